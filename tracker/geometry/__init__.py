@@ -1,0 +1,1 @@
+"""Geometry: SE(3) and quadrics."""

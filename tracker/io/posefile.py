@@ -1,0 +1,96 @@
+"""Pose TOML files such as ``init.toml`` (formats.md, "Pose files").
+
+``[pose.<component>]`` gives the world-from-component ``rotation`` (Rodrigues)
+and, for the root, the world ``translation``.  Other components hang on their
+parent's joint; one missing from the file takes its rest orientation relative
+to its parent.  The result is projected onto the model's joints (coercion), so
+a hinge given a rotation off its axis keeps only the part about the axis.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from tracker.chain import coerce
+from tracker.errors import TrackerInputError
+from tracker.geometry import se3
+from tracker.io.atomic import atomic_write
+from tracker.model import Model
+
+_JOINT_TOLERANCE = 1e-3
+
+
+def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
+    """World poses (N,4,4) of every component from a pose TOML."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise TrackerInputError(f"{path}: pose file not found; pass --init with an existing init.toml") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise TrackerInputError(f"{path}: not a readable TOML pose file ({exc}); fix the file") from None
+    table = data.get("pose")
+    if not isinstance(table, dict) or not table:
+        raise TrackerInputError(f"{path}: no [pose.<component>] tables; write at least the root's pose")
+    unknown = sorted(set(table) - set(model.names))
+    if unknown:
+        raise TrackerInputError(
+            f"{path}: unknown component {unknown[0]!r} (model {model.name!r} has {', '.join(model.names)}); fix the name"
+        )
+    root = model.names[0]
+    if "translation" not in table.get(root, {}):
+        raise TrackerInputError(f"{path}: the root {root!r} needs a `translation`; add it under [pose.{root}]")
+    poses = np.empty((model.size, 4, 4))
+    moved = []
+    for i, name in enumerate(model.names):
+        entry = table.get(name, {})
+        try:
+            rotation = _finite(entry.get("rotation"), name, "rotation") if "rotation" in entry else None
+            translation = _finite(entry.get("translation"), name, "translation") if "translation" in entry else None
+        except ValueError as exc:
+            raise TrackerInputError(f"{path}: {exc}; fix the file") from None
+        if i == 0:
+            poses[0] = se3.from_rotvec(rotation if rotation is not None else np.zeros(3), translation)
+            continue
+        hanging = poses[model.parent[i]] @ model.rest[i]
+        poses[i] = hanging
+        if rotation is not None:
+            poses[i, 0:3, 0:3] = se3.exp_so3(rotation)
+        if translation is not None and np.linalg.norm(translation - hanging[0:3, 3]) > _JOINT_TOLERANCE:
+            moved.append(name)
+    if moved:
+        warnings.warn(f"{path}: moved {', '.join(moved)} onto their parents' joints", stacklevel=2)
+    return coerce(poses, model.parent, model.rest, model.constraint, model.constraint_rows)
+
+
+def _finite(value, name: str, key: str) -> np.ndarray:
+    try:
+        out = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        out = np.zeros(0)
+    if out.shape != (3,) or not np.all(np.isfinite(out)):
+        raise ValueError(f"[pose.{name}].{key} must be 3 finite numbers, got {value!r}")
+    return out
+
+
+def pose_table(model: Model, poses: np.ndarray) -> dict:
+    """The ``pose`` table of a pose TOML: every component's rotation, the root's translation."""
+    table = {}
+    for i, name in enumerate(model.names):
+        entry = {"rotation": [float(v) for v in se3.log_so3(np.ascontiguousarray(poses[i, 0:3, 0:3]))]}
+        if i == 0:
+            entry["translation"] = [float(v) for v in poses[i, 0:3, 3]]
+        table[name] = entry
+    return {"pose": table}
+
+
+def save_pose_file(path: str | os.PathLike, model: Model, poses: np.ndarray) -> None:
+    """Write a pose TOML atomically."""
+    text = tomli_w.dumps(pose_table(model, poses)).encode()
+    atomic_write(path, lambda f: f.write(text))

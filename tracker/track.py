@@ -1,0 +1,142 @@
+"""The frame loop (design note, section 6): render, measure, solve, update, coerce.
+
+Per frame the poses are predicted from the motion model, then each IRLS
+iteration samples the visible outlines in every camera, measures their edges,
+adds a weak zero-motion prior ``C_i += diag(lt I3, lr I3)`` so that every
+``C_i`` is invertible (section 3), solves the whole tree for one twist per
+component (section 4), applies ``E_i <- E_i exp(alpha_i)`` and coerces the
+joints exact (section 5).  The frame's status comes from the share of samples
+that found an edge and the robust mean residual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numba import njit
+
+from tracker.chain import coerce_kernel, solve_kernel
+from tracker.geometry.se3 import exp, inverse, log
+from tracker.measure import Statistics, measure_kernel
+from tracker.model import Model
+from tracker.outline import Rig, Samples, outline_kernel
+
+TRACKED, UNCERTAIN, LOST = 0, 1, 2
+MOTION_MODELS = ("none", "constant-velocity")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Tracking parameters; the defaults suit 640x480 views of a whole body."""
+
+    iterations: int = 6
+    spacing: float = 4.0  # pixels between outline samples
+    search_range: int = 20  # pixels searched either side of the outline
+    threshold: float = 6.0  # minimum grey-level derivative of an edge (per pixel)
+    robust_c: float = 2.0  # IRLS weight w = 1 / (c + |m|), pixels
+    prior_translation: float = 1e3  # weak zero-motion prior, px^2 per m^2
+    prior_rotation: float = 1e2  # px^2 per rad^2
+    blur_sigma: float = 1.0  # Gaussian smoothing before the edge search, pixels
+    motion: str = "constant-velocity"
+    uncertain_share: float = 0.6  # share of samples with an edge below which a frame is uncertain
+    lost_share: float = 0.3  # ... and lost
+    uncertain_residual: float = 3.0  # robust mean offset (px) above which a frame is uncertain
+    lost_residual: float = 6.0  # ... and lost
+    capacity: int = 40000  # sample buffer size for all cameras together
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    poses: np.ndarray
+    status: int
+    residual: float
+    share: float
+    samples: int
+
+
+@njit(cache=True)
+def apply_motions(poses, alpha):
+    """E_i <- E_i exp(alpha_i) for every component."""
+    out = np.empty_like(poses)
+    for i in range(poses.shape[0]):
+        out[i] = poses[i] @ exp(alpha[i])
+    return out
+
+
+@njit(cache=True)
+def constant_velocity(previous, current):
+    """Predict E_{t+1} = E_t exp(log(E_{t-1}^-1 E_t)) for every component."""
+    out = np.empty_like(current)
+    for i in range(current.shape[0]):
+        out[i] = current[i] @ exp(log(inverse(previous[i]) @ current[i]))
+    return out
+
+
+class Tracker:
+    """Tracks one body in a fixed rig, frame after frame."""
+
+    def __init__(self, model: Model, cameras, initial_poses: np.ndarray, settings: Settings = Settings()):
+        if settings.motion not in MOTION_MODELS:
+            raise ValueError(f"motion model must be one of {MOTION_MODELS}")
+        self.model = model
+        self.rig = Rig.from_cameras(cameras)
+        self.settings = settings
+        self.samples = Samples.allocate(settings.capacity)
+        self.offset = np.zeros(settings.capacity)
+        self.weight = np.zeros(settings.capacity)
+        n = model.size
+        self.information = np.zeros((n, 6, 6))
+        self.eta = np.zeros((n, 6))
+        self.prior = np.diag([settings.prior_translation] * 3 + [settings.prior_rotation] * 3)
+        height = int(self.rig.size[:, 1].max())
+        width = int(self.rig.size[:, 0].max())
+        self.images = np.zeros((len(cameras), height, width), np.uint8)
+        self.poses = coerce_kernel(np.ascontiguousarray(initial_poses, dtype=np.float64), model.parent,
+                                   model.rest, model.constraint, model.constraint_rows)
+        self.previous: np.ndarray | None = None
+
+    def load_images(self, images) -> None:
+        """Copy (and smooth) one grey image per camera into the frame buffer."""
+        sigma = self.settings.blur_sigma
+        for k, image in enumerate(images):
+            h, w = image.shape
+            self.images[k, :h, :w] = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
+
+    def iterate(self) -> Statistics:
+        """One IRLS iteration at the current poses: sample, measure, solve, update, coerce."""
+        s, m, st = self.samples, self.model, self.settings
+        s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
+                                 self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
+                                 s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
+        visible, found, sum_wm, sum_w = measure_kernel(
+            self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
+            st.search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
+        self.information += self.prior
+        alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
+        self.poses = coerce_kernel(apply_motions(self.poses, alpha), m.parent, m.rest, m.constraint,
+                                   m.constraint_rows)
+        residual = sum_wm / sum_w if sum_w > 0 else float("inf")
+        return Statistics(self.information, self.eta, visible, found, residual)
+
+    def step(self, images) -> FrameResult:
+        """Track one frame given one grey image per camera (rig order)."""
+        self.load_images(images)
+        current = self.poses
+        if self.settings.motion == "constant-velocity" and self.previous is not None:
+            self.poses = coerce_kernel(constant_velocity(self.previous, current), self.model.parent,
+                                       self.model.rest, self.model.constraint, self.model.constraint_rows)
+        for _ in range(self.settings.iterations):
+            stats = self.iterate()
+        self.previous = current
+        share = stats.found / stats.visible if stats.visible else 0.0
+        return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)
+
+    def status(self, share: float, residual: float) -> int:
+        st = self.settings
+        if share < st.lost_share or residual > st.lost_residual:
+            return LOST
+        if share < st.uncertain_share or residual > st.uncertain_residual:
+            return UNCERTAIN
+        return TRACKED
