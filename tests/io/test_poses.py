@@ -1,0 +1,138 @@
+"""poses.npz writer (atomic, interrupt-safe) and the poses/truth loader."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracker.errors import TrackerInputError
+from tracker.io.poses import PosesWriter, load_poses
+
+COMPONENTS = ["pelvis", "thigh_l", "shin_l"]
+JOINTS = ["pelvis", "thigh_l", "shin_l", "foot_l"]
+
+
+def row(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    poses = np.tile(np.eye(4), (len(COMPONENTS), 1, 1))
+    poses[:, :3, 3] = rng.normal(size=(len(COMPONENTS), 3))
+    return poses, rng.normal(size=(len(JOINTS), 3))
+
+
+def write_frames(writer: PosesWriter, frames: range, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    rows = []
+    for frame in frames:
+        poses, joints = row(rng)
+        writer.append(frame, poses, joints, frame % 3, 0.5 * frame)
+        rows.append((poses, joints))
+    return rows
+
+
+def test_round_trip(tmp_path: Path) -> None:
+    path = tmp_path / "new" / "folder" / "poses.npz"  # missing folders are created
+    with PosesWriter(path, COMPONENTS, JOINTS, fps=25.0) as writer:
+        rows = write_frames(writer, range(10, 110))  # grows past the initial capacity
+    arrays = load_poses(path)
+    np.testing.assert_array_equal(arrays["frame"], np.arange(10, 110))
+    np.testing.assert_allclose(arrays["time"], np.arange(100) / 25.0)
+    assert list(arrays["component_names"]) == COMPONENTS and list(arrays["joint_names"]) == JOINTS
+    np.testing.assert_array_equal(arrays["poses"], np.stack([p for p, _ in rows]))
+    np.testing.assert_array_equal(arrays["joints"], np.stack([j for _, j in rows]))
+    np.testing.assert_array_equal(arrays["status"], np.arange(10, 110) % 3)
+    np.testing.assert_allclose(arrays["residual"], 0.5 * np.arange(10, 110))
+    dtypes = {key: arrays[key].dtype.kind + str(arrays[key].dtype.itemsize) for key in ("frame", "time", "poses", "status")}
+    assert dtypes == {"frame": "i8", "time": "f8", "poses": "f8", "status": "i1"}
+    assert arrays["joint_names"].dtype.kind == "U"
+    with np.load(path, allow_pickle=False) as raw:
+        keys = ["frame", "time", "component_names", "poses", "joint_names", "joints", "status", "residual"]
+        assert sorted(raw.files) == sorted(keys)
+
+
+def test_flush_writes_a_loadable_file_and_no_temporaries(tmp_path: Path) -> None:
+    path = tmp_path / "poses.npz"
+    writer = PosesWriter(path, COMPONENTS, JOINTS, fps=30.0, flush_every=1000)
+    write_frames(writer, range(3))
+    assert not path.exists()
+    writer.flush()
+    assert len(load_poses(path)["frame"]) == 3
+    assert [p.name for p in tmp_path.iterdir()] == ["poses.npz"]
+    write_frames(writer, range(3, 5))
+    assert len(load_poses(path)["frame"]) == 3  # not flushed yet
+    writer.close()
+    assert len(load_poses(path)["frame"]) == 5
+
+
+def test_flush_every(tmp_path: Path) -> None:
+    path = tmp_path / "poses.npz"
+    writer = PosesWriter(path, COMPONENTS, JOINTS, fps=30.0, flush_every=2)
+    write_frames(writer, range(3))
+    assert len(load_poses(path)["frame"]) == 2
+
+
+@pytest.mark.parametrize("interruption", [RuntimeError, KeyboardInterrupt])
+def test_interrupted_run_leaves_the_frames_done(tmp_path: Path, interruption: type[BaseException]) -> None:
+    path = tmp_path / "poses.npz"
+    with pytest.raises(interruption):
+        with PosesWriter(path, COMPONENTS, JOINTS, fps=30.0) as writer:
+            write_frames(writer, range(3))
+            raise interruption()
+    np.testing.assert_array_equal(load_poses(path)["frame"], [0, 1, 2])
+
+
+def test_unwritable_folder(tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("not a folder")
+    with pytest.raises(TrackerInputError, match="file"):
+        PosesWriter(tmp_path / "file" / "out" / "poses.npz", COMPONENTS, JOINTS, fps=30.0)
+
+
+def test_bad_rows_are_rejected(tmp_path: Path) -> None:
+    writer = PosesWriter(tmp_path / "poses.npz", COMPONENTS, JOINTS, fps=30.0)
+    with pytest.raises(ValueError, match="joints"):
+        writer.append(0, np.tile(np.eye(4), (3, 1, 1)), np.zeros((2, 3)), 0, 0.0)
+    with pytest.raises(ValueError, match="status"):
+        writer.append(0, np.tile(np.eye(4), (3, 1, 1)), np.zeros((4, 3)), 5, 0.0)
+
+
+def test_truth_with_only_joints_loads(tmp_path: Path) -> None:
+    path = tmp_path / "truth.npz"
+    np.savez(path, joint_names=np.array([b"a", b"b"]), joints=np.zeros((4, 2, 3), np.float32))
+    arrays = load_poses(path)
+    assert list(arrays["joint_names"]) == ["a", "b"] and arrays["joints"].dtype == np.float64
+
+
+@pytest.mark.parametrize(
+    "arrays, expected",
+    [
+        ({"joints": np.zeros((2, 1, 3))}, "joint_names"),
+        ({"joint_names": np.array(["a"]), "joints": np.zeros((2, 2, 3))}, "joints"),
+        ({"joint_names": np.array(["a", "a"]), "joints": np.zeros((2, 2, 3))}, "repeats"),
+        ({"joint_names": np.array(["a"]), "joints": np.zeros((2, 1, 3)), "frame": np.array([0.5, 1.5])}, "frame"),
+        ({"joint_names": np.array(["a"]), "joints": np.zeros((2, 1, 3)), "status": np.array([0, 7])}, "status"),
+        (
+            {"joint_names": np.array(["a"]), "joints": np.zeros((2, 1, 3)), "poses": np.zeros((2, 1, 4, 4))},
+            "component_names",
+        ),
+        ({"joint_names": np.array(["a"], dtype=object), "joints": np.zeros((2, 1, 3))}, "npz"),
+    ],
+)
+def test_bad_npz_names_file(tmp_path: Path, arrays: dict, expected: str) -> None:
+    path = tmp_path / "bad.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(TrackerInputError, match=expected) as error:
+        load_poses(path)
+    assert "bad.npz" in str(error.value)
+
+
+@pytest.mark.parametrize("content", [b"", b"not a zip file at all"])
+def test_not_an_npz(tmp_path: Path, content: bytes) -> None:
+    path = tmp_path / "poses.npz"
+    path.write_bytes(content)
+    with pytest.raises(TrackerInputError, match="poses.npz"):
+        load_poses(path)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(TrackerInputError, match="gone.npz"):
+        load_poses(tmp_path / "gone.npz")

@@ -1,0 +1,141 @@
+"""Recording folders: opening, validation and frame reading on tiny MJPG videos."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tracker.camera import Camera, save_calibration
+from tracker.errors import TrackerInputError
+from tracker.io.recording import frames, open_recording
+
+WIDTH, HEIGHT, COUNT, FPS = 64, 48, 10, 25.0
+
+
+def content(camera: int, index: int) -> np.ndarray:
+    """A grey test image: a flat level per frame and camera, with a bright square that moves."""
+    image = np.full((HEIGHT, WIDTH), 20 + 15 * index + 5 * camera, np.uint8)
+    image[10:26, 4 + 3 * index : 20 + 3 * index] = 240
+    return image
+
+
+def write_video(path: Path, camera: int, count: int = COUNT, size: tuple[int, int] = (WIDTH, HEIGHT)) -> None:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), FPS, size)
+    assert writer.isOpened()
+    for index in range(count):
+        writer.write(cv2.cvtColor(cv2.resize(content(camera, index), size), cv2.COLOR_GRAY2BGR))
+    writer.release()
+
+
+def make_recording(folder: Path, videos: tuple[str, ...] = ("cam0", "cam1"), size: tuple[int, int] = (WIDTH, HEIGHT)) -> Path:
+    """A recording whose calibration has cam0, cam1, cam2 (all ``size``) and MJPG videos for ``videos``."""
+    folder.mkdir()
+    K = np.array([[50.0, 0.0, 32.0], [0.0, 50.0, 24.0], [0.0, 0.0, 1.0]])
+    cameras = [Camera(f"cam{i}", size, K, np.zeros(4), np.eye(3), np.array([i, 0.0, 3.0])) for i in range(3)]
+    save_calibration(cameras, folder / "calibration.toml")
+    for name in videos:
+        write_video(folder / f"{name}.avi", int(name[-1]))
+    return folder
+
+
+def test_happy_path_yields_grey_frames(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    (folder / "model.toml").write_text('name = "x"\n')
+    recording = open_recording(folder)
+    assert [c.name for c in recording.cameras] == ["cam0", "cam1"]  # cam2 has no video
+    assert (recording.frame_count, recording.fps) == (COUNT, FPS)
+    assert recording.model_path == folder / "model.toml" and recording.init_path is None and recording.truth_path is None
+    seen = []
+    for index, images in frames(recording):
+        seen.append(index)
+        assert len(images) == 2
+        for camera, image in enumerate(images):
+            assert image.dtype == np.uint8 and image.shape == (HEIGHT, WIDTH)
+            assert np.abs(image.astype(float) - content(camera, index)).mean() < 4.0  # MJPG is lossy
+    assert seen == list(range(COUNT))
+
+
+def test_frame_range_and_camera_choice(tmp_path: Path) -> None:
+    recording = open_recording(make_recording(tmp_path / "rec"), cameras=["cam1"])
+    assert [c.name for c in recording.cameras] == ["cam1"]
+    got = list(frames(recording, start=6, stop=8))
+    assert [index for index, _ in got] == [6, 7]
+    assert np.abs(got[0][1][0].astype(float) - content(1, 6)).mean() < 4.0
+    with pytest.raises(TrackerInputError, match="outside"):
+        frames(recording, start=5, stop=11)
+
+
+def test_image_folder_source(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec", videos=())
+    (folder / "cam2").mkdir()
+    for index in range(4):
+        cv2.imwrite(str(folder / "cam2" / f"{index:06d}.png"), content(2, index))
+    recording = open_recording(folder)
+    assert [c.name for c in recording.cameras] == ["cam2"] and recording.frame_count == 4
+    for index, (image,) in frames(recording):
+        np.testing.assert_array_equal(image, content(2, index))
+
+
+def expect_error(folder: Path, *fragments: str, cameras: list[str] | None = None) -> str:
+    with pytest.raises(TrackerInputError) as error:
+        open_recording(folder, cameras=cameras)
+    message = str(error.value)
+    for fragment in fragments:
+        assert fragment in message
+    assert "\n" not in message
+    return message
+
+
+def test_missing_folder(tmp_path: Path) -> None:
+    expect_error(tmp_path / "nope", "nope")
+
+
+def test_missing_calibration(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    (folder / "calibration.toml").unlink()
+    expect_error(folder, "calibration.toml")
+
+
+def test_missing_video(tmp_path: Path) -> None:
+    expect_error(make_recording(tmp_path / "rec", videos=()), "rec", "no camera", "cam0")
+    expect_error(make_recording(tmp_path / "rec2"), "cam2", "cam0, cam1", cameras=["cam2"])
+
+
+def test_unknown_camera_name(tmp_path: Path) -> None:
+    expect_error(make_recording(tmp_path / "rec"), "calibration.toml", "'cam7'", "cam0, cam1", cameras=["cam7"])
+
+
+def test_different_frame_counts(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    write_video(folder / "cam1.avi", 1, count=8)
+    expect_error(folder, "cam0.avi", "cam1.avi", "10", "8")
+
+
+def test_corrupt_video(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    (folder / "cam0.avi").write_bytes(np.random.default_rng(0).bytes(5000))
+    expect_error(folder, "cam0.avi", "corrupt or unsupported video")
+
+
+def test_size_mismatch(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec", size=(80, 60))
+    expect_error(folder, "cam0.avi", "64x48", "80x60")
+
+
+def test_two_sources_for_one_camera(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    write_video(folder / "cam0.mkv", 0)
+    expect_error(folder, "cam0.avi", "cam0.mkv")
+
+
+def test_truncated_video_fails_mid_run_naming_file_and_frame(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    video = folder / "cam1.avi"
+    video.write_bytes(video.read_bytes()[: video.stat().st_size * 4 // 5])  # the last frames are cut
+    recording = open_recording(folder)
+    with pytest.raises(TrackerInputError, match=r"cam1\.avi: frame \d+ failed to decode"):
+        for _ in frames(recording):
+            pass

@@ -1,0 +1,181 @@
+"""Camera projection, distortion and calibration TOML load/save."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import tomli_w
+
+from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.errors import TrackerInputError
+
+K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
+DISTORTIONS = {
+    4: [-0.2, 0.05, 0.001, -0.002],
+    5: [-0.25, 0.08, 0.001, -0.0015, -0.01],
+    8: [-0.25, 0.08, 0.001, -0.0015, -0.01, 0.02, 0.01, 0.005],
+}
+
+
+def make_camera(name: str = "cam0", distortions=DISTORTIONS[5], fisheye: bool = False, seed: int = 0) -> Camera:
+    rng = np.random.default_rng(seed)
+    rotation = cv2.Rodrigues(rng.normal(scale=0.3, size=3))[0]
+    return Camera(name, (640, 480), K, np.array(distortions), rotation, np.array([0.1, -0.2, 3.0]), fisheye)
+
+
+def brown(xn: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Pixels of normalised points by the Brown-Conrady formula written out (OpenCV's rational form)."""
+    k1, k2, p1, p2, k3, k4, k5, k6 = np.concatenate([d, np.zeros(8 - len(d))])
+    x, y = xn[:, 0], xn[:, 1]
+    r2 = x * x + y * y
+    radial = (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return np.column_stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]])
+
+
+@pytest.mark.parametrize("length", sorted(DISTORTIONS))
+def test_project_matches_pinhole_brown_formula(length: int) -> None:
+    camera = make_camera(distortions=DISTORTIONS[length])
+    rng = np.random.default_rng(1)
+    points = camera.center + rng.normal(size=(50, 3)) * 0.5 + camera.rotation[2] * 3.0  # in front of the camera
+    local = points @ camera.rotation.T + camera.translation
+    expected = brown(local[:, :2] / local[:, 2:], camera.distortions)
+    np.testing.assert_allclose(camera.project(points), expected, atol=1e-9)
+
+
+def test_pose_and_center() -> None:
+    camera = make_camera()
+    np.testing.assert_allclose(camera.pose @ np.append(camera.center, 1.0), [0, 0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(camera.pose[:3, :3], camera.rotation)
+    assert not camera.rotation.flags.writeable
+
+
+@pytest.mark.parametrize("fisheye", [False, True])
+def test_undistort_then_distort_round_trip(fisheye: bool) -> None:
+    camera = make_camera(distortions=[0.1, -0.02, 0.01, -0.003] if fisheye else DISTORTIONS[5], fisheye=fisheye)
+    rng = np.random.default_rng(2)
+    pixels = rng.uniform([0, 0], [640, 480], size=(500, 2))
+    assert np.abs(camera.distort_normalized(camera.undistort_pixels(pixels)) - pixels).max() < 1e-6
+    xn = rng.uniform(-0.5, 0.5, size=(500, 2))
+    assert np.abs(camera.undistort_pixels(camera.distort_normalized(xn)) - xn).max() * K[0, 0] < 1e-6
+
+
+def test_empty_point_sets() -> None:
+    camera = make_camera()
+    assert camera.project(np.zeros((0, 3))).shape == (0, 2)
+    assert camera.undistort_pixels(np.zeros((0, 2))).shape == (0, 2)
+
+
+def test_toml_round_trip(tmp_path: Path) -> None:
+    cameras = [make_camera(f"cam{i}", DISTORTIONS[length], seed=i) for i, length in enumerate((4, 5, 8))]
+    cameras.append(make_camera("wide", [0.1, -0.02, 0.01, -0.003], fisheye=True, seed=9))
+    path = tmp_path / "out" / "calibration.toml"
+    save_calibration(cameras, path)
+    loaded = load_calibration(path)
+    assert [c.name for c in loaded] == [c.name for c in cameras]
+    for before, after in zip(cameras, loaded):
+        assert after.size == before.size and after.fisheye == before.fisheye
+        for field in ("matrix", "distortions", "rotation", "translation"):
+            np.testing.assert_allclose(getattr(after, field), getattr(before, field), atol=1e-12)
+    assert [p.name for p in path.parent.iterdir()] == ["calibration.toml"]  # no temporary file left
+
+
+def table(**changes) -> dict:
+    values = {
+        "name": "cam0",
+        "size": [640.0, 480.0],  # Pose2Sim writes floats
+        "matrix": K.tolist(),
+        "distortions": [0.0, 0.0, 0.0, 0.0],
+        "rotation": [0.0, 0.0, 0.0],
+        "translation": [0.0, 0.0, 3.0],
+    }
+    values.update(changes)
+    return {key: value for key, value in values.items() if value is not None}
+
+
+def write(path: Path, document: dict) -> Path:
+    path.write_bytes(tomli_w.dumps(document).encode())
+    return path
+
+
+def test_loads_pose2sim_style_file(tmp_path: Path) -> None:
+    path = write(tmp_path / "calib.toml", {"cam_01": table(), "cam_02": table(name="cam1"), "metadata": {"error": 0.3}})
+    cameras = load_calibration(path)
+    assert [c.name for c in cameras] == ["cam0", "cam1"]
+    assert cameras[0].size == (640, 480)
+    np.testing.assert_allclose(cameras[0].rotation, np.eye(3))
+
+
+def test_mm_units_are_converted(tmp_path: Path) -> None:
+    path = write(tmp_path / "calib.toml", {"cam_0": table(translation=[100.0, 0.0, 3000.0]), "metadata": {"units": "mm"}})
+    np.testing.assert_allclose(load_calibration(path)[0].translation, [0.1, 0.0, 3.0])
+
+
+def test_implausible_metres_are_read_as_mm_with_a_warning(tmp_path: Path) -> None:
+    document = {"cam_0": table(translation=[0.0, 0.0, 3000.0]), "cam_1": table(name="b", translation=[0.0, 0.0, 2500.0])}
+    path = write(tmp_path / "calib.toml", document)
+    with pytest.warns(UserWarning, match="millimetres"):
+        cameras = load_calibration(path)
+    np.testing.assert_allclose([c.translation[2] for c in cameras], [3.0, 2.5])
+
+
+def test_metres_load_without_warning(tmp_path: Path) -> None:
+    path = write(tmp_path / "calib.toml", {"cam_0": table()})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_allclose(load_calibration(path)[0].translation, [0.0, 0.0, 3.0])
+
+
+BAD_TABLES = {
+    "missing key": (table(matrix=None), "'matrix'"),
+    "matrix not 3x3": (table(matrix=[[1.0, 0.0], [0.0, 1.0]]), "shape"),
+    "matrix singular": (table(matrix=[[500.0, 0.0, 320.0], [0.0, 0.0, 240.0], [0.0, 0.0, 1.0]]), "invertible"),
+    "nan": (table(translation=[0.0, float("nan"), 3.0]), "NaN"),
+    "inf": (table(distortions=[float("inf"), 0.0, 0.0, 0.0]), "NaN or infinity"),
+    "size zero": (table(size=[0, 480]), "size"),
+    "size fraction": (table(size=[640.5, 480]), "size"),
+    "distortion length": (table(distortions=[0.0, 0.0, 0.0]), "distortions"),
+    "fisheye distortion length": (table(distortions=[0.0] * 5, fisheye=True), "distortions"),
+    "not numbers": (table(rotation=["a", "b", "c"]), "rotation"),
+    "rotation matrix not orthonormal": (table(rotation=[[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]]), "rotation"),
+    "empty name": (table(name=""), "name"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_TABLES))
+def test_bad_camera_table_names_file_and_table(tmp_path: Path, case: str) -> None:
+    bad, expected = BAD_TABLES[case]
+    path = write(tmp_path / "rig.toml", {"cam_0": table(name="a"), "cam_bad": bad})
+    with pytest.raises(TrackerInputError) as error:
+        load_calibration(path)
+    message = str(error.value)
+    assert "rig.toml" in message and "[cam_bad]" in message and expected in message
+    assert "\n" not in message
+
+
+@pytest.mark.parametrize(
+    "case, content, expected",
+    [
+        ("not toml", b"[cam_0\nname = ", "TOML"),
+        ("no cameras", b'[metadata]\nunits = "m"\n', "no camera"),
+        ("duplicate names", tomli_w.dumps({"a": table(), "b": table()}).encode(), "distinct"),
+        ("bad units", tomli_w.dumps({"a": table(), "metadata": {"units": "inch"}}).encode(), "units"),
+        ("binary", bytes(range(256)), "TOML"),
+    ],
+)
+def test_bad_file_names_file(tmp_path: Path, case: str, content: bytes, expected: str) -> None:
+    path = tmp_path / "rig.toml"
+    path.write_bytes(content)
+    with pytest.raises(TrackerInputError, match=expected) as error:
+        load_calibration(path)
+    assert "rig.toml" in str(error.value)
+
+
+def test_missing_file_names_file(tmp_path: Path) -> None:
+    with pytest.raises(TrackerInputError, match="nowhere.toml"):
+        load_calibration(tmp_path / "nowhere.toml")

@@ -1,0 +1,261 @@
+"""Calibrated cameras: intrinsics, lens distortion, extrinsics; calibration TOML load and save.
+
+A world point X projects to pixels in three steps (OpenCV conventions):
+
+    X_c = R X + t                                   world -> camera (rotation, translation)
+    x_n = (X_c,x / X_c,z,  X_c,y / X_c,z)           ideal normalised coordinates
+    u   = K d(x_n)                                  lens distortion d, then the camera matrix K
+
+For the pinhole model d is the Brown-Conrady model with OpenCV's coefficients
+(k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [tx ty]]]]); with r^2 = x^2 + y^2:
+
+    x' = x (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2)
+    y' = y (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y
+
+For ``fisheye`` cameras d is OpenCV's equidistant model (k1..k4), theta = atan(r):
+x' = x theta_d / r with theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8).
+The pixel centre of the top-left pixel is (0, 0).
+
+The calibration file is the multi-camera TOML of anipose/aniposelib and Pose2Sim
+(docs: shared/design/formats.md): one table per camera, rotations as Rodrigues vectors.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import tomli_w
+
+from tracker.errors import TrackerInputError
+from tracker.io.atomic import atomic_write
+
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+_PINHOLE_DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
+_UNIT_TO_METRES = {"m": 1.0, "mm": 1e-3}
+_MM_GUESS_DISTANCE = 50.0  # a median camera distance above this many "metres" is surely millimetres
+_REQUIRED_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation")
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """One calibrated camera; arrays are float64 and read-only.
+
+    ``rotation`` R (3x3) and ``translation`` t (3,) map world to camera:
+    X_c = R X_w + t. ``size`` is (width, height) in pixels.
+    """
+
+    name: str
+    size: tuple[int, int]
+    matrix: np.ndarray
+    distortions: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    fisheye: bool = False
+
+    def __post_init__(self) -> None:
+        shapes = {"matrix": (3, 3), "distortions": (-1,), "rotation": (3, 3), "translation": (3,)}
+        for field, shape in shapes.items():
+            array = np.array(getattr(self, field), dtype=np.float64).reshape(shape)
+            array.setflags(write=False)
+            object.__setattr__(self, field, array)
+        object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
+        object.__setattr__(self, "fisheye", bool(self.fisheye))
+
+    @property
+    def pose(self) -> np.ndarray:
+        """camera_from_world, the 4x4 transform [[R, t], [0, 1]]."""
+        pose = np.eye(4)
+        pose[:3, :3] = self.rotation
+        pose[:3, 3] = self.translation
+        return pose
+
+    @property
+    def center(self) -> np.ndarray:
+        """The camera's optical centre in world coordinates, c = -R^T t."""
+        return -self.rotation.T @ self.translation
+
+    def project(self, points_world: np.ndarray) -> np.ndarray:
+        """Pixels (M, 2) of world points (M, 3), with lens distortion.
+
+        Points behind the camera (X_c,z <= 0) give meaningless pixels; callers
+        cull them.
+        """
+        points_camera = np.asarray(points_world, dtype=np.float64).reshape(-1, 3) @ self.rotation.T + self.translation
+        return self.distort_normalized(points_camera[:, :2] / points_camera[:, 2:3])
+
+    def distort_normalized(self, xn: np.ndarray) -> np.ndarray:
+        """Pixels u = K d(x_n) of ideal normalised coordinates x_n (M, 2)."""
+        xn = _points(xn)
+        if len(xn) == 0:
+            return np.zeros((0, 2))
+        if self.fisheye:
+            pixels = cv2.fisheye.distortPoints(xn, self.matrix, self.distortions)
+        else:
+            homogeneous = np.concatenate([xn, np.ones((len(xn), 1, 1))], axis=2)
+            pixels, _ = cv2.projectPoints(homogeneous, np.zeros(3), np.zeros(3), self.matrix, self.distortions)
+        return pixels.reshape(-1, 2)
+
+    def undistort_pixels(self, pixels: np.ndarray) -> np.ndarray:
+        """Ideal normalised coordinates x_n (M, 2) of pixels (M, 2): the inverse of distort_normalized.
+
+        OpenCV's fixed-point iteration, run to 1e-14 so the round trip is exact
+        to well below 1e-6 px for ordinary lenses.
+        """
+        pixels = _points(pixels)
+        if len(pixels) == 0:
+            return np.zeros((0, 2))
+        undistort = cv2.fisheye.undistortPoints if self.fisheye else cv2.undistortPoints
+        xn = undistort(pixels, self.matrix, self.distortions, criteria=_UNDISTORT_CRITERIA)
+        return xn.reshape(-1, 2)
+
+
+def _points(points: np.ndarray) -> np.ndarray:
+    """(M, 2) points as the contiguous float64 (M, 1, 2) array OpenCV wants."""
+    return np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 1, 2))
+
+
+def load_calibration(path: str | os.PathLike) -> list[Camera]:
+    """Cameras of an anipose/Pose2Sim calibration TOML, in file order, translations in metres.
+
+    ``[metadata] units = "mm"`` converts translations to metres. Without a units
+    key, a rig whose median camera distance |t| exceeds 50 is taken to be in
+    millimetres (with a warning). Every problem raises TrackerInputError naming
+    the file, the camera table and the fix.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as file:
+            document = tomllib.load(file)
+    except FileNotFoundError:
+        raise TrackerInputError(f"{path}: calibration file not found; give the path of a calibration.toml") from None
+    except OSError as error:
+        raise TrackerInputError(f"{path}: cannot read the calibration ({error.strerror or error})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise TrackerInputError(f"{path}: not a valid TOML file ({error}); fix the syntax") from None
+
+    scale = _units_scale(path, document.get("metadata", {}))
+    tables = {key: value for key, value in document.items() if key != "metadata" and isinstance(value, dict)}
+    if not tables:
+        raise TrackerInputError(
+            f"{path}: no camera tables; add one [cam_N] table per camera with keys {', '.join(_REQUIRED_KEYS)}"
+        )
+    cameras = [_parse_camera(path, table, values) for table, values in tables.items()]
+
+    seen: dict[str, str] = {}
+    for table, camera in zip(tables, cameras):
+        if camera.name in seen:
+            raise TrackerInputError(
+                f"{path}: [{table}] camera name {camera.name!r} is also used by [{seen[camera.name]}]; "
+                "give every camera a distinct name"
+            )
+        seen[camera.name] = table
+
+    if scale is None:
+        scale = 1.0
+        median_distance = float(np.median([np.linalg.norm(camera.translation) for camera in cameras]))
+        if median_distance > _MM_GUESS_DISTANCE:
+            scale = _UNIT_TO_METRES["mm"]
+            warnings.warn(
+                f"{path}: median camera distance {median_distance:g} is implausible in metres, "
+                'reading translations as millimetres; add [metadata] units = "mm" (or "m") to say so',
+                stacklevel=2,
+            )
+    if scale == 1.0:
+        return cameras
+    return [replace(camera, translation=camera.translation * scale) for camera in cameras]
+
+
+def _units_scale(path: Path, metadata: Any) -> float | None:
+    """Metres per unit from ``[metadata] units``; None when the file does not say."""
+    if not isinstance(metadata, dict):
+        raise TrackerInputError(f"{path}: 'metadata' must be a table; write it as [metadata]")
+    units = metadata.get("units")
+    if units is None:
+        return None
+    if units not in _UNIT_TO_METRES:
+        raise TrackerInputError(
+            f"{path}: [metadata] units = {units!r} is not supported; use {' or '.join(map(repr, _UNIT_TO_METRES))}"
+        )
+    return _UNIT_TO_METRES[units]
+
+
+def _parse_camera(path: Path, table: str, values: dict[str, Any]) -> Camera:
+    """One camera table -> Camera, validating every key."""
+
+    def fail(problem: str, fix: str) -> TrackerInputError:
+        return TrackerInputError(f"{path}: [{table}] {problem}; {fix}")
+
+    def array(key: str, shapes: tuple[tuple[int, ...], ...], fix: str) -> np.ndarray:
+        try:
+            value = np.array(values[key], dtype=np.float64)
+        except (ValueError, TypeError):
+            raise fail(f"'{key}' is not an array of numbers", fix) from None
+        if value.shape not in shapes:
+            raise fail(f"'{key}' has shape {value.shape}", fix)
+        if not np.all(np.isfinite(value)):
+            raise fail(f"'{key}' holds NaN or infinity", fix)
+        return value
+
+    missing = [key for key in _REQUIRED_KEYS if key not in values]
+    if missing:
+        raise fail(f"missing key {', '.join(map(repr, missing))}", f"every camera table needs {', '.join(_REQUIRED_KEYS)}")
+    name = values["name"]
+    if not isinstance(name, str) or not name.strip():
+        raise fail(f"'name' = {name!r} is not a non-empty string", 'write name = "cam0"')
+
+    size = array("size", ((2,),), "write size = [width, height] in pixels")
+    if np.any(size <= 0) or np.any(size != np.round(size)):
+        raise fail(f"'size' = {size.tolist()} is not two positive whole numbers", "write size = [width, height] in pixels")
+
+    matrix = array("matrix", ((3, 3),), "write matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]")
+    if not np.allclose(matrix[2], [0.0, 0.0, 1.0]) or np.linalg.cond(matrix) > 1e12:
+        raise fail("'matrix' is not an invertible camera matrix with last row [0, 0, 1]",
+                   "write matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+
+    fisheye = values.get("fisheye", False)
+    if not isinstance(fisheye, bool):
+        raise fail(f"'fisheye' = {fisheye!r} is not a boolean", "write fisheye = true or false")
+    lengths = (4,) if fisheye else _PINHOLE_DISTORTION_LENGTHS
+    distortions = array(
+        "distortions", tuple((n,) for n in lengths),
+        f"write {'fisheye ' if fisheye else ''}distortions as {' or '.join(map(str, lengths))} numbers "
+        f"({'k1 k2 k3 k4' if fisheye else 'k1 k2 p1 p2 [k3 ...]'}, OpenCV order)",
+    )
+
+    rotation = array("rotation", ((3,), (3, 3)), "write rotation as a Rodrigues vector [rx, ry, rz] (world -> camera)")
+    if rotation.shape == (3,):
+        rotation = cv2.Rodrigues(rotation)[0]
+    elif not (np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6) and np.linalg.det(rotation) > 0):
+        raise fail("'rotation' is a 3x3 matrix but not a rotation", "write rotation as a Rodrigues vector [rx, ry, rz]")
+
+    translation = array("translation", ((3,),), "write translation = [tx, ty, tz] (world -> camera)")
+    return Camera(name, (int(size[0]), int(size[1])), matrix, distortions, rotation, translation, fisheye)
+
+
+def save_calibration(cameras: list[Camera], path: str | os.PathLike) -> None:
+    """Write cameras as an anipose/Pose2Sim calibration TOML (metres), atomically.
+
+    Tables are named cam_0, cam_1, ... (zero-padded when there are more than ten,
+    so anipose, which sorts table names, keeps the order).
+    """
+    digits = len(str(max(len(cameras) - 1, 0)))
+    document: dict[str, Any] = {}
+    for index, camera in enumerate(cameras):
+        document[f"cam_{index:0{digits}d}"] = {
+            "name": camera.name,
+            "size": list(camera.size),
+            "matrix": camera.matrix.tolist(),
+            "distortions": camera.distortions.tolist(),
+            "rotation": cv2.Rodrigues(camera.rotation)[0].ravel().tolist(),
+            "translation": camera.translation.tolist(),
+            "fisheye": camera.fisheye,
+        }
+    document["metadata"] = {"units": "m"}
+    atomic_write(path, lambda file: tomli_w.dump(document, file))

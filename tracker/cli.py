@@ -1,0 +1,161 @@
+"""The ``tracker`` command line (formats.md): parse, call, report; no algorithm here.
+
+Bad input raises :class:`TrackerInputError` and exits with code 2 and one line;
+an interrupted run (Ctrl-C) keeps the frames already written and exits 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from tracker.errors import TrackerInputError
+
+
+def _cameras(text: str | None) -> list[str] | None:
+    return [c.strip() for c in text.split(",") if c.strip()] if text else None
+
+
+def _choose(given: str | None, found: Path | None, what: str, option: str, rec: Path) -> Path:
+    if given:
+        return Path(given)
+    if found is None:
+        raise TrackerInputError(f"{rec}: no {what} in the recording folder; pass {option}")
+    return found
+
+
+def cmd_track(args: argparse.Namespace) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from tracker.evaluate import evaluate, format_report
+    from tracker.io.posefile import load_pose_file
+    from tracker.io.poses import PosesWriter, load_poses
+    from tracker.io.recording import frames, open_recording
+    from tracker.model import joint_centres, load_model
+    from tracker.track import LOST, TRACKED, UNCERTAIN, Settings, Tracker
+
+    rec = open_recording(args.recording, _cameras(args.cameras))
+    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
+    settings = Settings(
+        iterations=args.iterations, spacing=args.spacing, search_range=args.search_range, motion=args.motion
+    )
+    out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
+    stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
+    print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
+          f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
+          file=sys.stderr)
+    print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
+    tracker = Tracker(model, rec.cameras, init, settings)
+    tracker.warm_up()
+    counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
+    residuals = []
+    interrupted = False
+    started = time.perf_counter()
+    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
+        try:
+            for index, images in tqdm(frames(rec, args.start, stop), total=stop - args.start, unit="frame",
+                                      disable=args.quiet, file=sys.stderr):
+                result = tracker.step(images)
+                writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual)
+                counts[result.status] += 1
+                residuals.append(result.residual)
+        except KeyboardInterrupt:
+            interrupted = True
+    elapsed = time.perf_counter() - started
+    done = len(residuals)
+    print(f"wrote {out / 'poses.npz'} ({done} frames)")
+    if interrupted:
+        print("interrupted: the frames done so far are saved", file=sys.stderr)
+        return 130
+    fps = done / elapsed if elapsed > 0 else float("inf")
+    print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
+    print(f"mean residual: {np.mean(residuals):.2f} px")
+    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost")
+    if rec.truth_path is not None:
+        report = evaluate(load_poses(out / "poses.npz"), load_poses(rec.truth_path))
+        print(format_report(report))
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from tracker.evaluate import evaluate, format_report
+    from tracker.io.poses import load_poses
+
+    print(format_report(evaluate(load_poses(args.poses), load_poses(args.truth))))
+    return 0
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    from tracker.synth import synthesize
+
+    synthesize(args.model, args.calib, args.out, motion=args.motion, frames=args.frames, start=args.start,
+               stride=args.stride, seed=args.seed)
+    print(f"wrote recording {args.out}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="tracker", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    track = sub.add_parser("track", help="track a recording folder, write DIR/poses.npz and print a summary")
+    track.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
+    track.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    track.add_argument("--init", help="pose at the first frame (default: the recording's init.toml)")
+    track.add_argument("--out", help="output folder (default: out/<recording name>)")
+    track.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    track.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    track.add_argument("--frames", type=int, help="number of frames to track (default: all)")
+    track.add_argument("--iterations", type=int, default=6, help="IRLS iterations per frame (default 6)")
+    track.add_argument("--spacing", type=float, default=4.0, help="pixels between outline samples (default 4)")
+    track.add_argument("--search-range", type=int, default=20, help="edge search, pixels either side (default 20)")
+    track.add_argument("--motion", choices=("none", "constant-velocity"), default="constant-velocity",
+                       help="motion model that predicts each frame's pose (default constant-velocity)")
+    track.add_argument("--quiet", action="store_true", help="no progress bar")
+    track.set_defaults(run=cmd_track)
+
+    ev = sub.add_parser("eval", help="MPJPE, PA-MPJPE, PCK@50mm and lost frames of poses.npz against truth.npz")
+    ev.add_argument("poses")
+    ev.add_argument("truth")
+    ev.set_defaults(run=cmd_eval)
+
+    synth = sub.add_parser("synth", help="render a recording with ground truth from a model, a rig and a motion")
+    synth.add_argument("--model", required=True, help="body model TOML")
+    synth.add_argument("--calib", required=True, help="camera rig calibration.toml")
+    synth.add_argument("--motion", required=True, help="bvh:PATH (a BVH clip, retargeted) or procedural")
+    synth.add_argument("--out", required=True, help="recording folder to write")
+    synth.add_argument("--frames", type=int, default=160, help="frames to render (default 160)")
+    synth.add_argument("--start", type=int, default=0, help="first BVH frame (default 0)")
+    synth.add_argument("--stride", type=int, default=2, help="BVH frames per rendered frame (default 2)")
+    synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
+    synth.set_defaults(run=cmd_synth)
+    return parser
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"tracker: warning: {message}", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    warnings.showwarning = _show_warning
+    try:
+        return args.run(args)
+    except TrackerInputError as exc:
+        print(f"tracker: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("tracker: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

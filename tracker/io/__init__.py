@@ -1,0 +1,1 @@
+"""Input and output: recording folders, frame readers, poses.npz, atomic file writes."""

@@ -1,0 +1,60 @@
+"""Atomic file writes: a reader sees the old file or the new one, never a partial one.
+
+The content goes to a temporary file in the target's folder (same file system),
+is flushed to disk, then renamed over the target with ``os.replace``, which
+POSIX and Windows perform atomically.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO
+
+from tracker.errors import TrackerInputError
+
+
+def ensure_writable_folder(folder: str | os.PathLike) -> Path:
+    """Create ``folder`` (and parents) if missing and check a file can be created in it.
+
+    Raises TrackerInputError when the folder cannot be created or written, so a
+    long run fails before it starts rather than at its first save.
+    """
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise TrackerInputError(
+            f"{folder}: cannot write there ({error.strerror or error}); choose a writable output folder"
+        ) from None
+    return folder
+
+
+def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], None]) -> None:
+    """Write ``path`` atomically: ``write_fn(file)`` fills a temporary binary file that then replaces ``path``.
+
+    The folder is created if missing. The file gets the usual permissions
+    (0o666 minus the umask). On any error the temporary file is removed and
+    ``path`` is left as it was; OS errors become TrackerInputError naming the file.
+    """
+    path = Path(path)
+    ensure_writable_folder(path.parent)
+    temp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+        with os.fdopen(fd, "wb") as file:
+            write_fn(file)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(temp, path)
+    except OSError as error:
+        raise TrackerInputError(
+            f"{path}: cannot write ({error.strerror or error}); free disk space or choose a writable output folder"
+        ) from None
+    finally:
+        temp.unlink(missing_ok=True)

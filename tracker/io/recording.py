@@ -1,0 +1,234 @@
+"""Recording folders (formats.md): the calibration, one video or image folder per camera, optional extras.
+
+    NAME/calibration.toml                 required
+    NAME/<camera name>.mp4|.avi|.mkv      a video per camera ...
+    NAME/<camera name>/000000.png ...     ... or a folder of numbered .png/.jpg images
+    NAME/model.toml, init.toml, truth.npz optional
+
+Every camera of the calibration that has a video is tracked, unless a list of
+camera names picks some. All videos must have the same number of frames and
+the image size the calibration gives.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracker.camera import Camera, load_calibration
+from tracker.errors import TrackerInputError
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+DEFAULT_FPS = 30.0  # for image folders and videos that do not state a frame rate
+
+
+@dataclass
+class Recording:
+    """An opened recording folder; ``cameras`` and ``sources`` (video file or image folder) are parallel."""
+
+    path: Path
+    cameras: list[Camera]
+    model_path: Path | None
+    init_path: Path | None
+    truth_path: Path | None
+    frame_count: int
+    fps: float
+    sources: list[Path]
+
+
+def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) -> Recording:
+    """Open a recording folder, checking that its videos decode and agree with the calibration.
+
+    ``cameras`` picks cameras by name (in that order); by default every camera
+    in calibration.toml that has a video, in calibration order. The first frame
+    of every video is decoded here, so a corrupt file fails now rather than
+    mid-run. Problems raise TrackerInputError naming the file.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise TrackerInputError(
+            f"{folder}: recording folder not found; give a folder holding calibration.toml and one video per camera"
+        )
+    calibration = folder / "calibration.toml"
+    if not calibration.is_file():
+        raise TrackerInputError(f"{calibration}: not found; a recording folder needs the calibration of its cameras")
+    rig = {camera.name: camera for camera in load_calibration(calibration)}
+    sources = {name: _find_source(folder, name) for name in rig}
+    available = [name for name, source in sources.items() if source is not None]
+    available_text = ", ".join(available) or "none"
+    if cameras is None:
+        if not available:
+            raise TrackerInputError(
+                f"{folder}: no camera of calibration.toml ({', '.join(rig)}) has a video; "
+                f"add <name>{'|'.join(VIDEO_SUFFIXES)} or a folder <name>/ of numbered images"
+            )
+        chosen = available
+    else:
+        chosen = list(dict.fromkeys(cameras))
+        if not chosen:
+            raise TrackerInputError(f"{folder}: the camera list is empty; pick from {available_text}")
+        for name in chosen:
+            if name not in rig:
+                raise TrackerInputError(
+                    f"{calibration}: has no camera {name!r}; pick cameras with a video from: {available_text}"
+                )
+            if sources[name] is None:
+                raise TrackerInputError(
+                    f"{folder / name}{'|'.join(VIDEO_SUFFIXES)}: no video for camera {name!r}; "
+                    f"add it or pick cameras with a video from: {available_text}"
+                )
+
+    chosen_sources = [sources[name] for name in chosen]
+    probes = [_probe(source, rig[name]) for name, source in zip(chosen, chosen_sources)]
+    counts = [count for count, _ in probes]
+    for source, count in zip(chosen_sources, counts):
+        if count != counts[0]:
+            raise TrackerInputError(
+                f"{chosen_sources[0]} has {counts[0]} frames but {source} has {count}; "
+                "cut the videos to the same synchronised frames"
+            )
+    fps = next((rate for _, rate in probes if rate is not None), DEFAULT_FPS)
+
+    def optional(name: str) -> Path | None:
+        return folder / name if (folder / name).is_file() else None
+
+    return Recording(
+        path=folder,
+        cameras=[rig[name] for name in chosen],
+        model_path=optional("model.toml"),
+        init_path=optional("init.toml"),
+        truth_path=optional("truth.npz"),
+        frame_count=counts[0],
+        fps=fps,
+        sources=chosen_sources,
+    )
+
+
+def frames(recording: Recording, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, list[np.ndarray]]]:
+    """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
+
+    A frame that fails to decode raises TrackerInputError naming the file and the index.
+    """
+    stop = recording.frame_count if stop is None else stop
+    if not 0 <= start <= stop <= recording.frame_count:
+        raise TrackerInputError(
+            f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
+            "pick a range inside it"
+        )
+    return _frames(recording.sources, start, stop)
+
+
+def _frames(sources: list[Path], start: int, stop: int) -> Iterator[tuple[int, list[np.ndarray]]]:
+    readers = [_grey_frames(source, start) for source in sources]
+    try:
+        for index in range(start, stop):
+            yield index, [next(reader) for reader in readers]
+    finally:
+        for reader in readers:
+            reader.close()
+
+
+def _find_source(folder: Path, name: str) -> Path | None:
+    """The video file or image folder of camera ``name``, None if there is none."""
+    found = [folder / f"{name}{suffix}" for suffix in VIDEO_SUFFIXES if (folder / f"{name}{suffix}").is_file()]
+    if (folder / name).is_dir() and _image_files(folder / name):
+        found.append(folder / name)
+    if len(found) > 1:
+        raise TrackerInputError(
+            f"{folder}: camera {name!r} has several sources ({', '.join(path.name for path in found)}); keep one"
+        )
+    return found[0] if found else None
+
+
+def _image_files(folder: Path) -> list[Path]:
+    """The .png/.jpg files of an image folder, sorted by the (last) number in their names."""
+    files = [path for path in folder.iterdir() if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES]
+
+    def number(path: Path) -> int:
+        digits = re.findall(r"\d+", path.stem)
+        if not digits:
+            raise TrackerInputError(f"{path}: image name has no frame number; name images 000000.png, 000001.png, ...")
+        return int(digits[-1])
+
+    return sorted(files, key=number)
+
+
+def _probe(source: Path, camera: Camera) -> tuple[int, float | None]:
+    """Frame count and frame rate (None if unknown) of a source; decodes its first frame and checks its size."""
+    if source.is_dir():
+        files = _image_files(source)
+        _check_size(files[0], _read_image(files[0], 0), camera)
+        return len(files), None
+    capture = cv2.VideoCapture(str(source))
+    try:
+        ok, image = capture.read() if capture.isOpened() else (False, None)
+        if not ok:
+            raise TrackerInputError(
+                f"{source}: corrupt or unsupported video (its first frame does not decode); re-encode it, e.g. as H.264 .mp4"
+            )
+        _check_size(source, image, camera)
+        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        if count <= 0:  # the container does not say: count by decoding
+            count = 1
+            while capture.grab():
+                count += 1
+        fps = capture.get(cv2.CAP_PROP_FPS)
+        return count, fps if np.isfinite(fps) and fps > 0 else None
+    finally:
+        capture.release()
+
+
+def _check_size(file: Path, image: np.ndarray, camera: Camera) -> None:
+    height, width = image.shape[:2]
+    if (width, height) != camera.size:
+        raise TrackerInputError(
+            f"{file}: image size {width}x{height} differs from size {camera.size[0]}x{camera.size[1]} of camera "
+            f"{camera.name!r} in calibration.toml; use the calibration made for these videos"
+        )
+
+
+def _grey_frames(source: Path, start: int) -> Iterator[np.ndarray]:
+    """Grey frames of one video file or image folder from frame ``start`` on (the caller stops)."""
+    if source.is_dir():
+        for index, file in enumerate(_image_files(source)[start:], start):
+            yield _grey(_read_image(file, index))
+        raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
+    capture = cv2.VideoCapture(str(source))
+    try:
+        for index in range(start):
+            if not capture.grab():
+                raise _decode_error(source, index)
+        for index in itertools.count(start):
+            ok, image = capture.read()
+            if not ok:
+                raise _decode_error(source, index)
+            yield _grey(image)
+    finally:
+        capture.release()
+
+
+def _decode_error(video: Path, index: int) -> TrackerInputError:
+    return TrackerInputError(f"{video}: frame {index} failed to decode; the video is truncated or corrupt, re-encode it")
+
+
+def _read_image(file: Path, index: int) -> np.ndarray:
+    image = cv2.imread(str(file), cv2.IMREAD_COLOR)
+    if image is None:
+        raise TrackerInputError(f"{file}: frame {index} is a corrupt or unsupported image; replace it")
+    return image
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """Grey uint8 (H, W) from a BGR, BGRA or already grey frame."""
+    if image.ndim == 2:
+        return image
+    code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+    return cv2.cvtColor(image, code)
