@@ -102,8 +102,9 @@ def log_so3(r):
         for i in range(1, 3):
             if big_b[i, i] > big_b[j, j]:
                 j = i
-        k = big_b[:, j] / np.sqrt(big_b[:, j] @ big_b[:, j])
-        if k @ s < 0.0:
+        k = big_b[:, j].copy()
+        k /= np.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
+        if k[0] * s[0] + k[1] * s[1] + k[2] * s[2] < 0.0:
             k = -k
         return theta * k
     return theta * s / sin_t
