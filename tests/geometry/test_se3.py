@@ -1,0 +1,70 @@
+"""SE(3): exp/log against scipy's expm, the group axioms and the adjoint identity (design note, section 8)."""
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from tracker.geometry import se3
+
+
+def _twists(seed, count=200, scale=1.0):
+    return np.random.default_rng(seed).normal(scale=scale, size=(count, 6))
+
+
+def test_generators_order_and_hat():
+    g = se3.generators()
+    assert np.allclose(g[0][0:3, 3], [1, 0, 0]) and np.allclose(g[2][0:3, 3], [0, 0, 1])
+    # G4 is a right-handed rotation about x: it maps y to z
+    assert np.allclose(g[3][0:3, 0:3] @ [0, 1, 0], [0, 0, 1])
+    for alpha in _twists(0, 20):
+        assert np.allclose(np.tensordot(alpha, g, axes=1), se3.hat(alpha), atol=0)
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1e-5, 1e-3, 1.0, 3.0])
+def test_exp_matches_expm(scale):
+    for alpha in _twists(1, 100, scale):
+        assert np.abs(se3.exp(alpha) - expm(se3.hat(alpha))).max() < 1e-12
+
+
+@pytest.mark.parametrize("angle", [1e-9, 1e-6, 1e-4, 1e-2, 1.0, 3.0, np.pi - 1e-6])
+def test_log_inverts_exp(angle):
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        axis = rng.normal(size=3)
+        alpha = np.concatenate([rng.normal(size=3), angle * axis / np.linalg.norm(axis)])
+        back = se3.log(se3.exp(alpha))
+        assert np.abs(back - alpha).max() < 1e-9 * max(1.0, np.abs(alpha).max())
+
+
+def test_exp_of_log_for_random_poses():
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        pose = se3.from_rotvec(rng.normal(size=3) * 2.0, rng.normal(size=3))
+        assert np.abs(se3.exp(se3.log(pose)) - pose).max() < 1e-12
+
+
+def test_group_axioms():
+    rng = np.random.default_rng(4)
+    a, b, c = (se3.exp(x) for x in rng.normal(size=(3, 6)))
+    assert np.allclose((a @ b) @ c, a @ (b @ c), atol=1e-12)
+    assert np.allclose(a @ se3.inverse(a), np.eye(4), atol=1e-12)
+    assert np.allclose(se3.exp(np.zeros(6)), np.eye(4))
+    assert np.allclose(se3.inverse(a), np.linalg.inv(a), atol=1e-12)
+
+
+def test_adjoint_identity():
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        e = se3.exp(rng.normal(size=6))
+        alpha = rng.normal(size=6)
+        lhs = e @ se3.exp(alpha) @ se3.inverse(e)
+        assert np.abs(lhs - se3.exp(se3.adjoint(e) @ alpha)).max() < 1e-12
+        assert np.allclose(se3.adjoint(se3.inverse(e)), np.linalg.inv(se3.adjoint(e)), atol=1e-12)
+
+
+def test_point_velocity_matches_finite_differences():
+    rng = np.random.default_rng(6)
+    x, alpha = rng.normal(size=3), rng.normal(size=6)
+    eps = 1e-6
+    moved = [(se3.exp(s * eps * alpha) @ np.append(x, 1.0))[0:3] for s in (1.0, -1.0)]
+    assert np.allclose((moved[0] - moved[1]) / (2 * eps), se3.point_velocity(x) @ alpha, atol=1e-8)
