@@ -36,8 +36,8 @@ class Settings:
     search_range: int = 20  # pixels searched either side of the outline
     threshold: float = 6.0  # minimum grey-level derivative of an edge (per pixel)
     robust_c: float = 2.0  # IRLS weight w = 1 / (c + |m|), pixels
-    prior_translation: float = 1e3  # weak zero-motion prior, px^2 per m^2
-    prior_rotation: float = 1e2  # px^2 per rad^2
+    prior_translation: float = 10.0  # weak zero-motion prior, px^2 per m^2
+    prior_rotation: float = 1.0  # px^2 per rad^2
     blur_sigma: float = 1.0  # Gaussian smoothing before the edge search, pixels
     motion: str = "constant-velocity"
     uncertain_share: float = 0.6  # share of samples with an edge below which a frame is uncertain
@@ -96,6 +96,12 @@ class Tracker:
         self.poses = coerce_kernel(np.ascontiguousarray(initial_poses, dtype=np.float64), model.parent,
                                    model.rest, model.constraint, model.constraint_rows)
         self.previous: np.ndarray | None = None
+
+    def warm_up(self) -> None:
+        """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
+        poses, previous = self.poses.copy(), self.previous
+        self.iterate()
+        self.poses, self.previous = poses, previous
 
     def load_images(self, images) -> None:
         """Copy (and smooth) one grey image per camera into the frame buffer."""
