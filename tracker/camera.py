@@ -98,9 +98,18 @@ class Camera:
         if self.fisheye:
             pixels = cv2.fisheye.distortPoints(xn, self.matrix, self.distortions)
         else:
+            # OpenCV drops the skew K[0,1]: project without it, then add s * y_d
             homogeneous = np.concatenate([xn, np.ones((len(xn), 1, 1))], axis=2)
-            pixels, _ = cv2.projectPoints(homogeneous, np.zeros(3), np.zeros(3), self.matrix, self.distortions)
+            pixels, _ = cv2.projectPoints(homogeneous, np.zeros(3), np.zeros(3), self._unskewed, self.distortions)
+            pixels = pixels.reshape(-1, 2)
+            pixels[:, 0] += self.matrix[0, 1] * (pixels[:, 1] - self.matrix[1, 2]) / self.matrix[1, 1]
         return pixels.reshape(-1, 2)
+
+    @property
+    def _unskewed(self) -> np.ndarray:
+        matrix = self.matrix.copy()
+        matrix[0, 1] = 0.0
+        return matrix
 
     def undistort_pixels(self, pixels: np.ndarray) -> np.ndarray:
         """Ideal normalised coordinates x_n (M, 2) of pixels (M, 2): the inverse of distort_normalized.
@@ -111,8 +120,12 @@ class Camera:
         pixels = _points(pixels)
         if len(pixels) == 0:
             return np.zeros((0, 2))
-        undistort = cv2.fisheye.undistortPoints if self.fisheye else cv2.undistortPoints
-        xn = undistort(pixels, self.matrix, self.distortions, criteria=_UNDISTORT_CRITERIA)
+        if self.fisheye:
+            xn = cv2.fisheye.undistortPoints(pixels, self.matrix, self.distortions, criteria=_UNDISTORT_CRITERIA)
+        else:
+            pixels = pixels.copy()
+            pixels[:, 0, 0] -= self.matrix[0, 1] * (pixels[:, 0, 1] - self.matrix[1, 2]) / self.matrix[1, 1]
+            xn = cv2.undistortPoints(pixels, self._unskewed, self.distortions, criteria=_UNDISTORT_CRITERIA)
         return xn.reshape(-1, 2)
 
 

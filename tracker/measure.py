@@ -51,19 +51,18 @@ def _bilinear(image, width, height, x, y):
 def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, profile):
     """Signed distance along (nx, ny) from (px, py) to the nearest edge, or NaN if none within range.
 
-    ``profile`` is scratch space of at least 2 * search_range + 3 floats.
+    ``profile`` is scratch space of at least 2 * search_range + 5 floats (the
+    derivative at t = +-r needs the grey values at t +- 2).
     """
     r = search_range
-    for t in range(-r - 1, r + 2):
-        profile[t + r + 1] = _bilinear(image, width, height, px + t * nx, py + t * ny)
+    for t in range(-r - 2, r + 3):
+        profile[t + r + 2] = _bilinear(image, width, height, px + t * nx, py + t * ny)
     for d in range(0, r + 1):
         for sign in (1, -1):
             if d == 0 and sign == -1:
                 continue
             t = sign * d
-            c = t + r + 1
-            if c - 2 < 0 or c + 2 >= 2 * r + 3:
-                continue
+            c = t + r + 2
             a0 = profile[c - 2]
             a1 = profile[c - 1]
             a2 = profile[c]
@@ -90,7 +89,7 @@ def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_
     """Search every sample's edge and accumulate C_i, eta_i; returns (visible, found, sum w|m|, sum w)."""
     information[:] = 0.0
     eta[:] = 0.0
-    profile = np.empty(2 * search_range + 3)
+    profile = np.empty(2 * search_range + 5)
     found = 0
     sum_wm = 0.0
     sum_w = 0.0

@@ -75,8 +75,8 @@ def _vector(value, length: int, where: str) -> np.ndarray:
 
 
 def _positive(value, where: str) -> float:
-    if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{where} must be a positive number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{where} must be a positive number, got {float(value) if isinstance(value, float) else value!r}")
     return float(value)
 
 
@@ -159,6 +159,8 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
     specs = data.get("component")
     if not isinstance(specs, list) or not specs:
         raise TrackerInputError(f"{path}: no [[component]] tables; a model needs at least a root component")
+    if not all(isinstance(c, dict) for c in specs):
+        raise TrackerInputError(f"{path}: every `component` entry must be a [[component]] table; fix the file")
     names = [str(c.get("name", "")) for c in specs]
     if any(not n for n in names) or len(set(names)) != len(names):
         raise TrackerInputError(f"{path}: every component needs a unique non-empty `name`; fix the names")
@@ -184,7 +186,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
                 raise ValueError(f"{where}.axis must not be zero")
             direction = direction / np.linalg.norm(direction)
             q_specs = spec.get("quadric", [])
-            if not isinstance(q_specs, list):
+            if not isinstance(q_specs, list) or not all(isinstance(q, dict) for q in q_specs):
                 raise ValueError(f"{where}.quadric must be an array of tables")
             for k, q_spec in enumerate(q_specs):
                 surface, clip, bound = _build_quadric(q_spec, f"{where}.quadric[{k}]")

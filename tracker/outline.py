@@ -101,35 +101,36 @@ class Samples:
 
 
 @njit(cache=True)
-def distort(k_mat, dist, p):
-    """Ideal pixel p -> recorded pixel and the 2x2 Jacobian of that map (Brown-Conrady).
+def distort(k_mat, dist, px, py):
+    """Ideal pixel (px, py) -> recorded pixel and the 2x2 Jacobian of that map (Brown-Conrady).
 
     With x = K^-1 p, r2 = |x|^2, f = 1 + k1 r2 + k2 r2^2 + k3 r2^3:
-    d(x) = x f + (2 p1 x y + p2 (r2 + 2x^2), p1 (r2 + 2y^2) + 2 p2 x y).
+    d(x) = x f + (2 p1 x y + p2 (r2 + 2x^2), p1 (r2 + 2y^2) + 2 p2 x y), p_d = K d(x)
+    and J_d = K2 (dd/dx) K2^-1.  Returns (u, v, j00, j01, j10, j11).
     """
     fx, s, cx = k_mat[0, 0], k_mat[0, 1], k_mat[0, 2]
     fy, cy = k_mat[1, 1], k_mat[1, 2]
-    y = (p[1] - cy) / fy
-    x = (p[0] - cx - s * y) / fx
+    y = (py - cy) / fy
+    x = (px - cx - s * y) / fx
     k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
     r2 = x * x + y * y
     f = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     df = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3)
     dx = x * f + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     dy = y * f + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    out = np.empty(2)
-    out[0] = fx * dx + s * dy + cx
-    out[1] = fy * dy + cy
-    jn = np.empty((2, 2))
-    jn[0, 0] = f + 2.0 * x * x * df + 2.0 * p1 * y + 6.0 * p2 * x
-    jn[0, 1] = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y
-    jn[1, 0] = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y
-    jn[1, 1] = f + 2.0 * y * y * df + 6.0 * p1 * y + 2.0 * p2 * x
-    k2x2 = np.empty((2, 2))
-    k2x2[0, 0], k2x2[0, 1], k2x2[1, 0], k2x2[1, 1] = fx, s, 0.0, fy
-    k2inv = np.empty((2, 2))
-    k2inv[0, 0], k2inv[0, 1], k2inv[1, 0], k2inv[1, 1] = 1.0 / fx, -s / (fx * fy), 0.0, 1.0 / fy
-    return out, k2x2 @ jn @ k2inv
+    n00 = f + 2.0 * x * x * df + 2.0 * p1 * y + 6.0 * p2 * x
+    n01 = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y
+    n11 = f + 2.0 * y * y * df + 6.0 * p1 * y + 2.0 * p2 * x
+    # K2 N K2^-1 with K2 = [[fx, s], [0, fy]], K2^-1 = [[1/fx, -s/(fx fy)], [0, 1/fy]]
+    a00 = fx * n00 + s * n01
+    a01 = fx * n01 + s * n11
+    a10 = fy * n01
+    a11 = fy * n11
+    j00 = a00 / fx
+    j01 = -a00 * s / (fx * fy) + a01 / fy
+    j10 = a10 / fx
+    j11 = -a10 * s / (fx * fy) + a11 / fy
+    return fx * dx + s * dy + cx, fy * dy + cy, j00, j01, j10, j11
 
 
 @njit(cache=True)
@@ -168,21 +169,24 @@ def _occluded(x_cam, j, q_cam, clip_cam):
 
 
 @njit(cache=True)
-def _emit(p, j, k, comp, conic, q_cam, clip_cam, cam_from_comp, k_mat, k_inv, dist, size,
+def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, cam_from_comp, k_mat, k_inv, dist, size,
           o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point, n):
     """Test one ideal-pixel outline point and append it to the buffers if visible; returns the new count."""
     if n >= o_cam.shape[0]:
         return n
     q = q_cam[j]
-    xh = np.array([p[0], p[1], 1.0])
-    x = k_inv @ xh
-    denom = q[0, 3] * x[0] + q[1, 3] * x[1] + q[2, 3] * x[2]
+    x0 = k_inv[0, 0] * px + k_inv[0, 1] * py + k_inv[0, 2]
+    x1 = k_inv[1, 1] * py + k_inv[1, 2]
+    denom = q[0, 3] * x0 + q[1, 3] * x1 + q[2, 3]
     if denom == 0.0:
         return n
     depth = -q[3, 3] / denom
     if depth <= 0.0:
         return n
-    x_cam = depth * x
+    x_cam = np.empty(3)
+    x_cam[0] = depth * x0
+    x_cam[1] = depth * x1
+    x_cam[2] = depth
     clip = clip_cam[j]
     value = clip[3, 3]
     for a in range(3):
@@ -191,54 +195,57 @@ def _emit(p, j, k, comp, conic, q_cam, clip_cam, cam_from_comp, k_mat, k_inv, di
             value += x_cam[a] * clip[a, b] * x_cam[b]
     if value > 0.0:
         return n
-    grad = conic @ xh
-    gnorm = np.sqrt(grad[0] * grad[0] + grad[1] * grad[1])
-    scale = 0.0
-    for a in range(3):
-        for b in range(3):
-            scale = max(scale, abs(conic[a, b]))
-    if gnorm <= 1e-9 * scale * (1.0 + abs(p[0]) + abs(p[1])):
+    # outward normal (C_pix p~)[0:2]; undefined at a line pair's vertex
+    g0 = conic[0, 0] * px + conic[0, 1] * py + conic[0, 2]
+    g1 = conic[1, 0] * px + conic[1, 1] * py + conic[1, 2]
+    if np.sqrt(g0 * g0 + g1 * g1) <= 1e-9 * conic_scale * (1.0 + abs(px) + abs(py)):
         return n
-    pd, jd = distort(k_mat, dist, p)
-    if pd[0] < 0.0 or pd[1] < 0.0 or pd[0] > size[0] - 1.0 or pd[1] > size[1] - 1.0:
+    u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
+    if u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
         return n
     if _occluded(x_cam, j, q_cam, clip_cam):
         return n
     # normal through the distortion: n_d ~ J_d^-T n
-    det = jd[0, 0] * jd[1, 1] - jd[0, 1] * jd[1, 0]
-    nx = (jd[1, 1] * grad[0] - jd[1, 0] * grad[1]) / det
-    ny = (-jd[0, 1] * grad[0] + jd[0, 0] * grad[1]) / det
+    det = j00 * j11 - j01 * j10
+    nx = (j11 * g0 - j10 * g1) / det
+    ny = (-j01 * g0 + j00 * g1) / det
     nn = np.sqrt(nx * nx + ny * ny)
     nx /= nn
     ny /= nn
-    # L = n_d^T J_d dp/dY R D(X_comp)
-    r = cam_from_comp[0:3, 0:3]
-    x_comp = r.T @ (x_cam - cam_from_comp[0:3, 3])
-    gx = nx * jd[0, 0] + ny * jd[1, 0]
-    gy = nx * jd[0, 1] + ny * jd[1, 1]
-    # row of dp/dY: (1/Z) [K2 | -(p - c0)], contracted with (gx, gy)
+    # L = n_d^T J_d dp/dY R D(X_comp): first g = J_d^T n_d, then the row of dp/dY,
+    # (1/Z) [K2 | -(p - c0)], contracted with g, then R^T of it (the component frame)
+    gx = nx * j00 + ny * j10
+    gy = nx * j01 + ny * j11
     dy0 = gx * k_mat[0, 0] / depth
     dy1 = (gx * k_mat[0, 1] + gy * k_mat[1, 1]) / depth
-    dy2 = -(gx * (p[0] - k_mat[0, 2]) + gy * (p[1] - k_mat[1, 2])) / depth
-    # row in the component frame: R^T (dy0, dy1, dy2)
-    rx = r[0, 0] * dy0 + r[1, 0] * dy1 + r[2, 0] * dy2
-    ry = r[0, 1] * dy0 + r[1, 1] * dy1 + r[2, 1] * dy2
-    rz = r[0, 2] * dy0 + r[1, 2] * dy1 + r[2, 2] * dy2
+    dy2 = -(gx * (px - k_mat[0, 2]) + gy * (py - k_mat[1, 2])) / depth
+    e = cam_from_comp
+    rx = e[0, 0] * dy0 + e[1, 0] * dy1 + e[2, 0] * dy2
+    ry = e[0, 1] * dy0 + e[1, 1] * dy1 + e[2, 1] * dy2
+    rz = e[0, 2] * dy0 + e[1, 2] * dy1 + e[2, 2] * dy2
+    d0 = x_cam[0] - e[0, 3]
+    d1 = x_cam[1] - e[1, 3]
+    d2 = x_cam[2] - e[2, 3]
+    xc0 = e[0, 0] * d0 + e[1, 0] * d1 + e[2, 0] * d2
+    xc1 = e[0, 1] * d0 + e[1, 1] * d1 + e[2, 1] * d2
+    xc2 = e[0, 2] * d0 + e[1, 2] * d1 + e[2, 2] * d2
     o_jac[n, 0] = rx
     o_jac[n, 1] = ry
     o_jac[n, 2] = rz
     # g^T (-[X]x) w = (X x g) . w
-    o_jac[n, 3] = x_comp[1] * rz - x_comp[2] * ry
-    o_jac[n, 4] = x_comp[2] * rx - x_comp[0] * rz
-    o_jac[n, 5] = x_comp[0] * ry - x_comp[1] * rx
+    o_jac[n, 3] = xc1 * rz - xc2 * ry
+    o_jac[n, 4] = xc2 * rx - xc0 * rz
+    o_jac[n, 5] = xc0 * ry - xc1 * rx
     o_cam[n] = k
     o_comp[n] = comp
     o_quadric[n] = j
-    o_pixel[n, 0] = pd[0]
-    o_pixel[n, 1] = pd[1]
+    o_pixel[n, 0] = u
+    o_pixel[n, 1] = v
     o_normal[n, 0] = nx
     o_normal[n, 1] = ny
-    o_point[n] = x_comp
+    o_point[n, 0] = xc0
+    o_point[n, 1] = xc1
+    o_point[n, 2] = xc2
     return n + 1
 
 
@@ -264,7 +271,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
             clip_cam[j] = e_inv.T @ clip[j] @ e_inv
         for j in range(n_quadrics):
             e = cam_from_comp[j]
-            centre = e[0:3, 0:3] @ bound[j, 0:3].copy() + e[0:3, 3]
+            centre = np.ascontiguousarray(e[0:3, 0:3]) @ bound[j, 0:3].copy() + e[0:3, 3]
             radius = bound[j, 3]
             if centre[2] + radius <= 0.0:
                 continue
@@ -287,6 +294,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
             # classify and factor in normalised coordinates, where the spectrum is well scaled;
             # H_pix = K H_n and l_pix = K^-T l_n carry the factors to pixels
             lam, vec = np.linalg.eigh(conic_n)
+            conic_scale = np.abs(conic).max()
             big = max(abs(lam[0]), abs(lam[2]))
             if big == 0.0:
                 continue
@@ -331,7 +339,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     vy = (d1 * h2 - h1 * d2) / (h2 * h2)
                     speed = np.sqrt(vx * vx + vy * vy)
                     if (px - disc_c[0]) ** 2 + (py - disc_c[1]) ** 2 <= disc_r * disc_r:
-                        n = _emit(np.array([px, py]), j, k, comp, conic, q_cam, clip_cam, cam_from_comp[j],
+                        n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, cam_from_comp[j],
                                   k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric, o_pixel, o_normal,
                                   o_jac, o_point, n)
                     theta += max(spacing / max(speed, 1e-12), min_step)
@@ -356,7 +364,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     steps = int(2.0 * half / spacing) + 1
                     for s_i in range(steps):
                         t = -half + (s_i + 0.5) * (2.0 * half / steps)
-                        n = _emit(np.array([fx - t * uy, fy + t * ux]), j, k, comp, conic, q_cam, clip_cam,
+                        n = _emit(fx - t * uy, fy + t * ux, j, k, comp, conic, conic_scale, q_cam, clip_cam,
                                   cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
                                   o_pixel, o_normal, o_jac, o_point, n)
     return n

@@ -33,7 +33,8 @@ class Settings:
 
     iterations: int = 6
     spacing: float = 4.0  # pixels between outline samples
-    search_range: int = 20  # pixels searched either side of the outline
+    search_range: int = 20  # pixels searched either side of the outline, first iteration
+    final_search_range: int = 20  # ... last iteration (the range shrinks geometrically in between)
     threshold: float = 6.0  # minimum grey-level derivative of an edge (per pixel)
     robust_c: float = 2.0  # IRLS weight w = 1 / (c + |m|), pixels
     prior_translation: float = 10.0  # weak zero-motion prior, px^2 per m^2
@@ -110,15 +111,24 @@ class Tracker:
             h, w = image.shape
             self.images[k, :h, :w] = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
 
-    def iterate(self) -> Statistics:
+    def search_range(self, iteration: int) -> int:
+        """Coarse to fine: r_i = r_0 (r_last / r_0)^(i / (n - 1))."""
+        st = self.settings
+        if st.iterations < 2:
+            return st.search_range
+        ratio = st.final_search_range / st.search_range
+        return max(1, int(round(st.search_range * ratio ** (iteration / (st.iterations - 1)))))
+
+    def iterate(self, search_range: int | None = None) -> Statistics:
         """One IRLS iteration at the current poses: sample, measure, solve, update, coerce."""
         s, m, st = self.samples, self.model, self.settings
+        search_range = st.search_range if search_range is None else search_range
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
                                  s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
         visible, found, sum_wm, sum_w = measure_kernel(
             self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
-            st.search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
+            search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
         self.information += self.prior
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
         self.poses = coerce_kernel(apply_motions(self.poses, alpha), m.parent, m.rest, m.constraint,
@@ -133,8 +143,8 @@ class Tracker:
         if self.settings.motion == "constant-velocity" and self.previous is not None:
             self.poses = coerce_kernel(constant_velocity(self.previous, current), self.model.parent,
                                        self.model.rest, self.model.constraint, self.model.constraint_rows)
-        for _ in range(self.settings.iterations):
-            stats = self.iterate()
+        for iteration in range(self.settings.iterations):
+            stats = self.iterate(self.search_range(iteration))
         self.previous = current
         share = stats.found / stats.visible if stats.visible else 0.0
         return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)

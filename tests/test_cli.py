@@ -1,0 +1,99 @@
+"""The command line: a tracked run end to end, and one-line errors with exit code 2 for bad input."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracker.cli import main
+from tracker.io.poses import load_poses
+
+
+def _copy(recording: Path, tmp_path: Path) -> Path:
+    target = tmp_path / "rec"
+    shutil.copytree(recording, target)
+    return target
+
+
+def _error_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err, "no error message"
+    assert "Traceback" not in "\n".join(err)
+    return err[-1]
+
+
+def test_track_writes_poses_and_summary(tiny_recording, tmp_path, capsys):
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    poses = load_poses(tmp_path / "out" / "poses.npz")
+    assert poses["poses"].shape[0] == 6
+    assert np.all(np.isfinite(poses["joints"]))
+    out = capsys.readouterr().out
+    assert "frames per second" in out and "MPJPE" in out
+
+
+def test_eval_prints_report(tiny_recording, capsys):
+    truth = str(tiny_recording / "truth.npz")
+    assert main(["eval", truth, truth]) == 0
+    assert "MPJPE" in capsys.readouterr().out
+
+
+def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
+    """Break a copy of the recording one way; return the extra CLI args and the file the error must name."""
+    if name == "missing calibration":
+        (rec / "calibration.toml").unlink()
+        return [], "calibration.toml"
+    if name == "missing video":
+        (rec / "cam1.avi").unlink()
+        return ["--cameras", "cam0,cam1"], "cam1"
+    if name == "different frame counts":
+        import cv2
+
+        src = cv2.VideoCapture(str(rec / "cam1.avi"))
+        frames = []
+        while True:
+            ok, frame = src.read()
+            if not ok:
+                break
+            frames.append(frame)
+        src.release()
+        h, w = frames[0].shape[:2]
+        writer = cv2.VideoWriter(str(rec / "cam1.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (w, h))
+        for frame in frames[:-2]:
+            writer.write(frame)
+        writer.release()
+        return [], "cam1.avi"
+    if name == "model with a cycle":
+        text = (rec / "model.toml").read_text().replace('name = "torso"\nparent = "pelvis"', 'name = "torso"\nparent = "head"')
+        (rec / "model.toml").write_text(text)
+        return [], "model.toml"
+    if name == "unknown parent":
+        text = (rec / "model.toml").read_text().replace('parent = "torso"', 'parent = "chest"', 1)
+        (rec / "model.toml").write_text(text)
+        return [], "model.toml"
+    if name == "init names an unknown component":
+        with open(rec / "init.toml", "a") as f:
+            f.write("\n[pose.tail]\nrotation = [0.0, 0.0, 0.0]\n")
+        return [], "init.toml"
+    if name == "corrupt video":
+        (rec / "cam0.avi").write_bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8).tobytes())
+        return [], "cam0.avi"
+    raise AssertionError(name)
+
+
+@pytest.mark.parametrize("case", [
+    "missing calibration", "missing video", "different frame counts", "model with a cycle", "unknown parent",
+    "init names an unknown component", "corrupt video",
+])
+def test_bad_input_is_one_line_exit_2(case, tiny_recording, tmp_path, capsys):
+    rec = _copy(tiny_recording, tmp_path)
+    extra, named = _bad_case(case, rec)
+    code = main(["track", str(rec), "--out", str(tmp_path / "out"), "--quiet", *extra])
+    line = _error_line(capsys)
+    assert code == 2
+    assert line.startswith("tracker: error:") and named in line
+
+
+def test_missing_recording_folder(tmp_path, capsys):
+    assert main(["track", str(tmp_path / "nowhere"), "--quiet"]) == 2
+    assert "nowhere" in _error_line(capsys)
