@@ -183,12 +183,14 @@ def solve(information, eta, parent, D, rows, poses) -> np.ndarray:
 
 
 @njit(cache=True)
-def coerce_kernel(poses, parent, rest, D, rows):
-    """Repair the joints parents first (section 5, eqs. 23-25 with T0).
+def coerce_kernel(poses, parent, rest, D, rows, joint_type, axis, lower, upper):
+    """Repair the joints parents first (section 5, eqs. 23-25 with T0), within the joint limits.
 
     For each constrained child i with p = parent(i): a = log(T0_i^-1 E_p^-1 E_i),
     a' = a - D_i^T (D_i D_i^T)^-1 D_i a, E_i <- E_p T0_i exp(a').  Roots and free
-    children keep their poses.
+    children keep their poses.  A hinge's a' = theta (p x d, d) and a slide's
+    a' = (s d, 0) are then scaled so that theta (or s) lies in [lower_i, upper_i];
+    a ball's a' = (p x w, w) so that its rotation from rest |w| <= upper_i.
     """
     out = poses.copy()
     for i in range(out.shape[0]):
@@ -200,23 +202,44 @@ def coerce_kernel(poses, parent, rest, D, rows):
         a = log(inverse(at_rest) @ out[i])
         d_i = D[i, :k].copy()
         a -= d_i.T.copy() @ (np.linalg.inv(d_i @ d_i.T.copy()) @ (d_i @ a))
+        if joint_type[i] == BALL and upper[i] < np.inf:
+            angle = np.sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5])
+            if angle > upper[i]:
+                a *= upper[i] / angle
+        elif joint_type[i] == HINGE or joint_type[i] == SLIDE:
+            part = a[3:6] if joint_type[i] == HINGE else a[0:3]
+            amount = part[0] * axis[i, 0] + part[1] * axis[i, 1] + part[2] * axis[i, 2]
+            clamped = min(max(amount, lower[i]), upper[i])
+            if clamped != amount:
+                if amount != 0.0:
+                    a *= clamped / amount
+                elif joint_type[i] == HINGE:
+                    a[3:6] = clamped * axis[i]
+                else:
+                    a[0:3] = clamped * axis[i]
         out[i] = at_rest @ exp(a)
     return out
 
 
-def coerce(poses, parent, rest, D, rows) -> np.ndarray:
+def coerce(poses, parent, rest, D, rows, joint_type=None, axis=None, lower=None, upper=None) -> np.ndarray:
     """Poses (N,4,4) that satisfy every joint exactly (section 5); see :func:`coerce_kernel`.
 
     ``rest`` (N,4,4) holds T0_i (parent from child at rest).  Also projects arbitrary
     poses onto the joint set, e.g. a hinge keeps only the rotation about its axis.
+    Without ``joint_type``/``axis``/``lower``/``upper`` no joint limits apply.
     """
     parent = _check_order(parent)
+    n = parent.shape[0]
     return coerce_kernel(
         np.ascontiguousarray(poses, dtype=np.float64),
         parent,
         np.ascontiguousarray(rest, dtype=np.float64),
         np.ascontiguousarray(D, dtype=np.float64),
         np.ascontiguousarray(rows, dtype=np.int64),
+        np.zeros(n, np.int64) if joint_type is None else np.ascontiguousarray(joint_type, dtype=np.int64),
+        np.zeros((n, 3)) if axis is None else np.ascontiguousarray(axis, dtype=np.float64),
+        np.full(n, -np.inf) if lower is None else np.ascontiguousarray(lower, dtype=np.float64),
+        np.full(n, np.inf) if upper is None else np.ascontiguousarray(upper, dtype=np.float64),
     )
 
 

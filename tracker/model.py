@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.chain import JOINT_TYPES, constraint_rows, pack_constraints
+from tracker.chain import JOINT_TYPES, coerce_kernel, constraint_rows, pack_constraints
 from tracker.errors import TrackerInputError
 from tracker.geometry import quadric, se3
 
@@ -30,7 +30,9 @@ class Model:
     Per component (N): ``names``, ``parent`` (-1 for the root), ``joint_type``
     (codes of :mod:`tracker.chain`), ``rest`` (N,4,4) parent-from-child rest
     transforms ``T0``, ``axis`` (N,3), constraint rows ``constraint`` (N,6,6)
-    zero-padded with ``constraint_rows`` (N,) rows each.
+    zero-padded with ``constraint_rows`` (N,) rows each, and the joint limits
+    ``lower``/``upper`` (N,) of hinges (radians) and slides (metres), the largest
+    rotation from rest of a ball joint in ``upper``; +-inf if none.
     Per quadric (Q): ``quadric`` (Q,4,4) surfaces and ``clip`` (Q,4,4) clipping
     quadrics in their component's frame, ``quadric_component`` (Q,), and
     ``quadric_shape`` names for drawing; ``quadric_params`` keeps the TOML keys.
@@ -44,6 +46,8 @@ class Model:
     axis: np.ndarray
     constraint: np.ndarray
     constraint_rows: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
     quadric: np.ndarray
     clip: np.ndarray
     quadric_component: np.ndarray
@@ -54,6 +58,12 @@ class Model:
     @property
     def size(self) -> int:
         return len(self.names)
+
+    def coerce(self, poses: np.ndarray) -> np.ndarray:
+        """The poses with every joint repaired exactly and within its limits (chain.coerce_kernel)."""
+        return coerce_kernel(np.ascontiguousarray(poses, dtype=np.float64), self.parent, self.rest,
+                             self.constraint, self.constraint_rows, self.joint_type, self.axis,
+                             self.lower, self.upper)
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -167,7 +177,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
     parents = [str(c.get("parent", "")) for c in specs]
     order = _breadth_first(names, parents, path)
     ordered_names = tuple(names[i] for i in order)
-    parent, joint_type, rest, axis, rows = [], [], [], [], []
+    parent, joint_type, rest, axis, rows, limits = [], [], [], [], [], []
     quadrics, clips, bounds, owners, shapes, params = [], [], [], [], [], []
     for new_index, i in enumerate(order):
         spec = specs[i]
@@ -185,6 +195,17 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
             if np.linalg.norm(direction) < 1e-9:
                 raise ValueError(f"{where}.axis must not be zero")
             direction = direction / np.linalg.norm(direction)
+            limit = (-np.inf, np.inf)
+            if "max_angle" in spec:
+                if joint != "ball":
+                    raise ValueError(f"{where}.max_angle applies to ball joints only")
+                limit = (0.0, _positive(spec["max_angle"], f"{where}.max_angle"))
+            if "limits" in spec:
+                if joint not in ("hinge", "slide"):
+                    raise ValueError(f"{where}.limits apply to hinge and slide joints only")
+                limit = tuple(_vector(spec["limits"], 2, f"{where}.limits"))
+                if limit[0] > limit[1]:
+                    raise ValueError(f"{where}.limits must be [lower, upper] with lower <= upper")
             q_specs = spec.get("quadric", [])
             if not isinstance(q_specs, list) or not all(isinstance(q, dict) for q in q_specs):
                 raise ValueError(f"{where}.quadric must be an array of tables")
@@ -202,6 +223,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
         joint_type.append(JOINT_TYPES[joint])
         rest.append(se3.from_rotvec(rest_rot, at))
         axis.append(direction)
+        limits.append(limit)
         rows.append(constraint_rows(JOINT_TYPES[joint], np.zeros(3), direction))
     if not quadrics:
         raise TrackerInputError(f"{path}: the model has no quadrics, so nothing can be seen; add [[component.quadric]] tables")
@@ -215,6 +237,8 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
         axis=np.asarray(axis),
         constraint=constraint,
         constraint_rows=n_rows,
+        lower=np.array([lo for lo, _ in limits]),
+        upper=np.array([hi for _, hi in limits]),
         quadric=np.asarray(quadrics),
         clip=np.asarray(clips),
         quadric_component=np.asarray(owners, dtype=np.int64),

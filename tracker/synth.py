@@ -6,7 +6,7 @@ this renderer and ``outline.py`` points at a bug in one of them.
 
 Pipeline of :func:`synthesize`::
 
-    motion (BVH clip | procedural)  -> model poses (F, N, 4, 4), exact joints (chain.coerce)
+    motion (BVH clip | procedural)  -> model poses (F, N, 4, 4), exact joints (Model.coerce)
     per camera: pixel rays          -> exact lens distortion (undistorted pixel centres)
     per frame and camera:           render_kernel -> component id + shade per pixel
                                     -> colour, soft edges (Gaussian), over a background photo, sensor noise
@@ -33,7 +33,7 @@ import tomli_w
 from numba import njit, prange
 
 from tracker.camera import Camera, load_calibration, save_calibration
-from tracker.chain import HINGE, coerce
+from tracker.chain import HINGE
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_write, ensure_writable_folder
 from tracker.model import Model, joint_centres, load_model, poses_from_rotations, rest_poses
@@ -360,7 +360,7 @@ def retarget(bvh: Bvh, model: Model, start: int = 0, frames: int | None = None, 
     midpoint of the BVH hip joints (scaled by :data:`CMU_UNIT`). With ``centre``
     the clip's root path is centred on the world origin in x, y (middle of its
     bounding box) and lifted so that the lower foot touches z = 0 (median over
-    frames). Poses are projected onto the model's joints with ``chain.coerce``,
+    frames). Poses are projected onto the model's joints with ``Model.coerce``,
     so hinge joints keep only their rotation about the axis.
     """
     if frames is None:
@@ -378,7 +378,7 @@ def retarget(bvh: Bvh, model: Model, start: int = 0, frames: int | None = None, 
     hips = [_bvh_joint(bvh, name, path) for name in ("LeftHip", "RightHip")]
     root = 0.5 * (world[:, hips[0], 0:3, 3] + world[:, hips[1], 0:3, 3]) * CMU_UNIT @ c.T
     poses = np.stack([poses_from_rotations(model, root[f], rotations[f]) for f in range(frames)])
-    poses = np.stack([coerce(p, model.parent, model.rest, model.constraint, model.constraint_rows) for p in poses])
+    poses = np.stack([model.coerce(p) for p in poses])
     if centre:
         shift = np.zeros(3)
         xy = poses[:, 0, 0:2, 3]
@@ -469,7 +469,7 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
     """Smooth model poses (frames, N, 4, 4): turning on the spot, knee bends, arm swings and a wave.
 
     Built by forward kinematics from per-joint rotations relative to the rest pose
-    (E_i = E_parent T0_i R_i), then ``chain.coerce``. The seed varies the phases
+    (E_i = E_parent T0_i R_i), then ``Model.coerce``. The seed varies the phases
     and rates a little. Feet stay near z = 0 when the knees bend (the root drops).
     Needs the human model's component names.
     """
@@ -517,7 +517,7 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
         # hips above the ankles: (thigh + shin) cos(bend) plus the ankle's height above the sole
         root[2] = (thigh + shin) * np.cos(bend) + foot_low
         poses[:, 0:3, 3] += root
-        out[f] = coerce(poses, model.parent, model.rest, model.constraint, model.constraint_rows)
+        out[f] = model.coerce(poses)
     out[:, :, 2, 3] -= np.median(lowest_points(model, out))
     return out
 

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from tracker.chain import coerce_kernel, solve_kernel
+from tracker.chain import solve_kernel
 from tracker.geometry.se3 import exp, inverse, log
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
@@ -94,8 +94,7 @@ class Tracker:
         height = int(self.rig.size[:, 1].max())
         width = int(self.rig.size[:, 0].max())
         self.images = np.zeros((len(cameras), height, width), np.uint8)
-        self.poses = coerce_kernel(np.ascontiguousarray(initial_poses, dtype=np.float64), model.parent,
-                                   model.rest, model.constraint, model.constraint_rows)
+        self.poses = model.coerce(initial_poses)
         self.previous: np.ndarray | None = None
 
     def warm_up(self) -> None:
@@ -131,8 +130,7 @@ class Tracker:
             search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
         self.information += self.prior
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
-        self.poses = coerce_kernel(apply_motions(self.poses, alpha), m.parent, m.rest, m.constraint,
-                                   m.constraint_rows)
+        self.poses = m.coerce(apply_motions(self.poses, alpha))
         residual = sum_wm / sum_w if sum_w > 0 else float("inf")
         return Statistics(self.information, self.eta, visible, found, residual)
 
@@ -141,8 +139,7 @@ class Tracker:
         self.load_images(images)
         current = self.poses
         if self.settings.motion == "constant-velocity" and self.previous is not None:
-            self.poses = coerce_kernel(constant_velocity(self.previous, current), self.model.parent,
-                                       self.model.rest, self.model.constraint, self.model.constraint_rows)
+            self.poses = self.model.coerce(constant_velocity(self.previous, current))
         for iteration in range(self.settings.iterations):
             stats = self.iterate(self.search_range(iteration))
         self.previous = current

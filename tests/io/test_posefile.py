@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracker.chain import coerce
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file, save_pose_file
@@ -28,13 +27,13 @@ def unit(rng):
 
 
 def valid_poses(rng, model, max_angle=2.5):
-    """Rest poses with random rotations, projected onto the joints by chain.coerce."""
+    """Rest poses with random rotations, projected onto the joints by Model.coerce."""
     root = se3.from_rotvec(rng.uniform(0, max_angle) * unit(rng), rng.normal(size=3))
     rotations = np.array([se3.exp_so3(rng.uniform(0, max_angle) * unit(rng)) for _ in range(model.size)])
     rotations[0] = root[:3, :3]
     poses = poses_from_rotations(model, root[:3, 3], rotations)
     assert rest_poses(model, root).shape == poses.shape
-    return coerce(poses, model.parent, model.rest, model.constraint, model.constraint_rows)
+    return model.coerce(poses)
 
 
 def joint_errors(model, poses):

@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from tracker.chain import coerce
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.atomic import atomic_write
@@ -66,7 +65,7 @@ def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
             moved.append(name)
     if moved:
         warnings.warn(f"{path}: moved {', '.join(moved)} onto their parents' joints", stacklevel=2)
-    return coerce(poses, model.parent, model.rest, model.constraint, model.constraint_rows)
+    return model.coerce(poses)
 
 
 def _finite(value, name: str, key: str) -> np.ndarray:
