@@ -279,3 +279,41 @@ def test_rejects_parent_after_child():
         chain.coerce(eye, parent, eye, D, rows)
     with pytest.raises(ValueError):
         chain.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((2, 6)), parent, D, rows, eye)
+
+
+def _single_joint(joint, axis=(1.0, 0.0, 0.0)):
+    rows = chain.constraint_rows(joint, np.zeros(3), np.asarray(axis))
+    D, n_rows = chain.pack_constraints([np.zeros((0, 6)), rows])
+    return np.array([-1, 0]), np.stack([np.eye(4), se3.from_rotvec([0, 0, 0], [0.0, 0.0, -0.3])]), D, n_rows
+
+
+@pytest.mark.parametrize("angle, expected", [(0.5, 0.5), (1.4, 1.0), (-0.7, -0.2)])
+def test_coercion_clamps_a_hinge_to_its_limits(angle, expected):
+    parent, rest, D, rows = _single_joint(chain.HINGE)
+    poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.array([0, 0, 0, angle, 0, 0]))])
+    fixed = chain.coerce(poses, parent, rest, D, rows, [chain.FREE, chain.HINGE], [[0, 0, 0], [1, 0, 0]],
+                         [-np.inf, -0.2], [np.inf, 1.0])
+    relative = se3.log(np.linalg.inv(rest[1]) @ fixed[1])
+    np.testing.assert_allclose(relative, [0, 0, 0, expected, 0, 0], atol=1e-12)
+
+
+def test_coercion_clamps_a_slide_to_its_limits():
+    parent, rest, D, rows = _single_joint(chain.SLIDE, (0.0, 0.0, 1.0))
+    poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.array([0, 0, 0.5, 0, 0, 0]))])
+    fixed = chain.coerce(poses, parent, rest, D, rows, [chain.FREE, chain.SLIDE], [[0, 0, 0], [0, 0, 1]],
+                         [-np.inf, 0.0], [np.inf, 0.1])
+    np.testing.assert_allclose(se3.log(np.linalg.inv(rest[1]) @ fixed[1]), [0, 0, 0.1, 0, 0, 0], atol=1e-12)
+
+
+def test_coercion_limits_a_ball_joint_rotation():
+    rng = np.random.default_rng(11)
+    parent, rest, D, rows = _single_joint(chain.BALL)
+    for _ in range(20):
+        w = rng.normal(size=3)
+        poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.concatenate([np.zeros(3), w]))])
+        fixed = chain.coerce(poses, parent, rest, D, rows, [chain.FREE, chain.BALL], np.zeros((2, 3)),
+                             [-np.inf, 0.0], [np.inf, 0.8])
+        relative = se3.log(np.linalg.inv(rest[1]) @ fixed[1])
+        angle = np.linalg.norm(w)
+        expected = w if angle <= 0.8 else w * 0.8 / angle
+        np.testing.assert_allclose(relative, np.concatenate([np.zeros(3), expected]), atol=1e-12)

@@ -169,3 +169,28 @@ def test_non_table_entries_give_a_tracker_input_error(tmp_path, text):
     with pytest.raises(TrackerInputError) as info:
         load_model(path)
     assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("extra, joint", [
+    ("limits = [0.0, 1.0]", "ball"),
+    ("limits = [1.0, 0.0]", "hinge"),
+    ("max_angle = 1.0", "hinge"),
+    ("max_angle = -1.0", "ball"),
+])
+def test_bad_joint_limits_name_the_file(tmp_path, extra, joint):
+    path = tmp_path / "limits.toml"
+    path.write_text(
+        '[[component]]\nname = "a"\nparent = ""\n[[component.quadric]]\nshape = "sphere"\nradius = 0.1\n'
+        f'[[component]]\nname = "b"\nparent = "a"\njoint = "{joint}"\n{extra}\n'
+        '[[component.quadric]]\nshape = "sphere"\nradius = 0.1\n'
+    )
+    with pytest.raises(TrackerInputError, match="limits.toml"):
+        load_model(path)
+
+
+def test_human_model_has_joint_limits():
+    model = load_model(HUMAN)
+    elbow = model.index("forearm_l")
+    assert model.lower[elbow] == 0.0 and model.upper[elbow] == pytest.approx(2.6)
+    assert model.upper[model.index("foot_r")] == pytest.approx(1.3)
+    assert np.isinf(model.upper[model.index("thigh_l")])
