@@ -2,8 +2,9 @@
 
 Per frame the poses are predicted from the motion model, then each IRLS
 iteration samples the visible outlines in every camera, measures their edges,
-adds a weak zero-motion prior ``C_i += diag(lt I3, lr I3)`` so that every
-``C_i`` is invertible (section 3), solves the whole tree for one twist per
+adds a weak Gaussian prior ``P = diag(lt I3, lr I3)`` about the predicted pose
+(so that every ``C_i`` is invertible, section 3, and the iterations of a frame
+cannot drift along directions the images do not observe), solves the whole tree for one twist per
 component (section 4), applies ``E_i <- E_i exp(alpha_i)`` and coerces the
 joints exact (section 5).  The frame's status comes from the share of samples
 that found an edge and the robust mean residual.
@@ -67,6 +68,20 @@ def apply_motions(poses, alpha):
 
 
 @njit(cache=True)
+def add_prior(information, eta, prior, poses, anchor):
+    """Gaussian prior on each component's pose about the frame's predicted pose ``anchor``.
+
+    With delta_i = log(E_i^-1 E_anchor_i), the twist that would return E_i to
+    the prediction, the cost (alpha_i - delta_i)^T P (alpha_i - delta_i) adds
+    P to C_i and P delta_i to eta_i (section 3: it also keeps C_i invertible).
+    """
+    for i in range(poses.shape[0]):
+        delta = log(inverse(poses[i]) @ anchor[i])
+        information[i] += prior
+        eta[i] += prior @ delta
+
+
+@njit(cache=True)
 def constant_velocity(previous, current):
     """Predict E_{t+1} = E_t exp(log(E_{t-1}^-1 E_t)) for every component."""
     out = np.empty_like(current)
@@ -90,18 +105,19 @@ class Tracker:
         n = model.size
         self.information = np.zeros((n, 6, 6))
         self.eta = np.zeros((n, 6))
-        self.prior = np.diag([settings.prior_translation] * 3 + [settings.prior_rotation] * 3)
+        self.prior = np.diag(np.array([settings.prior_translation] * 3 + [settings.prior_rotation] * 3, float))
         height = int(self.rig.size[:, 1].max())
         width = int(self.rig.size[:, 0].max())
         self.images = np.zeros((len(cameras), height, width), np.uint8)
         self.poses = model.coerce(initial_poses)
         self.previous: np.ndarray | None = None
+        self.anchor = self.poses
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
-        poses, previous = self.poses.copy(), self.previous
+        poses, previous, anchor = self.poses.copy(), self.previous, self.anchor
         self.iterate()
-        self.poses, self.previous = poses, previous
+        self.poses, self.previous, self.anchor = poses, previous, anchor
 
     def load_images(self, images) -> None:
         """Copy (and smooth) one grey image per camera into the frame buffer."""
@@ -128,7 +144,7 @@ class Tracker:
         visible, found, sum_wm, sum_w = measure_kernel(
             self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
             search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
-        self.information += self.prior
+        add_prior(self.information, self.eta, self.prior, self.poses, self.anchor)
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
         self.poses = m.coerce(apply_motions(self.poses, alpha))
         residual = sum_wm / sum_w if sum_w > 0 else float("inf")
@@ -140,6 +156,7 @@ class Tracker:
         current = self.poses
         if self.settings.motion == "constant-velocity" and self.previous is not None:
             self.poses = self.model.coerce(constant_velocity(self.previous, current))
+        self.anchor = self.poses
         for iteration in range(self.settings.iterations):
             stats = self.iterate(self.search_range(iteration))
         self.previous = current
