@@ -23,7 +23,6 @@ The calibration file is the multi-camera TOML of anipose/aniposelib and Pose2Sim
 from __future__ import annotations
 
 import os
-import tomllib
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -34,6 +33,7 @@ import numpy as np
 import tomli_w
 
 from tracker.errors import TrackerInputError
+from tracker.io.tomlfile import read_toml
 from tracker.io.atomic import atomic_write
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
@@ -143,15 +143,7 @@ def load_calibration(path: str | os.PathLike) -> list[Camera]:
     the file, the camera table and the fix.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as file:
-            document = tomllib.load(file)
-    except FileNotFoundError:
-        raise TrackerInputError(f"{path}: calibration file not found; give the path of a calibration.toml") from None
-    except OSError as error:
-        raise TrackerInputError(f"{path}: cannot read the calibration ({error.strerror or error})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise TrackerInputError(f"{path}: not a valid TOML file ({error}); fix the syntax") from None
+    document = read_toml(path, "calibration", "give the path of a calibration.toml")
 
     scale = _units_scale(path, document.get("metadata", {}))
     tables = {key: value for key, value in document.items() if key != "metadata" and isinstance(value, dict)}

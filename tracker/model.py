@@ -9,7 +9,6 @@ order from the root, so ``parent[i] < i``; the flat arrays of
 
 from __future__ import annotations
 
-import tomllib
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy as np
 from tracker.chain import JOINT_TYPES, coerce_kernel, constraint_rows, pack_constraints
 from tracker.errors import TrackerInputError
 from tracker.geometry import quadric, se3
+from tracker.io.tomlfile import read_toml
 
 SHAPES = ("sphere", "ellipsoid", "cylinder", "cone")
 
@@ -154,13 +154,7 @@ def _breadth_first(names: list[str], parents: list[str], path: Path) -> list[int
 def load_model(path: str | Path) -> Model:
     """Load and validate a body model TOML (formats.md, "Body model")."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise TrackerInputError(f"{path}: model file not found; pass --model with an existing models/*.toml") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise TrackerInputError(f"{path}: not a readable TOML model ({exc}); fix the file") from None
-    return model_from_dict(data, path)
+    return model_from_dict(read_toml(path, "model", "pass --model with an existing models/*.toml"), path)
 
 
 def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:

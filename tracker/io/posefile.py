@@ -10,7 +10,6 @@ a hinge given a rotation off its axis keeps only the part about the axis.
 from __future__ import annotations
 
 import os
-import tomllib
 import warnings
 from pathlib import Path
 
@@ -20,6 +19,7 @@ import tomli_w
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.atomic import atomic_write
+from tracker.io.tomlfile import read_toml
 from tracker.model import Model
 
 _JOINT_TOLERANCE = 1e-3
@@ -28,12 +28,7 @@ _JOINT_TOLERANCE = 1e-3
 def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
     """World poses (N,4,4) of every component from a pose TOML."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise TrackerInputError(f"{path}: pose file not found; pass --init with an existing init.toml") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise TrackerInputError(f"{path}: not a readable TOML pose file ({exc}); fix the file") from None
+    data = read_toml(path, "pose", "pass --init with an existing init.toml")
     table = data.get("pose")
     if not isinstance(table, dict) or not table:
         raise TrackerInputError(f"{path}: no [pose.<component>] tables; write at least the root's pose")
