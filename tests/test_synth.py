@@ -9,11 +9,13 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker import synth
+from tracker import motion, render, synth
+from tracker.io import bvh as bvh_io
+from tracker.io.avi import MjpegAviWriter
 from tracker.camera import load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.model import load_model, model_from_dict, rest_poses
+from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "models" / "human.toml"
@@ -28,7 +30,7 @@ def human():
 
 @pytest.fixture(scope="module")
 def bvh():
-    return synth.load_bvh(CMU)
+    return bvh_io.load_bvh(CMU)
 
 
 def joint_gap(model, poses) -> float:
@@ -57,7 +59,7 @@ def test_bvh_parse(bvh):
 @needs_cmu
 def test_bvh_forward_kinematics_intrinsic_order(bvh):
     """A joint's world rotation is the parent's times Rz Ry Rx (channels in listed order) and offsets hang on it."""
-    world = synth.bvh_global(bvh, np.array([100]))[0]
+    world = bvh_io.bvh_global(bvh, np.array([100]))[0]
     j = bvh.index("LeftKnee")
     p = bvh.parents[j]
     start = bvh.channel_start[j]
@@ -69,7 +71,7 @@ def test_bvh_forward_kinematics_intrinsic_order(bvh):
 
 @needs_cmu
 def test_retarget_valid_poses_and_hinge_knee(bvh, human):
-    poses = synth.retarget(bvh, human, start=500, frames=40, stride=2)
+    poses = motion.retarget(bvh, human, start=500, frames=40, stride=2)
     assert poses.shape == (40, human.size, 4, 4)
     assert joint_gap(human, poses) < 1e-9
     rot = poses[:, :, 0:3, 0:3]
@@ -85,16 +87,16 @@ def test_retarget_valid_poses_and_hinge_knee(bvh, human):
     assert np.ptp(knee) > np.radians(30) and np.min(knee) > np.radians(-5)  # the knee bends, forwards only
     # walking: the pelvis moves, upright, feet on the floor, centred on the origin
     assert np.all(poses[:, 0, 2, 2] > 0.8)
-    assert abs(float(np.median(synth.lowest_points(human, poses)))) < 1e-9
+    assert abs(float(np.median(motion.lowest_points(human, poses)))) < 1e-9
 
 
 @needs_cmu
 def test_retarget_follows_bvh_bone_directions(bvh, human):
-    poses = synth.retarget(bvh, human, start=600, frames=5, stride=3, centre=False)
-    world = synth.bvh_global(bvh, 600 + 3 * np.arange(5))
+    poses = motion.retarget(bvh, human, start=600, frames=5, stride=3, centre=False)
+    world = bvh_io.bvh_global(bvh, 600 + 3 * np.arange(5))
     for name in ("thigh_r", "shin_r", "upperarm_l", "forearm_l", "foot_r"):
-        joint, tip, direction = synth.RETARGET_MAP[name]
-        bone = (world[:, bvh.index(tip), 0:3, 3] - world[:, bvh.index(joint), 0:3, 3]) @ synth.BVH_TO_WORLD.T
+        joint, tip, direction = motion.RETARGET_MAP[name]
+        bone = (world[:, bvh.index(tip), 0:3, 3] - world[:, bvh.index(joint), 0:3, 3]) @ motion.BVH_TO_WORLD.T
         bone /= np.linalg.norm(bone, axis=1, keepdims=True)
         ours = poses[:, human.index(name), 0:3, 0:3] @ np.asarray(direction)
         np.testing.assert_allclose(ours, bone, atol=1e-6)
@@ -102,7 +104,7 @@ def test_retarget_follows_bvh_bone_directions(bvh, human):
 
 def test_bvh_errors(tmp_path, human):
     with pytest.raises(TrackerInputError, match="not found"):
-        synth.load_bvh(tmp_path / "missing.bvh")
+        bvh_io.load_bvh(tmp_path / "missing.bvh")
     text = """HIERARCHY
 ROOT Hips
 {
@@ -126,25 +128,25 @@ Frame Time: 0.0083333
 """
     path = tmp_path / "tiny.bvh"
     path.write_text(text)
-    tiny = synth.load_bvh(path)
+    tiny = bvh_io.load_bvh(path)
     assert tiny.names == ("Hips", "Spine") and tiny.frames == 2
-    world = synth.bvh_global(tiny)
+    world = bvh_io.bvh_global(tiny)
     np.testing.assert_allclose(world[1, 1, 0:3, 3], [0, 19, 1])
     np.testing.assert_allclose(world[1, 1, 0:3, 0:3] @ [0, 1, 0], [0, 0, 1], atol=1e-12)  # 90 deg about X
     with pytest.raises(TrackerInputError, match="tiny.bvh.*no joint"):
-        synth.retarget(tiny, human, path=path)
+        motion.retarget(tiny, human, path=path)
     with pytest.raises(TrackerInputError, match="no joint"):
         synth.synthesize(MODEL, _rig(tmp_path), tmp_path / "out", motion=f"bvh:{path}", frames=1, progress=False)
     (tmp_path / "bad.bvh").write_text("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0\n")
     with pytest.raises(TrackerInputError, match="bad.bvh"):
-        synth.load_bvh(tmp_path / "bad.bvh")
+        bvh_io.load_bvh(tmp_path / "bad.bvh")
 
 
 def test_procedural_motion_valid(human):
-    poses = synth.procedural_motion(human, 30, fps=30.0, seed=3)
+    poses = motion.procedural_motion(human, 30, fps=30.0, seed=3)
     assert joint_gap(human, poses) < 1e-9
-    assert abs(float(np.median(synth.lowest_points(human, poses)))) < 1e-9
-    step = np.linalg.norm(np.diff(synth.joint_centres(poses), axis=0), axis=2)
+    assert abs(float(np.median(motion.lowest_points(human, poses)))) < 1e-9
+    step = np.linalg.norm(np.diff(joint_centres(poses), axis=0), axis=2)
     assert step.max() < 0.1  # smooth: under 3 m/s at 30 fps
     assert not np.allclose(poses[0], poses[-1])
 
@@ -157,7 +159,7 @@ def _one_component(shape: dict) -> object:
 
 
 def _cast(model, poses, camera):
-    renderer = synth.Renderer(model, camera, noise=0.0, blur=0.0)
+    renderer = render.Renderer(model, camera, noise=0.0, blur=0.0)
     return [a.copy() for a in renderer.cast(poses)]
 
 
@@ -181,11 +183,11 @@ def test_sphere_silhouette_matches_analytic_projection(distortions):
 
 def test_kernel_matches_pure_render(human):
     camera = synth.look_at_camera("c", (2.5, -2.5, 1.4), (0, 0, 0.9), (120, 100), 150.0, (-0.08, 0.02, 0, 0))
-    poses = synth.procedural_motion(human, 1, seed=1)[0]
+    poses = motion.procedural_motion(human, 1, seed=1)[0]
     comp, shade, depth = _cast(human, poses, camera)
-    surfaces, clips = synth.view_quadrics(human, poses, camera)
-    light = camera.rotation @ (synth.DEFAULT_LIGHT / np.linalg.norm(synth.DEFAULT_LIGHT))
-    comp2, shade2, depth2 = synth.render(synth.pixel_rays(camera), surfaces, clips, human.quadric_component, light)
+    surfaces, clips = render.view_quadrics(human, poses, camera)
+    light = camera.rotation @ (render.DEFAULT_LIGHT / np.linalg.norm(render.DEFAULT_LIGHT))
+    comp2, shade2, depth2 = render.render(render.pixel_rays(camera), surfaces, clips, human.quadric_component, light)
     assert np.count_nonzero(comp >= 0) > 500
     assert np.count_nonzero(comp != comp2) <= 2  # root ties at grazing rays only
     same = (comp == comp2) & (comp >= 0)
@@ -233,8 +235,8 @@ def test_clipped_cylinder_ends_and_open_tube():
 
 def test_renderer_speed_and_image(human):
     camera = synth.demo3_rig()[0]
-    renderer = synth.Renderer(human, camera)
-    poses = synth.procedural_motion(human, 2, seed=0)
+    renderer = render.Renderer(human, camera)
+    poses = motion.procedural_motion(human, 2, seed=0)
     image = renderer.render(poses[0], np.random.default_rng(0))
     assert image.shape == (480, 640, 3) and image.dtype == np.uint8
     import time
@@ -314,7 +316,7 @@ def test_synthesize_writes_recording(tmp_path, human, motion):
 def test_mjpeg_writer_roundtrip(tmp_path):
     rng = np.random.default_rng(0)
     images = [cv2.GaussianBlur(rng.integers(0, 256, (48, 64, 3), dtype=np.uint8), (0, 0), 2.0) for _ in range(4)]
-    with synth.MjpegAviWriter(tmp_path / "v.avi", 25.0, (64, 48), quality=90) as writer:
+    with MjpegAviWriter(tmp_path / "v.avi", 25.0, (64, 48), quality=90) as writer:
         for image in images:
             writer.write(image)
     capture = cv2.VideoCapture(str(tmp_path / "v.avi"))
