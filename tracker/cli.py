@@ -43,7 +43,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
     settings = Settings(
-        iterations=args.iterations, spacing=args.spacing, search_range=args.search_range, motion=args.motion
+        iterations=args.iterations, spacing=args.spacing, search_range=args.search_range,
+        motion=args.motion, damping=args.damping,
     )
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
@@ -117,6 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--search-range", type=int, default=20, help="edge search, pixels either side (default 20)")
     track.add_argument("--motion", choices=("none", "constant-velocity"), default="constant-velocity",
                        help="motion model that predicts each frame's pose (default constant-velocity)")
+    track.add_argument("--damping", type=float, default=1.0,
+                       help="share of the last frame's motion carried into the prediction (default 1; "
+                            "0.5 steadies a single camera)")
     track.add_argument("--quiet", action="store_true", help="no progress bar")
     track.set_defaults(run=cmd_track)
 

@@ -34,14 +34,14 @@ class Settings:
 
     iterations: int = 6
     spacing: float = 4.0  # pixels between outline samples
-    search_range: int = 20  # pixels searched either side of the outline, first iteration
-    final_search_range: int = 20  # ... last iteration (the range shrinks geometrically in between)
+    search_range: int = 20  # pixels searched either side of the outline
     threshold: float = 6.0  # minimum grey-level derivative of an edge (per pixel)
     robust_c: float = 2.0  # IRLS weight w = 1 / (c + |m|), pixels
-    prior_translation: float = 10.0  # weak zero-motion prior, px^2 per m^2
-    prior_rotation: float = 1.0  # px^2 per rad^2
+    prior_translation: float = 1e3  # prior about the predicted pose, per m^2
+    prior_rotation: float = 10.0  # per rad^2
     blur_sigma: float = 1.0  # Gaussian smoothing before the edge search, pixels
     motion: str = "constant-velocity"
+    damping: float = 1.0  # share of the last frame's motion carried into the prediction
     uncertain_share: float = 0.6  # share of samples with an edge below which a frame is uncertain
     lost_share: float = 0.3  # ... and lost
     uncertain_residual: float = 3.0  # robust mean offset (px) above which a frame is uncertain
@@ -82,11 +82,11 @@ def add_prior(information, eta, prior, poses, anchor):
 
 
 @njit(cache=True)
-def constant_velocity(previous, current):
-    """Predict E_{t+1} = E_t exp(log(E_{t-1}^-1 E_t)) for every component."""
+def constant_velocity(previous, current, damping):
+    """Predict E_{t+1} = E_t exp(d log(E_{t-1}^-1 E_t)) for every component (d = damping)."""
     out = np.empty_like(current)
     for i in range(current.shape[0]):
-        out[i] = current[i] @ exp(log(inverse(previous[i]) @ current[i]))
+        out[i] = current[i] @ exp(damping * log(inverse(previous[i]) @ current[i]))
     return out
 
 
@@ -126,24 +126,15 @@ class Tracker:
             h, w = image.shape
             self.images[k, :h, :w] = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
 
-    def search_range(self, iteration: int) -> int:
-        """Coarse to fine: r_i = r_0 (r_last / r_0)^(i / (n - 1))."""
-        st = self.settings
-        if st.iterations < 2:
-            return st.search_range
-        ratio = st.final_search_range / st.search_range
-        return max(1, int(round(st.search_range * ratio ** (iteration / (st.iterations - 1)))))
-
-    def iterate(self, search_range: int | None = None) -> Statistics:
+    def iterate(self) -> Statistics:
         """One IRLS iteration at the current poses: sample, measure, solve, update, coerce."""
         s, m, st = self.samples, self.model, self.settings
-        search_range = st.search_range if search_range is None else search_range
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
                                  s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
         visible, found, sum_wm, sum_w = measure_kernel(
             self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
-            search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
+            st.search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
         add_prior(self.information, self.eta, self.prior, self.poses, self.anchor)
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
         self.poses = m.coerce(apply_motions(self.poses, alpha))
@@ -155,10 +146,10 @@ class Tracker:
         self.load_images(images)
         current = self.poses
         if self.settings.motion == "constant-velocity" and self.previous is not None:
-            self.poses = self.model.coerce(constant_velocity(self.previous, current))
+            self.poses = self.model.coerce(constant_velocity(self.previous, current, self.settings.damping))
         self.anchor = self.poses
-        for iteration in range(self.settings.iterations):
-            stats = self.iterate(self.search_range(iteration))
+        for _ in range(self.settings.iterations):
+            stats = self.iterate()
         self.previous = current
         share = stats.found / stats.visible if stats.visible else 0.0
         return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)
