@@ -76,7 +76,7 @@ def cmd_track(args: argparse.Namespace) -> int:
         return 130
     fps = done / elapsed if elapsed > 0 else float("inf")
     print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
-    print(f"mean residual: {np.mean(residuals):.2f} px")
+    print(f"mean residual: {np.nanmean(residuals) if np.isfinite(residuals).any() else float('nan'):.2f} px")
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost")
     if rec.truth_path is not None:
         report = evaluate(load_poses(out / "poses.npz"), load_poses(rec.truth_path))

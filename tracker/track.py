@@ -138,7 +138,7 @@ class Tracker:
         add_prior(self.information, self.eta, self.prior, self.poses, self.anchor)
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
         self.poses = m.coerce(apply_motions(self.poses, alpha))
-        residual = sum_wm / sum_w if sum_w > 0 else float("inf")
+        residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(self.information, self.eta, visible, found, residual)
 
     def step(self, images) -> FrameResult:
@@ -156,7 +156,7 @@ class Tracker:
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings
-        if share < st.lost_share or residual > st.lost_residual:
+        if share < st.lost_share or not residual <= st.lost_residual:
             return LOST
         if share < st.uncertain_share or residual > st.uncertain_residual:
             return UNCERTAIN
