@@ -116,6 +116,7 @@ class Tracker:
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
         poses, previous, anchor = self.poses.copy(), self.previous, self.anchor
+        constant_velocity(poses, poses, self.settings.damping)
         self.iterate()
         self.poses, self.previous, self.anchor = poses, previous, anchor
 
