@@ -179,3 +179,19 @@ def test_bad_file_names_file(tmp_path: Path, case: str, content: bytes, expected
 def test_missing_file_names_file(tmp_path: Path) -> None:
     with pytest.raises(TrackerInputError, match="nowhere.toml"):
         load_calibration(tmp_path / "nowhere.toml")
+
+
+def test_loads_the_real_pose2sim_rig() -> None:
+    """The Pose2Sim demo's calibration (floats for sizes, metres): four portrait cameras about 3-4 m out."""
+    path = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim-balancing" / "calibration.toml"
+    if not path.is_file():
+        pytest.skip("shared Pose2Sim data not present")
+    cameras = load_calibration(path)
+    assert [c.name for c in cameras] == ["cam01", "cam02", "cam03", "cam04"]
+    assert all(c.size == (1088, 1920) for c in cameras)
+    distances = [np.linalg.norm(c.center[:2]) for c in cameras]
+    assert all(1.5 < d < 6.0 for d in distances)
+    # every camera sees the middle of the lab (about 1 m above the floor at the origin) inside its image
+    for camera in cameras:
+        u, v = camera.project(np.array([[0.0, 0.0, 1.0]]))[0]
+        assert 0 <= u < camera.size[0] and 0 <= v < camera.size[1]
