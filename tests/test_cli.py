@@ -97,3 +97,11 @@ def test_bad_input_is_one_line_exit_2(case, tiny_recording, tmp_path, capsys):
 def test_missing_recording_folder(tmp_path, capsys):
     assert main(["track", str(tmp_path / "nowhere"), "--quiet"]) == 2
     assert "nowhere" in _error_line(capsys)
+
+
+@pytest.mark.parametrize("option", [["--iterations", "0"], ["--spacing", "-1"], ["--damping", "2"], ["--frames", "0"]])
+def test_bad_options_are_usage_errors(tiny_recording, option, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["track", str(tiny_recording), *option])
+    assert exit_info.value.code == 2
+    assert option[0] in capsys.readouterr().err

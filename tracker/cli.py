@@ -16,6 +16,27 @@ from pathlib import Path
 from tracker.errors import TrackerInputError
 
 
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _share(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 1, got {text}")
+    return value
+
+
 def _cameras(text: str | None) -> list[str] | None:
     return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
@@ -112,13 +133,15 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--out", help="output folder (default: out/<recording name>)")
     track.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
     track.add_argument("--start", type=int, default=0, help="first frame (default 0)")
-    track.add_argument("--frames", type=int, help="number of frames to track (default: all)")
-    track.add_argument("--iterations", type=int, default=6, help="IRLS iterations per frame (default 6)")
-    track.add_argument("--spacing", type=float, default=4.0, help="pixels between outline samples (default 4)")
-    track.add_argument("--search-range", type=int, default=20, help="edge search, pixels either side (default 20)")
+    track.add_argument("--frames", type=_positive_int, help="number of frames to track (default: all)")
+    track.add_argument("--iterations", type=_positive_int, default=6, help="IRLS iterations per frame (default 6)")
+    track.add_argument("--spacing", type=_positive_float, default=4.0,
+                       help="pixels between outline samples (default 4)")
+    track.add_argument("--search-range", type=_positive_int, default=20,
+                       help="edge search, pixels either side (default 20)")
     track.add_argument("--motion", choices=("none", "constant-velocity"), default="constant-velocity",
                        help="motion model that predicts each frame's pose (default constant-velocity)")
-    track.add_argument("--damping", type=float, default=1.0,
+    track.add_argument("--damping", type=_share, default=1.0,
                        help="share of the last frame's motion carried into the prediction (default 1; "
                             "0.5 steadies a single camera)")
     track.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -134,9 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--calib", required=True, help="camera rig calibration.toml")
     synth.add_argument("--motion", required=True, help="bvh:PATH (a BVH clip, retargeted) or procedural")
     synth.add_argument("--out", required=True, help="recording folder to write")
-    synth.add_argument("--frames", type=int, default=160, help="frames to render (default 160)")
+    synth.add_argument("--frames", type=_positive_int, default=160, help="frames to render (default 160)")
     synth.add_argument("--start", type=int, default=0, help="first BVH frame (default 0)")
-    synth.add_argument("--stride", type=int, default=2, help="BVH frames per rendered frame (default 2)")
+    synth.add_argument("--stride", type=_positive_int, default=2, help="BVH frames per rendered frame (default 2)")
     synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
     synth.set_defaults(run=cmd_synth)
     return parser
