@@ -134,10 +134,21 @@ def distort(k_mat, dist, px, py):
 
 
 @njit(cache=True)
-def _occluded(x_cam, j, q_cam, clip_cam):
-    """True when the segment camera -> x_cam (points s x_cam, 0 < s < 1) enters another clipped quadric."""
+def _occluded(x_cam, j, q_cam, clip_cam, sphere):
+    """True when the segment camera -> x_cam (points s x_cam, 0 < s < 1) enters another clipped quadric.
+
+    ``sphere`` (Q, 4) holds each quadric's bounding sphere in the camera frame: a
+    quadric whose sphere the segment misses is skipped before the exact test.
+    """
+    xx = x_cam[0] * x_cam[0] + x_cam[1] * x_cam[1] + x_cam[2] * x_cam[2]
+    length = np.sqrt(xx)
     for l in range(q_cam.shape[0]):
         if l == j:
+            continue
+        cx = sphere[l, 0] * x_cam[0] + sphere[l, 1] * x_cam[1] + sphere[l, 2] * x_cam[2]
+        cc = sphere[l, 0] * sphere[l, 0] + sphere[l, 1] * sphere[l, 1] + sphere[l, 2] * sphere[l, 2]
+        r = sphere[l, 3]
+        if cc * xx - cx * cx > r * r * xx or cx / length - r >= length or cx / length + r <= 0.0:
             continue
         q = q_cam[l]
         qa = 0.0
@@ -169,8 +180,8 @@ def _occluded(x_cam, j, q_cam, clip_cam):
 
 
 @njit(cache=True)
-def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, cam_from_comp, k_mat, k_inv, dist, size,
-          o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point, n):
+def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_from_comp, k_mat, k_inv, dist,
+          size, o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point, n):
     """Test one ideal-pixel outline point and append it to the buffers if visible; returns the new count."""
     if n >= o_cam.shape[0]:
         return n
@@ -203,7 +214,7 @@ def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, cam_from_comp
     u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
     if u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
         return n
-    if _occluded(x_cam, j, q_cam, clip_cam):
+    if _occluded(x_cam, j, q_cam, clip_cam, sphere):
         return n
     # normal through the distortion: n_d ~ J_d^-T n
     det = j00 * j11 - j01 * j10
@@ -257,6 +268,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
     q_cam = np.empty((n_quadrics, 4, 4))
     clip_cam = np.empty((n_quadrics, 4, 4))
     cam_from_comp = np.empty((n_quadrics, 4, 4))
+    sphere = np.empty((n_quadrics, 4))
     n = 0
     for k in range(cam_matrix.shape[0]):
         k_mat = cam_matrix[k]
@@ -269,10 +281,12 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
             cam_from_comp[j] = e
             q_cam[j] = e_inv.T @ quadric[j] @ e_inv
             clip_cam[j] = e_inv.T @ clip[j] @ e_inv
+            for a in range(3):
+                sphere[j, a] = e[a, 0] * bound[j, 0] + e[a, 1] * bound[j, 1] + e[a, 2] * bound[j, 2] + e[a, 3]
+            sphere[j, 3] = bound[j, 3]
         for j in range(n_quadrics):
-            e = cam_from_comp[j]
-            centre = np.ascontiguousarray(e[0:3, 0:3]) @ bound[j, 0:3].copy() + e[0:3, 3]
-            radius = bound[j, 3]
+            centre = sphere[j, 0:3].copy()
+            radius = sphere[j, 3]
             if centre[2] + radius <= 0.0:
                 continue
             # projected bounding disc (ideal pixels); the whole plane when the sphere reaches the camera
@@ -339,7 +353,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     vy = (d1 * h2 - h1 * d2) / (h2 * h2)
                     speed = np.sqrt(vx * vx + vy * vy)
                     if (px - disc_c[0]) ** 2 + (py - disc_c[1]) ** 2 <= disc_r * disc_r:
-                        n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, cam_from_comp[j],
+                        n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_from_comp[j],
                                   k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric, o_pixel, o_normal,
                                   o_jac, o_point, n)
                     theta += max(spacing / max(speed, 1e-12), min_step)
@@ -365,7 +379,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     for s_i in range(steps):
                         t = -half + (s_i + 0.5) * (2.0 * half / steps)
                         n = _emit(fx - t * uy, fy + t * ux, j, k, comp, conic, conic_scale, q_cam, clip_cam,
-                                  cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
+                                  sphere, cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
                                   o_pixel, o_normal, o_jac, o_point, n)
     return n
 

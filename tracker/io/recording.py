@@ -12,9 +12,7 @@ the image size the calibration gives.
 
 from __future__ import annotations
 
-import itertools
 import os
-import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,9 +22,9 @@ import numpy as np
 
 from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
+from tracker.io.readers import image_files, read_frames, read_image
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DEFAULT_FPS = 30.0  # for image folders and videos that do not state a frame rate
 
 
@@ -115,7 +113,8 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) ->
 def frames(recording: Recording, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, list[np.ndarray]]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
 
-    A frame that fails to decode raises TrackerInputError naming the file and the index.
+    One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`). A
+    frame that fails to decode raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
     if not 0 <= start <= stop <= recording.frame_count:
@@ -123,23 +122,13 @@ def frames(recording: Recording, start: int = 0, stop: int | None = None) -> Ite
             f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
             "pick a range inside it"
         )
-    return _frames(recording.sources, start, stop)
-
-
-def _frames(sources: list[Path], start: int, stop: int) -> Iterator[tuple[int, list[np.ndarray]]]:
-    readers = [_grey_frames(source, start) for source in sources]
-    try:
-        for index in range(start, stop):
-            yield index, [next(reader) for reader in readers]
-    finally:
-        for reader in readers:
-            reader.close()
+    return read_frames(recording.sources, start, stop)
 
 
 def _find_source(folder: Path, name: str) -> Path | None:
     """The video file or image folder of camera ``name``, None if there is none."""
     found = [folder / f"{name}{suffix}" for suffix in VIDEO_SUFFIXES if (folder / f"{name}{suffix}").is_file()]
-    if (folder / name).is_dir() and _image_files(folder / name):
+    if (folder / name).is_dir() and image_files(folder / name):
         found.append(folder / name)
     if len(found) > 1:
         raise TrackerInputError(
@@ -148,24 +137,11 @@ def _find_source(folder: Path, name: str) -> Path | None:
     return found[0] if found else None
 
 
-def _image_files(folder: Path) -> list[Path]:
-    """The .png/.jpg files of an image folder, sorted by the (last) number in their names."""
-    files = [path for path in folder.iterdir() if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES]
-
-    def number(path: Path) -> int:
-        digits = re.findall(r"\d+", path.stem)
-        if not digits:
-            raise TrackerInputError(f"{path}: image name has no frame number; name images 000000.png, 000001.png, ...")
-        return int(digits[-1])
-
-    return sorted(files, key=number)
-
-
 def _probe(source: Path, camera: Camera) -> tuple[int, float | None]:
     """Frame count and frame rate (None if unknown) of a source; decodes its first frame and checks its size."""
     if source.is_dir():
-        files = _image_files(source)
-        _check_size(files[0], _read_image(files[0], 0), camera)
+        files = image_files(source)
+        _check_size(files[0], read_image(files[0], 0), camera)
         return len(files), None
     capture = cv2.VideoCapture(str(source))
     try:
@@ -193,42 +169,3 @@ def _check_size(file: Path, image: np.ndarray, camera: Camera) -> None:
             f"{file}: image size {width}x{height} differs from size {camera.size[0]}x{camera.size[1]} of camera "
             f"{camera.name!r} in calibration.toml; use the calibration made for these videos"
         )
-
-
-def _grey_frames(source: Path, start: int) -> Iterator[np.ndarray]:
-    """Grey frames of one video file or image folder from frame ``start`` on (the caller stops)."""
-    if source.is_dir():
-        for index, file in enumerate(_image_files(source)[start:], start):
-            yield _grey(_read_image(file, index))
-        raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
-    capture = cv2.VideoCapture(str(source))
-    try:
-        for index in range(start):
-            if not capture.grab():
-                raise _decode_error(source, index)
-        for index in itertools.count(start):
-            ok, image = capture.read()
-            if not ok:
-                raise _decode_error(source, index)
-            yield _grey(image)
-    finally:
-        capture.release()
-
-
-def _decode_error(video: Path, index: int) -> TrackerInputError:
-    return TrackerInputError(f"{video}: frame {index} failed to decode; the video is truncated or corrupt, re-encode it")
-
-
-def _read_image(file: Path, index: int) -> np.ndarray:
-    image = cv2.imread(str(file), cv2.IMREAD_COLOR)
-    if image is None:
-        raise TrackerInputError(f"{file}: frame {index} is a corrupt or unsupported image; replace it")
-    return image
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    """Grey uint8 (H, W) from a BGR, BGRA or already grey frame."""
-    if image.ndim == 2:
-        return image
-    code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-    return cv2.cvtColor(image, code)

@@ -1,0 +1,139 @@
+"""Decoding the frames of a recording: grey images, one reader thread per camera.
+
+Each camera's video (or image folder) is decoded by its own thread into a
+bounded queue, so decoding runs beside the tracker (OpenCV releases the GIL
+while it decodes) and never runs more than ``queue_size`` frames ahead.
+Motion-JPEG videos are decoded straight to grey: the compressed frame is taken
+from the container as it is and libjpeg decodes only its luma plane, about
+twice as fast as decoding colour and converting.  Other codecs are decoded in
+colour and converted.
+"""
+
+from __future__ import annotations
+
+import itertools
+import queue
+import re
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracker.errors import TrackerInputError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+_MJPG = int.from_bytes(b"MJPG", "little")
+_PUT_WAIT = 0.1  # seconds between checks of the stop flag while a queue is full
+
+
+def image_files(folder: Path) -> list[Path]:
+    """The .png/.jpg files of an image folder, sorted by the (last) number in their names."""
+    files = [path for path in folder.iterdir() if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES]
+
+    def number(path: Path) -> int:
+        digits = re.findall(r"\d+", path.stem)
+        if not digits:
+            raise TrackerInputError(f"{path}: image name has no frame number; name images 000000.png, 000001.png, ...")
+        return int(digits[-1])
+
+    return sorted(files, key=number)
+
+
+def read_image(file: Path, index: int, flags: int = cv2.IMREAD_COLOR) -> np.ndarray:
+    """One image file (colour by default); a corrupt one raises TrackerInputError naming it."""
+    image = cv2.imread(str(file), flags)
+    if image is None:
+        raise TrackerInputError(f"{file}: frame {index} is a corrupt or unsupported image; replace it")
+    return image
+
+
+def _decode_error(video: Path, index: int) -> TrackerInputError:
+    return TrackerInputError(f"{video}: frame {index} failed to decode; the video is truncated or corrupt, re-encode it")
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """Grey uint8 (H, W) from a BGR, BGRA or already grey frame."""
+    if image.ndim == 2:
+        return image
+    code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+    return cv2.cvtColor(image, code)
+
+
+def grey_frames(source: Path, start: int = 0) -> Iterator[np.ndarray]:
+    """Grey frames of one video file or image folder from frame ``start`` on (the caller stops)."""
+    if source.is_dir():
+        for index, file in enumerate(image_files(source)[start:], start):
+            yield read_image(file, index, cv2.IMREAD_GRAYSCALE)
+        raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
+    capture = cv2.VideoCapture(str(source), cv2.CAP_FFMPEG)
+    if not capture.isOpened():
+        capture = cv2.VideoCapture(str(source))
+    try:
+        raw = int(capture.get(cv2.CAP_PROP_FOURCC)) == _MJPG and capture.set(cv2.CAP_PROP_FORMAT, -1)
+        for index in range(start):
+            if not capture.grab():
+                raise _decode_error(source, index)
+        for index in itertools.count(start):
+            ok, data = capture.read()
+            if not ok:
+                raise _decode_error(source, index)
+            image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if raw else _grey(data)
+            if image is None:
+                raise _decode_error(source, index)
+            yield image
+    finally:
+        capture.release()
+
+
+class _Reader:
+    """A thread that decodes ``count`` frames of one source into a bounded queue (errors travel along)."""
+
+    def __init__(self, source: Path, start: int, count: int, queue_size: int):
+        self.source, self.start, self.count = source, start, count
+        self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        frames = grey_frames(self.source, self.start)
+        try:
+            for image in itertools.islice(frames, self.count):
+                if not self._put(image):
+                    return
+        except BaseException as error:  # handed to the consumer, raised there
+            self._put(error)
+        finally:
+            frames.close()
+
+    def _put(self, item) -> bool:
+        while not self.stopping.is_set():
+            try:
+                self.queue.put(item, timeout=_PUT_WAIT)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def get(self) -> np.ndarray:
+        item = self.queue.get()
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def close(self) -> None:
+        self.stopping.set()
+        self.thread.join()
+
+
+def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4) -> Iterator[tuple[int, list[np.ndarray]]]:
+    """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread."""
+    readers = [_Reader(source, start, stop - start, queue_size) for source in sources]
+    try:
+        for index in range(start, stop):
+            yield index, [reader.get() for reader in readers]
+    finally:
+        for reader in readers:
+            reader.close()
