@@ -122,6 +122,24 @@ def cmd_synth(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    import json
+
+    from tracker import bench
+    from tracker.track import Settings
+
+    defaults = Settings()
+    settings = Settings(iterations=args.iterations or defaults.iterations, spacing=args.spacing or defaults.spacing)
+    print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)
+    if args.scaling:
+        result = bench.scaling()
+        print(json.dumps(result, indent=2) if args.json else bench.format_scaling(result))
+        return 0
+    result = bench.run(Path(args.recording) if args.recording else bench.DEMO, settings, args.repeats)
+    print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tracker", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -162,6 +180,15 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--stride", type=_positive_int, default=2, help="BVH frames per rendered frame (default 2)")
     synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
     synth.set_defaults(run=cmd_synth)
+    bench = sub.add_parser("bench", help="per-stage timings, frames per second and the decode-only floor")
+    bench.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
+    bench.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    bench.add_argument("--scaling", action="store_true",
+                       help="time one iteration against the number of components (7-120) and of cameras (1-8)")
+    bench.add_argument("--repeats", type=_positive_int, default=3, help="passes per figure (default 3)")
+    bench.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default: tracking's)")
+    bench.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default: tracking's)")
+    bench.set_defaults(run=cmd_bench)
     return parser
 
 

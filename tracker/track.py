@@ -12,7 +12,8 @@ that found an edge and the robust mean residual.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -90,6 +91,22 @@ def constant_velocity(previous, current, damping):
     return out
 
 
+STAGES = ("grey", "outline", "measure", "solve")
+
+
+@dataclass
+class StageTimes:
+    """Seconds spent per stage since creation: smoothing the grey images, outline sampling
+    and visibility, edge search and Jacobians, prior + chain solve + coercion."""
+
+    seconds: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+
+    def add(self, stage: str, started: float) -> float:
+        now = time.perf_counter()
+        self.seconds[stage] += now - started
+        return now
+
+
 class Tracker:
     """Tracks one body in a fixed rig, frame after frame."""
 
@@ -112,6 +129,7 @@ class Tracker:
         self.poses = model.coerce(initial_poses)
         self.previous: np.ndarray | None = None
         self.anchor = self.poses
+        self.times = StageTimes()
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
@@ -122,23 +140,29 @@ class Tracker:
 
     def load_images(self, images) -> None:
         """Copy (and smooth) one grey image per camera into the frame buffer."""
+        started = time.perf_counter()
         sigma = self.settings.blur_sigma
         for k, image in enumerate(images):
             h, w = image.shape
             self.images[k, :h, :w] = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
+        self.times.add("grey", started)
 
     def iterate(self) -> Statistics:
         """One IRLS iteration at the current poses: sample, measure, solve, update, coerce."""
         s, m, st = self.samples, self.model, self.settings
+        started = time.perf_counter()
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
                                  s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
+        started = self.times.add("outline", started)
         visible, found, sum_wm, sum_w = measure_kernel(
             self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
             st.search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
+        started = self.times.add("measure", started)
         add_prior(self.information, self.eta, self.prior, self.poses, self.anchor)
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
         self.poses = m.coerce(apply_motions(self.poses, alpha))
+        self.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(self.information, self.eta, visible, found, residual)
 

@@ -1,0 +1,38 @@
+"""`tracker bench`: the JSON keys other tools read, and sane figures (no timing is asserted)."""
+
+import json
+
+from tracker.bench import _copies, _side_by_side, HUMAN
+from tracker.cli import main
+from tracker.model import model_from_dict
+
+KEYS = {"fps_one_view", "fps_all_views", "decode_only_fps_all_views", "ratio_all_views",
+        "core_ms_per_view_iteration", "views", "frames"}
+
+
+def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
+    assert main(["bench", str(tiny_recording), "--json", "--repeats", "1"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert KEYS <= set(result)
+    assert result["views"] == 2 and result["frames"] == 6
+    assert result["fps_all_views"] > 0 and result["decode_only_fps_all_views"] > 0
+    assert abs(result["ratio_all_views"] - result["fps_all_views"] / result["decode_only_fps_all_views"]) < 1e-9
+    assert set(result["stage_ms_per_frame_all_views"]) >= {"decode", "outline", "measure", "solve", "output"}
+
+
+def test_bench_table_is_printed(tiny_recording, capsys):
+    assert main(["bench", str(tiny_recording), "--repeats", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "ratio tracking / decode only" in out and "ms per view per IRLS iteration" in out
+
+
+def test_bodies_side_by_side_for_the_scaling_table():
+    import tomllib
+
+    data = tomllib.loads(HUMAN.read_text())
+    model = model_from_dict(_copies(data, 3))
+    single = model_from_dict(_copies(data, 1))
+    assert model.size == 45 and (model.parent == -1).sum() == 1
+    poses = _side_by_side(model, single, 3)
+    roots = [poses[model.index(f"pelvis_{k}")][0, 3] for k in range(3)]
+    assert roots == [-0.8, 0.0, 0.8]

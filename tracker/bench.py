@@ -1,0 +1,248 @@
+"""Benchmarks: per-stage costs, end-to-end frames per second, and the decode-only floor.
+
+Every figure is a median over ``repeats`` passes over the same recording in the
+same process, after the numba kernels are compiled (or loaded from the cache):
+
+* ``decode``: CPU milliseconds per frame to decode every camera's frame to grey,
+  one camera after the other in one thread;
+* the tracker's stages (:data:`tracker.track.STAGES`) and ``output`` (joint
+  centres and the poses.npz writer), milliseconds per frame;
+* end to end: frames per second of the whole ``tracker track`` loop (reader
+  threads, tracking, writing) with the first camera only and with all cameras;
+* decode only: frames per second of the same reader threads with no tracking,
+  the floor that tracking is compared with (``ratio_all_views``).
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracker.io.posefile import load_pose_file
+from tracker.io.poses import PosesWriter
+from tracker.io.readers import grey_frames
+from tracker.io.recording import Recording, frames, open_recording
+from tracker.geometry import se3
+from tracker.model import Model, joint_centres, load_model, model_from_dict, rest_poses
+from tracker.render import Renderer
+from tracker.synth import look_at_camera
+from tracker.track import STAGES, Settings, Tracker
+
+DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
+HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
+
+
+@dataclass(frozen=True)
+class TrackRun:
+    fps: float
+    stage_ms: dict  # stage -> milliseconds per frame
+    iterations: int
+    views: int
+
+
+def _median(values) -> float:
+    return float(statistics.median(values))
+
+
+def decode_cpu_ms(recording: Recording) -> float:
+    """Milliseconds per frame to decode every camera's frame to grey in one thread."""
+    started = time.perf_counter()
+    for source in recording.sources:
+        for _ in zip(range(recording.frame_count), grey_frames(source)):
+            pass
+    return (time.perf_counter() - started) * 1e3 / recording.frame_count
+
+
+def decode_only_fps(recording: Recording) -> float:
+    """Frames per second of the reader threads alone (all of the recording's cameras)."""
+    started = time.perf_counter()
+    count = sum(1 for _ in frames(recording))
+    return count / (time.perf_counter() - started)
+
+
+def track_run(recording: Recording, model: Model, settings: Settings, out: Path) -> TrackRun:
+    """One end-to-end pass: reader threads, tracking and the poses.npz writer."""
+    tracker = Tracker(model, recording.cameras, load_pose_file(recording.init_path, model), settings)
+    tracker.warm_up()
+    tracker.times = type(tracker.times)()
+    output = 0.0
+    started = time.perf_counter()
+    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
+        for index, images in frames(recording):
+            result = tracker.step(images)
+            mark = time.perf_counter()
+            writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual)
+            output += time.perf_counter() - mark
+    elapsed = time.perf_counter() - started
+    count = recording.frame_count
+    stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.times.seconds.items()}
+    stage_ms["output"] = output * 1e3 / count
+    return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
+
+
+def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) -> dict:
+    """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``)."""
+    every = open_recording(path)
+    first = open_recording(path, [every.cameras[0].name])
+    model = load_model(every.model_path)
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(folder)
+        decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
+        floor_all = [decode_only_fps(every) for _ in range(repeats)]
+        floor_one = [decode_only_fps(first) for _ in range(repeats)]
+        runs_all = [track_run(every, model, settings, out) for _ in range(repeats)]
+        runs_one = [track_run(first, model, settings, out) for _ in range(repeats)]
+    stage_ms = {"decode": _median(decode_ms)}
+    for stage in (*STAGES, "output"):
+        stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
+    core = sum(stage_ms[s] for s in ("outline", "measure", "solve"))
+    fps_all = _median([r.fps for r in runs_all])
+    decode_all = _median(floor_all)
+    return {
+        "recording": str(path),
+        "views": len(every.cameras),
+        "frames": every.frame_count,
+        "iterations": settings.iterations,
+        "spacing_px": settings.spacing,
+        "repeats": repeats,
+        "stage_ms_per_frame_all_views": stage_ms,
+        "core_ms_per_view_iteration": core / (len(every.cameras) * settings.iterations),
+        "fps_one_view": _median([r.fps for r in runs_one]),
+        "fps_all_views": fps_all,
+        "decode_only_fps_one_view": _median(floor_one),
+        "decode_only_fps_all_views": decode_all,
+        "ratio_one_view": _median([r.fps for r in runs_one]) / _median(floor_one),
+        "ratio_all_views": fps_all / decode_all,
+    }
+
+
+def format_table(result: dict) -> str:
+    """A Markdown table of :func:`run`'s figures."""
+    names = {
+        "decode": "decode to grey (CPU, all cameras, one thread)",
+        "grey": "smoothing into the frame buffer",
+        "outline": "outline sampling and visibility",
+        "measure": "edge search and Jacobians",
+        "solve": "chain solve and coercion",
+        "output": "output (joints, poses.npz)",
+    }
+    lines = [
+        f"Recording `{result['recording']}`: {result['views']} views, {result['frames']} frames, "
+        f"{result['iterations']} IRLS iterations, {result['spacing_px']:g} px spacing; "
+        f"medians of {result['repeats']} passes.",
+        "",
+        "| stage | ms per frame (all views) |",
+        "| --- | --- |",
+    ]
+    lines += [f"| {names[stage]} | {ms:.3f} |" for stage, ms in result["stage_ms_per_frame_all_views"].items()]
+    lines += [
+        "",
+        "| | one view | all views |",
+        "| --- | --- | --- |",
+        f"| tracking, frames per second | {result['fps_one_view']:.0f} | {result['fps_all_views']:.0f} |",
+        f"| decode only, frames per second | {result['decode_only_fps_one_view']:.0f} | "
+        f"{result['decode_only_fps_all_views']:.0f} |",
+        f"| ratio tracking / decode only | {result['ratio_one_view']:.2f} | {result['ratio_all_views']:.2f} |",
+        "",
+        f"Tracker core (outline + measure + solve): {result['core_ms_per_view_iteration']:.3f} ms per view "
+        "per IRLS iteration.",
+    ]
+    return "\n".join(lines)
+
+
+
+def _copies(data: dict, copies: int, keep=None) -> dict:
+    """A model TOML document with ``copies`` bodies side by side: copy k's names get ``_k``, and
+    every copy's root hangs on the first root by a free joint (independent bodies, one tree).
+    ``keep`` limits each body to the named components."""
+    components = []
+    root = next(c["name"] for c in data["component"] if not c.get("parent"))
+    for k in range(copies):
+        for spec in data["component"]:
+            if keep is not None and spec["name"] not in keep:
+                continue
+            spec = dict(spec, name=f"{spec['name']}_{k}")
+            if spec.get("parent"):
+                spec["parent"] = f"{spec['parent']}_{k}"
+            elif k > 0:
+                spec.update(parent=f"{root}_0", joint="free")
+            components.append(spec)
+    return {"name": f"{data.get('name', 'model')} x{copies}", "component": components}
+
+
+def _core_ms(tracker: Tracker, repeats: int, poses) -> tuple[float, int]:
+    """Median milliseconds of one IRLS iteration's core stages at fixed poses, and the sample count."""
+    times = []
+    for _ in range(repeats):
+        tracker.poses = poses.copy()
+        tracker.times = type(tracker.times)()
+        tracker.iterate()
+        times.append(sum(v for k, v in tracker.times.seconds.items() if k != "grey") * 1e3)
+    return _median(times), tracker.samples.count
+
+
+def _side_by_side(model: Model, single: Model, copies: int) -> np.ndarray:
+    """Rest poses of ``copies`` bodies standing 0.8 m apart along x, in ``model``'s order
+    (``single`` is copy 0 alone, names ending in ``_0``)."""
+    by_name = {}
+    for k in range(copies):
+        root = se3.from_rotvec([0.0, 0.0, 0.0], [0.8 * (k - (copies - 1) / 2), 0.0, 0.95])
+        for name, pose in zip(single.names, rest_poses(single, root)):
+            by_name[f"{name[:-2]}_{k}"] = pose
+    return np.stack([by_name[name] for name in model.names])
+
+
+def scaling(repeats: int = 50) -> dict:
+    """Core cost of one IRLS iteration against the number of components (bodies side by side in the
+    demo's three views) and against the number of cameras (1 to 8 around one body)."""
+    data = tomllib.loads(HUMAN.read_text())
+    demo = open_recording(DEMO)
+    _, images = next(frames(demo))
+    lower = {"pelvis", "thigh_l", "thigh_r", "shin_l", "shin_r", "foot_l", "foot_r"}
+    rows_components = []
+    for copies, keep in ((1, lower), (1, None), (2, None), (4, None), (8, None)):
+        model = model_from_dict(_copies(data, copies, keep))
+        single = model_from_dict(_copies(data, 1, keep))
+        tracker = Tracker(model, demo.cameras, _side_by_side(model, single, copies))
+        tracker.load_images(images)
+        tracker.warm_up()
+        ms, samples = _core_ms(tracker, repeats, tracker.poses)
+        rows_components.append({"components": model.size, "views": len(demo.cameras), "samples": samples,
+                                "ms_per_iteration": ms, "ms_per_component": ms / model.size})
+    human = model_from_dict(data)
+    body = rest_poses(human, se3.from_rotvec([0.0, 0.0, 0.0], [0.0, 0.0, 0.95]))
+    ring = [
+        look_at_camera(f"ring{k}", (4.0 * np.cos(a), 4.0 * np.sin(a), 1.2 + 0.3 * (k % 2)), (0.0, 0.0, 0.9))
+        for k, a in enumerate(np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False))
+    ]
+    rng = np.random.default_rng(0)
+    views = [cv2.cvtColor(Renderer(human, camera).render(body, rng), cv2.COLOR_BGR2GRAY) for camera in ring]
+    rows_cameras = []
+    for count in range(1, 9):
+        tracker = Tracker(human, ring[:count], body)
+        tracker.load_images(views[:count])
+        tracker.warm_up()
+        ms, samples = _core_ms(tracker, repeats, tracker.poses)
+        rows_cameras.append({"views": count, "components": human.size, "samples": samples,
+                             "ms_per_iteration": ms, "ms_per_view": ms / count})
+    return {"components": rows_components, "cameras": rows_cameras, "repeats": repeats}
+
+
+def format_scaling(result: dict) -> str:
+    """Markdown tables of :func:`scaling`."""
+    lines = ["Core of one IRLS iteration (outline, measurement, solve), median of "
+             f"{result['repeats']} at fixed poses.", "",
+             "| components | views | samples | ms per iteration | ms per component |", "| --- | --- | --- | --- | --- |"]
+    lines += [f"| {r['components']} | {r['views']} | {r['samples']} | {r['ms_per_iteration']:.3f} | "
+              f"{r['ms_per_component']:.4f} |" for r in result["components"]]
+    lines += ["", "| views | components | samples | ms per iteration | ms per view |", "| --- | --- | --- | --- | --- |"]
+    lines += [f"| {r['views']} | {r['components']} | {r['samples']} | {r['ms_per_iteration']:.3f} | "
+              f"{r['ms_per_view']:.3f} |" for r in result["cameras"]]
+    return "\n".join(lines)
