@@ -140,6 +140,22 @@ def test_nearest_of_two_edges(nx):
     assert abs(offset(image, [46.2, 30.0], n) - (x1 - 46.2) / nx) < 0.1
 
 
+def test_search_limits_lo_hi():
+    """[lo, hi] keeps the search off the nearer edge beyond a limit: the farther one inside is found, and with
+    no edge inside, none.  The full range is the default."""
+    x0, x1 = 30.3, 41.7
+    image = two_edges(x0, x1)
+    h, w = image.shape
+    profile = np.empty(2 * RANGE + 5)
+    px = 38.2  # nearer x1 (+3.5) than x0 (-7.9)
+    full = edge_offset(image, w, h, px, 30.0, 1.0, 0.0, RANGE, 5.0, profile)
+    assert abs(full - (x1 - px)) < 0.1
+    m = edge_offset(image, w, h, px, 30.0, 1.0, 0.0, RANGE, 5.0, profile, -RANGE, 1)
+    assert abs(m - (x0 - px)) < 0.1
+    assert np.isnan(edge_offset(image, w, h, px, 30.0, 1.0, 0.0, RANGE, 5.0, profile, -2, 1))
+    assert edge_offset(image, w, h, px, 30.0, 1.0, 0.0, RANGE, 5.0, profile, -100, 100) == full
+
+
 # ---------------------------------------------------------------- measure_kernel
 
 

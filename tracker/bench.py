@@ -102,7 +102,7 @@ def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) ->
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
-    core = sum(stage_ms[s] for s in ("outline", "measure", "solve"))
+    core = sum(stage_ms[s] for s in ("outline", "ownership", "measure", "solve"))
     fps_all = _median([r.fps for r in runs_all])
     decode_all = _median(floor_all)
     return {
@@ -129,6 +129,7 @@ def format_table(result: dict) -> str:
         "decode": "decode to grey (CPU, all cameras, one thread)",
         "grey": "smoothing into the frame buffer",
         "outline": "outline sampling and visibility",
+        "ownership": "search limits (edge ownership)",
         "measure": "edge search and Jacobians",
         "solve": "chain solve and coercion",
         "output": "output (joints, poses.npz)",
@@ -151,7 +152,7 @@ def format_table(result: dict) -> str:
         f"{result['decode_only_fps_all_views']:.0f} |",
         f"| ratio tracking / decode only | {result['ratio_one_view']:.2f} | {result['ratio_all_views']:.2f} |",
         "",
-        f"Tracker core (outline + measure + solve): {result['core_ms_per_view_iteration']:.3f} ms per view "
+        f"Tracker core (outline + ownership + measure + solve): {result['core_ms_per_view_iteration']:.3f} ms per view "
         "per IRLS iteration.",
     ]
     return "\n".join(lines)
@@ -237,7 +238,7 @@ def scaling(repeats: int = 50) -> dict:
 
 def format_scaling(result: dict) -> str:
     """Markdown tables of :func:`scaling`."""
-    lines = ["Core of one IRLS iteration (outline, measurement, solve), median of "
+    lines = ["Core of one IRLS iteration (outline, ownership, measurement, solve), median of "
              f"{result['repeats']} at fixed poses.", "",
              "| components | views | samples | ms per iteration | ms per component |", "| --- | --- | --- | --- | --- |"]
     lines += [f"| {r['components']} | {r['views']} | {r['samples']} | {r['ms_per_iteration']:.3f} | "

@@ -1,7 +1,8 @@
 """Edge measurement and per-component information (design note, section 3).
 
 Each visible sample searches the (smoothed) grey image along its normal,
-``p + s n`` for ``s`` in ``[-r, r]``, for the nearest edge: a local maximum of
+``p + s n`` for ``s`` in ``[-r, r]`` (or a per-sample sub-interval ``[lo, hi]``
+of it, see :mod:`tracker.ownership`), for the nearest edge: a local maximum of
 the directional derivative ``|dI/ds|`` above ``threshold`` (sub-pixel by a
 parabola through the three values around it).  Its signed offset ``m`` (pixels,
 positive along ``+n``) and the sample's Jacobian row ``L`` give, per
@@ -48,20 +49,25 @@ def _bilinear(image, width, height, x, y):
 
 
 @njit(cache=True)
-def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, profile):
+def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, profile, lo=-(1 << 30), hi=1 << 30):
     """Signed distance along (nx, ny) from (px, py) to the nearest edge, or NaN if none within range.
 
-    ``profile`` is scratch space of at least 2 * search_range + 5 floats (the
-    derivative at t = +-r needs the grey values at t +- 2).
+    Only integer offsets ``t`` with ``lo <= t <= hi`` (clipped to ``[-r, r]``) are searched, and only the
+    grey values they need are read.  ``profile`` is scratch space of at least 2 * search_range + 5 floats
+    (the derivative at t = +-r needs the grey values at t +- 2).
     """
     r = search_range
-    for t in range(-r - 2, r + 3):
+    lo = max(lo, -r)
+    hi = min(hi, r)
+    for t in range(lo - 2, hi + 3):
         profile[t + r + 2] = _bilinear(image, width, height, px + t * nx, py + t * ny)
-    for d in range(0, r + 1):
+    for d in range(r + 1):
         for sign in (1, -1):
             if d == 0 and sign == -1:
                 continue
             t = sign * d
+            if t < lo or t > hi:
+                continue
             c = t + r + 2
             a0 = profile[c - 2]
             a1 = profile[c - 1]
@@ -85,8 +91,11 @@ def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, p
 
 @njit(cache=True)
 def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, search_range, threshold,
-                   robust_c, n_components, o_offset, o_weight, information, eta):
-    """Search every sample's edge and accumulate C_i, eta_i; returns (visible, found, sum w|m|, sum w)."""
+                   robust_c, n_components, o_offset, o_weight, information, eta, s_lo=None, s_hi=None):
+    """Search every sample's edge and accumulate C_i, eta_i; returns (visible, found, sum w|m|, sum w).
+
+    ``s_lo``, ``s_hi`` (optional, integer per sample) restrict each search to ``[lo, hi]``.
+    """
     information[:] = 0.0
     eta[:] = 0.0
     profile = np.empty(2 * search_range + 5)
@@ -95,8 +104,14 @@ def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_
     sum_w = 0.0
     for s in range(count):
         k = s_cam[s]
+        lo = -search_range
+        hi = search_range
+        if s_lo is not None:
+            lo = s_lo[s]
+        if s_hi is not None:
+            hi = s_hi[s]
         m = edge_offset(images[k], cam_size[k, 0], cam_size[k, 1], s_pixel[s, 0], s_pixel[s, 1],
-                        s_normal[s, 0], s_normal[s, 1], search_range, threshold, profile)
+                        s_normal[s, 0], s_normal[s, 1], search_range, threshold, profile, lo, hi)
         o_offset[s] = m
         if np.isnan(m):
             o_weight[s] = 0.0

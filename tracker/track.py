@@ -6,7 +6,11 @@ adds a weak Gaussian prior ``P = diag(lt I3, lr I3)`` about the predicted pose
 (so that every ``C_i`` is invertible, section 3, and the iterations of a frame
 cannot drift along directions the images do not observe), solves the whole tree for one twist per
 component (section 4), applies ``E_i <- E_i exp(alpha_i)`` and coerces the
-joints exact (section 5).  The frame's status comes from the share of samples
+joints exact (section 5).  Before measuring, each sample's search is cut half way
+to the next predicted edge along its line that is not its own boundary
+(:mod:`tracker.ownership`), so an image edge is only explained by the nearest
+predicted outline that can account for it, and the search range shrinks from
+iteration to iteration (coarse to fine).  The frame's status comes from the share of samples
 that found an edge and the robust mean residual.
 """
 
@@ -24,6 +28,7 @@ from tracker.geometry.se3 import exp, inverse, log
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
 from tracker.outline import Rig, Samples, outline_kernel
+from tracker.ownership import Ownership
 
 TRACKED, UNCERTAIN, LOST = 0, 1, 2
 MOTION_MODELS = ("none", "constant-velocity")
@@ -35,7 +40,8 @@ class Settings:
 
     iterations: int = 6
     spacing: float = 4.0  # pixels between outline samples
-    search_range: int = 20  # pixels searched either side of the outline
+    search_range: int = 20  # pixels searched either side of the outline (first iteration)
+    final_search_range: int = 6  # last iteration's range (pixels), shrinking geometrically from search_range; 0 = fixed
     threshold: float = 6.0  # minimum grey-level derivative of an edge (per pixel)
     robust_c: float = 2.0  # IRLS weight w = 1 / (c + |m|), pixels
     prior_translation: float = 1e3  # prior about the predicted pose, per m^2
@@ -48,6 +54,7 @@ class Settings:
     uncertain_residual: float = 3.0  # robust mean offset (px) above which a frame is uncertain
     lost_residual: float = 6.0  # ... and lost
     capacity: int = 40000  # sample buffer size for all cameras together
+    ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
 
 
 @dataclass(frozen=True)
@@ -91,13 +98,13 @@ def constant_velocity(previous, current, damping):
     return out
 
 
-STAGES = ("grey", "outline", "measure", "solve")
+STAGES = ("grey", "outline", "ownership", "measure", "solve")
 
 
 @dataclass
 class StageTimes:
     """Seconds spent per stage since creation: smoothing the grey images, outline sampling
-    and visibility, edge search and Jacobians, prior + chain solve + coercion."""
+    and visibility, search limits (ownership), edge search and Jacobians, prior + chain solve + coercion."""
 
     seconds: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
 
@@ -119,6 +126,10 @@ class Tracker:
         self.samples = Samples.allocate(settings.capacity)
         self.offset = np.zeros(settings.capacity)
         self.weight = np.zeros(settings.capacity)
+        self.ownership = Ownership(model, self.rig, settings.capacity,
+                                   max(settings.search_range, settings.final_search_range))
+        self.lo = np.zeros(settings.capacity, np.int64)
+        self.hi = np.zeros(settings.capacity, np.int64)
         n = model.size
         self.information = np.zeros((n, 6, 6))
         self.eta = np.zeros((n, 6))
@@ -147,17 +158,35 @@ class Tracker:
             self.images[k, :h, :w] = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
         self.times.add("grey", started)
 
-    def iterate(self) -> Statistics:
-        """One IRLS iteration at the current poses: sample, measure, solve, update, coerce."""
+    def search_range(self, iteration: int) -> int:
+        """Coarse to fine when final_search_range > 0: r_i = r_0 (r_last / r_0)^(i / (n - 1)), rounded."""
+        st = self.settings
+        if st.final_search_range <= 0 or st.iterations < 2:
+            return st.search_range
+        ratio = st.final_search_range / st.search_range
+        return max(1, round(st.search_range * ratio ** (min(iteration, st.iterations - 1) / (st.iterations - 1))))
+
+    def iterate(self, iteration: int = 0) -> Statistics:
+        """One IRLS iteration at the current poses: sample, limit the searches, measure, solve, update, coerce."""
         s, m, st = self.samples, self.model, self.settings
+        search_range = self.search_range(iteration)
         started = time.perf_counter()
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
                                  s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
         started = self.times.add("outline", started)
+        if st.ownership:
+            lo, hi = self.ownership.limits(self.poses, s, search_range)
+        else:
+            lo = self.lo[:s.count]
+            hi = self.hi[:s.count]
+            lo[:] = -search_range
+            hi[:] = search_range
+        started = self.times.add("ownership", started)
         visible, found, sum_wm, sum_w = measure_kernel(
             self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
-            st.search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta)
+            search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta,
+            lo, hi)
         started = self.times.add("measure", started)
         add_prior(self.information, self.eta, self.prior, self.poses, self.anchor)
         alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
@@ -173,8 +202,8 @@ class Tracker:
         if self.settings.motion == "constant-velocity" and self.previous is not None:
             self.poses = self.model.coerce(constant_velocity(self.previous, current, self.settings.damping))
         self.anchor = self.poses
-        for _ in range(self.settings.iterations):
-            stats = self.iterate()
+        for iteration in range(self.settings.iterations):
+            stats = self.iterate(iteration)
         self.previous = current
         share = stats.found / stats.visible if stats.visible else 0.0
         return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)
