@@ -75,8 +75,8 @@ def track_run(recording: Recording, model: Model, settings: Settings, out: Path)
     output = 0.0
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
-        for index, images in frames(recording):
-            result = tracker.step(images)
+        for index, images in frames(recording, prepare=tracker.smooth):
+            result = tracker.step(images, smoothed=True)
             mark = time.perf_counter()
             writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual)
             output += time.perf_counter() - mark
@@ -127,7 +127,7 @@ def format_table(result: dict) -> str:
     """A Markdown table of :func:`run`'s figures."""
     names = {
         "decode": "decode to grey (CPU, all cameras, one thread)",
-        "grey": "smoothing into the frame buffer",
+        "grey": "copy into the frame buffer (smoothing runs in the reader threads)",
         "outline": "outline sampling and visibility",
         "ownership": "search limits (edge ownership)",
         "measure": "edge search and Jacobians",

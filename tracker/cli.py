@@ -81,9 +81,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
-            for index, images in tqdm(frames(rec, args.start, stop), total=stop - args.start, unit="frame",
-                                      disable=args.quiet, file=sys.stderr):
-                result = tracker.step(images)
+            for index, images in tqdm(frames(rec, args.start, stop, prepare=tracker.smooth),
+                                      total=stop - args.start, unit="frame", disable=args.quiet, file=sys.stderr):
+                result = tracker.step(images, smoothed=True)
                 writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual)
                 counts[result.status] += 1
                 residuals.append(result.residual)
@@ -197,7 +197,10 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices only: no BLAS thread storms
+    import cv2
+
+    cv2.setNumThreads(1)  # the reader threads already run in parallel; OpenCV's own pool only contends
     parser = build_parser()
     args = parser.parse_args(argv)
     warnings.showwarning = _show_warning

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from tracker.chain import solve_kernel
+from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import exp, inverse, log
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
@@ -67,15 +67,6 @@ class FrameResult:
 
 
 @njit(cache=True)
-def apply_motions(poses, alpha):
-    """E_i <- E_i exp(alpha_i) for every component."""
-    out = np.empty_like(poses)
-    for i in range(poses.shape[0]):
-        out[i] = poses[i] @ exp(alpha[i])
-    return out
-
-
-@njit(cache=True)
 def add_prior(information, eta, prior, poses, anchor):
     """Gaussian prior on each component's pose about the frame's predicted pose ``anchor``.
 
@@ -87,6 +78,17 @@ def add_prior(information, eta, prior, poses, anchor):
         delta = log(inverse(poses[i]) @ anchor[i])
         information[i] += prior
         eta[i] += prior @ delta
+
+
+@njit(cache=True)
+def update_kernel(information, eta, prior, poses, anchor, parent, D, rows, rest, joint_type, axis, lower, upper):
+    """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5)."""
+    add_prior(information, eta, prior, poses, anchor)
+    alpha = solve_kernel(information, eta, parent, D, rows, poses)
+    moved = np.empty_like(poses)
+    for i in range(poses.shape[0]):
+        moved[i] = poses[i] @ exp(alpha[i])
+    return coerce_kernel(moved, parent, rest, D, rows, joint_type, axis, lower, upper)
 
 
 @njit(cache=True)
@@ -149,13 +151,20 @@ class Tracker:
         self.iterate()
         self.poses, self.previous, self.anchor = poses, previous, anchor
 
-    def load_images(self, images) -> None:
-        """Copy (and smooth) one grey image per camera into the frame buffer."""
-        started = time.perf_counter()
+    def smooth(self, image: np.ndarray) -> np.ndarray:
+        """The edge search's input: a grey image smoothed by a Gaussian of ``blur_sigma`` pixels.
+
+        Thread-safe, so reader threads can run it beside the tracker (``step(..., smoothed=True)``).
+        """
         sigma = self.settings.blur_sigma
+        return cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
+
+    def load_images(self, images, smoothed: bool = False) -> None:
+        """Copy one grey image per camera into the frame buffer, smoothing them unless ``smoothed``."""
+        started = time.perf_counter()
         for k, image in enumerate(images):
             h, w = image.shape
-            self.images[k, :h, :w] = cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
+            self.images[k, :h, :w] = image if smoothed else self.smooth(image)
         self.times.add("grey", started)
 
     def search_range(self, iteration: int) -> int:
@@ -188,16 +197,15 @@ class Tracker:
             search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta,
             lo, hi)
         started = self.times.add("measure", started)
-        add_prior(self.information, self.eta, self.prior, self.poses, self.anchor)
-        alpha = solve_kernel(self.information, self.eta, m.parent, m.constraint, m.constraint_rows, self.poses)
-        self.poses = m.coerce(apply_motions(self.poses, alpha))
+        self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
+                                   m.constraint, m.constraint_rows, m.rest, m.joint_type, m.axis, m.lower, m.upper)
         self.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(self.information, self.eta, visible, found, residual)
 
-    def step(self, images) -> FrameResult:
-        """Track one frame given one grey image per camera (rig order)."""
-        self.load_images(images)
+    def step(self, images, smoothed: bool = False) -> FrameResult:
+        """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not."""
+        self.load_images(images, smoothed)
         current = self.poses
         if self.settings.motion == "constant-velocity" and self.previous is not None:
             self.poses = self.model.coerce(constant_velocity(self.previous, current, self.settings.damping))

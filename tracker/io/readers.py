@@ -90,8 +90,8 @@ def grey_frames(source: Path, start: int = 0) -> Iterator[np.ndarray]:
 class _Reader:
     """A thread that decodes ``count`` frames of one source into a bounded queue (errors travel along)."""
 
-    def __init__(self, source: Path, start: int, count: int, queue_size: int):
-        self.source, self.start, self.count = source, start, count
+    def __init__(self, source: Path, start: int, count: int, queue_size: int, prepare=None):
+        self.source, self.start, self.count, self.prepare = source, start, count, prepare
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
@@ -101,7 +101,7 @@ class _Reader:
         frames = grey_frames(self.source, self.start)
         try:
             for image in itertools.islice(frames, self.count):
-                if not self._put(image):
+                if not self._put(image if self.prepare is None else self.prepare(image)):
                     return
         except BaseException as error:  # handed to the consumer, raised there
             self._put(error)
@@ -128,9 +128,11 @@ class _Reader:
         self.thread.join()
 
 
-def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4) -> Iterator[tuple[int, list[np.ndarray]]]:
-    """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread."""
-    readers = [_Reader(source, start, stop - start, queue_size) for source in sources]
+def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4,
+                prepare=None) -> Iterator[tuple[int, list[np.ndarray]]]:
+    """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread;
+    ``prepare`` (image -> image), if given, runs in that thread too (e.g. the tracker's smoothing)."""
+    readers = [_Reader(source, start, stop - start, queue_size, prepare) for source in sources]
     try:
         for index in range(start, stop):
             yield index, [reader.get() for reader in readers]

@@ -110,11 +110,13 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) ->
     )
 
 
-def frames(recording: Recording, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, list[np.ndarray]]]:
+def frames(recording: Recording, start: int = 0, stop: int | None = None,
+           prepare=None) -> Iterator[tuple[int, list[np.ndarray]]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
 
-    One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`). A
-    frame that fails to decode raises TrackerInputError naming the file and the index.
+    One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`) and
+    applies ``prepare`` (image -> image) if given. A frame that fails to decode
+    raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
     if not 0 <= start <= stop <= recording.frame_count:
@@ -122,7 +124,7 @@ def frames(recording: Recording, start: int = 0, stop: int | None = None) -> Ite
             f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
             "pick a range inside it"
         )
-    return read_frames(recording.sources, start, stop)
+    return read_frames(recording.sources, start, stop, prepare=prepare)
 
 
 def _find_source(folder: Path, name: str) -> Path | None:
