@@ -52,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tracker.geometry.se3 import adjoint, exp, inverse, log, point_velocity
+from tracker.geometry.se3 import exp, inverse, log, point_velocity
 
 FREE = 0
 BALL = 1
@@ -122,6 +122,57 @@ def pack_constraints(blocks) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
+def _invert(a, n, out, work):
+    """out[:n, :n] = a[:n, :n]^-1 by Gauss-Jordan elimination with partial pivoting (work: n x 2n)."""
+    for r in range(n):
+        for c in range(n):
+            work[r, c] = a[r, c]
+            work[r, n + c] = 1.0 if r == c else 0.0
+    for col in range(n):
+        pivot = col
+        for r in range(col + 1, n):
+            if abs(work[r, col]) > abs(work[pivot, col]):
+                pivot = r
+        if pivot != col:
+            for c in range(2 * n):
+                work[col, c], work[pivot, c] = work[pivot, c], work[col, c]
+        scale = 1.0 / work[col, col]
+        for c in range(2 * n):
+            work[col, c] *= scale
+        for r in range(n):
+            factor = work[r, col]
+            if r != col and factor != 0.0:
+                for c in range(2 * n):
+                    work[r, c] -= factor * work[col, c]
+    for r in range(n):
+        for c in range(n):
+            out[r, c] = work[r, n + c]
+
+
+@njit(cache=True)
+def _relative_adjoint(child, parent, out):
+    """out = Ad(E_child^-1 E_parent) = [[R, [t]x R], [0, R]] with R = R_c^T R_p, t = R_c^T (t_p - t_c)."""
+    r = np.empty((3, 3))
+    t = np.empty(3)
+    for a in range(3):
+        t[a] = 0.0
+        for b in range(3):
+            r[a, b] = 0.0
+            for c in range(3):
+                r[a, b] += child[c, a] * parent[c, b]
+            t[a] += child[b, a] * (parent[b, 3] - child[b, 3])
+    out[:] = 0.0
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = r[a, b]
+            out[3 + a, 3 + b] = r[a, b]
+    for b in range(3):  # [t]x R, column by column: t x R[:, b]
+        out[0, 3 + b] = t[1] * r[2, b] - t[2] * r[1, b]
+        out[1, 3 + b] = t[2] * r[0, b] - t[0] * r[2, b]
+        out[2, 3 + b] = t[0] * r[1, b] - t[1] * r[0, b]
+
+
+@njit(cache=True)
 def solve_kernel(information, eta, parent, D, rows, poses):
     """MAP twists of the whole tree (section 4): upward marginalisation, downward back-substitution.
 
@@ -132,35 +183,91 @@ def solve_kernel(information, eta, parent, D, rows, poses):
 
     The back-substitution alpha_i = mu_i - K_i (D_pi alpha_p + D_i mu_i) is kept
     as alpha_i = b_i + G_i alpha_p with b_i = mu_i - K_i D_i mu_i and G_i = -K_i D_pi.
-    Roots (parent < 0) and free children (k_i = 0) get alpha_i = mu_i.
+    Roots (parent < 0) and free children (k_i = 0) get alpha_i = mu_i.  Small
+    matrices are multiplied in loops over preallocated scratch (no allocation per
+    component).
     """
     n = information.shape[0]
     info = information.copy()
     eta_up = eta.copy()
     alpha = np.empty((n, 6))
     gain = np.zeros((n, 6, 6))
+    c_inv = np.empty((6, 6))
+    work = np.empty((6, 12))
+    adj = np.empty((6, 6))
+    d_p = np.empty((6, 6))
+    c_inv_dt = np.empty((6, 6))
+    s_mat = np.empty((6, 6))
+    s_inv = np.empty((6, 6))
+    k_gain = np.empty((6, 6))
+    dpt_s_inv = np.empty((6, 6))
+    mu = np.empty(6)
+    d_mu = np.empty(6)
     for i in range(n - 1, -1, -1):
-        c_inv = np.linalg.inv(info[i])
-        mu = c_inv @ eta_up[i]
+        _invert(info[i], 6, c_inv, work)
+        for a in range(6):
+            mu[a] = 0.0
+            for b in range(6):
+                mu[a] += c_inv[a, b] * eta_up[i, b]
         p = parent[i]
         k = rows[i]
         if p < 0 or k == 0:
             alpha[i] = mu
             continue
-        d_i = D[i, :k].copy()
-        d_p = -(d_i @ adjoint(inverse(poses[i]) @ poses[p]))
-        c_inv_dt = c_inv @ d_i.T.copy()
-        s_inv = np.linalg.inv(d_i @ c_inv_dt)
-        dpt_s_inv = d_p.T.copy() @ s_inv
-        d_mu = d_i @ mu
-        eta_up[p] -= dpt_s_inv @ d_mu
-        info[p] += dpt_s_inv @ d_p
-        k_gain = c_inv_dt @ s_inv
-        alpha[i] = mu - k_gain @ d_mu
-        gain[i] = -(k_gain @ d_p)
+        d_i = D[i]
+        _relative_adjoint(poses[i], poses[p], adj)
+        for r in range(k):
+            d_mu[r] = 0.0
+            for c in range(6):
+                d_mu[r] += d_i[r, c] * mu[c]
+                value = 0.0
+                for m in range(6):
+                    value += d_i[r, m] * adj[m, c]
+                d_p[r, c] = -value
+        for a in range(6):  # C^-1 D^T (6 x k)
+            for r in range(k):
+                value = 0.0
+                for m in range(6):
+                    value += c_inv[a, m] * d_i[r, m]
+                c_inv_dt[a, r] = value
+        for r in range(k):  # S = D C^-1 D^T (k x k)
+            for q in range(k):
+                value = 0.0
+                for m in range(6):
+                    value += d_i[r, m] * c_inv_dt[m, q]
+                s_mat[r, q] = value
+        _invert(s_mat, k, s_inv, work)
+        for a in range(6):  # D_p^T S^-1 (6 x k) and K = C^-1 D^T S^-1 (6 x k)
+            for q in range(k):
+                v1 = 0.0
+                v2 = 0.0
+                for r in range(k):
+                    v1 += d_p[r, a] * s_inv[r, q]
+                    v2 += c_inv_dt[a, r] * s_inv[r, q]
+                dpt_s_inv[a, q] = v1
+                k_gain[a, q] = v2
+        for a in range(6):
+            correction = 0.0
+            step = 0.0
+            for q in range(k):
+                correction += dpt_s_inv[a, q] * d_mu[q]
+                step += k_gain[a, q] * d_mu[q]
+            eta_up[p, a] -= correction
+            alpha[i, a] = mu[a] - step
+            for b in range(6):
+                v1 = 0.0
+                v2 = 0.0
+                for q in range(k):
+                    v1 += dpt_s_inv[a, q] * d_p[q, b]
+                    v2 += k_gain[a, q] * d_p[q, b]
+                info[p, a, b] += v1
+                gain[i, a, b] = -v2
     for i in range(1, n):
-        if parent[i] >= 0 and rows[i] > 0:
-            alpha[i] += gain[i] @ alpha[parent[i]]
+        p = parent[i]
+        if p >= 0 and rows[i] > 0:
+            for a in range(6):
+                for b in range(6):
+                    alpha[i, a] += gain[i, a, b] * alpha[p, b]
     return alpha
 
 
@@ -193,6 +300,10 @@ def coerce_kernel(poses, parent, rest, D, rows, joint_type, axis, lower, upper):
     a ball's a' = (p x w, w) so that its rotation from rest |w| <= upper_i.
     """
     out = poses.copy()
+    gram = np.empty((6, 6))
+    gram_inv = np.empty((6, 6))
+    work = np.empty((6, 12))
+    d_a = np.empty(6)
     for i in range(out.shape[0]):
         p = parent[i]
         k = rows[i]
@@ -200,8 +311,21 @@ def coerce_kernel(poses, parent, rest, D, rows, joint_type, axis, lower, upper):
             continue
         at_rest = out[p] @ rest[i]
         a = log(inverse(at_rest) @ out[i])
-        d_i = D[i, :k].copy()
-        a -= d_i.T.copy() @ (np.linalg.inv(d_i @ d_i.T.copy()) @ (d_i @ a))
+        d_i = D[i]
+        for r in range(k):
+            d_a[r] = 0.0
+            for c in range(6):
+                d_a[r] += d_i[r, c] * a[c]
+            for q in range(k):
+                value = 0.0
+                for c in range(6):
+                    value += d_i[r, c] * d_i[q, c]
+                gram[r, q] = value
+        _invert(gram, k, gram_inv, work)
+        for c in range(6):
+            for r in range(k):
+                for q in range(k):
+                    a[c] -= d_i[r, c] * gram_inv[r, q] * d_a[q]
         if joint_type[i] == BALL and upper[i] < np.inf:
             angle = np.sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5])
             if angle > upper[i]:
