@@ -89,7 +89,7 @@ def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, p
     return np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, search_range, threshold,
                    robust_c, n_components, o_offset, o_weight, information, eta, s_lo=None, s_hi=None):
     """Search every sample's edge and accumulate C_i, eta_i; returns (visible, found, sum w|m|, sum w).

@@ -36,7 +36,7 @@ from numba import njit
 from tracker.geometry.se3 import inverse
 
 _TANGENT_EPS = 1e-3
-_MAX_STEPS = 20000
+_MAX_STEPS = 4096
 
 
 @dataclass(frozen=True)
@@ -131,6 +131,16 @@ def distort(k_mat, dist, px, py):
     j10 = a10 / fx
     j11 = -a10 * s / (fx * fy) + a11 / fy
     return fx * dx + s * dy + cx, fy * dy + cy, j00, j01, j10, j11
+
+
+@njit(cache=True)
+def _outside(px, py, width, height):
+    """Distance (ideal pixels) from (px, py) to the image grown by a quarter of its size on each side
+    (room for lens distortion); 0 inside."""
+    margin = 0.25 * max(width, height)
+    dx = max(-margin - px, 0.0, px - (width - 1.0 + margin))
+    dy = max(-margin - py, 0.0, py - (height - 1.0 + margin))
+    return np.sqrt(dx * dx + dy * dy)
 
 
 @njit(cache=True)
@@ -260,7 +270,7 @@ def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_f
     return n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, cam_pose, cam_dist, cam_size,
                    spacing, o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point):
     """Sample the visible outlines of all quadrics in all cameras; returns the sample count."""
@@ -352,11 +362,13 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     vx = (d0 * h2 - h0 * d2) / (h2 * h2)
                     vy = (d1 * h2 - h1 * d2) / (h2 * h2)
                     speed = np.sqrt(vx * vx + vy * vy)
-                    if (px - disc_c[0]) ** 2 + (py - disc_c[1]) ** 2 <= disc_r * disc_r:
+                    outside = _outside(px, py, width, height)
+                    if outside == 0.0 and (px - disc_c[0]) ** 2 + (py - disc_c[1]) ** 2 <= disc_r * disc_r:
                         n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_from_comp[j],
                                   k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric, o_pixel, o_normal,
                                   o_jac, o_point, n)
-                    theta += max(spacing / max(speed, 1e-12), min_step)
+                    # arc length >= distance: off the image, skip straight to where it could re-enter
+                    theta += max(max(spacing, outside) / max(speed, 1e-12), min_step)
             elif n_pos + n_neg == 2 and n_pos == 1 and n_neg == 1:
                 # line pair l+- = sqrt(la) va +- sqrt(-lb) vb (rank 2, opposite signs)
                 ia = 0 if lam[0] > tol else (1 if lam[1] > tol else 2)
@@ -378,6 +390,8 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     steps = int(2.0 * half / spacing) + 1
                     for s_i in range(steps):
                         t = -half + (s_i + 0.5) * (2.0 * half / steps)
+                        if _outside(fx - t * uy, fy + t * ux, width, height) > 0.0:
+                            continue
                         n = _emit(fx - t * uy, fy + t * ux, j, k, comp, conic, conic_scale, q_cam, clip_cam,
                                   sphere, cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
                                   o_pixel, o_normal, o_jac, o_point, n)

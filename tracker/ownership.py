@@ -64,7 +64,7 @@ NCOEF = 18  # per candidate: discriminant (3), x^T A x (3), 2 b^T x (2), c, clip
 # sphere test g (3)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def prepare(quadric, clip, bound, quadric_component, poses, cam_pose, cam_scale, r, o_quadric, o_clip, o_sphere,
             o_near, o_near_count):
     """Camera-frame quadrics ``E^-T Q E^-1``, clips and bounding spheres (centre, radius) for every camera and
@@ -424,7 +424,7 @@ def _side(sign, r, n_cand, cand_comp, coef, own, outside, first, covered):
     return r
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def search_limits(q_cam, clip_cam, sphere, near, near_count, quadric_component, cam_matrix, cam_dist, grid, count,
                   s_cam, s_comp, s_quadric, s_pixel, s_normal, r, cand_comp, coef, covered, o_lo, o_hi):
     """Per sample, the search interval ``[lo, hi]`` (within ``[-r, r]``) that ends half way to the next

@@ -80,7 +80,7 @@ def add_prior(information, eta, prior, poses, anchor):
         eta[i] += prior @ delta
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def update_kernel(information, eta, prior, poses, anchor, parent, D, rows, rest, joint_type, axis, lower, upper):
     """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5)."""
     add_prior(information, eta, prior, poses, anchor)
@@ -91,7 +91,7 @@ def update_kernel(information, eta, prior, poses, anchor, parent, D, rows, rest,
     return coerce_kernel(moved, parent, rest, D, rows, joint_type, axis, lower, upper)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def constant_velocity(previous, current, damping):
     """Predict E_{t+1} = E_t exp(d log(E_{t-1}^-1 E_t)) for every component (d = damping)."""
     out = np.empty_like(current)
