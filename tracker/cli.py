@@ -63,10 +63,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     rec = open_recording(args.recording, _cameras(args.cameras))
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
-    settings = Settings(
-        iterations=args.iterations, spacing=args.spacing, search_range=args.search_range,
-        motion=args.motion, damping=args.damping,
-    )
+    given = {"iterations": args.iterations, "spacing": args.spacing, "search_range": args.search_range,
+             "motion": args.motion, "damping": args.damping}
+    settings = Settings(**{key: value for key, value in given.items() if value is not None})
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
@@ -128,8 +127,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from tracker import bench
     from tracker.track import Settings
 
-    defaults = Settings()
-    settings = Settings(iterations=args.iterations or defaults.iterations, spacing=args.spacing or defaults.spacing)
+    given = {"iterations": args.iterations, "spacing": args.spacing}
+    settings = Settings(**{key: value for key, value in given.items() if value is not None})
     print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)
     if args.scaling:
         result = bench.scaling()
@@ -152,14 +151,13 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
     track.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     track.add_argument("--frames", type=_positive_int, help="number of frames to track (default: all)")
-    track.add_argument("--iterations", type=_positive_int, default=6, help="IRLS iterations per frame (default 6)")
-    track.add_argument("--spacing", type=_positive_float, default=4.0,
-                       help="pixels between outline samples (default 4)")
-    track.add_argument("--search-range", type=_positive_int, default=20,
-                       help="edge search, pixels either side (default 20)")
-    track.add_argument("--motion", choices=("none", "constant-velocity"), default="constant-velocity",
+    track.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default 6)")
+    track.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default 4)")
+    track.add_argument("--search-range", type=_positive_int,
+                       help="edge search in the first iteration, pixels either side (default 20; the last uses 6)")
+    track.add_argument("--motion", choices=("none", "constant-velocity"),
                        help="motion model that predicts each frame's pose (default constant-velocity)")
-    track.add_argument("--damping", type=_share, default=1.0,
+    track.add_argument("--damping", type=_share,
                        help="share of the last frame's motion carried into the prediction (default 1; "
                             "0.5 steadies a single camera)")
     track.add_argument("--quiet", action="store_true", help="no progress bar")
