@@ -10,6 +10,7 @@ occlusion, culling, and the Jacobian rows against finite differences.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,8 +18,8 @@ import pytest
 from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.geometry.quadric import KEEP_ALL
-from tracker.model import model_from_dict
-from tracker.outline import Rig, Samples, sample_outlines
+from tracker.model import load_model, model_from_dict
+from tracker.outline import Placed, Rig, Samples, place, sample_outlines
 
 SIZE = (640, 480)
 
@@ -561,3 +562,24 @@ def test_camera_project_agrees_with_the_outline_for_a_skewed_camera():
     n = s.count
     world = world_points(poses.repeat(n, 0), np.zeros(n, int), s.point[:n])
     assert np.abs(cam.project(world) - s.pixel[:n]).max() < 1e-6
+
+
+def test_place_matches_the_matrix_formula():
+    """place(): E = P W, Q' = E^-T Q E^-1, clip likewise, bounding sphere centre E c."""
+    rng = np.random.default_rng(23)
+    model = load_model(Path(__file__).resolve().parents[1] / "models" / "human.toml")
+    poses = np.stack([se3.exp(rng.normal(size=6)) for _ in range(model.size)])
+    cams = random_cameras(rng, 2, distorted=False)
+    rig = Rig.from_cameras(cams)
+    placed = Placed.allocate(2, model.quadric.shape[0])
+    place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
+          placed.camera_from, placed.quadric, placed.clip, placed.sphere)
+    for k in range(2):
+        for j, c in enumerate(model.quadric_component):
+            e = rig.pose[k] @ poses[c]
+            e_inv = np.linalg.inv(e)
+            np.testing.assert_allclose(placed.camera_from[k, j], e, atol=1e-12)
+            np.testing.assert_allclose(placed.quadric[k, j], e_inv.T @ model.quadric[j] @ e_inv, rtol=1e-10, atol=1e-9)
+            np.testing.assert_allclose(placed.clip[k, j], e_inv.T @ model.clip[j] @ e_inv, rtol=1e-10, atol=1e-9)
+            np.testing.assert_allclose(placed.sphere[k, j, :3], (e @ np.append(model.quadric_bound[j, :3], 1.0))[:3],
+                                       atol=1e-12)

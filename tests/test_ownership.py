@@ -9,19 +9,26 @@ import pytest
 
 from tracker.camera import Camera
 from tracker.model import load_model, model_from_dict
-from tracker.outline import Rig, Samples, sample_outlines
+from tracker.outline import Placed, Rig, Samples, place, sample_outlines
 from tracker.ownership import (
     NCOEF,
     Ownership,
     line_labels,
     pixel_scale,
-    prepare,
     undistort,
     undistort_grid,
 )
 from tracker.synth import demo3_rig, motion_poses
 
 HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
+
+
+def placed_at(model, poses, rig) -> Placed:
+    """The camera-frame quadrics that the outline stage hands to the ownership stage."""
+    placed = Placed.allocate(len(rig.names), model.quadric.shape[0])
+    place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
+          placed.camera_from, placed.quadric, placed.clip, placed.sphere)
+    return placed
 
 
 def brute_labels(model, poses, camera: Camera, pixels):
@@ -108,23 +115,19 @@ def test_fast_labels_match_brute_force(human_views, r):
     model, cameras, rig, views = human_views
     n_quadrics = model.quadric.shape[0]
     grid = undistort_grid(rig.matrix, rig.distortion, rig.size)
-    q_cam = np.zeros((len(cameras), n_quadrics, 4, 4))
-    clip_cam = np.zeros_like(q_cam)
-    sphere = np.zeros((len(cameras), n_quadrics, 4))
-    near = np.zeros((len(cameras), n_quadrics, n_quadrics), np.int64)
-    near_count = np.zeros((len(cameras), n_quadrics), np.int64)  # (prepare's coarse cull; line_labels takes all)
+    placed = Placed.allocate(len(cameras), n_quadrics)
     cand = np.zeros(n_quadrics, np.int64)
     coef = np.zeros((n_quadrics, NCOEF))
     total = agree = 0
     ts = np.arange(-r - 1, r + 2)
     used = ts != 0
     for poses, s in views:
-        prepare(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-                pixel_scale(grid), r, q_cam, clip_cam, sphere, near, near_count)
+        place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
+              placed.camera_from, placed.quadric, placed.clip, placed.sphere)
         fast = np.zeros(2 * r + 3, np.int64)
         for i in range(0, s.count, 3):
             k = s.camera[i]
-            line_labels(q_cam, clip_cam, sphere, model.quadric_component, rig.matrix, rig.distortion, grid, k,
+            line_labels(placed.quadric, placed.clip, placed.sphere, model.quadric_component, rig.matrix, rig.distortion, grid, k,
                         s.pixel[i, 0], s.pixel[i, 1], s.normal[i, 0], s.normal[i, 1], r, cand, coef, fast)
             pixels = s.pixel[i] + ts[:, None] * s.normal[i]
             exact = brute_labels(model, poses, cameras[k], pixels)
@@ -146,7 +149,7 @@ def test_search_limits_match_the_rule_on_brute_force_labels(human_views):
     for r in (20, 12, 6):
         ts = np.arange(-r - 1, r + 2)
         for poses, s in views:
-            lo, hi = Ownership(model, rig, s.count, r).limits(poses, s, r)
+            lo, hi = Ownership(model, rig, s.count, r).limits(placed_at(model, poses, rig), s, r)
             for i in range(0, s.count, 2):
                 k = s.camera[i]
                 exact = brute_labels(model, poses, cameras[k], s.pixel[i] + ts[:, None] * s.normal[i])
@@ -183,7 +186,7 @@ def test_another_outline_cuts_the_search_half_way():
     r = 20
     model = two_spheres(0.03, 0.1, 0.05)  # a is 15 px across, the gap 12.5 px
     poses, rig, s = facing(model)
-    lo, hi = Ownership(model, rig, s.count, r).limits(poses, s, r)
+    lo, hi = Ownership(model, rig, s.count, r).limits(placed_at(model, poses, rig), s, r)
     on_a = np.flatnonzero((s.component[: s.count] == 0) & (s.normal[: s.count, 0] > 0.999))
     assert len(on_a)
     for i in on_a:
@@ -204,5 +207,5 @@ def test_no_other_outline_no_cut():
     r = 20
     model = two_spheres(0.05, 0.05, 0.6)
     poses, rig, s = facing(model)
-    lo, hi = Ownership(model, rig, s.count, r).limits(poses, s, r)
+    lo, hi = Ownership(model, rig, s.count, r).limits(placed_at(model, poses, rig), s, r)
     assert (lo == -r).all() and (hi == r).all()

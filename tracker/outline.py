@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from tracker.geometry.se3 import inverse
 
 _TANGENT_EPS = 1e-3
 _MAX_STEPS = 4096
@@ -271,29 +270,66 @@ def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_f
 
 
 @njit(cache=True, nogil=True)
+def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_quadric, o_clip, o_sphere):
+    """Every quadric in every camera's frame: with E = P_k W_c (camera from component), ``o_from`` = E,
+    ``o_quadric`` = E^-T Q E^-1 and ``o_clip`` = E^-T Q2 E^-1 (C, Q, 4, 4), and ``o_sphere`` (C, Q, 4)
+    the bounding sphere (centre in the camera frame, radius).  No allocation."""
+    e_inv = np.zeros((4, 4))
+    half = np.empty((4, 4))
+    e_inv[3, 3] = 1.0
+    for k in range(cam_pose.shape[0]):
+        p = cam_pose[k]
+        for j in range(quadric.shape[0]):
+            w = poses[quadric_component[j]]
+            e = o_from[k, j]
+            for a in range(3):
+                for b in range(4):
+                    e[a, b] = p[a, 0] * w[0, b] + p[a, 1] * w[1, b] + p[a, 2] * w[2, b] + (p[a, 3] if b == 3 else 0.0)
+            e[3, 0] = e[3, 1] = e[3, 2] = 0.0
+            e[3, 3] = 1.0
+            for a in range(3):  # E^-1 = [[R^T, -R^T t], [0, 1]]
+                for b in range(3):
+                    e_inv[a, b] = e[b, a]
+                e_inv[a, 3] = -(e[0, a] * e[0, 3] + e[1, a] * e[1, 3] + e[2, a] * e[2, 3])
+                o_sphere[k, j, a] = e[a, 0] * bound[j, 0] + e[a, 1] * bound[j, 1] + e[a, 2] * bound[j, 2] + e[a, 3]
+            o_sphere[k, j, 3] = bound[j, 3]
+            for m in range(2):
+                src = quadric[j] if m == 0 else clip[j]
+                dst = o_quadric[k, j] if m == 0 else o_clip[k, j]
+                for a in range(4):  # half = Q E^-1, dst = E^-T half
+                    for b in range(4):
+                        acc = 0.0
+                        for c in range(4):
+                            acc += src[a, c] * e_inv[c, b]
+                        half[a, b] = acc
+                for a in range(4):
+                    for b in range(4):
+                        acc = 0.0
+                        for c in range(4):
+                            acc += e_inv[c, a] * half[c, b]
+                        dst[a, b] = acc
+
+
+@njit(cache=True, nogil=True)
 def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, cam_pose, cam_dist, cam_size,
-                   spacing, o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point):
-    """Sample the visible outlines of all quadrics in all cameras; returns the sample count."""
+                   spacing, placed_from, placed_quadric, placed_clip, placed_sphere,
+                   o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point):
+    """Sample the visible outlines of all quadrics in all cameras; returns the sample count.
+
+    The ``placed_*`` buffers receive :func:`place`'s camera-frame quadrics (later stages reuse them)."""
+    place(quadric, clip, bound, quadric_component, poses, cam_pose, placed_from, placed_quadric, placed_clip,
+          placed_sphere)
     n_quadrics = quadric.shape[0]
-    q_cam = np.empty((n_quadrics, 4, 4))
-    clip_cam = np.empty((n_quadrics, 4, 4))
-    cam_from_comp = np.empty((n_quadrics, 4, 4))
-    sphere = np.empty((n_quadrics, 4))
     n = 0
     for k in range(cam_matrix.shape[0]):
         k_mat = cam_matrix[k]
         k_inv = np.linalg.inv(k_mat)
         size = cam_size[k]
         width, height = float(size[0]), float(size[1])
-        for j in range(n_quadrics):
-            e = cam_pose[k] @ poses[quadric_component[j]]
-            e_inv = inverse(e)
-            cam_from_comp[j] = e
-            q_cam[j] = e_inv.T @ quadric[j] @ e_inv
-            clip_cam[j] = e_inv.T @ clip[j] @ e_inv
-            for a in range(3):
-                sphere[j, a] = e[a, 0] * bound[j, 0] + e[a, 1] * bound[j, 1] + e[a, 2] * bound[j, 2] + e[a, 3]
-            sphere[j, 3] = bound[j, 3]
+        q_cam = placed_quadric[k]
+        clip_cam = placed_clip[k]
+        cam_from_comp = placed_from[k]
+        sphere = placed_sphere[k]
         for j in range(n_quadrics):
             centre = sphere[j, 0:3].copy()
             radius = sphere[j, 3]
@@ -398,11 +434,30 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
     return n
 
 
-def sample_outlines(model, poses: np.ndarray, rig: Rig, spacing: float, samples: Samples) -> Samples:
-    """Fill ``samples`` with the visible outline of ``model`` at ``poses`` (N,4,4) seen by ``rig``."""
+@dataclass
+class Placed:
+    """Buffers for :func:`place`: every quadric in every camera's frame (see there)."""
+
+    camera_from: np.ndarray
+    quadric: np.ndarray
+    clip: np.ndarray
+    sphere: np.ndarray
+
+    @classmethod
+    def allocate(cls, cameras: int, quadrics: int) -> "Placed":
+        return cls(np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4, 4)),
+                   np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4)))
+
+
+def sample_outlines(model, poses: np.ndarray, rig: Rig, spacing: float, samples: Samples,
+                    placed: Placed | None = None) -> Samples:
+    """Fill ``samples`` with the visible outline of ``model`` at ``poses`` (N,4,4) seen by ``rig``
+    (and ``placed``, if given, with the camera-frame quadrics)."""
+    placed = Placed.allocate(len(rig.names), model.quadric.shape[0]) if placed is None else placed
     samples.count = outline_kernel(
         model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses,
         rig.matrix, rig.pose, rig.distortion, rig.size, float(spacing),
+        placed.camera_from, placed.quadric, placed.clip, placed.sphere,
         samples.camera, samples.component, samples.quadric, samples.pixel, samples.normal,
         samples.jacobian, samples.point,
     )

@@ -65,57 +65,20 @@ NCOEF = 18  # per candidate: discriminant (3), x^T A x (3), 2 b^T x (2), c, clip
 
 
 @njit(cache=True, nogil=True)
-def prepare(quadric, clip, bound, quadric_component, poses, cam_pose, cam_scale, r, o_quadric, o_clip, o_sphere,
-            o_near, o_near_count):
-    """Camera-frame quadrics ``E^-T Q E^-1``, clips and bounding spheres (centre, radius) for every camera and
-    quadric, into ``o_quadric``, ``o_clip`` (C, Q, 4, 4) and ``o_sphere`` (C, Q, 4); and per camera and quadric
-    ``j`` the quadrics whose bounding sphere's cone of rays comes within the angle of a search line
-    (``r + 1`` pixels at most ``cam_scale[k]`` radians each, see :func:`pixel_scale`) of quadric ``j``'s: a
-    coarse cull for the samples of ``j``, ``o_near[k, j, :o_near_count[k, j]]``."""
-    n_cams = cam_pose.shape[0]
-    n_quadrics = quadric.shape[0]
-    e_inv = np.zeros((4, 4))
-    half = np.empty((4, 4))
+def prepare(sphere, cam_scale, r, o_near, o_near_count):
+    """Per camera and quadric ``j``, the quadrics whose bounding sphere's cone of rays comes within the angle
+    of a search line (``r + 1`` pixels at most ``cam_scale[k]`` radians each, see :func:`pixel_scale`) of
+    quadric ``j``'s: a coarse cull for the samples of ``j``, ``o_near[k, j, :o_near_count[k, j]]``.
+    ``sphere`` (C, Q, 4) holds the bounding spheres in each camera's frame (:func:`tracker.outline.place`)."""
+    n_cams, n_quadrics = sphere.shape[0], sphere.shape[1]
     cone = np.empty((n_quadrics, 4))
-    e_inv[3, 3] = 1.0
     for k in range(n_cams):
-        p = cam_pose[k]
-        for j in range(n_quadrics):
-            w = poses[quadric_component[j]]
-            # E = P W (rigid): rotation rows into e_inv transposed, translation t = P_R W_t + P_t
-            for a in range(3):
-                for b in range(3):
-                    e_inv[b, a] = p[a, 0] * w[0, b] + p[a, 1] * w[1, b] + p[a, 2] * w[2, b]
-            for a in range(3):
-                t_a = p[a, 0] * w[0, 3] + p[a, 1] * w[1, 3] + p[a, 2] * w[2, 3] + p[a, 3]
-                o_sphere[k, j, a] = (t_a + e_inv[0, a] * bound[j, 0] + e_inv[1, a] * bound[j, 1]
-                                     + e_inv[2, a] * bound[j, 2])
-                half[a, 0] = t_a  # scratch: the translation
-            o_sphere[k, j, 3] = bound[j, 3]
-            for a in range(3):
-                e_inv[a, 3] = -(e_inv[a, 0] * half[0, 0] + e_inv[a, 1] * half[1, 0] + e_inv[a, 2] * half[2, 0])
-            for m in range(2):
-                src = quadric[j] if m == 0 else clip[j]
-                dst = o_quadric[k, j] if m == 0 else o_clip[k, j]
-                # half = Q E^-1, dst = E^-T half
-                for a in range(4):
-                    for b in range(4):
-                        acc = 0.0
-                        for c in range(4):
-                            acc += src[a, c] * e_inv[c, b]
-                        half[a, b] = acc
-                for a in range(4):
-                    for b in range(4):
-                        acc = 0.0
-                        for c in range(4):
-                            acc += e_inv[c, a] * half[c, b]
-                        dst[a, b] = acc
         # cones of rays through the spheres (axis u, half angle a): quadric l is near quadric j when the angle
         # between the axes is at most a_j + a_l + a margin m covering the r + 1 pixels of a search line (and
         # 10% for the straight segments): cos(axes) >= cos(a_j) cos(a_l + m) - sin(a_j) sin(a_l + m)
         margin = 1.1 * (r + 2.0) * cam_scale[k]
         for j in range(n_quadrics):
-            c = o_sphere[k, j]
+            c = sphere[k, j]
             norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
             cone[j, 0] = c[0] / norm
             cone[j, 1] = c[1] / norm
@@ -471,7 +434,8 @@ def line_labels(q_cam, clip_cam, sphere, quadric_component, cam_matrix, cam_dist
 class Ownership:
     """The search limits of a tracker's samples, with every buffer allocated once for a model and a rig.
 
-    ``limits(poses, samples, r)`` fills ``lo``/``hi`` for the first ``samples.count`` samples.
+    ``limits(placed, samples, r)`` fills ``lo``/``hi`` for the first ``samples.count`` samples, from the
+    camera-frame quadrics that the outline stage left in ``placed`` (:class:`tracker.outline.Placed`).
     """
 
     def __init__(self, model, rig, capacity: int, max_range: int):
@@ -479,9 +443,6 @@ class Ownership:
         self.model, self.rig = model, rig
         self.grid = undistort_grid(rig.matrix, rig.distortion, rig.size)
         self.scale = pixel_scale(self.grid)
-        self.quadric_cam = np.zeros((n_cams, n_quadrics, 4, 4))
-        self.clip_cam = np.zeros((n_cams, n_quadrics, 4, 4))
-        self.sphere = np.zeros((n_cams, n_quadrics, 4))
         self.near = np.zeros((n_cams, n_quadrics, n_quadrics), np.int64)
         self.near_count = np.zeros((n_cams, n_quadrics), np.int64)
         self.candidates = np.zeros(n_quadrics, np.int64)
@@ -490,11 +451,10 @@ class Ownership:
         self.lo = np.zeros(capacity, np.int64)
         self.hi = np.zeros(capacity, np.int64)
 
-    def limits(self, poses: np.ndarray, samples, r: int) -> tuple[np.ndarray, np.ndarray]:
+    def limits(self, placed, samples, r: int) -> tuple[np.ndarray, np.ndarray]:
         m, rig = self.model, self.rig
-        prepare(m.quadric, m.clip, m.quadric_bound, m.quadric_component, poses, rig.pose, self.scale, r,
-                self.quadric_cam, self.clip_cam, self.sphere, self.near, self.near_count)
-        search_limits(self.quadric_cam, self.clip_cam, self.sphere, self.near, self.near_count, m.quadric_component,
+        prepare(placed.sphere, self.scale, r, self.near, self.near_count)
+        search_limits(placed.quadric, placed.clip, placed.sphere, self.near, self.near_count, m.quadric_component,
                       rig.matrix, rig.distortion, self.grid, samples.count, samples.camera, samples.component,
                       samples.quadric, samples.pixel, samples.normal, r, self.candidates, self.coefficients,
                       self.covered, self.lo, self.hi)

@@ -27,7 +27,7 @@ from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import exp, inverse, log
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
-from tracker.outline import Rig, Samples, outline_kernel
+from tracker.outline import Placed, Rig, Samples, outline_kernel
 from tracker.ownership import Ownership
 
 TRACKED, UNCERTAIN, LOST = 0, 1, 2
@@ -128,6 +128,7 @@ class Tracker:
         self.samples = Samples.allocate(settings.capacity)
         self.offset = np.zeros(settings.capacity)
         self.weight = np.zeros(settings.capacity)
+        self.placed = Placed.allocate(len(cameras), model.quadric.shape[0])
         self.ownership = Ownership(model, self.rig, settings.capacity,
                                    max(settings.search_range, settings.final_search_range))
         self.lo = np.zeros(settings.capacity, np.int64)
@@ -182,10 +183,11 @@ class Tracker:
         started = time.perf_counter()
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
+                                 self.placed.camera_from, self.placed.quadric, self.placed.clip, self.placed.sphere,
                                  s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
         started = self.times.add("outline", started)
         if st.ownership:
-            lo, hi = self.ownership.limits(self.poses, s, search_range)
+            lo, hi = self.ownership.limits(self.placed, s, search_range)
         else:
             lo = self.lo[:s.count]
             hi = self.hi[:s.count]
