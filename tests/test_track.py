@@ -94,3 +94,9 @@ def test_ctrl_c_keeps_the_frames_done(tiny_recording, tmp_path, monkeypatch, cap
     saved = load_poses(tmp_path / "poses.npz")
     assert saved["poses"].shape[0] == 3 and list(saved["frame"]) == [0, 1, 2]
     assert "interrupted" in capsys.readouterr().err
+
+
+def test_plain_search_without_ownership_still_tracks():
+    """Settings(ownership=False, final_search_range=0): the paper's plain nearest-edge search at a fixed range."""
+    report, _ = _track(DEMO, 20, settings=Settings(ownership=False, final_search_range=0))
+    assert report.mpjpe_mm <= 20.0 and report.lost_frames == 0

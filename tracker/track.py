@@ -131,8 +131,6 @@ class Tracker:
         self.placed = Placed.allocate(len(cameras), model.quadric.shape[0])
         self.ownership = Ownership(model, self.rig, settings.capacity,
                                    max(settings.search_range, settings.final_search_range))
-        self.lo = np.zeros(settings.capacity, np.int64)
-        self.hi = np.zeros(settings.capacity, np.int64)
         n = model.size
         self.information = np.zeros((n, 6, 6))
         self.eta = np.zeros((n, 6))
@@ -189,8 +187,8 @@ class Tracker:
         if st.ownership:
             lo, hi = self.ownership.limits(self.placed, s, search_range)
         else:
-            lo = self.lo[:s.count]
-            hi = self.hi[:s.count]
+            lo = self.ownership.lo[:s.count]
+            hi = self.ownership.hi[:s.count]
             lo[:] = -search_range
             hi[:] = search_range
         started = self.times.add("ownership", started)
