@@ -143,17 +143,17 @@ def _outside(px, py, width, height):
 
 
 @njit(cache=True)
-def _occluded(x_cam, j, q_cam, clip_cam, sphere):
+def _occluded(x_cam, occluders, n_occluders, q_cam, clip_cam, sphere):
     """True when the segment camera -> x_cam (points s x_cam, 0 < s < 1) enters another clipped quadric.
 
-    ``sphere`` (Q, 4) holds each quadric's bounding sphere in the camera frame: a
-    quadric whose sphere the segment misses is skipped before the exact test.
+    Only the quadrics ``occluders[:n_occluders]`` can (see :func:`_occluders`); ``sphere`` (Q, 4)
+    holds each quadric's bounding sphere in the camera frame: a quadric whose sphere the
+    segment misses is skipped before the exact test.
     """
     xx = x_cam[0] * x_cam[0] + x_cam[1] * x_cam[1] + x_cam[2] * x_cam[2]
     length = np.sqrt(xx)
-    for l in range(q_cam.shape[0]):
-        if l == j:
-            continue
+    for index in range(n_occluders):
+        l = occluders[index]
         cx = sphere[l, 0] * x_cam[0] + sphere[l, 1] * x_cam[1] + sphere[l, 2] * x_cam[2]
         cc = sphere[l, 0] * sphere[l, 0] + sphere[l, 1] * sphere[l, 1] + sphere[l, 2] * sphere[l, 2]
         r = sphere[l, 3]
@@ -189,8 +189,47 @@ def _occluded(x_cam, j, q_cam, clip_cam, sphere):
 
 
 @njit(cache=True)
-def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_from_comp, k_mat, k_inv, dist,
-          size, o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point, n):
+def _cones(sphere, cone):
+    """Per quadric the cone of camera rays through its bounding sphere: unit axis, cos and sin of
+    the half angle (cone (Q, 5)); a sphere around the camera gets the whole space (cos = -1)."""
+    for j in range(sphere.shape[0]):
+        c = sphere[j]
+        norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+        if norm <= c[3]:
+            cone[j, 0:3] = 0.0
+            cone[j, 3] = -1.0
+            cone[j, 4] = 0.0
+            continue
+        cone[j, 0] = c[0] / norm
+        cone[j, 1] = c[1] / norm
+        cone[j, 2] = c[2] / norm
+        cone[j, 4] = c[3] / norm
+        cone[j, 3] = np.sqrt(1.0 - cone[j, 4] * cone[j, 4])
+
+
+@njit(cache=True)
+def _occluders(j, cone, out):
+    """The quadrics other than j whose ray cones meet j's (only they can hide j's outline);
+    returns their count in ``out``.  Cones meet when the angle between their axes is at most
+    the sum of their half angles: cos(axes) >= cos(a_j + a_l)."""
+    count = 0
+    for l in range(cone.shape[0]):
+        if l == j:
+            continue
+        if cone[j, 3] > -1.0 and cone[l, 3] > -1.0:
+            sum_cos = cone[j, 3] * cone[l, 3] - cone[j, 4] * cone[l, 4]
+            if cone[j, 4] * cone[l, 3] + cone[j, 3] * cone[l, 4] >= 0.0:  # a_j + a_l <= pi
+                cos_axes = cone[j, 0] * cone[l, 0] + cone[j, 1] * cone[l, 1] + cone[j, 2] * cone[l, 2]
+                if cos_axes < sum_cos:
+                    continue
+        out[count] = l
+        count += 1
+    return count
+
+
+@njit(cache=True)
+def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, occluders, n_occluders,
+          cam_from_comp, k_mat, k_inv, dist, size, o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point, n):
     """Test one ideal-pixel outline point and append it to the buffers if visible; returns the new count."""
     if n >= o_cam.shape[0]:
         return n
@@ -223,7 +262,7 @@ def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_f
     u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
     if u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
         return n
-    if _occluded(x_cam, j, q_cam, clip_cam, sphere):
+    if _occluded(x_cam, occluders, n_occluders, q_cam, clip_cam, sphere):
         return n
     # normal through the distortion: n_d ~ J_d^-T n
     det = j00 * j11 - j01 * j10
@@ -320,6 +359,8 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
     place(quadric, clip, bound, quadric_component, poses, cam_pose, placed_from, placed_quadric, placed_clip,
           placed_sphere)
     n_quadrics = quadric.shape[0]
+    cone = np.empty((n_quadrics, 5))
+    occluders = np.empty(n_quadrics, np.int64)
     n = 0
     for k in range(cam_matrix.shape[0]):
         k_mat = cam_matrix[k]
@@ -330,7 +371,9 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
         clip_cam = placed_clip[k]
         cam_from_comp = placed_from[k]
         sphere = placed_sphere[k]
+        _cones(sphere, cone)
         for j in range(n_quadrics):
+            n_occluders = _occluders(j, cone, occluders)
             centre = sphere[j, 0:3].copy()
             radius = sphere[j, 3]
             if centre[2] + radius <= 0.0:
@@ -400,7 +443,8 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     speed = np.sqrt(vx * vx + vy * vy)
                     outside = _outside(px, py, width, height)
                     if outside == 0.0 and (px - disc_c[0]) ** 2 + (py - disc_c[1]) ** 2 <= disc_r * disc_r:
-                        n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, cam_from_comp[j],
+                        n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, occluders,
+                                  n_occluders, cam_from_comp[j],
                                   k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric, o_pixel, o_normal,
                                   o_jac, o_point, n)
                     # arc length >= distance: off the image, skip straight to where it could re-enter
@@ -429,7 +473,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                         if _outside(fx - t * uy, fy + t * ux, width, height) > 0.0:
                             continue
                         n = _emit(fx - t * uy, fy + t * ux, j, k, comp, conic, conic_scale, q_cam, clip_cam,
-                                  sphere, cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
+                                  sphere, occluders, n_occluders, cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
                                   o_pixel, o_normal, o_jac, o_point, n)
     return n
 
