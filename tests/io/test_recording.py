@@ -139,3 +139,15 @@ def test_truncated_video_fails_mid_run_naming_file_and_frame(tmp_path: Path) -> 
     with pytest.raises(TrackerInputError, match=r"cam1\.avi: frame \d+ failed to decode"):
         for _ in frames(recording):
             pass
+
+
+def test_readers_apply_prepare_and_stop_when_the_consumer_stops(tmp_path: Path) -> None:
+    import threading
+
+    recording = open_recording(make_recording(tmp_path / "rec"))
+    stream = frames(recording, prepare=lambda image: 255 - image)
+    index, images = next(stream)
+    assert index == 0
+    assert np.abs((255 - images[0]).astype(float) - content(0, 0)).mean() < 4.0
+    stream.close()  # the consumer gives up early: every reader thread ends
+    assert not [t for t in threading.enumerate() if t.name.startswith("reader ")]
