@@ -136,3 +136,14 @@ def test_not_an_npz(tmp_path: Path, content: bytes) -> None:
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(TrackerInputError, match="gone.npz"):
         load_poses(tmp_path / "gone.npz")
+
+
+def test_long_runs_flush_geometrically(tmp_path: Path, monkeypatch) -> None:
+    """Flushes come after 25 frames or a quarter more than the file holds: O(F) bytes over a run."""
+    writer = PosesWriter(tmp_path / "poses.npz", COMPONENTS, JOINTS, fps=30.0, flush_every=25)
+    flushed_at = []
+    monkeypatch.setattr(writer, "flush", lambda: (flushed_at.append(len(writer)), setattr(writer, "_unflushed", 0)))
+    for index in range(2000):
+        writer.append(index, np.tile(np.eye(4), (len(COMPONENTS), 1, 1)), np.zeros((len(JOINTS), 3)), 0, 0.5)
+    assert flushed_at[:4] == [25, 50, 75, 100]
+    assert sum(flushed_at) < 6 * 2000 and len(flushed_at) < 30
