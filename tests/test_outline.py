@@ -573,7 +573,7 @@ def test_place_matches_the_matrix_formula():
     rig = Rig.from_cameras(cams)
     placed = Placed.allocate(2, model.quadric.shape[0])
     place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-          placed.camera_from, placed.quadric, placed.clip, placed.sphere)
+          placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone)
     for k in range(2):
         for j, c in enumerate(model.quadric_component):
             e = rig.pose[k] @ poses[c]

@@ -27,7 +27,7 @@ def placed_at(model, poses, rig) -> Placed:
     """The camera-frame quadrics that the outline stage hands to the ownership stage."""
     placed = Placed.allocate(len(rig.names), model.quadric.shape[0])
     place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-          placed.camera_from, placed.quadric, placed.clip, placed.sphere)
+          placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone)
     return placed
 
 
@@ -123,7 +123,7 @@ def test_fast_labels_match_brute_force(human_views, r):
     used = ts != 0
     for poses, s in views:
         place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-              placed.camera_from, placed.quadric, placed.clip, placed.sphere)
+              placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone)
         fast = np.zeros(2 * r + 3, np.int64)
         for i in range(0, s.count, 3):
             k = s.camera[i]

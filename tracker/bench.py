@@ -33,7 +33,7 @@ from tracker.geometry import se3
 from tracker.model import Model, joint_centres, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
-from tracker.track import STAGES, Settings, Tracker
+from tracker.track import STAGES, Settings, StageTimes, Tracker
 
 DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
 HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
@@ -71,7 +71,7 @@ def track_run(recording: Recording, model: Model, settings: Settings, out: Path)
     """One end-to-end pass: reader threads, tracking and the poses.npz writer."""
     tracker = Tracker(model, recording.cameras, load_pose_file(recording.init_path, model), settings)
     tracker.warm_up()
-    tracker.times = type(tracker.times)()
+    tracker.times = StageTimes()
     output = 0.0
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
@@ -183,7 +183,7 @@ def _core_ms(tracker: Tracker, repeats: int, poses) -> tuple[float, int]:
     times = []
     for _ in range(repeats):
         tracker.poses = poses.copy()
-        tracker.times = type(tracker.times)()
+        tracker.times = StageTimes()
         tracker.iterate()
         times.append(sum(v for k, v in tracker.times.seconds.items() if k != "grey") * 1e3)
     return _median(times), tracker.samples.count

@@ -25,10 +25,8 @@ from numba import njit
 
 @dataclass(frozen=True)
 class Statistics:
-    """The result of one measurement pass over all samples."""
+    """The counts of one measurement pass over all samples (C_i and eta_i stay in the caller's buffers)."""
 
-    information: np.ndarray  # (N, 6, 6)
-    eta: np.ndarray  # (N, 6)
     visible: int  # samples searched
     found: int  # samples that found an edge
     residual: float  # robust mean |m| = sum w|m| / sum w, pixels

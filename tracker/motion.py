@@ -257,7 +257,7 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
     idx = {name: model.index(name) for name in model.names}
     thigh = float(np.linalg.norm(model.rest[idx["shin_l"], 0:3, 3]))
     shin = float(np.linalg.norm(model.rest[idx["foot_l"], 0:3, 3]))
-    foot_low = -float(lowest_points(model, _rest_stack(model, 1))[0])
+    foot_low = -float(lowest_points(model, rest_poses(model, np.eye(4))[None])[0])
     phase = rng.uniform(0.0, 2.0 * np.pi, size=6)
     rate = rng.uniform(0.85, 1.15, size=4)
     out = np.empty((frames, model.size, 4, 4))
@@ -295,7 +295,3 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
         out[f] = model.coerce(poses)
     out[:, :, 2, 3] -= np.median(lowest_points(model, out))
     return out
-
-
-def _rest_stack(model: Model, frames: int) -> np.ndarray:
-    return np.stack([rest_poses(model, np.eye(4))] * frames)

@@ -190,8 +190,8 @@ def _occluded(x_cam, occluders, n_occluders, q_cam, clip_cam, sphere):
 
 @njit(cache=True)
 def _cones(sphere, cone):
-    """Per quadric the cone of camera rays through its bounding sphere: unit axis, cos and sin of
-    the half angle (cone (Q, 5)); a sphere around the camera gets the whole space (cos = -1)."""
+    """Per quadric the cone of camera rays through its bounding sphere (cone (Q, 6)): unit axis,
+    cos, sin and the half angle itself; a sphere around the camera gets the whole space (angle pi)."""
     for j in range(sphere.shape[0]):
         c = sphere[j]
         norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
@@ -199,12 +199,14 @@ def _cones(sphere, cone):
             cone[j, 0:3] = 0.0
             cone[j, 3] = -1.0
             cone[j, 4] = 0.0
+            cone[j, 5] = np.pi
             continue
         cone[j, 0] = c[0] / norm
         cone[j, 1] = c[1] / norm
         cone[j, 2] = c[2] / norm
         cone[j, 4] = c[3] / norm
         cone[j, 3] = np.sqrt(1.0 - cone[j, 4] * cone[j, 4])
+        cone[j, 5] = np.arcsin(cone[j, 4])
 
 
 @njit(cache=True)
@@ -309,10 +311,11 @@ def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, occlu
 
 
 @njit(cache=True, nogil=True)
-def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_quadric, o_clip, o_sphere):
+def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_quadric, o_clip, o_sphere, o_cone):
     """Every quadric in every camera's frame: with E = P_k W_c (camera from component), ``o_from`` = E,
-    ``o_quadric`` = E^-T Q E^-1 and ``o_clip`` = E^-T Q2 E^-1 (C, Q, 4, 4), and ``o_sphere`` (C, Q, 4)
-    the bounding sphere (centre in the camera frame, radius).  No allocation."""
+    ``o_quadric`` = E^-T Q E^-1 and ``o_clip`` = E^-T Q2 E^-1 (C, Q, 4, 4), ``o_sphere`` (C, Q, 4)
+    the bounding sphere (centre in the camera frame, radius) and ``o_cone`` (C, Q, 6) the cone of
+    rays through it (see :func:`_cones`).  No allocation."""
     e_inv = np.zeros((4, 4))
     half = np.empty((4, 4))
     e_inv[3, 3] = 1.0
@@ -347,19 +350,19 @@ def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_qu
                         for c in range(4):
                             acc += e_inv[c, a] * half[c, b]
                         dst[a, b] = acc
+        _cones(o_sphere[k], o_cone[k])
 
 
 @njit(cache=True, nogil=True)
 def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, cam_pose, cam_dist, cam_size,
-                   spacing, placed_from, placed_quadric, placed_clip, placed_sphere,
+                   spacing, placed_from, placed_quadric, placed_clip, placed_sphere, placed_cone,
                    o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point):
     """Sample the visible outlines of all quadrics in all cameras; returns the sample count.
 
     The ``placed_*`` buffers receive :func:`place`'s camera-frame quadrics (later stages reuse them)."""
     place(quadric, clip, bound, quadric_component, poses, cam_pose, placed_from, placed_quadric, placed_clip,
-          placed_sphere)
+          placed_sphere, placed_cone)
     n_quadrics = quadric.shape[0]
-    cone = np.empty((n_quadrics, 5))
     occluders = np.empty(n_quadrics, np.int64)
     n = 0
     for k in range(cam_matrix.shape[0]):
@@ -371,7 +374,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
         clip_cam = placed_clip[k]
         cam_from_comp = placed_from[k]
         sphere = placed_sphere[k]
-        _cones(sphere, cone)
+        cone = placed_cone[k]
         for j in range(n_quadrics):
             n_occluders = _occluders(j, cone, occluders)
             centre = sphere[j, 0:3].copy()
@@ -486,11 +489,13 @@ class Placed:
     quadric: np.ndarray
     clip: np.ndarray
     sphere: np.ndarray
+    cone: np.ndarray
 
     @classmethod
     def allocate(cls, cameras: int, quadrics: int) -> "Placed":
         return cls(np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4, 4)),
-                   np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4)))
+                   np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4)),
+                   np.zeros((cameras, quadrics, 6)))
 
 
 def sample_outlines(model, poses: np.ndarray, rig: Rig, spacing: float, samples: Samples,
@@ -501,7 +506,7 @@ def sample_outlines(model, poses: np.ndarray, rig: Rig, spacing: float, samples:
     samples.count = outline_kernel(
         model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses,
         rig.matrix, rig.pose, rig.distortion, rig.size, float(spacing),
-        placed.camera_from, placed.quadric, placed.clip, placed.sphere,
+        placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone,
         samples.camera, samples.component, samples.quadric, samples.pixel, samples.normal,
         samples.jacobian, samples.point,
     )

@@ -65,38 +65,26 @@ NCOEF = 18  # per candidate: discriminant (3), x^T A x (3), 2 b^T x (2), c, clip
 
 
 @njit(cache=True, nogil=True)
-def prepare(sphere, cam_scale, r, o_near, o_near_count):
+def prepare(cone, cam_scale, r, o_near, o_near_count):
     """Per camera and quadric ``j``, the quadrics whose bounding sphere's cone of rays comes within the angle
     of a search line (``r + 1`` pixels at most ``cam_scale[k]`` radians each, see :func:`pixel_scale`) of
     quadric ``j``'s: a coarse cull for the samples of ``j``, ``o_near[k, j, :o_near_count[k, j]]``.
-    ``sphere`` (C, Q, 4) holds the bounding spheres in each camera's frame (:func:`tracker.outline.place`)."""
-    n_cams, n_quadrics = sphere.shape[0], sphere.shape[1]
-    cone = np.empty((n_quadrics, 4))
+    ``cone`` (C, Q, 6) holds the cones of rays of :func:`tracker.outline.place` (axis, cos, sin, angle)."""
+    n_cams, n_quadrics = cone.shape[0], cone.shape[1]
     for k in range(n_cams):
-        # cones of rays through the spheres (axis u, half angle a): quadric l is near quadric j when the angle
-        # between the axes is at most a_j + a_l + a margin m covering the r + 1 pixels of a search line (and
-        # 10% for the straight segments): cos(axes) >= cos(a_j) cos(a_l + m) - sin(a_j) sin(a_l + m)
+        # quadric l is near quadric j when the angle between the cone axes is at most a_j + a_l + a margin
+        # m covering the r + 1 pixels of a search line (and 10% for the straight segments):
+        # cos(axes) >= cos(a_j) cos(a_l + m) - sin(a_j) sin(a_l + m)
         margin = 1.1 * (r + 2.0) * cam_scale[k]
-        for j in range(n_quadrics):
-            c = sphere[k, j]
-            norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-            cone[j, 0] = c[0] / norm
-            cone[j, 1] = c[1] / norm
-            cone[j, 2] = c[2] / norm
-            if norm <= c[3]:
-                cone[j, 3] = np.pi  # the camera is inside the sphere: every ray
-            else:
-                cone[j, 3] = np.arcsin(c[3] / norm)
+        c = cone[k]
         for j in range(n_quadrics):
             count = 0
-            cos_j = np.cos(cone[j, 3])
-            sin_j = np.sin(cone[j, 3])
             for l in range(n_quadrics):
-                wide = cone[l, 3] + margin
-                near = l == j or cone[j, 3] + wide >= np.pi
+                wide = c[l, 5] + margin
+                near = l == j or c[j, 5] + wide >= np.pi
                 if not near:
-                    cos_axes = cone[j, 0] * cone[l, 0] + cone[j, 1] * cone[l, 1] + cone[j, 2] * cone[l, 2]
-                    near = cos_axes >= cos_j * np.cos(wide) - sin_j * np.sin(wide)
+                    cos_axes = c[j, 0] * c[l, 0] + c[j, 1] * c[l, 1] + c[j, 2] * c[l, 2]
+                    near = cos_axes >= c[j, 3] * np.cos(wide) - c[j, 4] * np.sin(wide)
                 if near:
                     o_near[k, j, count] = l
                     count += 1
@@ -453,7 +441,7 @@ class Ownership:
 
     def limits(self, placed, samples, r: int) -> tuple[np.ndarray, np.ndarray]:
         m, rig = self.model, self.rig
-        prepare(placed.sphere, self.scale, r, self.near, self.near_count)
+        prepare(placed.cone, self.scale, r, self.near, self.near_count)
         search_limits(placed.quadric, placed.clip, placed.sphere, self.near, self.near_count, m.quadric_component,
                       rig.matrix, rig.distortion, self.grid, samples.count, samples.camera, samples.component,
                       samples.quadric, samples.pixel, samples.normal, r, self.candidates, self.coefficients,

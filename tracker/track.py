@@ -182,7 +182,8 @@ class Tracker:
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
                                  self.placed.camera_from, self.placed.quadric, self.placed.clip, self.placed.sphere,
-                                 s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian, s.point)
+                                 self.placed.cone, s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian,
+                                 s.point)
         started = self.times.add("outline", started)
         if st.ownership:
             lo, hi = self.ownership.limits(self.placed, s, search_range)
@@ -201,7 +202,7 @@ class Tracker:
                                    m.constraint, m.constraint_rows, m.rest, m.joint_type, m.axis, m.lower, m.upper)
         self.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
-        return Statistics(self.information, self.eta, visible, found, residual)
+        return Statistics(visible, found, residual)
 
     def step(self, images, smoothed: bool = False) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not."""
