@@ -190,8 +190,8 @@ def test_measure_kernel_information_matches_numpy():
     information = rng.normal(size=(n_components, 6, 6))  # garbage: the kernel must reset it
     eta = rng.normal(size=(n_components, 6))
     visible, found, sum_wm, sum_w = measure_kernel(
-        images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, RANGE, 5.0, robust_c, n_components,
-        o_offset, o_weight, information, eta)
+        images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, np.zeros((n_components, 6)), RANGE, 5.0,
+        robust_c, n_components, o_offset, o_weight, information, eta)
 
     m = o_offset[:count]
     valid = ~np.isnan(m)
@@ -233,8 +233,8 @@ def test_measure_kernel_hand_made_offsets():
     o_offset, o_weight = np.empty(4), np.empty(4)
     information, eta = np.empty((2, 6, 6)), np.empty((2, 6))
     c = 1.0
-    measure_kernel(images, cam_size, 4, np.zeros(4, np.int64), s_comp, pixels, normals, s_jac, RANGE, 5.0, c, 2,
-                   o_offset, o_weight, information, eta)
+    measure_kernel(images, cam_size, 4, np.zeros(4, np.int64), s_comp, pixels, normals, s_jac, np.zeros((2, 6)),
+                   RANGE, 5.0, c, 2, o_offset, o_weight, information, eta)
     np.testing.assert_allclose(o_offset, offsets, atol=0.1)
     m = o_offset
     w = 1.0 / (c + np.abs(m))
@@ -243,3 +243,23 @@ def test_measure_kernel_hand_made_offsets():
         ref_eta = sum(w[k] * s_jac[k] * m[k] for k in rows)
         np.testing.assert_allclose(information[i], ref_c, rtol=1e-14, atol=1e-15)
         np.testing.assert_allclose(eta[i], ref_eta, rtol=1e-14, atol=1e-15)
+
+
+def test_measure_kernel_searches_from_the_linearly_moved_sample():
+    """With a twist, each search starts at p + (L . twist) n and its offset is measured from there."""
+    x0 = 40.25
+    images = vertical_step(x0)[None]
+    cam_size = np.array([[W, H]], dtype=np.int64)
+    pixels = np.array([[x0 - 9.0, 20.0], [x0 + 4.0, 30.0]])
+    normals = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    s_comp = np.array([0, 1], dtype=np.int64)
+    s_jac = np.array([[2.0, 0, 0, 0, 0, 1.0], [0, 0, 0, 0, 3.0, 0]])
+    twist = np.array([[1.5, 7.0, 7.0, 7.0, 0.0, 2.5], [9.0, 9.0, 9.0, 9.0, 0.5, 0.0]])  # moves 5.5 and 1.5 px
+    o_offset, o_weight = np.empty(2), np.empty(2)
+    information, eta = np.empty((2, 6, 6)), np.empty((2, 6))
+    measure_kernel(images, cam_size, 2, np.zeros(2, np.int64), s_comp, pixels, normals, s_jac, twist, RANGE, 5.0,
+                   1.0, 2, o_offset, o_weight, information, eta)
+    np.testing.assert_allclose(o_offset, [9.0 - 5.5, 4.0 - 1.5], atol=0.1)
+    for s, start in enumerate((x0 - 3.5, x0 + 2.5)):  # the same as a fresh sample at the moved position
+        alone = offset(images[0], np.array([start, pixels[s, 1]]), normals[s])
+        assert alone == o_offset[s]

@@ -64,7 +64,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
     given = {"iterations": args.iterations, "spacing": args.spacing, "search_range": args.search_range,
-             "motion": args.motion, "damping": args.damping}
+             "motion": args.motion, "damping": args.damping, "resample_every": args.resample_every}
     settings = Settings(**{key: value for key, value in given.items() if value is not None})
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
@@ -127,7 +127,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from tracker import bench
     from tracker.track import Settings
 
-    given = {"iterations": args.iterations, "spacing": args.spacing}
+    given = {"iterations": args.iterations, "spacing": args.spacing, "resample_every": args.resample_every}
     settings = Settings(**{key: value for key, value in given.items() if value is not None})
     print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)
     if args.scaling:
@@ -153,6 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--frames", type=_positive_int, help="number of frames to track (default: all)")
     track.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default 6)")
     track.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default 4)")
+    track.add_argument("--resample-every", type=_positive_int,
+                       help="sample the outlines afresh every N-th iteration, moving them to first order "
+                            "between (default 3; 1 = every iteration)")
     track.add_argument("--search-range", type=_positive_int,
                        help="edge search in the first iteration, pixels either side (default 20; the last uses 6)")
     track.add_argument("--motion", choices=("none", "constant-velocity"),
@@ -186,6 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--repeats", type=_positive_int, default=3, help="passes per figure (default 3)")
     bench.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default: tracking's)")
     bench.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default: tracking's)")
+    bench.add_argument("--resample-every", type=_positive_int,
+                       help="sample the outlines afresh every N-th iteration (default: tracking's)")
     bench.set_defaults(run=cmd_bench)
     return parser
 

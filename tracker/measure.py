@@ -88,11 +88,14 @@ def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, p
 
 
 @njit(cache=True, nogil=True)
-def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, search_range, threshold,
-                   robust_c, n_components, o_offset, o_weight, information, eta, s_lo=None, s_hi=None):
+def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, twist, search_range,
+                   threshold, robust_c, n_components, o_offset, o_weight, information, eta, s_lo=None, s_hi=None):
     """Search every sample's edge and accumulate C_i, eta_i; returns (visible, found, sum w|m|, sum w).
 
-    ``s_lo``, ``s_hi`` (optional, integer per sample) restrict each search to ``[lo, hi]``.
+    ``twist`` (n_components, 6) is each component's motion since the samples were taken: every search
+    starts from the sample's first-order predicted position ``p + (L . twist_i) n`` (section 3; zero
+    for fresh samples), and ``m`` is measured from there.  ``s_lo``, ``s_hi`` (optional, integer per
+    sample) restrict each search to ``[lo, hi]`` about that start.
     """
     information[:] = 0.0
     eta[:] = 0.0
@@ -108,8 +111,14 @@ def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_
             lo = s_lo[s]
         if s_hi is not None:
             hi = s_hi[s]
-        m = edge_offset(images[k], cam_size[k, 0], cam_size[k, 1], s_pixel[s, 0], s_pixel[s, 1],
-                        s_normal[s, 0], s_normal[s, 1], search_range, threshold, profile, lo, hi)
+        i = s_comp[s]
+        moved = 0.0
+        for a in range(6):
+            moved += s_jac[s, a] * twist[i, a]
+        nx = s_normal[s, 0]
+        ny = s_normal[s, 1]
+        m = edge_offset(images[k], cam_size[k, 0], cam_size[k, 1], s_pixel[s, 0] + moved * nx,
+                        s_pixel[s, 1] + moved * ny, nx, ny, search_range, threshold, profile, lo, hi)
         o_offset[s] = m
         if np.isnan(m):
             o_weight[s] = 0.0
@@ -119,7 +128,6 @@ def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_
         found += 1
         sum_wm += w * abs(m)
         sum_w += w
-        i = s_comp[s]
         for a in range(6):
             la = w * s_jac[s, a]
             eta[i, a] += la * m

@@ -55,6 +55,7 @@ class Settings:
     lost_residual: float = 6.0  # ... and lost
     capacity: int = 40000  # sample buffer size for all cameras together
     ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
+    resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,15 @@ def update_kernel(information, eta, prior, poses, anchor, parent, D, rows, rest,
     for i in range(poses.shape[0]):
         moved[i] = poses[i] @ exp(alpha[i])
     return coerce_kernel(moved, parent, rest, D, rows, joint_type, axis, lower, upper)
+
+
+@njit(cache=True, nogil=True)
+def motion_since(sampled, current):
+    """Each component's body twist log(E_sampled^-1 E_current) since its outline was sampled."""
+    out = np.empty((current.shape[0], 6))
+    for i in range(current.shape[0]):
+        out[i] = log(inverse(sampled[i]) @ current[i])
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -141,13 +151,17 @@ class Tracker:
         self.poses = model.coerce(initial_poses)
         self.previous: np.ndarray | None = None
         self.anchor = self.poses
+        self.sampled_poses = self.poses
+        self.still = np.zeros((n, 6))
+        self.lo = self.hi = None
         self.times = StageTimes()
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
         poses, previous, anchor = self.poses.copy(), self.previous, self.anchor
         constant_velocity(poses, poses, self.settings.damping)
-        self.iterate()
+        self.iterate(0)
+        self.iterate(1)
         self.poses, self.previous, self.anchor = poses, previous, anchor
 
     def smooth(self, image: np.ndarray) -> np.ndarray:
@@ -175,9 +189,35 @@ class Tracker:
         return max(1, round(st.search_range * ratio ** (min(iteration, st.iterations - 1) / (st.iterations - 1))))
 
     def iterate(self, iteration: int = 0) -> Statistics:
-        """One IRLS iteration at the current poses: sample, limit the searches, measure, solve, update, coerce."""
+        """One IRLS iteration at the current poses: sample, limit the searches, measure, solve, update, coerce.
+
+        Every ``resample_every``-th iteration samples the outlines and their search limits afresh; the
+        iterations between reuse them, each sample moved along its normal by its Jacobian row times its
+        component's motion since (first order, section 3), which costs a few flops instead of a render.
+        """
         s, m, st = self.samples, self.model, self.settings
         search_range = self.search_range(iteration)
+        if iteration % max(st.resample_every, 1) == 0:
+            self.sample(search_range)
+            self.sampled_poses = self.poses
+            twist = self.still
+        else:
+            twist = motion_since(self.sampled_poses, self.poses)
+        started = time.perf_counter()
+        visible, found, sum_wm, sum_w = measure_kernel(
+            self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian, twist,
+            search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta,
+            self.lo, self.hi)
+        started = self.times.add("measure", started)
+        self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
+                                   m.constraint, m.constraint_rows, m.rest, m.joint_type, m.axis, m.lower, m.upper)
+        self.times.add("solve", started)
+        residual = sum_wm / sum_w if sum_w > 0 else float("nan")
+        return Statistics(visible, found, residual)
+
+    def sample(self, search_range: int) -> None:
+        """Sample the visible outlines at the current poses and limit each one's search (ownership)."""
+        s, m, st = self.samples, self.model, self.settings
         started = time.perf_counter()
         s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
                                  self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
@@ -186,23 +226,13 @@ class Tracker:
                                  s.point)
         started = self.times.add("outline", started)
         if st.ownership:
-            lo, hi = self.ownership.limits(self.placed, s, search_range)
+            self.lo, self.hi = self.ownership.limits(self.placed, s, search_range)
         else:
-            lo = self.ownership.lo[:s.count]
-            hi = self.ownership.hi[:s.count]
-            lo[:] = -search_range
-            hi[:] = search_range
-        started = self.times.add("ownership", started)
-        visible, found, sum_wm, sum_w = measure_kernel(
-            self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
-            search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta,
-            lo, hi)
-        started = self.times.add("measure", started)
-        self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
-                                   m.constraint, m.constraint_rows, m.rest, m.joint_type, m.axis, m.lower, m.upper)
-        self.times.add("solve", started)
-        residual = sum_wm / sum_w if sum_w > 0 else float("nan")
-        return Statistics(visible, found, residual)
+            self.lo = self.ownership.lo[:s.count]
+            self.hi = self.ownership.hi[:s.count]
+            self.lo[:] = -search_range
+            self.hi[:] = search_range
+        self.times.add("ownership", started)
 
     def step(self, images, smoothed: bool = False) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not."""
