@@ -52,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tracker.geometry.se3 import exp, inverse, log, point_velocity
+from tracker.geometry.se3 import between, exp, log, point_velocity
 
 FREE = 0
 BALL = 1
@@ -310,7 +310,7 @@ def coerce_kernel(poses, parent, rest, D, rows, joint_type, axis, lower, upper):
         if p < 0 or k == 0:
             continue
         at_rest = out[p] @ rest[i]
-        a = log(inverse(at_rest) @ out[i])
+        a = log(between(at_rest, out[i]))
         d_i = D[i]
         for r in range(k):
             d_a[r] = 0.0

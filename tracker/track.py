@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from tracker.chain import coerce_kernel, solve_kernel
-from tracker.geometry.se3 import exp, inverse, log
+from tracker.geometry.se3 import between, exp, log
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
 from tracker.outline import Placed, Rig, Samples, outline_kernel
@@ -76,7 +76,7 @@ def add_prior(information, eta, prior, poses, anchor):
     P to C_i and P delta_i to eta_i (section 3: it also keeps C_i invertible).
     """
     for i in range(poses.shape[0]):
-        delta = log(inverse(poses[i]) @ anchor[i])
+        delta = log(between(poses[i], anchor[i]))
         information[i] += prior
         eta[i] += prior @ delta
 
@@ -97,7 +97,7 @@ def motion_since(sampled, current):
     """Each component's body twist log(E_sampled^-1 E_current) since its outline was sampled."""
     out = np.empty((current.shape[0], 6))
     for i in range(current.shape[0]):
-        out[i] = log(inverse(sampled[i]) @ current[i])
+        out[i] = log(between(sampled[i], current[i]))
     return out
 
 
@@ -106,7 +106,7 @@ def constant_velocity(previous, current, damping):
     """Predict E_{t+1} = E_t exp(d log(E_{t-1}^-1 E_t)) for every component (d = damping)."""
     out = np.empty_like(current)
     for i in range(current.shape[0]):
-        out[i] = current[i] @ exp(damping * log(inverse(previous[i]) @ current[i]))
+        out[i] = current[i] @ exp(damping * log(between(previous[i], current[i])))
     return out
 
 

@@ -50,6 +50,7 @@ def test_group_axioms():
     assert np.allclose(a @ se3.inverse(a), np.eye(4), atol=1e-12)
     assert np.allclose(se3.exp(np.zeros(6)), np.eye(4))
     assert np.allclose(se3.inverse(a), np.linalg.inv(a), atol=1e-12)
+    assert np.allclose(se3.between(a, b), np.linalg.inv(a) @ b, atol=1e-12)
 
 
 def test_adjoint_identity():

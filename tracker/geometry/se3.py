@@ -64,57 +64,87 @@ def _exp_coefficients(theta):
 
 
 @njit(cache=True)
+def _cross(a, b):
+    """a x b for 3-vectors, as three floats."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True)
+def _rodrigues(w, a, b, out):
+    """out[0:3, 0:3] = I + A W + B W^2 with W = [w]x (W^2 = w w^T - |w|^2 I), written in place."""
+    t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = b * w[i] * w[j]
+        out[i, i] += 1.0 - b * t2
+    out[0, 1] -= a * w[2]
+    out[0, 2] += a * w[1]
+    out[1, 0] += a * w[2]
+    out[1, 2] -= a * w[0]
+    out[2, 0] -= a * w[1]
+    out[2, 1] += a * w[0]
+
+
+@njit(cache=True)
 def exp_so3(w):
     """Rodrigues: R = I + A W + B W^2 with W = [w]x."""
     theta = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     a, b, _ = _exp_coefficients(theta)
-    big_w = skew(w)
-    return np.eye(3) + a * big_w + b * (big_w @ big_w)
+    out = np.empty((3, 3))
+    _rodrigues(w, a, b, out)
+    return out
 
 
 @njit(cache=True)
 def exp(alpha):
-    """exp(hat(alpha)): R as in ``exp_so3``, t = V v with V = I + B W + Cc W^2."""
+    """exp(hat(alpha)): R as in ``exp_so3``, t = V v with V = I + B W + Cc W^2,
+    so t = v + B (w x v) + Cc (w x (w x v))."""
     w = alpha[3:6]
     theta = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     a, b, c = _exp_coefficients(theta)
-    big_w = skew(w)
-    w2 = big_w @ big_w
-    out = np.eye(4)
-    out[0:3, 0:3] = np.eye(3) + a * big_w + b * w2
-    v_mat = np.eye(3) + b * big_w + c * w2
-    out[0:3, 3] = v_mat @ np.ascontiguousarray(alpha[0:3])
+    out = np.zeros((4, 4))
+    _rodrigues(w, a, b, out)
+    wv = _cross(w, alpha)
+    wwv = _cross(w, wv)
+    for i in range(3):
+        out[i, 3] = alpha[i] + b * wv[i] + c * wwv[i]
+    out[3, 3] = 1.0
     return out
 
 
 @njit(cache=True)
 def log_so3(r):
     """Rotation vector w with exp_so3(w) = R; stable near 0 and near pi."""
-    s = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    sin_t = np.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+    s0 = 0.5 * (r[2, 1] - r[1, 2])
+    s1 = 0.5 * (r[0, 2] - r[2, 0])
+    s2 = 0.5 * (r[1, 0] - r[0, 1])
+    sin_t = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
     cos_t = 0.5 * (r[0, 0] + r[1, 1] + r[2, 2] - 1.0)
     theta = np.arctan2(sin_t, cos_t)
-    if theta < _SMALL:
-        return (1.0 + theta * theta / 6.0) * s
-    if cos_t < -0.99:
+    if cos_t < -0.99 and theta >= _SMALL:
         big_b = 0.5 * (r + r.T) - cos_t * np.eye(3)
         j = 0
         for i in range(1, 3):
             if big_b[i, i] > big_b[j, j]:
                 j = i
         k = big_b[:, j].copy()
-        k /= np.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
-        if k[0] * s[0] + k[1] * s[1] + k[2] * s[2] < 0.0:
+        k *= theta / np.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
+        if k[0] * s0 + k[1] * s1 + k[2] * s2 < 0.0:
             k = -k
-        return theta * k
-    return theta * s / sin_t
+        return k
+    scale = 1.0 + theta * theta / 6.0 if theta < _SMALL else theta / sin_t
+    out = np.empty(3)
+    out[0] = scale * s0
+    out[1] = scale * s1
+    out[2] = scale * s2
+    return out
 
 
 @njit(cache=True)
 def log(e):
     """Twist alpha = (v; w) with exp(alpha) = E: w = log_so3(R), v = V^-1 t,
-    V^-1 = I - W/2 + g W^2, g = (1 - (th/2) cot(th/2)) / th^2."""
-    w = log_so3(np.ascontiguousarray(e[0:3, 0:3]))
+    V^-1 = I - W/2 + g W^2, g = (1 - (th/2) cot(th/2)) / th^2, so v = t - (w x t)/2 + g (w x (w x t))."""
+    w = log_so3(e[0:3, 0:3])
     theta = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     if theta < 1e-2:
         t2 = theta * theta
@@ -122,21 +152,37 @@ def log(e):
     else:
         half = 0.5 * theta
         g = (1.0 - half * np.cos(half) / np.sin(half)) / (theta * theta)
-    big_w = skew(w)
-    v_inv = np.eye(3) - 0.5 * big_w + g * (big_w @ big_w)
+    t = (e[0, 3], e[1, 3], e[2, 3])
+    wt = _cross(w, t)
+    wwt = _cross(w, wt)
     out = np.empty(6)
-    out[0:3] = v_inv @ np.ascontiguousarray(e[0:3, 3])
-    out[3:6] = w
+    for i in range(3):
+        out[i] = t[i] - 0.5 * wt[i] + g * wwt[i]
+        out[3 + i] = w[i]
     return out
 
 
 @njit(cache=True)
 def inverse(e):
     """E^-1 = [[R^T, -R^T t], [0, 1]]."""
-    out = np.eye(4)
-    rt = e[0:3, 0:3].T.copy()
-    out[0:3, 0:3] = rt
-    out[0:3, 3] = -(rt @ np.ascontiguousarray(e[0:3, 3]))
+    out = np.zeros((4, 4))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = e[j, i]
+        out[i, 3] = -(e[0, i] * e[0, 3] + e[1, i] * e[1, 3] + e[2, i] * e[2, 3])
+    out[3, 3] = 1.0
+    return out
+
+
+@njit(cache=True)
+def between(a, b):
+    """A^-1 B = [[Ra^T Rb, Ra^T (tb - ta)], [0, 1]]: B seen from A's frame."""
+    out = np.zeros((4, 4))
+    for i in range(3):
+        for j in range(4):
+            out[i, j] = a[0, i] * b[0, j] + a[1, i] * b[1, j] + a[2, i] * b[2, j]
+        out[i, 3] -= a[0, i] * a[0, 3] + a[1, i] * a[1, 3] + a[2, i] * a[2, 3]
+    out[3, 3] = 1.0
     return out
 
 
