@@ -67,6 +67,22 @@ class FrameResult:
     samples: int
 
 
+@dataclass(frozen=True)
+class Inspection:
+    """What the edge search saw at one set of poses (for viewers): per sample its camera, component,
+    pixel and normal, the searched interval ``[lo, hi]`` along the normal, the edge offset (NaN if none)
+    and the IRLS weight."""
+
+    camera: np.ndarray
+    component: np.ndarray
+    pixel: np.ndarray
+    normal: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    offset: np.ndarray
+    weight: np.ndarray
+
+
 @njit(cache=True)
 def add_prior(information, eta, prior, poses, anchor):
     """Gaussian prior on each component's pose about the frame's predicted pose ``anchor``.
@@ -233,6 +249,20 @@ class Tracker:
             self.lo[:] = -search_range
             self.hi[:] = search_range
         self.times.add("ownership", started)
+
+    def inspect(self, images, smoothed: bool = False) -> Inspection:
+        """Sample and measure every outline at the current poses, as the last iteration would, without moving them."""
+        s, st = self.samples, self.settings
+        self.load_images(images, smoothed)
+        search_range = self.search_range(st.iterations - 1)
+        self.sample(search_range)
+        measure_kernel(self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
+                       self.still, search_range, st.threshold, st.robust_c, self.model.size, self.offset,
+                       self.weight, self.information, self.eta, self.lo, self.hi)
+        n = s.count
+        return Inspection(s.camera[:n].copy(), s.component[:n].copy(), s.pixel[:n].copy(), s.normal[:n].copy(),
+                          np.clip(self.lo, -search_range, search_range), np.clip(self.hi, -search_range, search_range),
+                          self.offset[:n].copy(), self.weight[:n].copy())
 
     def step(self, images, smoothed: bool = False) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not."""
