@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -74,6 +75,9 @@ def cmd_track(args: argparse.Namespace) -> int:
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
+    if args.record and not args.view:
+        raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
+    live = _live_view(args, rec, model, init, settings) if args.view else None
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
     residuals = []
     interrupted = False
@@ -82,13 +86,20 @@ def cmd_track(args: argparse.Namespace) -> int:
         try:
             for index, images in tqdm(frames(rec, args.start, stop, prepare=tracker.smooth),
                                       total=stop - args.start, unit="frame", disable=args.quiet, file=sys.stderr):
+                begun = time.perf_counter()
                 result = tracker.step(images, smoothed=True)
-                writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual)
+                spent = time.perf_counter() - begun
+                writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual,
+                              spent)
+                if live is not None:
+                    live.offer(index, images, result, spent)
                 counts[result.status] += 1
                 residuals.append(result.residual)
         except KeyboardInterrupt:
             interrupted = True
     elapsed = time.perf_counter() - started
+    if live is not None:
+        live.close()
     done = len(residuals)
     print(f"wrote {out / 'poses.npz'} ({done} frames)")
     if interrupted:
@@ -101,7 +112,95 @@ def cmd_track(args: argparse.Namespace) -> int:
     if rec.truth_path is not None:
         report = evaluate(load_poses(out / "poses.npz"), load_poses(rec.truth_path))
         print(format_report(report))
+    if live is not None:
+        from tracker.viewer.review import Review
+
+        review = Review(live.scene, rec, model, load_poses(out / "poses.npz"), _truth(rec), settings)
+        return _serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
+
+
+def _truth(rec):
+    from tracker.io.poses import load_poses
+
+    return load_poses(rec.truth_path) if rec.truth_path is not None else None
+
+
+def _scene(args: argparse.Namespace, rec, model, settings):
+    from tracker.viewer.scene import Scene, start_server
+
+    truth = _truth(rec)
+    server = start_server(args.host, args.port)
+    names = None if truth is None else list(truth["joint_names"])
+    return Scene(server, model, rec.cameras, settings.robust_c, names)
+
+
+def _live_view(args: argparse.Namespace, rec, model, init, settings):
+    from tracker.viewer.live import LiveView
+
+    truth = _truth(rec)
+    record = Path(args.record) if args.record else None
+    return LiveView(_scene(args, rec, model, settings), model, rec.cameras, init, settings,
+                    truth=None if truth is None else truth["joints"], record=record)
+
+
+def _serve(message: str, *closing) -> int:
+    """Keep the viewer up until Ctrl-C (then exit 0: everything is already written)."""
+    print(f"{message}; press Ctrl-C to quit", file=sys.stderr, flush=True)
+    stop = threading.Event()
+    try:
+        stop.wait()
+    except KeyboardInterrupt:
+        pass
+    for item in closing:
+        item.close()
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from tracker.io.poses import load_poses
+    from tracker.io.recording import open_recording
+    from tracker.model import load_model
+    from tracker.track import Settings
+    from tracker.viewer.review import Review
+
+    rec = open_recording(args.recording, _cameras(args.cameras))
+    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    poses_path = Path(args.poses) if args.poses else Path("out") / rec.path.resolve().name / "poses.npz"
+    if not args.poses and not poses_path.is_file():
+        raise TrackerInputError(f"{poses_path}: no poses to review; run `tracker track {rec.path}` first or pass --poses")
+    results = load_poses(poses_path)
+    if "poses" not in results or list(results["component_names"]) != list(model.names):
+        raise TrackerInputError(f"{poses_path}: its components do not match the model {model.name!r}; "
+                                "pass the --model it was tracked with")
+    if results["frame"].max(initial=0) >= rec.frame_count:
+        raise TrackerInputError(f"{poses_path}: frames beyond the recording's {rec.frame_count}; "
+                                "pass the recording it was tracked from")
+    settings = Settings()
+    review = Review(_scene(args, rec, model, settings), rec, model, results, _truth(rec), settings)
+    review.show(0)
+    if args.record:
+        review.record(Path(args.record), progress=not args.quiet)
+        review.close()
+        print(f"wrote {args.record}")
+        return 0
+    return _serve(f"reviewing {poses_path} ({len(results['frame'])} frames)", review)
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    from tracker.io.posefile import load_pose_file
+    from tracker.io.recording import open_recording
+    from tracker.model import load_model, rest_poses
+    from tracker.track import Settings
+    from tracker.viewer.placement import Placement, in_view
+
+    rec = open_recording(args.recording, _cameras(args.cameras))
+    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    start = Path(args.init) if args.init else rec.init_path
+    poses = load_pose_file(start, model) if start is not None else rest_poses(model, in_view(rec.cameras))
+    out = Path(args.out)
+    Placement(_scene(args, rec, model, Settings()), rec, model, poses, out)
+    return _serve(f"placing the first pose of {rec.path}; save writes {out}")
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -164,7 +263,28 @@ def build_parser() -> argparse.ArgumentParser:
                        help="share of the last frame's motion carried into the prediction (default 1; "
                             "0.5 steadies a single camera)")
     track.add_argument("--quiet", action="store_true", help="no progress bar")
+    track.add_argument("--view", action="store_true",
+                       help="show the run in the browser viewer (about 30 updates a second), then review the result")
+    _viewer_options(track)
     track.set_defaults(run=cmd_track)
+
+    view = sub.add_parser("view", help="review poses.npz over its recording in the browser viewer")
+    view.add_argument("recording", help="recording folder")
+    view.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
+    view.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    view.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    view.add_argument("--quiet", action="store_true", help="no progress bar while recording")
+    _viewer_options(view)
+    view.set_defaults(run=cmd_view)
+
+    init = sub.add_parser("init", help="place the first pose by hand in the browser viewer and save init.toml")
+    init.add_argument("recording", help="recording folder")
+    init.add_argument("--out", required=True, help="init.toml to write")
+    init.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    init.add_argument("--init", help="pose to start from (default: the recording's init.toml, else the rest pose)")
+    init.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    _viewer_options(init, record=False)
+    init.set_defaults(run=cmd_init)
 
     ev = sub.add_parser("eval", help="MPJPE, PA-MPJPE, PCK@50mm and lost frames of poses.npz against truth.npz")
     ev.add_argument("poses")
@@ -193,6 +313,15 @@ def build_parser() -> argparse.ArgumentParser:
                        help="sample the outlines afresh every N-th iteration (default: tracking's)")
     bench.set_defaults(run=cmd_bench)
     return parser
+
+
+def _viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> None:
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)")
+    parser.add_argument("--port", type=int, default=8080, help="viewer port (default 8080, or the next free one)")
+    if record:
+        parser.add_argument("--record", metavar="FILE.viser",
+                            help="also write the viewer session as a .viser file for viser's static client")
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

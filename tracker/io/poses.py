@@ -65,6 +65,7 @@ class PosesWriter:
             "joints": np.empty((_INITIAL_CAPACITY, j, 3), np.float64),
             "status": np.empty(_INITIAL_CAPACITY, np.int8),
             "residual": np.empty(_INITIAL_CAPACITY, np.float64),
+            "elapsed": np.empty(_INITIAL_CAPACITY, np.float64),
         }
         self._count = 0
         self._unflushed = 0
@@ -73,11 +74,14 @@ class PosesWriter:
     def __len__(self) -> int:
         return self._count
 
-    def append(self, frame_index: int, poses: np.ndarray, joints: np.ndarray, status: int, residual: float) -> None:
-        """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0/1/2, residual px."""
+    def append(self, frame_index: int, poses: np.ndarray, joints: np.ndarray, status: int, residual: float,
+               elapsed: float = np.nan) -> None:
+        """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0/1/2, residual px,
+        and the seconds the tracker spent on it (NaN if unknown)."""
         if self._closed:
             raise ValueError(f"{self.path}: writer is closed")
-        row = {"frame": frame_index, "poses": poses, "joints": joints, "status": status, "residual": residual}
+        row = {"frame": frame_index, "poses": poses, "joints": joints, "status": status, "residual": residual,
+               "elapsed": elapsed}
         for key, value in row.items():
             if np.shape(value) != self._columns[key].shape[1:]:
                 raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._columns[key].shape[1:]}")
@@ -107,6 +111,7 @@ class PosesWriter:
             "joints": done["joints"],
             "status": done["status"],
             "residual": done["residual"],
+            "elapsed": done["elapsed"],
         }
 
     def flush(self) -> None:
@@ -134,7 +139,7 @@ def load_poses(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Arrays of a poses.npz or truth.npz, validated and in their canonical dtypes.
 
     ``joint_names`` and ``joints`` are required; ``frame``, ``time``, ``status``,
-    ``residual``, ``component_names`` and ``poses`` are optional (truth files
+    ``residual``, ``elapsed``, ``component_names`` and ``poses`` are optional (truth files
     often hold only the joints), and so is any extra array, returned as is.
     Byte-string name arrays are decoded to unicode.
     """
@@ -186,7 +191,8 @@ def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarra
     frames = arrays["joints"].shape[0]
     out["joints"] = numbers("joints", (frames, len(out["joint_names"]), 3), np.float64)
     for key, dtype, integer in (("frame", np.int64, True), ("status", np.int8, True),
-                                ("time", np.float64, False), ("residual", np.float64, False)):
+                                ("time", np.float64, False), ("residual", np.float64, False),
+                                ("elapsed", np.float64, False)):
         if key in arrays:
             out[key] = numbers(key, (frames,), dtype, integer)
     if "frame" in out and len(np.unique(out["frame"])) != frames:

@@ -139,3 +139,29 @@ def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4,
     finally:
         for reader in readers:
             reader.close()
+
+
+class FrameSeeker:
+    """Random access to grey frames of one video or image folder (for viewers): reading the next frame
+    continues decoding; any other index seeks.  Motion-JPEG AVIs seek exactly."""
+
+    def __init__(self, source: Path):
+        self.source = source
+        self.files = image_files(source) if source.is_dir() else None
+        self.capture = None if self.files is not None else cv2.VideoCapture(str(source))
+        self.next_index = 0
+
+    def read(self, index: int) -> np.ndarray:
+        if self.files is not None:
+            return read_image(self.files[index], index, cv2.IMREAD_GRAYSCALE)
+        if index != self.next_index:
+            self.capture.set(cv2.CAP_PROP_POS_FRAMES, index)
+        ok, image = self.capture.read()
+        if not ok:
+            raise _decode_error(self.source, index)
+        self.next_index = index + 1
+        return _grey(image)
+
+    def close(self) -> None:
+        if self.capture is not None:
+            self.capture.release()

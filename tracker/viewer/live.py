@@ -1,0 +1,121 @@
+"""Showing a run while it tracks, without slowing it down.
+
+The tracking loop hands each finished frame to :meth:`LiveView.offer`, which only
+keeps a reference to the newest one (a lock and an assignment: the tracker never
+waits for the browser).  A thread of the viewer wakes at most ``rate`` times a
+second, takes the newest frame, redoes its edge search at the tracked poses for
+the panels (its own :class:`~tracker.track.Tracker`; the numba kernels release the
+GIL) and sends the whole update as one batch; frames that arrive in between are
+skipped, not queued.  Plots of status, residual and speed are refreshed twice a
+second over the last ``history`` frames.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from tracker.io.atomic import atomic_write
+from tracker.model import Model
+from tracker.track import FrameResult, Settings, Tracker
+from tracker.viewer.scene import Frame, Scene
+
+PLOT_PERIOD = 0.5  # seconds between plot refreshes
+
+
+class LiveView:
+    """Throttled, non-blocking display of a running tracker; optionally recorded as a .viser file."""
+
+    def __init__(self, scene: Scene, model: Model, cameras, initial_poses: np.ndarray,
+                 settings: Settings = Settings(), rate: float = 30.0, truth: np.ndarray | None = None,
+                 record: Path | None = None, history: int = 600):
+        self.scene, self.rate, self.truth_joints, self.record_path = scene, rate, truth, record
+        self.inspector = Tracker(model, cameras, initial_poses, settings)
+        self.serializer = scene.server.get_scene_serializer() if record is not None else None
+        self.latest = None
+        self.lock = threading.Lock()
+        self.arrived = threading.Event()
+        self.stopping = threading.Event()
+        self.shown = 0
+        self.history = {key: deque(maxlen=history) for key in ("frame", "status", "residual", "fps")}
+        self.trajectory = deque(maxlen=history)
+        gui = scene.server.gui
+        with gui.add_folder("Live", order=20):
+            self.plots = {
+                key: gui.add_uplot((np.zeros(2), np.zeros(2)),
+                                   ({"label": "frame"}, {"label": label, "stroke": colour, "width": 1.5}),
+                                   title=key, aspect=2.5)
+                for key, label, colour in (("status", "0 tracked, 1 uncertain, 2 lost", "#d04020"),
+                                           ("residual", "residual (px)", "#2060d0"),
+                                           ("fps", "tracker fps", "#20a040"))}
+        scene.look_at_body(initial_poses)
+        self.thread = threading.Thread(target=self._run, name="viewer live", daemon=True)
+        self.thread.start()
+
+    def offer(self, index: int, images: list[np.ndarray], result: FrameResult, elapsed: float) -> None:
+        """Hand over a tracked frame (``images`` smoothed grey, as the tracker got them); never blocks."""
+        with self.lock:
+            self.latest = (index, images, result)
+            self.history["frame"].append(float(index))
+            self.history["status"].append(float(result.status))
+            self.history["residual"].append(result.residual if np.isfinite(result.residual) else -1.0)
+            self.history["fps"].append(1.0 / elapsed if elapsed > 0 else 0.0)
+            self.trajectory.append(result.poses[0, 0:3, 3])
+        self.arrived.set()
+
+    def _run(self) -> None:
+        last_push = last_plot = 0.0
+        while not self.stopping.is_set():
+            self.arrived.wait(0.1)
+            wait = last_push + 1.0 / self.rate - time.monotonic()
+            if wait > 0:
+                self.stopping.wait(wait)
+            with self.lock:
+                latest, self.latest = self.latest, None
+                self.arrived.clear()
+            if latest is None:
+                continue
+            self._show(*latest)
+            last_push = time.monotonic()
+            if self.serializer is not None:
+                self.serializer.insert_sleep(1.0 / self.rate)
+            if last_push - last_plot > PLOT_PERIOD:
+                self._plot()
+                last_plot = last_push
+
+    def _show(self, index: int, images: list[np.ndarray], result: FrameResult) -> None:
+        self.inspector.poses = result.poses
+        inspection = self.inspector.inspect(images, smoothed=True)
+        truth = None
+        if self.truth_joints is not None and index < len(self.truth_joints):
+            truth = self.truth_joints[index]
+        label = f"frame {index}: residual {result.residual:.2f} px, {100 * result.share:.0f} % of samples found an edge"
+        self.scene.show(Frame(result.poses, images, inspection, truth, label))
+        self.shown += 1
+
+    def _plot(self) -> None:
+        with self.lock:
+            columns = {key: np.array(values) for key, values in self.history.items()}
+            trajectory = np.array(self.trajectory)
+        if len(columns["frame"]) < 2:
+            return
+        for key, plot in self.plots.items():
+            plot.data = (columns["frame"], columns[key])
+        self.scene.show_trajectory(trajectory)
+
+    def close(self) -> None:
+        """Show the last frame, stop the thread and write the recording if one was asked for."""
+        self.stopping.set()
+        self.thread.join()
+        with self.lock:
+            latest, self.latest = self.latest, None
+        if latest is not None:
+            self._show(*latest)
+        self._plot()
+        if self.serializer is not None:
+            data = self.serializer.serialize()
+            atomic_write(self.record_path, lambda file: file.write(data))

@@ -1,0 +1,143 @@
+"""Reviewing a poses file in the viewer: a timeline over the recording's frames.
+
+The timeline slider, play/pause, single steps and the playback speed pick a row of
+``poses.npz``; the scene then shows that frame's poses and truth, and each camera's
+image with the edge search redone at those poses (:meth:`tracker.track.Tracker.inspect`),
+so what the panels show is what the tracker saw.  Plots give each frame's status,
+residual and, for files that record it, the tracker's speed.  Playback keeps to real
+time (times the speed) by skipping frames when drawing is slower than the video.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from tracker.io.atomic import atomic_write
+from tracker.io.readers import FrameSeeker
+from tracker.io.recording import Recording
+from tracker.model import Model
+from tracker.track import Settings, Tracker
+from tracker.viewer.scene import Frame, Scene
+
+SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
+STATUS_NAMES = ("tracked", "uncertain", "lost")
+
+
+def truth_rows(truth: dict | None, frames: np.ndarray) -> np.ndarray | None:
+    """Truth joints (F, J, 3) for the given recording frames, NaN where the truth has no such frame."""
+    if truth is None:
+        return None
+    joints = truth["joints"]
+    index = truth.get("frame", np.arange(len(joints)))
+    row = {int(f): k for k, f in enumerate(index)}
+    out = np.full((len(frames),) + joints.shape[1:], np.nan)
+    for k, f in enumerate(frames):
+        if int(f) in row:
+            out[k] = joints[row[int(f)]]
+    return out
+
+
+class Review:
+    """Timeline controls and plots for one poses file over its recording."""
+
+    def __init__(self, scene: Scene, recording: Recording, model: Model, results: dict, truth: dict | None = None,
+                 settings: Settings = Settings()):
+        self.scene, self.recording, self.results = scene, recording, results
+        self.frames = results["frame"]
+        self.truth = truth_rows(truth, self.frames)
+        self.seekers = [FrameSeeker(source) for source in recording.sources]
+        self.inspector = Tracker(model, recording.cameras, results["poses"][0], settings)
+        self.lock = threading.Lock()
+        self.stopping = threading.Event()
+        self.row = -1
+        gui = scene.server.gui
+        count = len(self.frames)
+        with gui.add_folder("Timeline", order=0):
+            self.slider = gui.add_slider("frame", min=0, max=max(count - 1, 1), step=1, initial_value=0)
+            self.play = gui.add_checkbox("play", initial_value=False)
+            self.previous = gui.add_button("previous frame")
+            self.next = gui.add_button("next frame")
+            self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="1x")
+        self.slider.on_update(lambda _: self.show(int(self.slider.value)))
+        self.previous.on_click(lambda _: self.step(-1))
+        self.next.on_click(lambda _: self.step(1))
+        self._plots(gui)
+        scene.look_at_body(results["poses"][0])
+        scene.show_trajectory(results["poses"][:, 0, 0:3, 3])
+        self.player = threading.Thread(target=self._play, name="viewer playback", daemon=True)
+        self.player.start()
+
+    def _plots(self, gui) -> None:
+        x = self.frames.astype(np.float64)
+        with gui.add_folder("Plots", order=20, expand_by_default=False):
+            gui.add_uplot((x, self.results["status"].astype(np.float64)),
+                          ({"label": "frame"}, {"label": "status (0 tracked, 1 uncertain, 2 lost)",
+                                                "stroke": "#d04020", "width": 1.5}), title="status", aspect=2.5)
+            gui.add_uplot((x, np.nan_to_num(self.results["residual"], nan=-1.0)),
+                          ({"label": "frame"}, {"label": "residual (px)", "stroke": "#2060d0", "width": 1.5}),
+                          title="residual", aspect=2.5)
+            elapsed = self.results.get("elapsed")
+            if elapsed is not None:
+                fps = np.where(elapsed > 0, 1.0 / np.where(elapsed > 0, elapsed, 1.0), 0.0)
+                gui.add_uplot((x, fps), ({"label": "frame"}, {"label": "tracker fps", "stroke": "#20a040",
+                                                              "width": 1.5}), title="speed", aspect=2.5)
+
+    def step(self, delta: int) -> None:
+        self.play.value = False
+        self.slider.value = int(np.clip(self.row + delta, 0, len(self.frames) - 1))
+        self.show(int(self.slider.value))
+
+    def show(self, row: int) -> None:
+        """Draw row ``row`` of the poses file (thread-safe; a row already shown is not redrawn)."""
+        with self.lock:
+            if row == self.row:
+                return
+            index = int(self.frames[row])
+            images = [seeker.read(index) for seeker in self.seekers]
+            poses = self.results["poses"][row]
+            self.inspector.poses = poses
+            inspection = self.inspector.inspect(images)
+            status = STATUS_NAMES[int(self.results["status"][row])]
+            label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
+            truth = None if self.truth is None else self.truth[row]
+            self.scene.show(Frame(poses, images, inspection, truth, label))
+            self.row = row
+
+    def _play(self) -> None:
+        """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up with."""
+        started, first = None, 0
+        while not self.stopping.is_set():
+            if not self.play.value:
+                started = None
+                self.stopping.wait(0.05)
+                continue
+            if started is None:
+                started, first = time.monotonic(), max(self.row, 0)
+            rate = self.recording.fps * float(self.speed.value.rstrip("x"))
+            row = first + int((time.monotonic() - started) * rate)
+            if row >= len(self.frames):
+                self.play.value = False
+                continue
+            self.show(row)
+            self.slider.value = row
+            self.stopping.wait(max(0.0, started + (row + 1 - first) / rate - time.monotonic()))
+
+    def record(self, path: Path, progress: bool = True) -> None:
+        """Write every frame, at the recording's rate, as a .viser file that viser's static client plays back."""
+        serializer = self.scene.server.get_scene_serializer()
+        for row in tqdm(range(len(self.frames)), unit="frame", desc="recording the viewer", disable=not progress):
+            self.show(row)
+            serializer.insert_sleep(1.0 / self.recording.fps)
+        data = serializer.serialize()
+        atomic_write(Path(path), lambda file: file.write(data))
+
+    def close(self) -> None:
+        self.stopping.set()
+        self.player.join()
+        for seeker in self.seekers:
+            seeker.close()

@@ -1,0 +1,153 @@
+"""The viewer's scene and camera panels (viser): what is drawn, not when.
+
+World frame as in the calibration (z up, metres).  Drawn: the model as shaded
+meshes of its clipped quadrics at the current poses, its joints and bones, the
+ground grid (z = 0), every camera as a frustum showing its current image, the
+truth skeleton when there is one (blue), and the root's trajectory.  Beside the
+3-D view, one image panel per camera with the search lines, outlines and found
+edges (:mod:`tracker.viewer.overlay`).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import viser
+import viser.transforms as vtf
+
+from tracker.model import Model, joint_centres
+from tracker.track import Inspection
+from tracker.viewer.mesh import component_meshes
+from tracker.viewer.overlay import component_colours, draw
+
+BODY = (235, 120, 40)  # shaded meshes and bones
+TRUTH = (40, 150, 255)  # the truth skeleton
+TRAJECTORY = (250, 220, 60)
+FRUSTUM_WIDTH = 320  # pixels of the images shown on the frustums (the panels get full size)
+
+
+def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False) -> viser.ViserServer:
+    """A viser server on ``host:port`` (the next free port if taken); says its URL on stderr.
+
+    Any address other than loopback opens the viewer to the network, so it warns.
+    """
+    if host not in ("127.0.0.1", "localhost", "::1") and not quiet:
+        print(f"tracker: warning: the viewer listens on {host}: anyone who can reach this machine can see it",
+              file=sys.stderr)
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.scene.set_up_direction("+z")
+    if not quiet:
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+        print(f"viewer: http://{shown}:{server.get_port()}", file=sys.stderr, flush=True)
+    return server
+
+
+def _wxyz(rotation: np.ndarray) -> np.ndarray:
+    return vtf.SO3.from_matrix(rotation).wxyz
+
+
+def bones(model: Model, joints: np.ndarray) -> np.ndarray:
+    """Segments (N-1, 2, 3) from each joint to its parent's joint."""
+    child = np.arange(1, model.size)
+    return np.stack([joints[model.parent[child]], joints[child]], 1)
+
+
+@dataclass
+class Frame:
+    """Everything drawn for one frame; ``images`` are grey, one per camera, or None."""
+
+    poses: np.ndarray
+    images: list[np.ndarray] | None = None
+    inspection: Inspection | None = None
+    truth: np.ndarray | None = None  # truth joint centres (J, 3), NaN where unknown
+    label: str = ""
+
+
+class Scene:
+    """Builds the scene on a server and redraws it for each :class:`Frame`."""
+
+    def __init__(self, server: viser.ViserServer, model: Model, cameras, robust_c: float = 2.0,
+                 truth_names: list[str] | None = None):
+        self.server, self.model, self.cameras, self.robust_c = server, model, cameras, robust_c
+        self.colours = component_colours(model.size)
+        scene = server.scene
+        scene.add_grid("/ground", width=8.0, height=8.0, plane="xy", cell_size=0.5)
+        self.meshes = [scene.add_mesh_simple(f"/body/{name}", vertices, faces, color=BODY, flat_shading=False)
+                       for name, (vertices, faces) in zip(model.names, component_meshes(model))]
+        self.joints = scene.add_point_cloud("/joints", np.zeros((model.size, 3), np.float32), colors=(30, 30, 30),
+                                            point_size=0.03, point_shape="circle")
+        self.bones = scene.add_line_segments("/bones", np.zeros((model.size - 1, 2, 3), np.float32), BODY,
+                                             thickness=0.012)
+        self.truth_index = None
+        if truth_names is not None:
+            index = {name: k for k, name in enumerate(truth_names)}
+            self.truth_index = np.array([index.get(name, -1) for name in model.joint_names])
+            self.truth = scene.add_line_segments("/truth", np.zeros((model.size - 1, 2, 3), np.float32), TRUTH,
+                                                 thickness=0.008)
+        self.trajectory = None
+        self.frustums = []
+        self.panels = []
+        folder = server.gui.add_folder("Cameras", order=30)
+        for camera in cameras:
+            width, height = camera.size
+            fov = 2.0 * np.arctan(0.5 * height / camera.matrix[1, 1])
+            self.frustums.append(scene.add_camera_frustum(
+                f"/cameras/{camera.name}", fov=fov, aspect=width / height, scale=0.25, color=(60, 60, 60),
+                wxyz=_wxyz(camera.rotation.T), position=camera.center,
+                image=np.zeros((FRUSTUM_WIDTH * height // width, FRUSTUM_WIDTH, 3), np.uint8), format="jpeg"))
+            with folder:
+                self.panels.append(server.gui.add_image(np.zeros((height, width, 3), np.uint8), label=camera.name,
+                                                        format="jpeg", jpeg_quality=80))
+        self.status = server.gui.add_markdown("", order=10)
+
+    def look_at_body(self, poses: np.ndarray) -> None:
+        """Start browsers' view from above and behind the cameras' mean centre, looking at the body."""
+        centre = poses[0, 0:3, 3]
+        away = np.mean([camera.center for camera in self.cameras], axis=0) - centre
+        away[2] = 0.0
+        if np.linalg.norm(away) < 1e-6:
+            away = self.cameras[0].center - centre
+        eye = centre + 4.0 * away / np.linalg.norm(away) + np.array([0.0, 0.0, 2.0])
+        self.server.initial_camera.position = tuple(eye)
+        self.server.initial_camera.look_at = tuple(centre)
+
+    def show_trajectory(self, points: np.ndarray) -> None:
+        """The root's path as a polyline (P, 3)."""
+        points = np.asarray(points, np.float32)
+        points = points[np.isfinite(points).all(axis=1)]
+        if len(points) < 2:
+            return
+        segments = np.stack([points[:-1], points[1:]], 1)
+        if self.trajectory is None:
+            self.trajectory = self.server.scene.add_line_segments("/trajectory", segments, TRAJECTORY,
+                                                                  thickness=0.006)
+        else:
+            self.trajectory.points = segments
+
+    def show(self, frame: Frame) -> None:
+        """Redraw the body, the truth, and the camera images with their overlays, as one batch."""
+        joints = joint_centres(frame.poses)
+        images = None
+        if frame.images is not None:
+            images = [draw(image, frame.inspection, k, self.robust_c, self.colours) if frame.inspection is not None
+                      else cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) for k, image in enumerate(frame.images)]
+        with self.server.atomic():
+            for mesh, pose in zip(self.meshes, frame.poses):
+                mesh.wxyz = _wxyz(pose[0:3, 0:3])
+                mesh.position = pose[0:3, 3]
+            self.joints.points = joints.astype(np.float32)
+            self.bones.points = bones(self.model, joints).astype(np.float32)
+            if self.truth_index is not None and frame.truth is not None:
+                truth = np.where(self.truth_index[:, None] >= 0, frame.truth[self.truth_index], np.nan)
+                segments = bones(self.model, truth)
+                self.truth.points = np.nan_to_num(segments).astype(np.float32)
+            if images is not None:
+                for frustum, panel, image in zip(self.frustums, self.panels, images):
+                    height, width = image.shape[:2]
+                    frustum.image = cv2.resize(image, (FRUSTUM_WIDTH, FRUSTUM_WIDTH * height // width),
+                                               interpolation=cv2.INTER_AREA)
+                    panel.image = image
+            self.status.content = frame.label
