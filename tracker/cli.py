@@ -140,7 +140,7 @@ def _live_view(args: argparse.Namespace, rec, model, init, settings):
 
     truth = _truth(rec)
     record = Path(args.record) if args.record else None
-    return LiveView(_scene(args, rec, model, settings), model, rec.cameras, init, settings,
+    return LiveView(_scene(args, rec, model, settings), model, rec.cameras, init, settings, rate=args.view_rate,
                     truth=None if truth is None else truth["joints"], record=record)
 
 
@@ -265,6 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--quiet", action="store_true", help="no progress bar")
     track.add_argument("--view", action="store_true",
                        help="show the run in the browser viewer (about 30 updates a second), then review the result")
+    track.add_argument("--view-rate", type=_positive_float, default=30.0,
+                       help="viewer updates per second while tracking (default 30)")
     _viewer_options(track)
     track.set_defaults(run=cmd_track)
 

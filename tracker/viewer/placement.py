@@ -98,10 +98,13 @@ class Placement:
             self.poses = self.model.coerce(poses)
             self.refresh()
 
-    def snap(self) -> None:
-        """Track frame 0 from the current placement: ``snap_iterations`` IRLS iterations, no motion model."""
+    def snap(self, rounds: int = 3) -> None:
+        """Track frame 0 from the current placement, ``rounds`` times ``snap_iterations`` IRLS iterations
+        without a motion model; each round re-centres the prior on where the last one ended."""
         with self.lock:
-            result = Tracker(self.model, self.recording.cameras, self.poses, self.settings).step(self.images)
+            tracker = Tracker(self.model, self.recording.cameras, self.poses, self.settings)
+            for _ in range(rounds):
+                result = tracker.step(self.images)
             self.poses = result.poses
             self.message.content = (f"Snapped: residual {result.residual:.2f} px, "
                                     f"{100 * result.share:.0f} % of the samples found an edge.")

@@ -52,7 +52,7 @@ class Review:
         self.truth = truth_rows(truth, self.frames)
         self.seekers = [FrameSeeker(source) for source in recording.sources]
         self.inspector = Tracker(model, recording.cameras, results["poses"][0], settings)
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()
         self.stopping = threading.Event()
         self.row = -1
         gui = scene.server.gui
@@ -89,8 +89,7 @@ class Review:
 
     def step(self, delta: int) -> None:
         self.play.value = False
-        self.slider.value = int(np.clip(self.row + delta, 0, len(self.frames) - 1))
-        self.show(int(self.slider.value))
+        self.show(int(np.clip(self.row + delta, 0, len(self.frames) - 1)))
 
     def show(self, row: int) -> None:
         """Draw row ``row`` of the poses file (thread-safe; a row already shown is not redrawn)."""
@@ -107,6 +106,7 @@ class Review:
             truth = None if self.truth is None else self.truth[row]
             self.scene.show(Frame(poses, images, inspection, truth, label))
             self.row = row
+            self.slider.value = row
 
     def _play(self) -> None:
         """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up with."""
@@ -124,7 +124,6 @@ class Review:
                 self.play.value = False
                 continue
             self.show(row)
-            self.slider.value = row
             self.stopping.wait(max(0.0, started + (row + 1 - first) / rate - time.monotonic()))
 
     def record(self, path: Path, progress: bool = True) -> None:

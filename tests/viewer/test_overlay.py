@@ -1,0 +1,26 @@
+import numpy as np
+
+from tracker.track import Inspection
+from tracker.viewer.overlay import component_colours, draw, weight_colour
+
+
+def test_search_lines_are_coloured_by_weight_and_missing_edges_grey():
+    image = np.full((60, 80), 200, np.uint8)
+    inspection = Inspection(
+        camera=np.array([0, 0, 1]), component=np.array([0, 1, 0]),
+        pixel=np.array([[20.0, 15.0], [20.0, 45.0], [40.0, 30.0]]), normal=np.array([[1.0, 0.0]] * 3),
+        lo=np.array([-8, -8, -8]), hi=np.array([8, 8, 8]),
+        offset=np.array([0.0, np.nan, 1.0]), weight=np.array([0.5, 0.0, 1 / 3]))
+    out = draw(image, inspection, 0, 2.0, component_colours(2))
+    assert out.shape == (60, 80, 3) and out.dtype == np.uint8
+    green = np.array(weight_colour(1.0))
+    # sample 0 (perfect fit, w c = 1) draws a green line left of its dot; sample 1 (no edge) a grey one
+    assert np.abs(out[15, 13].astype(int) - green).max() < 60
+    assert abs(int(out[45, 13, 0]) - 110) < 30 and np.ptp(out[45, 13].astype(int)) < 10
+    assert (out[30] == 200).all()  # camera 1's sample is not drawn on camera 0
+    assert np.array_equal(out[5], np.full((80, 3), 200))
+
+
+def test_weight_colours_run_from_red_to_green():
+    assert weight_colour(0.0) == (255, 0, 40) and weight_colour(1.0) == (0, 255, 40)
+    assert len({tuple(c) for c in component_colours(15)}) == 15

@@ -1,0 +1,76 @@
+import numpy as np
+
+from tracker.cli import main
+from tracker.io.recording import open_recording
+from tracker.model import load_model
+from tracker.track import Settings
+from tracker.viewer.review import Review, truth_rows
+from tracker.viewer.scene import Scene
+
+
+def _review(server, tracked):
+    recording, results = tracked
+    rec = open_recording(recording)
+    model = load_model(rec.model_path)
+    from tracker.io.poses import load_poses
+
+    truth = load_poses(rec.truth_path)
+    scene = Scene(server, model, rec.cameras, truth_names=list(truth["joint_names"]))
+    return Review(scene, rec, model, results, truth, Settings()), scene
+
+
+def test_review_draws_any_row_with_its_edge_search(server, tracked):
+    review, scene = _review(server, tracked)
+    try:
+        for row in (3, 0, 5, 4):  # seeks backwards and forwards
+            review.show(row)
+            assert review.row == row
+            pose = review.results["poses"][row]
+            np.testing.assert_allclose(scene.meshes[0].position, pose[0, 0:3, 3])
+            assert f"frame {review.frames[row]}:" in scene.status.content
+            panel = scene.panels[0].image
+            assert panel.shape == (240, 320, 3) and panel.std() > 5  # an image, not a blank
+        review.step(-1)
+        assert review.row == 3 and int(review.slider.value) == 3
+    finally:
+        review.close()
+
+
+def test_record_writes_a_viser_file_growing_with_the_frames(server, tracked, tmp_path):
+    review, _ = _review(server, tracked)
+    try:
+        review.record(tmp_path / "session.viser", progress=False)
+    finally:
+        review.close()
+    data = (tmp_path / "session.viser").read_bytes()
+    assert len(data) > 6 * 5000  # six frames of three camera images at least
+    assert not list(tmp_path.glob(".*.tmp"))  # written atomically, no temporary left
+
+
+def test_truth_rows_match_frames_and_leave_gaps_nan():
+    truth = {"frame": np.array([2, 3, 4]), "joints": np.arange(3 * 2 * 3, dtype=float).reshape(3, 2, 3)}
+    rows = truth_rows(truth, np.array([3, 7, 2]))
+    np.testing.assert_array_equal(rows[0], truth["joints"][1])
+    assert np.isnan(rows[1]).all()
+    np.testing.assert_array_equal(rows[2], truth["joints"][0])
+
+
+def test_view_without_poses_is_a_one_line_error(tiny_recording, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["view", str(tiny_recording), "--port", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no poses to review" in err and "tracker track" in err
+
+
+def test_view_of_poses_from_another_model_is_a_one_line_error(tracked, tmp_path, capsys):
+    recording, results = tracked
+    other = dict(results)
+    other["component_names"] = np.array([f"part{i}" for i in range(len(results["component_names"]))])
+    np.savez(tmp_path / "poses.npz", **other)
+    assert main(["view", str(recording), "--poses", str(tmp_path / "poses.npz"), "--port", "0"]) == 2
+    assert "do not match the model" in capsys.readouterr().err
+
+
+def test_record_without_view_is_refused(tiny_recording, tmp_path, capsys):
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--record", str(tmp_path / "a.viser")]) == 2
+    assert "add --view" in capsys.readouterr().err
