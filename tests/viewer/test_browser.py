@@ -96,3 +96,35 @@ def test_init_buttons_work_from_the_browser(server, page, tiny_recording, tmp_pa
     assert placement.saved.wait(timeout=60)
     saved = load_pose_file(out, model)
     assert np.abs(saved[0, 0:3, 3] - start[0, 0:3, 3]).max() > 0.01  # snapping moved it before saving
+
+
+def test_recorded_session_plays_in_viser_static_client(server, page, tracked, tmp_path):
+    import functools
+    import http.server
+    import threading
+
+    import viser
+
+    recording, results = tracked
+    rec = open_recording(recording)
+    model = load_model(rec.model_path)
+    review = Review(Scene(server, model, rec.cameras), rec, model, results, None, Settings())
+    site = tmp_path / "site"
+    shutil.copytree(Path(viser.__file__).parent / "client" / "build", site)
+    try:
+        review.record(site / "session.viser", progress=False)
+    finally:
+        review.close()
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(site))
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    try:
+        page.goto(f"http://127.0.0.1:{httpd.server_address[1]}/?playbackPath=/session.viser")
+        page.wait_for_selector("canvas", timeout=60_000)
+        page.wait_for_timeout(3000)
+        shot = tmp_path / "playback.png"
+        page.screenshot(path=str(shot))
+        rgb = cv2.cvtColor(cv2.imread(str(shot)), cv2.COLOR_BGR2RGB)
+        assert _body_pixels(rgb) > 300, f"the recorded body is not drawn; see {shot}"
+    finally:
+        httpd.shutdown()

@@ -39,6 +39,7 @@ def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False)
               file=sys.stderr)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     server.scene.set_up_direction("+z")
+    server.scene.configure_default_lights(cast_shadow=False)  # shadow maps double the cost of every redraw
     if not quiet:
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         print(f"viewer: http://{shown}:{server.get_port()}", file=sys.stderr, flush=True)
