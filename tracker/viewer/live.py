@@ -7,7 +7,8 @@ second, takes the newest frame, redoes its edge search at the tracked poses for
 the panels (its own :class:`~tracker.track.Tracker`; the numba kernels release the
 GIL) and sends the whole update as one batch; frames that arrive in between are
 skipped, not queued.  Plots of status, residual and speed are refreshed twice a
-second over the last ``history`` frames.
+second over the last ``history`` frames, the camera images and their edge searches ten
+times a second (encoding, sending and decoding images is most of a viewer's cost).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from tracker.track import FrameResult, Settings, Tracker
 from tracker.viewer.scene import Frame, Scene
 
 PLOT_PERIOD = 0.5  # seconds between plot refreshes
+IMAGE_PERIOD = 0.1  # seconds between camera image refreshes (the body moves at the full rate)
 
 
 class LiveView:
@@ -68,7 +70,7 @@ class LiveView:
         self.arrived.set()
 
     def _run(self) -> None:
-        last_push = last_plot = 0.0
+        last_push = last_plot = last_image = 0.0
         while not self.stopping.is_set():
             self.arrived.wait(0.1)
             wait = last_push + 1.0 / self.rate - time.monotonic()
@@ -79,22 +81,27 @@ class LiveView:
                 self.arrived.clear()
             if latest is None:
                 continue
-            self._show(*latest)
+            with_images = time.monotonic() - last_image >= IMAGE_PERIOD
+            self._show(*latest, with_images=with_images)
             last_push = time.monotonic()
+            if with_images:
+                last_image = last_push
             if self.serializer is not None:
                 self.serializer.insert_sleep(1.0 / self.rate)
             if last_push - last_plot > PLOT_PERIOD:
                 self._plot()
                 last_plot = last_push
 
-    def _show(self, index: int, images: list[np.ndarray], result: FrameResult) -> None:
-        self.inspector.poses = result.poses
-        inspection = self.inspector.inspect(images, smoothed=True)
+    def _show(self, index: int, images: list[np.ndarray], result: FrameResult, with_images: bool = True) -> None:
+        inspection = None
+        if with_images:
+            self.inspector.poses = result.poses
+            inspection = self.inspector.inspect(images, smoothed=True)
         truth = None
         if self.truth_joints is not None and index < len(self.truth_joints):
             truth = self.truth_joints[index]
         label = f"frame {index}: residual {result.residual:.2f} px, {100 * result.share:.0f} % of samples found an edge"
-        self.scene.show(Frame(result.poses, images, inspection, truth, label))
+        self.scene.show(Frame(result.poses, images if with_images else None, inspection, truth, label))
         self.shown += 1
 
     def _plot(self) -> None:

@@ -26,7 +26,7 @@ from tracker.viewer.overlay import component_colours, draw
 BODY = (235, 120, 40)  # shaded meshes and bones
 TRUTH = (40, 150, 255)  # the truth skeleton
 TRAJECTORY = (250, 220, 60)
-FRUSTUM_WIDTH = 320  # pixels of the images shown on the frustums (the panels get full size)
+FRUSTUM_WIDTH = 200  # pixels of the images shown on the frustums (the panels get full size)
 
 
 def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False) -> viser.ViserServer:
@@ -101,7 +101,7 @@ class Scene:
                 image=np.zeros((FRUSTUM_WIDTH * height // width, FRUSTUM_WIDTH, 3), np.uint8), format="jpeg"))
             with folder:
                 self.panels.append(server.gui.add_image(np.zeros((height, width, 3), np.uint8), label=camera.name,
-                                                        format="jpeg", jpeg_quality=80))
+                                                        format="jpeg", jpeg_quality=70))
         self.status = server.gui.add_markdown("", order=10)
 
     def look_at_body(self, poses: np.ndarray) -> None:
