@@ -112,10 +112,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     if rec.truth_path is not None:
         report = evaluate(load_poses(out / "poses.npz"), load_poses(rec.truth_path))
         print(format_report(report))
-    if live is not None:
+    if live is not None and done > 0:
         from tracker.viewer.review import Review
 
         review = Review(live.scene, rec, model, load_poses(out / "poses.npz"), _truth(rec), settings)
+        review.show(done - 1)
         return _serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
 
@@ -170,6 +171,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     if not args.poses and not poses_path.is_file():
         raise TrackerInputError(f"{poses_path}: no poses to review; run `tracker track {rec.path}` first or pass --poses")
     results = load_poses(poses_path)
+    if len(results["joints"]) == 0:
+        raise TrackerInputError(f"{poses_path}: holds no frames; track some first")
     if "poses" not in results or list(results["component_names"]) != list(model.names):
         raise TrackerInputError(f"{poses_path}: its components do not match the model {model.name!r}; "
                                 "pass the --model it was tracked with")

@@ -74,3 +74,15 @@ def test_view_of_poses_from_another_model_is_a_one_line_error(tracked, tmp_path,
 def test_record_without_view_is_refused(tiny_recording, tmp_path, capsys):
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--record", str(tmp_path / "a.viser")]) == 2
     assert "add --view" in capsys.readouterr().err
+
+
+def test_a_non_loopback_host_warns_and_every_server_says_its_url(capsys):
+    from tracker.viewer.scene import start_server
+
+    server = start_server("0.0.0.0", 0)
+    try:
+        err = capsys.readouterr().err
+        assert "warning" in err and "0.0.0.0" in err
+        assert f"http://127.0.0.1:{server.get_port()}" in err
+    finally:
+        server.stop()

@@ -23,7 +23,7 @@ import numpy as np
 from tracker.io.atomic import atomic_write
 from tracker.model import Model
 from tracker.track import FrameResult, Settings, Tracker
-from tracker.viewer.scene import Frame, Scene
+from tracker.viewer.scene import Frame, Scene, add_plot
 
 PLOT_PERIOD = 0.5  # seconds between plot refreshes
 IMAGE_PERIOD = 0.1  # seconds between camera image refreshes (the body moves at the full rate)
@@ -48,12 +48,11 @@ class LiveView:
         gui = scene.server.gui
         with gui.add_folder("Live", order=20):
             self.plots = {
-                key: gui.add_uplot((np.zeros(2), np.zeros(2)),
-                                   ({"label": "frame"}, {"label": label, "stroke": colour, "width": 1.5}),
-                                   title=key, aspect=2.5)
-                for key, label, colour in (("status", "0 tracked, 1 uncertain, 2 lost", "#d04020"),
-                                           ("residual", "residual (px)", "#2060d0"),
-                                           ("fps", "tracker fps", "#20a040"))}
+                key: add_plot(gui, key, label, colour, np.zeros(2), np.zeros(2), y_range)
+                for key, label, colour, y_range in (
+                    ("status", "0 tracked, 1 uncertain, 2 lost", "#d04020", (-0.1, 2.1)),
+                    ("residual", "residual (px)", "#2060d0", None),
+                    ("fps", "tracker fps", "#20a040", None))}
         scene.look_at_body(initial_poses)
         self.thread = threading.Thread(target=self._run, name="viewer live", daemon=True)
         self.thread.start()

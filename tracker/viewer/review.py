@@ -22,7 +22,7 @@ from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.track import Settings, Tracker
-from tracker.viewer.scene import Frame, Scene
+from tracker.viewer.scene import Frame, Scene, add_plot
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 STATUS_NAMES = ("tracked", "uncertain", "lost")
@@ -75,17 +75,13 @@ class Review:
     def _plots(self, gui) -> None:
         x = self.frames.astype(np.float64)
         with gui.add_folder("Plots", order=20, expand_by_default=False):
-            gui.add_uplot((x, self.results["status"].astype(np.float64)),
-                          ({"label": "frame"}, {"label": "status (0 tracked, 1 uncertain, 2 lost)",
-                                                "stroke": "#d04020", "width": 1.5}), title="status", aspect=2.5)
-            gui.add_uplot((x, np.nan_to_num(self.results["residual"], nan=-1.0)),
-                          ({"label": "frame"}, {"label": "residual (px)", "stroke": "#2060d0", "width": 1.5}),
-                          title="residual", aspect=2.5)
+            add_plot(gui, "status", "0 tracked, 1 uncertain, 2 lost", "#d04020", x, self.results["status"],
+                     (-0.1, 2.1))
+            add_plot(gui, "residual", "residual (px)", "#2060d0", x, np.nan_to_num(self.results["residual"], nan=-1.0))
             elapsed = self.results.get("elapsed")
             if elapsed is not None:
                 fps = np.where(elapsed > 0, 1.0 / np.where(elapsed > 0, elapsed, 1.0), 0.0)
-                gui.add_uplot((x, fps), ({"label": "frame"}, {"label": "tracker fps", "stroke": "#20a040",
-                                                              "width": 1.5}), title="speed", aspect=2.5)
+                add_plot(gui, "speed", "tracker fps", "#20a040", x, fps)
 
     def step(self, delta: int) -> None:
         self.play.value = False

@@ -46,6 +46,17 @@ def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False)
     return server
 
 
+def add_plot(gui, title: str, label: str, colour: str, x: np.ndarray, y: np.ndarray,
+             y_range: tuple[float, float] | None = None):
+    """A uPlot line chart of ``y`` against frame numbers ``x`` in the GUI panel (``y_range`` fixes its axis)."""
+    scales = {"x": {"time": False}}
+    if y_range is not None:
+        scales["y"] = {"auto": False, "range": list(y_range)}
+    return gui.add_uplot((np.asarray(x, np.float64), np.asarray(y, np.float64)),
+                         ({"label": "frame"}, {"label": label, "stroke": colour, "width": 1.5}),
+                         title=title, scales=scales, aspect=2.5)
+
+
 def _wxyz(rotation: np.ndarray) -> np.ndarray:
     return vtf.SO3.from_matrix(rotation).wxyz
 
