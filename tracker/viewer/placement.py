@@ -81,7 +81,7 @@ class Placement:
             self.message = server.gui.add_markdown("Drag the gizmos onto the person, snap, then save.")
         self.snap_button.on_click(lambda _: self.snap())
         self.save_button.on_click(lambda _: self.save())
-        scene.look_at_body(self.poses)
+        scene.look_at_body(self.poses, distance=2.2)
         self.refresh()
 
     def moved(self, i: int) -> None:

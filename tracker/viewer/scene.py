@@ -115,14 +115,15 @@ class Scene:
                                                         format="jpeg", jpeg_quality=70))
         self.status = server.gui.add_markdown("", order=10)
 
-    def look_at_body(self, poses: np.ndarray) -> None:
-        """Start browsers' view from above and behind the cameras' mean centre, looking at the body."""
+    def look_at_body(self, poses: np.ndarray, distance: float = 4.0) -> None:
+        """Start browsers' view ``distance`` metres out towards the cameras' mean centre and 2 m up,
+        looking at the body."""
         centre = poses[0, 0:3, 3]
         away = np.mean([camera.center for camera in self.cameras], axis=0) - centre
         away[2] = 0.0
         if np.linalg.norm(away) < 1e-6:
             away = self.cameras[0].center - centre
-        eye = centre + 4.0 * away / np.linalg.norm(away) + np.array([0.0, 0.0, 2.0])
+        eye = centre + distance * away / np.linalg.norm(away) + np.array([0.0, 0.0, 0.5 * distance])
         self.server.initial_camera.position = tuple(eye)
         self.server.initial_camera.look_at = tuple(centre)
 
