@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.camera import Camera, save_calibration
+from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.recording import frames, open_recording
 
@@ -123,6 +123,26 @@ def test_corrupt_video(tmp_path: Path) -> None:
 def test_size_mismatch(tmp_path: Path) -> None:
     folder = make_recording(tmp_path / "rec", size=(80, 60))
     expect_error(folder, "cam0.avi", "64x48", "80x60")
+
+
+def test_codec_crop_keeps_the_intrinsics_and_takes_the_decoded_size(tmp_path: Path) -> None:
+    folder = make_recording(tmp_path / "rec")
+    write_video(folder / "cam0.avi", 0, size=(WIDTH, HEIGHT - 8))  # 8 padding rows cropped by the container
+    with pytest.warns(UserWarning, match="codec padding"):
+        rec = open_recording(folder)
+    assert rec.cameras[0].size == (WIDTH, HEIGHT - 8) and rec.cameras[1].size == (WIDTH, HEIGHT)
+    calibrated = load_calibration(folder / "calibration.toml")[0]
+    np.testing.assert_array_equal(rec.cameras[0].matrix, calibrated.matrix)
+
+
+def test_real_videos_one_row_block_short_of_their_calibration() -> None:
+    """pose2sim-balancing: cam01 and cam02 decode as 1080x1920 where the calibration says 1088x1920."""
+    folder = Path(__file__).resolve().parents[3] / "shared" / "data" / "pose2sim-balancing"
+    with pytest.warns(UserWarning) as caught:
+        rec = open_recording(folder)
+    assert sorted(str(w.message).split(":")[0].rsplit("/", 1)[1] for w in caught) == ["cam01.mp4", "cam02.mp4"]
+    assert [c.size for c in rec.cameras] == [(1080, 1920), (1080, 1920), (1088, 1920), (1088, 1920)]
+    assert rec.frame_count == 100 and rec.fps == 60.0
 
 
 def test_two_sources_for_one_camera(tmp_path: Path) -> None:

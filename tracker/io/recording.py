@@ -12,7 +12,9 @@ the image size the calibration gives.
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -86,21 +88,21 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) ->
 
     chosen_sources = [sources[name] for name in chosen]
     probes = [_probe(source, rig[name]) for name, source in zip(chosen, chosen_sources)]
-    counts = [count for count, _ in probes]
+    counts = [count for count, _, _ in probes]
     for source, count in zip(chosen_sources, counts):
         if count != counts[0]:
             raise TrackerInputError(
                 f"{chosen_sources[0]} has {counts[0]} frames but {source} has {count}; "
                 "cut the videos to the same synchronised frames"
             )
-    fps = next((rate for _, rate in probes if rate is not None), DEFAULT_FPS)
+    fps = next((rate for _, rate, _ in probes if rate is not None), DEFAULT_FPS)
 
     def optional(name: str) -> Path | None:
         return folder / name if (folder / name).is_file() else None
 
     return Recording(
         path=folder,
-        cameras=[rig[name] for name in chosen],
+        cameras=[camera for _, _, camera in probes],
         model_path=optional("model.toml"),
         init_path=optional("init.toml"),
         truth_path=optional("truth.npz"),
@@ -139,12 +141,11 @@ def _find_source(folder: Path, name: str) -> Path | None:
     return found[0] if found else None
 
 
-def _probe(source: Path, camera: Camera) -> tuple[int, float | None]:
-    """Frame count and frame rate (None if unknown) of a source; decodes its first frame and checks its size."""
+def _probe(source: Path, camera: Camera) -> tuple[int, float | None, Camera]:
+    """Frame count, frame rate (None if unknown) and the camera fitted to the decoded size (:func:`_fit_size`)."""
     if source.is_dir():
         files = image_files(source)
-        _check_size(files[0], read_image(files[0], 0), camera)
-        return len(files), None
+        return len(files), None, _fit_size(files[0], read_image(files[0], 0), camera)
     capture = cv2.VideoCapture(str(source))
     try:
         ok, image = capture.read() if capture.isOpened() else (False, None)
@@ -152,22 +153,39 @@ def _probe(source: Path, camera: Camera) -> tuple[int, float | None]:
             raise TrackerInputError(
                 f"{source}: corrupt or unsupported video (its first frame does not decode); re-encode it, e.g. as H.264 .mp4"
             )
-        _check_size(source, image, camera)
+        camera = _fit_size(source, image, camera)
         count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
         if count <= 0:  # the container does not say: count by decoding
             count = 1
             while capture.grab():
                 count += 1
         fps = capture.get(cv2.CAP_PROP_FPS)
-        return count, fps if np.isfinite(fps) and fps > 0 else None
+        return count, fps if np.isfinite(fps) and fps > 0 else None, camera
     finally:
         capture.release()
 
 
-def _check_size(file: Path, image: np.ndarray, camera: Camera) -> None:
+def _fit_size(file: Path, image: np.ndarray, camera: Camera) -> Camera:
+    """The camera as the file's frames show it.
+
+    Video codecs work on 16 x 16 blocks: an encoder pads a frame to a multiple of 16
+    and the container crops the padding away on the right and at the bottom, so a
+    calibration made on the padded frames (1088 rows) may meet videos that decode
+    to 1080.  Such a crop leaves every remaining pixel where it was, so when the
+    decoded frame is smaller by less than 16 pixels in each direction the camera
+    keeps its intrinsics and takes the decoded size (with a warning); any other
+    difference is an error.
+    """
     height, width = image.shape[:2]
-    if (width, height) != camera.size:
-        raise TrackerInputError(
-            f"{file}: image size {width}x{height} differs from size {camera.size[0]}x{camera.size[1]} of camera "
-            f"{camera.name!r} in calibration.toml; use the calibration made for these videos"
-        )
+    if (width, height) == camera.size:
+        return camera
+    cut_w, cut_h = camera.size[0] - width, camera.size[1] - height
+    if 0 <= cut_w < 16 and 0 <= cut_h < 16:
+        warnings.warn(f"{file}: decodes as {width}x{height} but camera {camera.name!r} is calibrated at "
+                      f"{camera.size[0]}x{camera.size[1]}; taking the difference for codec padding cropped at the "
+                      "right and bottom (intrinsics unchanged)", stacklevel=2)
+        return dataclasses.replace(camera, size=(width, height))
+    raise TrackerInputError(
+        f"{file}: image size {width}x{height} differs from size {camera.size[0]}x{camera.size[1]} of camera "
+        f"{camera.name!r} in calibration.toml; use the calibration made for these videos"
+    )
