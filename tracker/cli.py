@@ -78,6 +78,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     live = _live_view(args, rec, model, init, settings) if args.view else None
+    overlay = None
+    if args.overlay:
+        from tracker.viewer.overlay import OverlayVideo
+
+        overlay = OverlayVideo(Path(args.overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
     residuals = []
     interrupted = False
@@ -93,10 +98,15 @@ def cmd_track(args: argparse.Namespace) -> int:
                               spent)
                 if live is not None:
                     live.offer(index, images, result, spent)
+                if overlay is not None:
+                    overlay.write(images, tracker.inspect(images, smoothed=True))
                 counts[result.status] += 1
                 residuals.append(result.residual)
         except KeyboardInterrupt:
             interrupted = True
+        finally:
+            if overlay is not None:
+                overlay.close()
     elapsed = time.perf_counter() - started
     if live is not None:
         live.close()
@@ -266,6 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="share of the last frame's motion carried into the prediction (default 1; "
                             "0.5 steadies a single camera)")
     track.add_argument("--quiet", action="store_true", help="no progress bar")
+    track.add_argument("--overlay", metavar="VIDEO",
+                       help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches")
     track.add_argument("--view", action="store_true",
                        help="show the run in the browser viewer (about 30 updates a second), then review the result")
     track.add_argument("--view-rate", type=_positive_float, default=30.0,

@@ -24,3 +24,24 @@ def test_search_lines_are_coloured_by_weight_and_missing_edges_grey():
 def test_weight_colours_run_from_red_to_green():
     assert weight_colour(0.0) == (255, 0, 40) and weight_colour(1.0) == (0, 255, 40)
     assert len({tuple(c) for c in component_colours(15)}) == 15
+
+
+def test_track_writes_an_overlay_video_of_all_cameras(tiny_recording, tmp_path):
+    import cv2
+
+    from tracker.cli import main
+
+    video = tmp_path / "overlay.mp4"
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--overlay", str(video), "--quiet"]) == 0
+    capture = cv2.VideoCapture(str(video))
+    assert int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == 6
+    ok, frame = capture.read()
+    assert ok and frame.shape == (240, 640, 3)  # two 320x240 cameras side by side
+    assert not list(tmp_path.glob(".overlay*"))  # the temporary file was renamed into place
+
+
+def test_overlay_video_of_unknown_type_is_a_one_line_error(tiny_recording, tmp_path, capsys):
+    from tracker.cli import main
+
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--overlay", str(tmp_path / "o.gif")]) == 2
+    assert "unknown video type" in capsys.readouterr().err

@@ -15,6 +15,7 @@ import colorsys
 import cv2
 import numpy as np
 
+from tracker.io.mosaic import MosaicWriter
 from tracker.track import Inspection
 
 _SHIFT = 2  # sub-pixel drawing: coordinates in quarter pixels
@@ -63,3 +64,18 @@ def draw(image: np.ndarray, inspection: Inspection, camera: int, robust_c: float
     for x, y in _fixed(pixel[found] + offset[found, None] * normal[found]):
         cv2.circle(out, (int(x), int(y)), 1 << _SHIFT, (255, 255, 255), -1, cv2.LINE_AA, _SHIFT)
     return out
+
+
+class OverlayVideo:
+    """A video of every camera side by side with :func:`draw`'s annotations (``tracker track --overlay``)."""
+
+    def __init__(self, path, cameras, fps: float, components: int, robust_c: float):
+        self.writer = MosaicWriter(path, [camera.size for camera in cameras], fps)
+        self.colours = component_colours(components)
+        self.robust_c = robust_c
+
+    def write(self, images: list[np.ndarray], inspection: Inspection) -> None:
+        self.writer.write([draw(image, inspection, k, self.robust_c, self.colours) for k, image in enumerate(images)])
+
+    def close(self) -> None:
+        self.writer.close()
