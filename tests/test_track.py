@@ -114,3 +114,14 @@ def test_motion_since_is_the_body_twist_between_poses():
     twist = rng.normal(size=(4, 6)) * 0.3
     current = np.stack([sampled[i] @ se3.exp(twist[i]) for i in range(4)])
     np.testing.assert_allclose(motion_since(sampled, current), twist, atol=1e-12)
+
+
+def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
+    from tracker.track import scaled_to
+
+    base = Settings()
+    assert scaled_to(base, 480) == base and scaled_to(base, 240) == base
+    hd = scaled_to(base, 1080)
+    assert hd.spacing == pytest.approx(9.0) and hd.search_range == 45 and hd.final_search_range == 14
+    assert hd.blur_sigma == pytest.approx(2.25) and hd.threshold == pytest.approx(6.0 / 2.25)
+    assert scaled_to(hd, 1080) == hd  # already scaled: unchanged

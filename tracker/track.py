@@ -16,6 +16,7 @@ that found an edge and the robust mean residual.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -55,7 +56,21 @@ class Settings:
     lost_residual: float = 6.0  # ... and lost
     capacity: int = 40000  # sample buffer size for all cameras together
     ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
+    reference_size: int = 480  # the pixel settings above are for images this many pixels on their short side
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
+
+
+def scaled_to(settings: Settings, short_side: int) -> Settings:
+    """The settings for images ``short_side`` pixels on their short side: spacing, search ranges and blur
+    grow with the image beyond ``reference_size`` (an edge spreads over as many more pixels), and the edge
+    threshold, a grey-level derivative per pixel, shrinks by the same factor; smaller images keep them."""
+    k = max(1.0, short_side / settings.reference_size)
+    if k == 1.0:
+        return settings
+    return dataclasses.replace(
+        settings, spacing=settings.spacing * k, search_range=round(settings.search_range * k),
+        final_search_range=round(settings.final_search_range * k), blur_sigma=settings.blur_sigma * k,
+        threshold=settings.threshold / k, reference_size=short_side)
 
 
 @dataclass(frozen=True)
@@ -150,6 +165,7 @@ class Tracker:
             raise ValueError(f"motion model must be one of {MOTION_MODELS}")
         self.model = model
         self.rig = Rig.from_cameras(cameras)
+        settings = scaled_to(settings, int(self.rig.size.min(axis=1).max()))
         self.settings = settings
         self.samples = Samples.allocate(settings.capacity)
         self.offset = np.zeros(settings.capacity)
