@@ -105,3 +105,39 @@ def test_bad_options_are_usage_errors(tiny_recording, option, capsys):
         main(["track", str(tiny_recording), *option])
     assert exit_info.value.code == 2
     assert option[0] in capsys.readouterr().err
+
+
+def test_unwritable_output_folder_fails_before_tracking(tiny_recording, tmp_path, capsys, monkeypatch):
+    import tempfile
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", denied)
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    line = _error_line(capsys)
+    assert "cannot write there (Permission denied)" in line and "out" in line
+
+
+def test_disk_full_mid_run_keeps_the_frames_already_saved(tmp_path, capsys, monkeypatch):
+    import errno
+    import os
+
+    from tracker.io import atomic
+    from tracker.io.poses import load_poses
+
+    demo = Path(__file__).resolve().parents[1] / "recordings" / "demo"
+    calls = {"n": 0}
+    real_fsync = os.fsync
+
+    def fsync(fd):
+        calls["n"] += 1
+        if calls["n"] > 1:  # the first save (25 frames) lands, then the disk is full
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_fsync(fd)
+
+    monkeypatch.setattr(atomic.os, "fsync", fsync)
+    assert main(["track", str(demo), "--out", str(tmp_path), "--frames", "60", "--quiet"]) == 2
+    assert "No space left on device" in _error_line(capsys)
+    assert list(load_poses(tmp_path / "poses.npz")["frame"]) == list(range(25))
+    assert [p.name for p in tmp_path.iterdir()] == ["poses.npz"]  # no temporary file left behind
