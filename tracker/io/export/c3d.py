@@ -1,0 +1,55 @@
+"""C3D files (biomechanics' binary motion format), written with ezc3d.
+
+What we write: POINT data only (no analogs), one point per joint centre,
+``POINT:LABELS`` = joint names, ``POINT:UNITS`` = "mm", ``POINT:RATE`` = frames
+per second, 32-bit floats.  The header's first frame is the recording's frame
+index (C3D counts from 1, so readers show the index plus one).  A point's
+residual word is -1 where it is a gap (the C3D convention for an invalid
+point; ezc3d then reads NaN) and 0 elsewhere (C3D: a valid point computed
+rather than measured by cameras).  The coordinates stay in the tracker's world,
+right-handed with z up; ``POINT:X_SCREEN`` = "+X" and ``POINT:Y_SCREEN`` = "+Z"
+tell viewers such as Mokka that z is up.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from tracker.io.atomic import atomic_write
+
+_MM_PER_M = 1000.0
+
+
+def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, rate: float,
+              joints: np.ndarray) -> None:
+    """Write ``joints`` (F, M, 3) metres, NaN for gaps, as the C3D file ``path`` (mm, atomically)."""
+    import ezc3d
+
+    count = len(joints)
+    gap = ~np.isfinite(joints).all(axis=2)  # (F, M)
+    points = np.ones((4, len(names), count))
+    points[:3] = np.transpose(joints, (2, 1, 0)) * _MM_PER_M
+    points[:3, gap.T] = np.nan
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [float(rate)]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = list(names)
+    c3d["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    c3d.add_parameter("POINT", "X_SCREEN", ["+X"])
+    c3d.add_parameter("POINT", "Y_SCREEN", ["+Z"])
+    c3d["header"]["points"]["first_frame"] = int(first_frame)
+    c3d["data"]["points"] = points
+    c3d["data"]["meta_points"]["residuals"] = np.where(gap.T, -1.0, 0.0)[np.newaxis]
+
+    def write(file) -> None:
+        # ezc3d writes only to a path: write to a scratch folder, then copy into the atomic file
+        with tempfile.TemporaryDirectory() as folder:
+            scratch = Path(folder) / "export.c3d"
+            c3d.write(str(scratch))
+            file.write(scratch.read_bytes())
+
+    atomic_write(path, write)
