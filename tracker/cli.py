@@ -318,6 +318,12 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--stride", type=_positive_int, default=2, help="BVH frames per rendered frame (default 2)")
     synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
     synth.set_defaults(run=cmd_synth)
+    from tracker.io import export
+
+    exporter = sub.add_parser("export", help="write poses.npz as TRC, C3D, BVH or CSV for other tools")
+    export.add_arguments(exporter)
+    exporter.set_defaults(run=export.run)
+
     bench = sub.add_parser("bench", help="per-stage timings, frames per second and the decode-only floor")
     bench.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
     bench.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
