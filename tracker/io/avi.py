@@ -54,7 +54,11 @@ class MjpegAviWriter:
         ok, buffer = cv2.imencode(".jpg", image, self.params)
         if not ok:
             raise RuntimeError("JPEG encoding failed")
-        data = buffer.tobytes()
+        self.write_jpeg(buffer.tobytes())
+
+    def write_jpeg(self, data: bytes) -> None:
+        """Append one frame that is already a JPEG of the writer's size, byte for byte (a camera's
+        Motion-JPEG frame is stored as it came, so reading the video back decodes the same image)."""
         offset = self.file.tell() - (self.movi_at + 8)
         self.file.write(_chunk(b"00dc", data))
         if self.file.tell() > self._MAX_BYTES:

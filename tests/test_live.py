@@ -1,0 +1,196 @@
+"""`tracker live`: tracking cameras as they capture, fed here by video files replayed in real time.
+
+The runs take as long as their videos (0.1 s for the tiny recording, 2.7 s for the demo); how
+many frames the tracker keeps up with depends on the machine, so the assertions are about what
+must hold whatever it is: counters that agree, a recording that replays to the same poses, the
+messages of a dropped camera.
+"""
+
+import _thread
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracker.camera import load_calibration
+from tracker.cli import main
+from tracker.errors import TrackerInputError
+from tracker.io.capture import Capture, CaptureError, ReplayClock, ReplaySource
+from tracker.io.posefile import load_pose_file
+from tracker.io.poses import load_poses
+from tracker.io.recording import open_recording
+from tracker.live import Recorder, add_arguments, assign_cameras, run, track_live
+from tracker.model import load_model
+from tracker.track import Settings
+
+DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
+
+
+def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    options = [item for camera in cameras for item in ("--camera", camera)]
+    return parser.parse_args(options + ["--calib", str(rec / "calibration.toml"), "--model", str(rec / "model.toml"),
+                                        "--init", str(rec / "init.toml"), *extra])
+
+
+def _replayed(recording: Path, out: Path, *extra: str) -> dict:
+    """poses.npz of `tracker track` on a recording folder."""
+    assert main(["track", str(recording), "--out", str(out), "--quiet", *extra]) == 0
+    return load_poses(out / "poses.npz")
+
+
+def _assert_same(live: dict, replay: dict, frames: int) -> None:
+    for key in ("frame", "time", "poses", "joints", "status", "residual"):
+        np.testing.assert_array_equal(live[key][:frames], replay[key][:frames], err_msg=key)
+
+
+def _consistent(counts, frames: int) -> None:
+    assert [p + u for p, u in zip(counts.paired, counts.unpaired)] == list(counts.captured)
+    assert counts.sets == counts.taken + counts.stale
+    assert counts.taken == frames
+
+
+class Failing:
+    """Wraps a source; after ``after`` frames it raises (a camera unplugged), or once calls ``then``."""
+
+    def __init__(self, source, after: int, then=None):
+        self.source, self.after, self.then, self.delivered = source, after, then, 0
+        self.name, self.size, self.fps = source.name, source.size, source.fps
+
+    def read(self):
+        if self.delivered == self.after:
+            if self.then is None:
+                raise CaptureError("was unplugged")
+            self.then()
+        self.delivered += 1
+        return self.source.read()
+
+    def close(self):
+        self.source.close()
+
+
+def _live(rec: Path, tmp_path: Path, wrap=lambda camera, source: source, record: bool = True):
+    """track_live over the videos of ``rec`` replayed as cameras (``wrap`` may replace a source); with a recorder."""
+    cameras = load_calibration(rec / "calibration.toml")
+    model = load_model(rec / "model.toml")
+    init = load_pose_file(rec / "init.toml", model)
+    clock = ReplayClock()
+    sources = [wrap(camera.name, ReplaySource(rec / f"{camera.name}.avi", clock)) for camera in cameras]
+    capture = Capture(sources, [camera.name for camera in cameras])
+    copies = {name: rec / name for name in ("calibration.toml", "model.toml", "init.toml")}
+    with Recorder(tmp_path / "rec", cameras, 60.0, copies) as recorder:
+        return track_live(capture, cameras, model, init, Settings(), tmp_path / "out", recorder)
+
+
+def test_a_live_run_records_what_it_tracked_and_tracker_track_replays_it(tiny_recording, tmp_path, capsys):
+    out, record = tmp_path / "out", tmp_path / "rec"
+    cameras = [str(tiny_recording / "cam0.avi"), str(tiny_recording / "cam1.avi")]
+    assert run(_args(tiny_recording, cameras, "--out", str(out), "--record", str(record), "--iterations", "4")) == 0
+    assert "sets: 6 paired" in capsys.readouterr().out  # replayed files share one clock: every frame pairs
+    live = load_poses(out / "poses.npz")
+    frames = len(live["frame"])
+    assert frames >= 1
+    np.testing.assert_array_equal(live["frame"], np.arange(frames))
+    recording = open_recording(record)
+    assert recording.frame_count == frames and [camera.name for camera in recording.cameras] == ["cam0", "cam1"]
+    for name in ("calibration.toml", "model.toml", "init.toml"):
+        assert (record / name).read_bytes() == (tiny_recording / name).read_bytes()
+    rows = (record / "timestamps.csv").read_text().splitlines()
+    assert rows[0] == "frame,cam0,cam1" and len(rows) == frames + 1
+    times = np.array([[float(value) for value in row.split(",")] for row in rows[1:]])
+    np.testing.assert_array_equal(times[:, 0], np.arange(frames))
+    assert np.all(np.diff(times[:, 1]) > 0) and np.array_equal(times[:, 1], times[:, 2])
+    _assert_same(live, _replayed(record, tmp_path / "replay", "--iterations", "4"), frames)
+
+
+def test_a_dropped_camera_ends_the_recording_and_tracking_goes_on(tmp_path, capsys):
+    summary = _live(DEMO, tmp_path, wrap=lambda name, source: Failing(source, 40) if name == "cam2" else source)
+    err = capsys.readouterr().err
+    assert "camera cam2 (" in err and "was unplugged; going on with cam0, cam1" in err
+    assert "tracking goes on with cam0, cam1 from frame" in err and "the recording ends at its" in err
+    assert "live 1 s: tracking" in err and "capture cam0" in err  # the status line (the demo plays 2.7 s)
+    counts = summary.counts
+    assert counts.live == ("cam0", "cam1") and counts.captured[2] == 40
+    _consistent(counts, summary.frames)
+    assert 1 <= summary.recorded <= 40 and summary.frames > summary.recorded
+    live = load_poses(tmp_path / "out" / "poses.npz")
+    assert len(live["frame"]) == summary.frames
+    assert open_recording(tmp_path / "rec").frame_count == summary.recorded
+    _assert_same(live, _replayed(tmp_path / "rec", tmp_path / "replay"), summary.recorded)
+
+
+def test_when_no_camera_is_left_the_run_stops_and_keeps_its_output(tiny_recording, tmp_path, capsys):
+    summary = _live(tiny_recording, tmp_path, wrap=lambda name, source: Failing(source, 3))
+    assert "no camera is left" in capsys.readouterr().err
+    assert summary.counts.live == ()
+    _consistent(summary.counts, summary.frames)
+    assert len(load_poses(tmp_path / "out" / "poses.npz")["frame"]) == summary.frames
+
+
+def test_ctrl_c_stops_after_the_frame_in_hand_with_every_output_agreeing(tmp_path):
+    def interrupt(name, source):  # cam0 presses Ctrl-C (as a signal to the main thread) at its 21st frame
+        return Failing(source, 20, then=_thread.interrupt_main) if name == "cam0" else source
+
+    summary = _live(DEMO, tmp_path, wrap=interrupt)
+    assert summary.interrupted and 1 <= summary.frames < 160
+    _consistent(summary.counts, summary.frames)
+    live = load_poses(tmp_path / "out" / "poses.npz")
+    assert len(live["frame"]) == summary.recorded == summary.frames
+    assert open_recording(tmp_path / "rec").frame_count == summary.frames
+    assert len((tmp_path / "rec" / "timestamps.csv").read_text().splitlines()) == summary.frames + 1
+    _assert_same(live, _replayed(tmp_path / "rec", tmp_path / "replay"), summary.frames)
+
+
+def test_a_missing_device_is_a_one_line_error(tiny_recording, tmp_path):
+    with pytest.raises(TrackerInputError) as error:
+        run(_args(tiny_recording, ["/dev/video99", str(tiny_recording / "cam1.avi")], "--out", str(tmp_path)))
+    assert str(error.value).startswith("/dev/video99: no such video device") and "\n" not in str(error.value)
+
+
+def test_a_camera_must_give_its_calibrated_size(tiny_recording, tmp_path):
+    with pytest.raises(TrackerInputError, match="gives 640x480 images but camera 'cam0' .* is calibrated at 320x240"):
+        run(_args(tiny_recording, [str(DEMO / "cam0.avi")], "--out", str(tmp_path)))
+
+
+def test_cameras_are_matched_to_the_calibration_by_order_or_by_name(tiny_recording):
+    path = tiny_recording / "calibration.toml"
+    calibration = load_calibration(path)
+
+    def matched(specs):
+        return [(camera.name, device) for camera, device in assign_cameras(specs, calibration, path)]
+
+    assert matched(["/dev/video0"]) == [("cam0", "/dev/video0")]
+    assert matched(["/dev/video0", "/dev/video2"]) == [("cam0", "/dev/video0"), ("cam1", "/dev/video2")]
+    # by name, tracked in calibration order whatever the order given
+    assert matched(["cam1=/dev/video2", "cam0=/dev/video4"]) == [("cam0", "/dev/video4"), ("cam1", "/dev/video2")]
+    assert matched(["cam1=/dev/video2"]) == [("cam1", "/dev/video2")]
+    for specs, message in ((["a", "b", "c"], "has 2 camera"), (["cam9=/dev/video0"], "has no camera 'cam9'"),
+                           (["cam0=/dev/video0", "/dev/video2"], "name every camera"),
+                           (["/dev/video0", "/dev/video0"], "device '/dev/video0' is given twice"),
+                           (["cam0=/dev/video0", "cam0=/dev/video2"], "camera 'cam0' is given twice"),
+                           (["cam0="], "give the device")):
+        with pytest.raises(TrackerInputError, match=message):
+            matched(specs)
+
+
+def test_size_is_width_x_height(tiny_recording):
+    assert _args(tiny_recording, ["/dev/video0"], "--size", "640x480").size == (640, 480)
+    with pytest.raises(SystemExit):
+        _args(tiny_recording, ["/dev/video0"], "--size", "640")
+
+
+def test_a_recording_goes_to_a_new_folder(tiny_recording, tmp_path):
+    (tmp_path / "rec").mkdir()
+    (tmp_path / "rec" / "notes.txt").write_text("keep me")
+    with pytest.raises(TrackerInputError, match="already exists"):
+        Recorder(tmp_path / "rec", load_calibration(tiny_recording / "calibration.toml"), 60.0, {})
+    assert (tmp_path / "rec" / "notes.txt").read_text() == "keep me"
+
+
+def test_a_live_run_can_be_watched_in_the_viewer(tiny_recording, tmp_path, capsys):
+    cameras = [str(tiny_recording / "cam0.avi"), str(tiny_recording / "cam1.avi")]
+    assert run(_args(tiny_recording, cameras, "--out", str(tmp_path), "--view", "--port", "0")) == 0
+    assert "viewer: http://127.0.0.1:" in capsys.readouterr().err
+    assert len(load_poses(tmp_path / "poses.npz")["frame"]) >= 1

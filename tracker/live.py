@@ -1,0 +1,364 @@
+"""``tracker live``: track a body in the cameras' frames as they are captured.
+
+    tracker live --camera /dev/video0 --camera /dev/video2 --calib C --model M --init I
+                 [--size WxH] [--fps F] [--record DIR] [--out DIR] [--view]
+
+Cameras are matched to the calibration's cameras in order (``--camera cam1=/dev/video2`` names
+one instead) and tracked in calibration order.  A ``--camera`` that is a video file is played
+at its frame rate as if a camera delivered it (several files share one clock).  Every camera
+must give the size it is calibrated at.
+
+Capture (:mod:`tracker.io.capture`): one thread per camera stamps, decodes and smooths each
+frame; frames are paired into sets by capture time, and the tracker always takes the newest
+complete set, so it never falls behind the cameras: frames it had no time for are dropped and
+counted (stale sets), as are frames that found no partner (unpaired).  A status line on stderr
+gives, every second, the tracked and captured frame rates and the drops.
+
+A camera that fails or stops delivering is dropped with a message, and tracking goes on with
+the others: the tracker is rebuilt for the remaining cameras at its current poses and motion,
+with the same pixel settings.  When no camera is left the run stops; its output is kept.
+
+Outputs: ``DIR/poses.npz`` (default ``out/live``) as ``tracker track`` writes it, frames numbered
+0, 1, ... in the order they were tracked (capture order), written atomically as it grows.
+``--record DIR`` writes a recording folder of exactly the frames the tracker took, in order:
+``<camera>.avi`` per camera holding each frame's JPEG byte for byte as the camera gave it,
+``calibration.toml``, ``model.toml`` and ``init.toml`` (copies), and ``timestamps.csv`` (frame and
+each camera's capture time in seconds since capture started; the videos state the cameras' nominal
+frame rate).  So ``tracker track DIR`` with the
+same settings decodes the same images and computes the same poses as the live run.  A recording
+needs every camera in every frame: when a camera drops, the recording ends there (tracking
+goes on), and it still replays identically.
+
+Ctrl-C stops the run after the frame in hand, so poses.npz, the videos and timestamps.csv hold the
+same frames, and exits with 130; a second Ctrl-C interrupts at once (the files are still valid).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import signal
+import sys
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tracker.camera import Camera, load_calibration
+from tracker.errors import TrackerInputError
+from tracker.io.atomic import ensure_writable_folder
+from tracker.io.avi import MjpegAviWriter
+from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
+from tracker.io.posefile import load_pose_file
+from tracker.io.poses import PosesWriter
+from tracker.model import Model, joint_centres, load_model
+from tracker.track import Settings, Tracker
+
+DEFAULT_OUT = Path("out") / "live"
+STATUS_PERIOD = 1.0  # seconds between status lines
+TAKE_WAIT = 0.1  # seconds the loop waits for a set before it looks at the status and the stop request
+
+
+def _size(text: str) -> tuple[int, int]:
+    width, _, height = text.lower().partition("x")
+    if not (width.isdigit() and height.isdigit() and int(width) > 0 and int(height) > 0):
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels, e.g. 640x480, got {text}")
+    return int(width), int(height)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker live``."""
+    from tracker.cli import _positive_float, _positive_int, _share
+
+    parser.add_argument("--camera", action="append", required=True, metavar="[NAME=]DEVICE",
+                        help="a camera: a V4L2 device such as /dev/video0, or a video file played at its frame "
+                             "rate; repeat for each camera; matched to the calibration's cameras in order, or "
+                             "to the one called NAME")
+    parser.add_argument("--calib", required=True, help="calibration.toml of the cameras")
+    parser.add_argument("--model", required=True, help="body model TOML")
+    parser.add_argument("--init", required=True, help="pose at the first frame (init.toml)")
+    parser.add_argument("--size", type=_size, metavar="WxH",
+                        help="image size to ask the cameras for (default: each camera's calibrated size, "
+                             "which the camera must give)")
+    parser.add_argument("--fps", type=_positive_float, help="frame rate to ask the cameras for (default: the driver's)")
+    parser.add_argument("--out", help=f"output folder for poses.npz (default {DEFAULT_OUT})")
+    parser.add_argument("--record", metavar="DIR",
+                        help="also write the tracked frames as a recording folder that `tracker track DIR` "
+                             "replays to the same poses")
+    parser.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default 6)")
+    parser.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default 4)")
+    parser.add_argument("--resample-every", type=_positive_int,
+                        help="sample the outlines afresh every N-th iteration (default 3)")
+    parser.add_argument("--search-range", type=_positive_int,
+                        help="edge search in the first iteration, pixels either side (default 20)")
+    parser.add_argument("--motion", choices=("none", "constant-velocity"),
+                        help="motion model that predicts each frame's pose (default constant-velocity)")
+    parser.add_argument("--damping", type=_share,
+                        help="share of the last frame's motion carried into the prediction (default 1)")
+    parser.add_argument("--view", action="store_true", help="show the run in the browser viewer")
+    parser.add_argument("--view-rate", type=_positive_float, default=30.0,
+                        help="viewer updates per second (default 30)")
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)")
+    parser.add_argument("--port", type=int, default=8080, help="viewer port (default 8080, or the next free one)")
+
+
+def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> list[tuple[Camera, str]]:
+    """(camera, device) for each ``--camera``, in calibration order: by position, or ``NAME=DEVICE`` by name."""
+    names = [camera.name for camera in calibration]
+    named = [spec for spec in specs if "=" in spec]
+    if named and len(named) != len(specs):
+        raise TrackerInputError("--camera: name every camera (cam0=/dev/video0) or none (then they are matched "
+                                f"to {path}'s cameras in order)")
+    if named:
+        pairs = [tuple(spec.split("=", 1)) for spec in specs]
+        for name, device in pairs:
+            if name not in names:
+                raise TrackerInputError(f"{path}: has no camera {name!r}; name one of {', '.join(names)}")
+            if not device:
+                raise TrackerInputError(f"--camera {name}=: give the device, e.g. {name}=/dev/video0")
+    else:
+        if len(specs) > len(names):
+            raise TrackerInputError(f"{path}: has {len(names)} camera(s) ({', '.join(names)}) but {len(specs)} "
+                                    "--camera were given; use a calibration of every camera")
+        pairs = list(zip(names, specs))
+    for kind, values in (("camera", [name for name, _ in pairs]), ("device", [device for _, device in pairs])):
+        repeated = sorted({value for value in values if values.count(value) > 1})
+        if repeated:
+            raise TrackerInputError(f"--camera: {kind} {repeated[0]!r} is given twice; give each once")
+    by_name = dict(pairs)
+    return [(camera, by_name[camera.name]) for camera in calibration if camera.name in by_name]
+
+
+def open_sources(devices: list[str], cameras: list[Camera], size: tuple[int, int] | None, fps: float | None,
+                 calibration: Path) -> list[Source]:
+    """One source per camera: a video file is replayed (all files on one clock), anything else is opened as
+    a V4L2 device asked for ``size`` (default: the camera's) and ``fps``.  Each must give its camera's
+    calibrated size."""
+    clock = ReplayClock()
+    sources: list[Source] = []
+    try:
+        for device, camera in zip(devices, cameras):
+            if Path(device).is_file():
+                source = ReplaySource(device, clock)
+            else:
+                source = V4L2Source(device, size or camera.size, fps)
+            sources.append(source)
+            if source.size != camera.size:
+                width, height = source.size
+                raise TrackerInputError(
+                    f"{device}: gives {width}x{height} images but camera {camera.name!r} in {calibration} is "
+                    f"calibrated at {camera.size[0]}x{camera.size[1]}; ask for that size (--size) or use a "
+                    f"calibration made at {width}x{height}")
+    except BaseException:
+        for source in sources:
+            source.close()
+        raise
+    return sources
+
+
+class Recorder:
+    """Writes the sets the tracker took as a recording folder (module docstring); ``copies`` maps file names
+    in the folder (calibration.toml, model.toml, init.toml) to the files to copy there."""
+
+    def __init__(self, folder: Path, cameras: list[Camera], fps: float, copies: dict[str, Path]):
+        if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+            raise TrackerInputError(f"{folder}: already exists; give a new folder for the recording")
+        ensure_writable_folder(folder)
+        for name, source in copies.items():
+            shutil.copyfile(source, folder / name)
+        self.frames = 0
+        self.videos = [MjpegAviWriter(folder / f"{camera.name}.avi", fps, camera.size) for camera in cameras]
+        self.times = open(folder / "timestamps.csv", "w", buffering=1)
+        self.times.write(",".join(["frame"] + [camera.name for camera in cameras]) + "\n")
+
+    def write(self, frame_set: FrameSet, origin: float) -> None:
+        """Append one set (every camera's frame) and its capture times, in seconds since ``origin``."""
+        for video, frame in zip(self.videos, frame_set.frames):
+            video.write_jpeg(frame.jpeg.tobytes())
+        self.times.write(",".join([str(self.frames)] + [f"{frame.time - origin:.6f}" for frame in frame_set.frames])
+                         + "\n")
+        self.frames += 1
+
+    def close(self) -> None:
+        for video in self.videos:
+            video.close()
+        self.times.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class Summary:
+    """How a live run went: frames tracked (rows of poses.npz), frames recorded, the capture counters,
+    seconds from the start of capture to the end, and whether Ctrl-C stopped it."""
+
+    frames: int
+    recorded: int
+    counts: Counts
+    seconds: float
+    interrupted: bool
+
+
+class _StopRequest:
+    """While active, the first Ctrl-C only asks the loop to stop after the frame in hand; a second one
+    raises KeyboardInterrupt as usual."""
+
+    def __enter__(self) -> _StopRequest:
+        self.requested = False
+        self.previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc) -> None:
+        signal.signal(signal.SIGINT, self.previous)
+
+
+class _Status:
+    """A status line on stderr every STATUS_PERIOD seconds: frame rates since the last line and the drops."""
+
+    def __init__(self, capture: Capture):
+        self.capture, self.frames = capture, 0
+        self.time, self.counts = time.monotonic(), capture.counts()
+
+    def tick(self, frames: int) -> None:
+        now = time.monotonic()
+        seconds = now - self.time
+        if seconds < STATUS_PERIOD:
+            return
+        counts = self.capture.counts()
+        rates = ", ".join(f"{name} {(now_count - then) / seconds:.1f}"
+                          for name, now_count, then in zip(counts.names, counts.captured, self.counts.captured))
+        print(f"live {now - self.capture.started:.0f} s: tracking {(frames - self.frames) / seconds:.1f} fps | "
+              f"capture {rates} fps | {_drops(counts)}", file=sys.stderr, flush=True)
+        self.time, self.counts, self.frames = now, counts, frames
+
+
+def _drops(counts: Counts) -> str:
+    unpaired = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.unpaired))
+    return f"dropped {counts.stale} stale sets, unpaired frames {unpaired}"
+
+
+def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
+    """A tracker for ``cameras`` that goes on from ``tracker``'s poses and motion with its (pixel-scaled) settings."""
+    rebuilt = Tracker(tracker.model, cameras, tracker.poses, tracker.settings)
+    rebuilt.previous = tracker.previous
+    return rebuilt
+
+
+def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.ndarray, settings: Settings,
+               out: Path, recorder: Recorder | None = None, view=None) -> Summary:
+    """Track the sets ``capture`` delivers until its sources end, no camera is left, or Ctrl-C.
+
+    ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order; ``recorder`` and
+    ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the recorder
+    until a camera drops) and stay open for the caller to close.  Closes ``capture``.
+    """
+    tracker = Tracker(model, cameras, init, settings)
+    rig = tuple(range(len(cameras)))
+    blanks = [np.zeros((camera.size[1], camera.size[0]), np.uint8) for camera in cameras]  # viewer, dropped cameras
+    recording = recorder is not None
+    frames = 0
+    try:
+        with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), capture.fps) as writer:
+            print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
+            tracker.warm_up()
+            with _StopRequest() as stop:
+                capture.start(tracker.smooth)
+                status = _Status(capture)
+                while not stop.requested:
+                    frame_set = capture.take(TAKE_WAIT)
+                    status.tick(frames)
+                    if frame_set is None:
+                        if capture.finished:
+                            break
+                        continue
+                    if frame_set.cameras != rig:
+                        rig = frame_set.cameras
+                        tracker = _rebuilt(tracker, [cameras[camera] for camera in rig])
+                        print(f"tracker: tracking goes on with {', '.join(cameras[camera].name for camera in rig)} "
+                              f"from frame {frames} (tracker rebuilt at the current poses)", file=sys.stderr)
+                        if recording:
+                            print(f"tracker: the recording ends at its {recorder.frames} frames: a recording "
+                                  "folder needs every camera in every frame", file=sys.stderr)
+                            recording = False
+                    begun = time.perf_counter()
+                    result = tracker.step([frame.image for frame in frame_set.frames], smoothed=True)
+                    spent = time.perf_counter() - begun
+                    if recording:
+                        recorder.write(frame_set, capture.started)
+                    writer.append(frames, result.poses, joint_centres(result.poses), result.status,
+                                  result.residual, spent)
+                    if view is not None:
+                        images = list(blanks)
+                        for camera, frame in zip(frame_set.cameras, frame_set.frames):
+                            images[camera] = frame.image
+                        view.offer(frames, images, result, spent)
+                    frames += 1
+            seconds = time.monotonic() - capture.started
+    finally:
+        capture.close()  # also settles the counters
+    return Summary(frames, recorder.frames if recorder is not None else 0, capture.counts(), seconds,
+                   stop.requested)
+
+
+def run(args: argparse.Namespace) -> int:
+    """``tracker live``: 0 when the sources ended, 130 after Ctrl-C; TrackerInputError for bad input and
+    when every camera stopped delivering (after the output is written)."""
+    calibration_path = Path(args.calib)
+    rig = assign_cameras(args.camera, load_calibration(calibration_path), calibration_path)
+    cameras = [camera for camera, _ in rig]
+    model = load_model(args.model)
+    init = load_pose_file(args.init, model)
+    given = {"iterations": args.iterations, "spacing": args.spacing, "search_range": args.search_range,
+             "motion": args.motion, "damping": args.damping, "resample_every": args.resample_every}
+    settings = Settings(**{key: value for key, value in given.items() if value is not None})
+    out = Path(args.out) if args.out else DEFAULT_OUT
+    with ExitStack() as stack:
+        sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
+        capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
+        print("live: " + ", ".join(f"{camera.name} = {source.name} ({source.size[0]}x{source.size[1]}, "
+                                   f"{source.fps:g} fps)" for camera, source in zip(cameras, sources)),
+              file=sys.stderr)
+        recorder = None
+        if args.record:
+            copies = {"calibration.toml": calibration_path, "model.toml": Path(args.model),
+                      "init.toml": Path(args.init)}
+            recorder = stack.enter_context(Recorder(Path(args.record), cameras, capture.fps, copies))
+        view = None
+        if args.view:
+            from tracker.viewer.live import LiveView
+            from tracker.viewer.scene import Scene, start_server
+
+            server = start_server(args.host, args.port)
+            stack.callback(server.stop)
+            view = LiveView(Scene(server, model, cameras, settings.robust_c), model, cameras, init, settings,
+                            rate=args.view_rate)
+            stack.callback(view.close)
+        summary = track_live(capture, cameras, model, init, settings, out, recorder, view)
+    counts = summary.counts
+    print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
+    if recorder is not None:
+        print(f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record}` with the "
+              "same settings replays them)")
+    rate = summary.frames / summary.seconds if summary.seconds > 0 else 0.0
+    captured = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.captured))
+    print(f"frames per second: {rate:.1f} tracked; frames captured: {captured}")
+    print(f"sets: {counts.sets} paired, {counts.taken} tracked; {_drops(counts)}")
+    if summary.interrupted:
+        print("interrupted: the frames done so far are saved", file=sys.stderr)
+        return 130
+    if not counts.live:
+        raise TrackerInputError(f"every camera stopped delivering (see above); the {summary.frames} frames "
+                                f"tracked are in {out / 'poses.npz'}; check the cameras and their connections")
+    return 0
