@@ -64,9 +64,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     rec = open_recording(args.recording, _cameras(args.cameras))
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
-    given = {"iterations": args.iterations, "spacing": args.spacing, "search_range": args.search_range,
-             "motion": args.motion, "damping": args.damping, "resample_every": args.resample_every}
-    settings = Settings(**{key: value for key, value in given.items() if value is not None})
+    settings = settings_from(args)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
@@ -239,8 +237,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from tracker import bench
     from tracker.track import Settings
 
-    given = {"iterations": args.iterations, "spacing": args.spacing, "resample_every": args.resample_every}
-    settings = Settings(**{key: value for key, value in given.items() if value is not None})
+    settings = settings_from(args)
     print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)
     if args.scaling:
         result = bench.scaling()
@@ -263,25 +260,11 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
     track.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     track.add_argument("--frames", type=_positive_int, help="number of frames to track (default: all)")
-    track.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default 6)")
-    track.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default 4)")
-    track.add_argument("--resample-every", type=_positive_int,
-                       help="sample the outlines afresh every N-th iteration, moving them to first order "
-                            "between (default 3; 1 = every iteration)")
-    track.add_argument("--search-range", type=_positive_int,
-                       help="edge search in the first iteration, pixels either side (default 20; the last uses 6)")
-    track.add_argument("--motion", choices=("none", "constant-velocity"),
-                       help="motion model that predicts each frame's pose (default constant-velocity)")
-    track.add_argument("--damping", type=_share,
-                       help="share of the last frame's motion carried into the prediction (default 1; "
-                            "0.5 steadies a single camera)")
+    add_tuning_options(track)
     track.add_argument("--quiet", action="store_true", help="no progress bar")
     track.add_argument("--overlay", metavar="VIDEO",
                        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches")
-    track.add_argument("--view", action="store_true",
-                       help="show the run in the browser viewer (about 30 updates a second), then review the result")
-    track.add_argument("--view-rate", type=_positive_float, default=30.0,
-                       help="viewer updates per second while tracking (default 30)")
+    add_live_view_options(track, "then review the result")
     _viewer_options(track)
     track.set_defaults(run=cmd_track)
 
@@ -318,7 +301,12 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--stride", type=_positive_int, default=2, help="BVH frames per rendered frame (default 2)")
     synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
     synth.set_defaults(run=cmd_synth)
+    from tracker import live
     from tracker.io import export
+
+    capture = sub.add_parser("live", help="track cameras live (V4L2 through OpenCV), optionally recording them")
+    live.add_arguments(capture)
+    capture.set_defaults(run=live.run)
 
     exporter = sub.add_parser("export", help="write poses.npz as TRC, C3D, BVH or CSV for other tools")
     export.add_arguments(exporter)
@@ -330,12 +318,48 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--scaling", action="store_true",
                        help="time one iteration against the number of components (7-120) and of cameras (1-8)")
     bench.add_argument("--repeats", type=_positive_int, default=3, help="passes per figure (default 3)")
-    bench.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default: tracking's)")
-    bench.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default: tracking's)")
-    bench.add_argument("--resample-every", type=_positive_int,
-                       help="sample the outlines afresh every N-th iteration (default: tracking's)")
+    add_tuning_options(bench, ("iterations", "spacing", "resample_every"))
     bench.set_defaults(run=cmd_bench)
     return parser
+
+
+TUNING = ("iterations", "spacing", "resample_every", "search_range", "motion", "damping")
+
+
+def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] = TUNING) -> None:
+    """The tracker's tuning options (Settings fields) that a command offers."""
+    options = {
+        "iterations": (["--iterations"], dict(type=_positive_int, help="IRLS iterations per frame (default 6)")),
+        "spacing": (["--spacing"], dict(type=_positive_float, help="pixels between outline samples (default 4)")),
+        "resample_every": (["--resample-every"], dict(
+            type=_positive_int, help="sample the outlines afresh every N-th iteration, moving them to first order "
+                                     "between (default 3; 1 = every iteration)")),
+        "search_range": (["--search-range"], dict(
+            type=_positive_int, help="edge search in the first iteration, pixels either side (default 20; the "
+                                     "last uses 6)")),
+        "motion": (["--motion"], dict(choices=("none", "constant-velocity"),
+                                      help="motion model that predicts each frame's pose (default constant-velocity)")),
+        "damping": (["--damping"], dict(type=_share, help="share of the last frame's motion carried into the "
+                                                          "prediction (default 1; 0.5 steadies a single camera)")),
+    }
+    for key in which:
+        flags, kwargs = options[key]
+        parser.add_argument(*flags, **kwargs)
+
+
+def settings_from(args: argparse.Namespace):
+    """Settings with the tuning options the user gave (the others at their defaults)."""
+    from tracker.track import Settings
+
+    given = {key: getattr(args, key, None) for key in TUNING}
+    return Settings(**{key: value for key, value in given.items() if value is not None})
+
+
+def add_live_view_options(parser: argparse.ArgumentParser, after: str) -> None:
+    parser.add_argument("--view", action="store_true",
+                        help=f"show the run in the browser viewer (about 30 updates a second), {after}")
+    parser.add_argument("--view-rate", type=_positive_float, default=30.0,
+                        help="viewer updates per second while tracking (default 30)")
 
 
 def _viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> None:

@@ -70,7 +70,7 @@ def _size(text: str) -> tuple[int, int]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker live``."""
-    from tracker.cli import _positive_float, _positive_int, _share
+    from tracker.cli import _positive_float, _viewer_options, add_live_view_options, add_tuning_options
 
     parser.add_argument("--camera", action="append", required=True, metavar="[NAME=]DEVICE",
                         help="a camera: a V4L2 device such as /dev/video0, or a video file played at its frame "
@@ -87,23 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", metavar="DIR",
                         help="also write the tracked frames as a recording folder that `tracker track DIR` "
                              "replays to the same poses")
-    parser.add_argument("--iterations", type=_positive_int, help="IRLS iterations per frame (default 6)")
-    parser.add_argument("--spacing", type=_positive_float, help="pixels between outline samples (default 4)")
-    parser.add_argument("--resample-every", type=_positive_int,
-                        help="sample the outlines afresh every N-th iteration (default 3)")
-    parser.add_argument("--search-range", type=_positive_int,
-                        help="edge search in the first iteration, pixels either side (default 20)")
-    parser.add_argument("--motion", choices=("none", "constant-velocity"),
-                        help="motion model that predicts each frame's pose (default constant-velocity)")
-    parser.add_argument("--damping", type=_share,
-                        help="share of the last frame's motion carried into the prediction (default 1)")
-    parser.add_argument("--view", action="store_true", help="show the run in the browser viewer")
-    parser.add_argument("--view-rate", type=_positive_float, default=30.0,
-                        help="viewer updates per second (default 30)")
-    parser.add_argument("--host", default="127.0.0.1",
-                        help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)")
-    parser.add_argument("--port", type=int, default=8080, help="viewer port (default 8080, or the next free one)")
-
+    add_tuning_options(parser)
+    add_live_view_options(parser, "while it tracks")
+    _viewer_options(parser, record=False)
 
 def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> list[tuple[Camera, str]]:
     """(camera, device) for each ``--camera``, in calibration order: by position, or ``NAME=DEVICE`` by name."""
@@ -320,9 +306,9 @@ def run(args: argparse.Namespace) -> int:
     cameras = [camera for camera, _ in rig]
     model = load_model(args.model)
     init = load_pose_file(args.init, model)
-    given = {"iterations": args.iterations, "spacing": args.spacing, "search_range": args.search_range,
-             "motion": args.motion, "damping": args.damping, "resample_every": args.resample_every}
-    settings = Settings(**{key: value for key, value in given.items() if value is not None})
+    from tracker.cli import settings_from
+
+    settings = settings_from(args)
     out = Path(args.out) if args.out else DEFAULT_OUT
     with ExitStack() as stack:
         sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
