@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
+from tracker.io.tomlfile import read_text
 
 
 @dataclass
@@ -51,12 +52,7 @@ _CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Z
 def load_bvh(path: str | os.PathLike) -> Bvh:
     """Parse a BVH file (HIERARCHY and MOTION sections); TrackerInputError when it is missing or malformed."""
     path = Path(path)
-    try:
-        text = path.read_text(errors="strict")
-    except FileNotFoundError:
-        raise TrackerInputError(f"{path}: BVH file not found; give the path of an existing .bvh motion file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrackerInputError(f"{path}: cannot read the BVH file ({exc}); give a readable text .bvh file") from None
+    text = read_text(path, "BVH", "give the path of an existing .bvh motion file")
     try:
         return _parse_bvh(text)
     except (ValueError, IndexError) as exc:

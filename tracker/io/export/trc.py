@@ -30,6 +30,7 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_write
+from tracker.io.tomlfile import read_text
 
 HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units", "OrigDataRate",
                "OrigDataStartFrame", "OrigNumFrames")
@@ -93,12 +94,7 @@ def write_trc(path: str | os.PathLike, names: Sequence[str], frame: np.ndarray, 
 def read_trc(path: str | os.PathLike) -> Trc:
     """Parse a TRC file; TrackerInputError when it is missing or malformed."""
     path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except FileNotFoundError:
-        raise TrackerInputError(f"{path}: TRC file not found; check the path") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise TrackerInputError(f"{path}: cannot read the TRC file ({error}); give a readable text .trc file") from None
+    lines = read_text(path, "TRC", "check the path").splitlines()
     try:
         return _parse_trc(lines)
     except (ValueError, IndexError, KeyError) as error:
