@@ -302,7 +302,11 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
     synth.set_defaults(run=cmd_synth)
     from tracker import live
+    from tracker.calibrate import command as calibrate
     from tracker.io import export
+
+    calibration = sub.add_parser("calibrate", help="calibrate a camera rig from videos or photos of a board")
+    calibrate.add_arguments(calibration)
 
     capture = sub.add_parser("live", help="track cameras live (V4L2 through OpenCV), optionally recording them")
     live.add_arguments(capture)
