@@ -13,7 +13,6 @@ Real data (../shared/data, see its README):
 
 from __future__ import annotations
 
-import argparse
 import re
 import tomllib
 import xml.etree.ElementTree as ET
@@ -24,7 +23,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.calibrate import command
+from tracker.cli import build_parser
 from tracker.calibrate.board import Detection, parse_board
 from tracker.calibrate.extrinsics import (
     Pose,
@@ -43,9 +42,7 @@ POSE2SIM = DATA / "pose2sim-intrinsics"
 
 
 def run_cli(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser()
-    command.add_arguments(parser)
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(["calibrate", *argv])
     return args.run(args)
 
 

@@ -141,3 +141,17 @@ def test_disk_full_mid_run_keeps_the_frames_already_saved(tmp_path, capsys, monk
     assert "No space left on device" in _error_line(capsys)
     assert list(load_poses(tmp_path / "poses.npz")["frame"]) == list(range(25))
     assert [p.name for p in tmp_path.iterdir()] == ["poses.npz"]  # no temporary file left behind
+
+
+def test_a_start_beyond_the_recording_leaves_earlier_results_alone(tiny_recording, tmp_path, capsys):
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--quiet"]) == 0
+    before = (tmp_path / "poses.npz").read_bytes()
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--start", "6", "--quiet"]) == 2
+    assert "--start 6 is outside its frames 0..5" in _error_line(capsys)
+    assert (tmp_path / "poses.npz").read_bytes() == before
+
+
+def test_a_port_out_of_range_is_a_usage_error(tiny_recording, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["view", str(tiny_recording), "--port", "70000"])
+    assert exit_info.value.code == 2 and "0-65535" in capsys.readouterr().err

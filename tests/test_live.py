@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 from tracker.camera import load_calibration
-from tracker.cli import main
+from tracker.cli import build_parser, main
 from tracker.errors import TrackerInputError
 from tracker.io.capture import Capture, CaptureError, ReplayClock, ReplaySource
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.live import Recorder, add_arguments, assign_cameras, run, track_live
+from tracker.live import Recorder, assign_cameras, run, track_live
 from tracker.model import load_model
 from tracker.track import Settings
 
@@ -28,11 +28,10 @@ DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
 
 
 def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:
-    parser = argparse.ArgumentParser()
-    add_arguments(parser)
     options = [item for camera in cameras for item in ("--camera", camera)]
-    return parser.parse_args(options + ["--calib", str(rec / "calibration.toml"), "--model", str(rec / "model.toml"),
-                                        "--init", str(rec / "init.toml"), *extra])
+    return build_parser().parse_args(["live"] + options + [
+        "--calib", str(rec / "calibration.toml"), "--model", str(rec / "model.toml"),
+        "--init", str(rec / "init.toml"), *extra])
 
 
 def _replayed(recording: Path, out: Path, *extra: str) -> dict:

@@ -38,6 +38,20 @@ def _share(text: str) -> float:
     return value
 
 
+def _size(text: str) -> tuple[int, int]:
+    width, _, height = text.lower().partition("x")
+    if not (width.isdigit() and height.isdigit() and int(width) > 0 and int(height) > 0):
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels, e.g. 640x480, got {text}")
+    return int(width), int(height)
+
+
+def _port(text: str) -> int:
+    value = int(text)
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a port number 0-65535, got {text}")
+    return value
+
+
 def _cameras(text: str | None) -> list[str] | None:
     return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
@@ -59,9 +73,14 @@ def cmd_track(args: argparse.Namespace) -> int:
     from tracker.io.poses import PosesWriter, load_poses
     from tracker.io.recording import frames, open_recording
     from tracker.model import joint_centres, load_model
-    from tracker.track import LOST, TRACKED, UNCERTAIN, Settings, Tracker
+    from tracker.track import LOST, TRACKED, UNCERTAIN, Tracker
 
+    if args.record and not args.view:
+        raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec = open_recording(args.recording, _cameras(args.cameras))
+    if not 0 <= args.start < rec.frame_count:
+        raise TrackerInputError(f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; "
+                                "pick a frame inside them")
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
     settings = settings_from(args)
@@ -73,8 +92,6 @@ def cmd_track(args: argparse.Namespace) -> int:
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
-    if args.record and not args.view:
-        raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     live = _live_view(args, rec, model, init, settings) if args.view else None
     overlay = None
     if args.overlay:
@@ -231,11 +248,28 @@ def cmd_synth(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_live(args: argparse.Namespace) -> int:
+    from tracker import live
+
+    return live.run(args)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from tracker.calibrate import command
+
+    return command.run(args)
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from tracker.io import export
+
+    return export.run(args)
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     import json
 
     from tracker import bench
-    from tracker.track import Settings
 
     settings = settings_from(args)
     print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)
@@ -301,20 +335,61 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--stride", type=_positive_int, default=2, help="BVH frames per rendered frame (default 2)")
     synth.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
     synth.set_defaults(run=cmd_synth)
-    from tracker import live
-    from tracker.calibrate import command as calibrate
-    from tracker.io import export
+    live = sub.add_parser("live", help="track cameras live (V4L2 through OpenCV), optionally recording them")
+    live.add_argument("--camera", action="append", required=True, metavar="[NAME=]DEVICE",
+                      help="a camera: a V4L2 device such as /dev/video0, or a video file played at its frame "
+                           "rate; repeat for each camera; matched to the calibration's cameras in order, or "
+                           "to the one called NAME")
+    live.add_argument("--calib", required=True, help="calibration.toml of the cameras")
+    live.add_argument("--model", required=True, help="body model TOML")
+    live.add_argument("--init", required=True, help="pose at the first frame (init.toml)")
+    live.add_argument("--size", type=_size, metavar="WxH",
+                      help="image size to ask the cameras for (default: each camera's calibrated size, "
+                           "which the camera must give)")
+    live.add_argument("--fps", type=_positive_float, help="frame rate to ask the cameras for (default: the driver's)")
+    live.add_argument("--out", help="output folder for poses.npz (default out/live)")
+    live.add_argument("--record", metavar="DIR",
+                      help="also write the tracked frames as a recording folder that `tracker track DIR` "
+                           "replays to the same poses")
+    add_tuning_options(live)
+    add_live_view_options(live, "while it tracks")
+    _viewer_options(live, record=False)
+    live.set_defaults(run=cmd_live)
 
     calibration = sub.add_parser("calibrate", help="calibrate a camera rig from videos or photos of a board")
-    calibrate.add_arguments(calibration)
-
-    capture = sub.add_parser("live", help="track cameras live (V4L2 through OpenCV), optionally recording them")
-    live.add_arguments(capture)
-    capture.set_defaults(run=live.run)
+    calibration.add_argument("folder", metavar="DIR",
+                             help="folder with one board video (<cam>.mp4|.avi|.mkv) or image folder (<cam>/) per "
+                                  "camera, frame-synchronous")
+    calibration.add_argument("--board", required=True, metavar="SPEC",
+                             help="chessboard:COLSxROWS:SQUARE_M (inner corners) or "
+                                  "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares); add :inverted for "
+                                  "light-on-dark boards")
+    calibration.add_argument("--out", required=True, metavar="calibration.toml", help="the calibration file to write")
+    calibration.add_argument("--fix-intrinsics", metavar="calibration.toml",
+                             help="take each camera's K and distortion from this file (by camera name) and keep "
+                                  "them fixed")
+    calibration.add_argument("--intrinsics-only", action="store_true",
+                             help="calibrate each camera's intrinsics only (cameras need not share views)")
+    calibration.add_argument("--world", choices=("first-camera", "board"), default="first-camera",
+                             help="world frame: the first camera (default), or the board where first seen, "
+                                  "on the floor with z up")
+    calibration.add_argument("--inverted", action="store_true", help="the board is printed light on dark")
+    calibration.add_argument("--refine-intrinsics", action="store_true",
+                             help="let the bundle adjustment refine the intrinsics as well as the poses")
+    calibration.add_argument("--max-frames", type=_positive_int, default=300, metavar="N",
+                             help="search about N frames per camera, evenly spread (default 300)")
+    calibration.set_defaults(run=cmd_calibrate)
 
     exporter = sub.add_parser("export", help="write poses.npz as TRC, C3D, BVH or CSV for other tools")
-    export.add_arguments(exporter)
-    exporter.set_defaults(run=export.run)
+    exporter.add_argument("poses", metavar="POSES", help="poses.npz written by tracker track (or a truth.npz)")
+    exporter.add_argument("--to", required=True, metavar="FORMAT", type=str.lower,
+                          help="trc (OpenSim/Pose2Sim markers, mm, z up), c3d (POINT data, mm, z up), "
+                               "bvh (the model's skeleton for Blender, metres, y up) or csv (metres, z up)")
+    exporter.add_argument("--out", help="output file (default: POSES with the format's suffix, e.g. poses.trc)")
+    exporter.add_argument("--model", help="body model TOML the poses were tracked with (bvh only, where it is needed)")
+    exporter.add_argument("--fps", type=_positive_float,
+                          help="frames per second (default: from the poses file's frame and time arrays)")
+    exporter.set_defaults(run=cmd_export)
 
     bench = sub.add_parser("bench", help="per-stage timings, frames per second and the decode-only floor")
     bench.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
@@ -369,7 +444,8 @@ def add_live_view_options(parser: argparse.ArgumentParser, after: str) -> None:
 def _viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> None:
     parser.add_argument("--host", default="127.0.0.1",
                         help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)")
-    parser.add_argument("--port", type=int, default=8080, help="viewer port (default 8080, or the next free one)")
+    parser.add_argument("--port", type=_port, default=8080,
+                        help="viewer port (default 8080, or the next free one; 0 picks any free port)")
     if record:
         parser.add_argument("--record", metavar="FILE.viser",
                             help="also write the viewer session as a .viser file for viser's static client")

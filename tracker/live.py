@@ -61,36 +61,6 @@ STATUS_PERIOD = 1.0  # seconds between status lines
 TAKE_WAIT = 0.1  # seconds the loop waits for a set before it looks at the status and the stop request
 
 
-def _size(text: str) -> tuple[int, int]:
-    width, _, height = text.lower().partition("x")
-    if not (width.isdigit() and height.isdigit() and int(width) > 0 and int(height) > 0):
-        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels, e.g. 640x480, got {text}")
-    return int(width), int(height)
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``tracker live``."""
-    from tracker.cli import _positive_float, _viewer_options, add_live_view_options, add_tuning_options
-
-    parser.add_argument("--camera", action="append", required=True, metavar="[NAME=]DEVICE",
-                        help="a camera: a V4L2 device such as /dev/video0, or a video file played at its frame "
-                             "rate; repeat for each camera; matched to the calibration's cameras in order, or "
-                             "to the one called NAME")
-    parser.add_argument("--calib", required=True, help="calibration.toml of the cameras")
-    parser.add_argument("--model", required=True, help="body model TOML")
-    parser.add_argument("--init", required=True, help="pose at the first frame (init.toml)")
-    parser.add_argument("--size", type=_size, metavar="WxH",
-                        help="image size to ask the cameras for (default: each camera's calibrated size, "
-                             "which the camera must give)")
-    parser.add_argument("--fps", type=_positive_float, help="frame rate to ask the cameras for (default: the driver's)")
-    parser.add_argument("--out", help=f"output folder for poses.npz (default {DEFAULT_OUT})")
-    parser.add_argument("--record", metavar="DIR",
-                        help="also write the tracked frames as a recording folder that `tracker track DIR` "
-                             "replays to the same poses")
-    add_tuning_options(parser)
-    add_live_view_options(parser, "while it tracks")
-    _viewer_options(parser, record=False)
-
 def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> list[tuple[Camera, str]]:
     """(camera, device) for each ``--camera``, in calibration order: by position, or ``NAME=DEVICE`` by name."""
     names = [camera.name for camera in calibration]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import csv
 import warnings
 from pathlib import Path
@@ -17,7 +16,8 @@ from scipy.spatial.transform import Rotation
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.bvh import bvh_global, load_bvh
-from tracker.io.export import add_arguments, export, run
+from tracker.cli import build_parser
+from tracker.io.export import export, run
 from tracker.io.export.bvh import Z_UP_TO_Y_UP, depth_first, euler_zxy, hold_lost, motion, write_bvh
 from tracker.io.export.trc import read_trc, write_trc
 from tracker.io.poses import PosesWriter
@@ -266,10 +266,8 @@ def test_hold_lost_takes_the_last_good_frame() -> None:
 
 
 def test_run_prints_wrote_and_takes_the_format_case_insensitively(tracked: Path, capsys) -> None:
-    parser = argparse.ArgumentParser()
-    add_arguments(parser)
     out = tracked.parent / "sub" / "joints.csv"
-    assert run(parser.parse_args([str(tracked), "--to", "CSV", "--out", str(out), "--fps", "25"])) == 0
+    assert run(build_parser().parse_args(["export", str(tracked), "--to", "CSV", "--out", str(out), "--fps", "25"])) == 0
     assert capsys.readouterr().out == f"wrote {out}\n"
     with open(out) as file:
         assert file.read().splitlines()[2].split(",")[1] == "0.040000000"  # --fps sets the time step

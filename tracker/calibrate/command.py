@@ -38,34 +38,8 @@ from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``tracker calibrate``; the parser's default ``run`` is set to ``run``."""
-    parser.add_argument("folder", metavar="DIR",
-                        help="folder with one board video (<cam>.mp4|.avi|.mkv) or image folder (<cam>/) per camera, "
-                             "frame-synchronous")
-    parser.add_argument("--board", required=True, metavar="SPEC",
-                        help="chessboard:COLSxROWS:SQUARE_M (inner corners) or "
-                             "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares); add :inverted for light-on-dark boards")
-    parser.add_argument("--out", required=True, metavar="calibration.toml", help="the calibration file to write")
-    parser.add_argument("--fix-intrinsics", metavar="calibration.toml",
-                        help="take each camera's K and distortion from this file (by camera name) and keep them fixed")
-    parser.add_argument("--intrinsics-only", action="store_true",
-                        help="calibrate each camera's intrinsics only (cameras need not share views)")
-    parser.add_argument("--world", choices=("first-camera", "board"), default="first-camera",
-                        help="world frame: the first camera (default), or the board where first seen, "
-                             "on the floor with z up")
-    parser.add_argument("--inverted", action="store_true", help="the board is printed light on dark")
-    parser.add_argument("--refine-intrinsics", action="store_true",
-                        help="let the bundle adjustment refine the intrinsics as well as the poses")
-    parser.add_argument("--max-frames", type=int, default=300, metavar="N",
-                        help="search about N frames per camera, evenly spread (default 300)")
-    parser.set_defaults(run=run)
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``tracker calibrate``; prints the per-camera RMS; returns 0 (errors raise TrackerInputError)."""
-    if args.max_frames < 1:
-        raise TrackerInputError(f"--max-frames {args.max_frames}: give a positive number of frames")
     if args.fix_intrinsics and args.intrinsics_only:
         raise TrackerInputError("--fix-intrinsics with --intrinsics-only leaves nothing to calibrate; drop one of them")
     if args.refine_intrinsics and args.fix_intrinsics:

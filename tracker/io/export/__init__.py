@@ -169,25 +169,6 @@ def _bvh_poses(rows: Rows, path: Path, names: tuple[str, ...], model_path: Path)
     return poses
 
 
-def _positive_fps(text: str) -> float:
-    value = float(text)
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The arguments of ``tracker export``."""
-    parser.add_argument("poses", metavar="POSES", help="poses.npz written by tracker track (or a truth.npz)")
-    parser.add_argument("--to", required=True, metavar="FORMAT", type=str.lower,
-                        help="trc (OpenSim/Pose2Sim markers, mm, z up), c3d (POINT data, mm, z up), "
-                             "bvh (the model's skeleton for Blender, metres, y up) or csv (metres, z up)")
-    parser.add_argument("--out", help="output file (default: POSES with the format's suffix, e.g. poses.trc)")
-    parser.add_argument("--model", help="body model TOML the poses were tracked with (bvh only, where it is needed)")
-    parser.add_argument("--fps", type=_positive_fps,
-                        help="frames per second (default: from the poses file's frame and time arrays)")
-
-
 def run(args: argparse.Namespace) -> int:
     """Body of ``tracker export``: write the file and print ``wrote FILE``."""
     target = export(args.poses, args.to, args.out, args.model, args.fps)
