@@ -309,3 +309,12 @@ def test_bad_input(tmp_path: Path, tracked: Path, truth: dict[str, np.ndarray]) 
     bad_trc = tmp_path / "bad.trc"
     bad_trc.write_text("PathFileType\t4\n")
     assert str(bad_trc) in one_line_error(lambda: read_trc(bad_trc))
+
+
+def test_c3d_refuses_frame_numbers_its_16_bit_header_cannot_hold(tmp_path: Path) -> None:
+    from tracker.io.export.c3d import write_c3d
+
+    joints = np.zeros((3, 2, 3))
+    with pytest.raises(TrackerInputError, match="export to TRC or CSV"):
+        write_c3d(tmp_path / "late.c3d", ["a", "b"], 70_000, 60.0, joints)
+    assert not (tmp_path / "late.c3d").exists()

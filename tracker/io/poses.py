@@ -140,7 +140,8 @@ def load_poses(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
     ``joint_names`` and ``joints`` are required; ``frame``, ``time``, ``status``,
     ``residual``, ``elapsed``, ``component_names`` and ``poses`` are optional (truth files
-    often hold only the joints), and so is any extra array, returned as is.
+    often hold only the joints; a missing ``frame`` is filled in as 0..F-1), and so is any extra
+    array, returned as is.
     Byte-string name arrays are decoded to unicode.
     """
     path = Path(path)
@@ -195,7 +196,8 @@ def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarra
                                 ("elapsed", np.float64, False)):
         if key in arrays:
             out[key] = numbers(key, (frames,), dtype, integer)
-    if "frame" in out and len(np.unique(out["frame"])) != frames:
+    out.setdefault("frame", np.arange(frames, dtype=np.int64))
+    if len(np.unique(out["frame"])) != frames:
         raise fail("'frame' repeats a frame index")
     if "status" in out and not np.isin(out["status"], (STATUS_TRACKED, STATUS_UNCERTAIN, STATUS_LOST)).all():
         raise fail("'status' holds values other than 0, 1, 2")

@@ -33,8 +33,7 @@ def truth_rows(truth: dict | None, frames: np.ndarray) -> np.ndarray | None:
     if truth is None:
         return None
     joints = truth["joints"]
-    index = truth.get("frame", np.arange(len(joints)))
-    row = {int(f): k for k, f in enumerate(index)}
+    row = {int(f): k for k, f in enumerate(truth["frame"])}
     out = np.full((len(frames),) + joints.shape[1:], np.nan)
     for k, f in enumerate(frames):
         if int(f) in row:

@@ -61,7 +61,7 @@ def frame_rate(data: dict[str, np.ndarray], path: Path, fps: float | None = None
     """``fps`` if given, else frames per second from the first and last ``frame`` and ``time``."""
     if fps is not None:
         return float(fps)
-    frame = data.get("frame", np.arange(len(data["joints"])))
+    frame = data["frame"]
     if "time" not in data or len(frame) < 2 or not data["time"][-1] > data["time"][0]:
         raise TrackerInputError(f"{path}: no 'time' array of two or more frames to take the frame rate from; pass --fps")
     rate = float((frame[-1] - frame[0]) / (data["time"][-1] - data["time"][0]))
@@ -79,7 +79,7 @@ def regular_rows(data: dict[str, np.ndarray], path: Path, fps: float | None = No
     if count == 0:
         raise TrackerInputError(f"{path}: holds no frames; export a poses file with at least one frame")
     rate = frame_rate(data, path, fps)
-    given = data.get("frame", np.arange(count))
+    given = data["frame"]
     order = np.argsort(given)
     given = given[order]
     frame = np.arange(given[0], given[-1] + 1)

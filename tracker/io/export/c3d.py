@@ -20,9 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_write
 
 _MM_PER_M = 1000.0
+_C3D_MAX_FRAMES = 65535  # the header's first and last frame are 16-bit
 
 
 def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, rate: float,
@@ -31,6 +33,9 @@ def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, r
     import ezc3d
 
     count = len(joints)
+    if count > _C3D_MAX_FRAMES or not 0 <= first_frame <= _C3D_MAX_FRAMES:
+        raise TrackerInputError(f"{path}: C3D headers hold frame numbers up to {_C3D_MAX_FRAMES}, these frames run "
+                                f"{first_frame}..{first_frame + count - 1}; export to TRC or CSV instead")
     gap = ~np.isfinite(joints).all(axis=2)  # (F, M)
     points = np.ones((4, len(names), count))
     points[:3] = np.transpose(joints, (2, 1, 0)) * _MM_PER_M
