@@ -87,7 +87,8 @@ class Review:
         self.show(int(np.clip(self.row + delta, 0, len(self.frames) - 1)))
 
     def show(self, row: int) -> None:
-        """Draw row ``row`` of the poses file (thread-safe; a row already shown is not redrawn)."""
+        """Draw row ``row`` of the poses file, clamped to its rows (thread-safe; a row already shown is not redrawn)."""
+        row = min(max(int(row), 0), len(self.frames) - 1)
         with self.lock:
             if row == self.row:
                 return
@@ -104,21 +105,24 @@ class Review:
             self.slider.value = row
 
     def _play(self) -> None:
-        """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up with."""
-        started, first = None, 0
+        """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up
+        with; the clock restarts from the shown row when the speed changes or someone else moved the timeline."""
+        clock, played = None, None
         while not self.stopping.is_set():
             if not self.play.value:
-                started = None
+                clock = None
                 self.stopping.wait(0.05)
                 continue
-            if started is None:
-                started, first = time.monotonic(), max(self.row, 0)
             rate = self.recording.fps * float(self.speed.value.rstrip("x"))
+            if clock is None or clock[2] != rate or self.row != played:
+                clock = (time.monotonic(), max(self.row, 0), rate)
+            started, first, _ = clock
             row = first + int((time.monotonic() - started) * rate)
             if row >= len(self.frames):
                 self.play.value = False
                 continue
             self.show(row)
+            played = row
             self.stopping.wait(max(0.0, started + (row + 1 - first) / rate - time.monotonic()))
 
     def record(self, path: Path, progress: bool = True) -> None:
