@@ -20,10 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.io.atomic import atomic_write
 from tracker.model import Model
 from tracker.track import FrameResult, Settings, Tracker
-from tracker.viewer.scene import Frame, Scene, add_plot
+from tracker.viewer.scene import Frame, Scene, add_run_plots, run_plot_values, write_viser
 
 PLOT_PERIOD = 0.5  # seconds between plot refreshes
 IMAGE_PERIOD = 0.1  # seconds between camera image refreshes (the body moves at the full rate)
@@ -43,16 +42,11 @@ class LiveView:
         self.arrived = threading.Event()
         self.stopping = threading.Event()
         self.shown = 0
-        self.history = {key: deque(maxlen=history) for key in ("frame", "status", "residual", "fps")}
+        self.history = {key: deque(maxlen=history) for key in ("frame", "status", "residual", "elapsed")}
         self.trajectory = deque(maxlen=history)
         gui = scene.server.gui
         with gui.add_folder("Live", order=20):
-            self.plots = {
-                key: add_plot(gui, key, label, colour, np.zeros(2), np.zeros(2), y_range)
-                for key, label, colour, y_range in (
-                    ("status", "0 tracked, 1 uncertain, 2 lost", "#d04020", (-0.1, 2.1)),
-                    ("residual", "residual (px)", "#2060d0", None),
-                    ("fps", "tracker fps", "#20a040", None))}
+            self.plots = add_run_plots(gui, np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2))
         scene.look_at_body(initial_poses)
         self.thread = threading.Thread(target=self._run, name="viewer live", daemon=True)
         self.thread.start()
@@ -63,8 +57,8 @@ class LiveView:
             self.latest = (index, images, result)
             self.history["frame"].append(float(index))
             self.history["status"].append(float(result.status))
-            self.history["residual"].append(result.residual if np.isfinite(result.residual) else -1.0)
-            self.history["fps"].append(1.0 / elapsed if elapsed > 0 else 0.0)
+            self.history["residual"].append(result.residual)
+            self.history["elapsed"].append(elapsed)
             self.trajectory.append(result.poses[0, 0:3, 3])
         self.arrived.set()
 
@@ -109,8 +103,9 @@ class LiveView:
             trajectory = np.array(self.trajectory)
         if len(columns["frame"]) < 2:
             return
+        values = run_plot_values(columns["status"], columns["residual"], columns["elapsed"])
         for key, plot in self.plots.items():
-            plot.data = (columns["frame"], columns[key])
+            plot.data = (columns["frame"], values[key])
         self.scene.show_trajectory(trajectory)
 
     def close(self) -> None:
@@ -123,5 +118,4 @@ class LiveView:
             self._show(*latest)
         self._plot()
         if self.serializer is not None:
-            data = self.serializer.serialize()
-            atomic_write(self.record_path, lambda file: file.write(data))
+            write_viser(self.serializer, self.record_path)

@@ -17,12 +17,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from tracker.io.atomic import atomic_write
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.track import Settings, Tracker
-from tracker.viewer.scene import Frame, Scene, add_plot
+from tracker.viewer.scene import Frame, Scene, add_run_plots, write_viser
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 STATUS_NAMES = ("tracked", "uncertain", "lost")
@@ -72,15 +71,11 @@ class Review:
         self.player.start()
 
     def _plots(self, gui) -> None:
-        x = self.frames.astype(np.float64)
+        unknown = np.full(len(self.frames), np.nan)
+        results = self.results
         with gui.add_folder("Plots", order=20, expand_by_default=False):
-            add_plot(gui, "status", "0 tracked, 1 uncertain, 2 lost", "#d04020", x, self.results["status"],
-                     (-0.1, 2.1))
-            add_plot(gui, "residual", "residual (px)", "#2060d0", x, np.nan_to_num(self.results["residual"], nan=-1.0))
-            elapsed = self.results.get("elapsed")
-            if elapsed is not None:
-                fps = np.where(elapsed > 0, 1.0 / np.where(elapsed > 0, elapsed, 1.0), 0.0)
-                add_plot(gui, "speed", "tracker fps", "#20a040", x, fps)
+            add_run_plots(gui, self.frames, results.get("status", np.zeros(len(self.frames))),
+                          results.get("residual", unknown), results.get("elapsed", unknown))
 
     def step(self, delta: int) -> None:
         self.play.value = False
@@ -131,8 +126,7 @@ class Review:
         for row in tqdm(range(len(self.frames)), unit="frame", desc="recording the viewer", disable=not progress):
             self.show(row)
             serializer.insert_sleep(1.0 / self.recording.fps)
-        data = serializer.serialize()
-        atomic_write(Path(path), lambda file: file.write(data))
+        write_viser(serializer, path)
 
     def close(self) -> None:
         self.stopping.set()

@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
 import viser
 import viser.transforms as vtf
 
+from tracker.io.atomic import atomic_write
 from tracker.model import Model, joint_centres
 from tracker.track import Inspection
 from tracker.viewer.mesh import component_meshes
@@ -55,6 +57,33 @@ def add_plot(gui, title: str, label: str, colour: str, x: np.ndarray, y: np.ndar
     return gui.add_uplot((np.asarray(x, np.float64), np.asarray(y, np.float64)),
                          ({"label": "frame"}, {"label": label, "stroke": colour, "width": 1.5}),
                          title=title, scales=scales, aspect=2.5)
+
+
+PLOTS = (("status", "0 tracked, 1 uncertain, 2 lost", "#d04020", (-0.1, 2.1)),
+         ("residual", "residual (px)", "#2060d0", None),
+         ("fps", "tracker fps", "#20a040", None))
+
+
+def run_plot_values(status: np.ndarray, residual: np.ndarray, elapsed: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-frame status, residual (-1 where no edge was found) and tracker speed (0 where unknown)."""
+    elapsed = np.asarray(elapsed, np.float64)
+    known = elapsed > 0
+    return {"status": np.asarray(status, np.float64),
+            "residual": np.nan_to_num(np.asarray(residual, np.float64), nan=-1.0),
+            "fps": np.where(known, 1.0 / np.where(known, elapsed, 1.0), 0.0)}
+
+
+def add_run_plots(gui, frames, status, residual, elapsed) -> dict:
+    """The status, residual and speed plots of a run, keyed as :data:`PLOTS`."""
+    values = run_plot_values(status, residual, elapsed)
+    return {key: add_plot(gui, key, label, colour, frames, values[key], y_range)
+            for key, label, colour, y_range in PLOTS}
+
+
+def write_viser(serializer, path) -> None:
+    """Write a scene serializer's recording as a .viser file, atomically."""
+    data = serializer.serialize()
+    atomic_write(Path(path), lambda file: file.write(data))
 
 
 def _wxyz(rotation: np.ndarray) -> np.ndarray:
