@@ -53,6 +53,7 @@ from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import PosesWriter
+from tracker.io.recording import VIDEO_SUFFIXES
 from tracker.model import Model, joint_centres, load_model
 from tracker.track import Settings, Tracker
 
@@ -99,6 +100,8 @@ def open_sources(devices: list[str], cameras: list[Camera], size: tuple[int, int
         for device, camera in zip(devices, cameras):
             if Path(device).is_file():
                 source = ReplaySource(device, clock)
+            elif Path(device).suffix.lower() in VIDEO_SUFFIXES:
+                raise TrackerInputError(f"{device}: no such video file; check the path")
             else:
                 source = V4L2Source(device, size or camera.size, fps)
             sources.append(source)

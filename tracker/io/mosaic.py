@@ -53,7 +53,12 @@ class MosaicWriter:
     def close(self) -> None:
         """Finish the video and put it in place (nothing is left behind if no frame was written)."""
         self.writer.release()
-        if self.frames:
-            os.replace(self.temp, self.path)
-        else:
+        if not self.frames:
             self.temp.unlink(missing_ok=True)
+            return
+        try:
+            os.replace(self.temp, self.path)
+        except OSError as error:
+            self.temp.unlink(missing_ok=True)
+            raise TrackerInputError(f"{self.path}: cannot write ({error.strerror or error}); "
+                                    "free disk space or choose a writable place for the video") from None
