@@ -181,7 +181,8 @@ class BoardDetector:
         return self._detect_chessboard(grey)
 
     def _detect_charuco(self, grey: np.ndarray) -> Detection | None:
-        best = None
+        """The board's front side, else its mirrored back (double-sided boards): the back's corners are
+        those of the front seen in a left-right flipped image, mapped back by x -> W - 1 - x."""
         for mirrored in (False, True):
             image = cv2.flip(grey, 1) if mirrored else grey
             corners, ids, _, _ = self._charuco.detectBoard(image)
@@ -191,14 +192,11 @@ class BoardDetector:
             if mirrored:
                 pixels[:, 0] = grey.shape[1] - 1 - pixels[:, 0]
             ids = ids.ravel().astype(np.int64)
-            if best is None or len(ids) > len(best.ids):
-                best = Detection(ids, pixels)
-            if len(best.ids) >= MIN_CORNERS:
-                break  # the front side was found: no need to look for the mirrored back
-        if best is None or not _spans_plane(self.board.object_points[best.ids]):
-            return None
-        order = np.argsort(best.ids)
-        return Detection(best.ids[order], best.pixels[order])
+            if not _spans_plane(self.board.object_points[ids]):
+                return None
+            order = np.argsort(ids)
+            return Detection(ids[order], pixels[order])
+        return None
 
     def _detect_chessboard(self, grey: np.ndarray) -> Detection | None:
         cols, rows = self.board.grid

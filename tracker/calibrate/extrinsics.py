@@ -182,7 +182,7 @@ def pairwise_poses(poses: list[dict[int, Pose]]) -> dict[tuple[int, int], PairEs
     return pairs
 
 
-def spanning_tree(count: int, pairs: dict[tuple[int, int], PairEstimate], root: int = 0) -> dict[int, int]:
+def spanning_tree(pairs: dict[tuple[int, int], PairEstimate], root: int = 0) -> dict[int, int]:
     """Parent of every camera reached from ``root`` in the maximum spanning tree of shared views
     (Prim's algorithm); cameras not reached are missing from the result, the root maps to itself."""
     parent = {root: root}
@@ -364,7 +364,7 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
                 found[f] = pose
         poses.append(found)
     pairs = pairwise_poses(poses)
-    parent = spanning_tree(count, pairs, root)
+    parent = spanning_tree(pairs, root)
     if len(parent) < count:
         raise ValueError("split rig", sorted(set(range(count)) - set(parent)))
     camera_poses = chain_poses(parent, pairs, root)
