@@ -171,3 +171,19 @@ def test_readers_apply_prepare_and_stop_when_the_consumer_stops(tmp_path: Path) 
     assert np.abs((255 - images[0]).astype(float) - content(0, 0)).mean() < 4.0
     stream.close()  # the consumer gives up early: every reader thread ends
     assert not [t for t in threading.enumerate() if t.name.startswith("reader ")]
+
+
+def test_seeking_decodes_exactly_as_the_readers() -> None:
+    """The viewer's random access (FrameSeeker) gives the tracker's grey frames, in any order."""
+    import itertools
+
+    from tracker.io.readers import FrameSeeker, grey_frames
+
+    video = Path(__file__).resolve().parents[2] / "recordings" / "demo" / "cam1.avi"
+    sequence = list(itertools.islice(grey_frames(video), 12))
+    seeker = FrameSeeker(video)
+    try:
+        for index in (10, 3, 4, 11, 0):
+            np.testing.assert_array_equal(seeker.read(index), sequence[index])
+    finally:
+        seeker.close()

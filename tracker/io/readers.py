@@ -67,24 +67,35 @@ def grey_frames(source: Path, start: int = 0) -> Iterator[np.ndarray]:
         for index, file in enumerate(image_files(source)[start:], start):
             yield read_image(file, index, cv2.IMREAD_GRAYSCALE)
         raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
-    capture = cv2.VideoCapture(str(source), cv2.CAP_FFMPEG)
-    if not capture.isOpened():
-        capture = cv2.VideoCapture(str(source))
+    capture, raw = _open_video(source)
     try:
-        raw = int(capture.get(cv2.CAP_PROP_FOURCC)) == _MJPG and capture.set(cv2.CAP_PROP_FORMAT, -1)
         for index in range(start):
             if not capture.grab():
                 raise _decode_error(source, index)
         for index in itertools.count(start):
-            ok, data = capture.read()
-            if not ok:
-                raise _decode_error(source, index)
-            image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if raw else _grey(data)
-            if image is None:
-                raise _decode_error(source, index)
-            yield image
+            yield _read_grey(capture, raw, source, index)
     finally:
         capture.release()
+
+
+def _open_video(source: Path) -> tuple[cv2.VideoCapture, bool]:
+    """A capture of the video and whether its frames come as raw Motion-JPEG (decoded to grey directly)."""
+    capture = cv2.VideoCapture(str(source), cv2.CAP_FFMPEG)
+    if not capture.isOpened():
+        capture = cv2.VideoCapture(str(source))
+    raw = int(capture.get(cv2.CAP_PROP_FOURCC)) == _MJPG and capture.set(cv2.CAP_PROP_FORMAT, -1)
+    return capture, bool(raw)
+
+
+def _read_grey(capture: cv2.VideoCapture, raw: bool, source: Path, index: int) -> np.ndarray:
+    """The next frame as grey uint8 (raw Motion-JPEG: libjpeg's luma plane; otherwise colour converted)."""
+    ok, data = capture.read()
+    if not ok:
+        raise _decode_error(source, index)
+    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if raw else _grey(data)
+    if image is None:
+        raise _decode_error(source, index)
+    return image
 
 
 class _Reader:
@@ -148,19 +159,18 @@ class FrameSeeker:
     def __init__(self, source: Path):
         self.source = source
         self.files = image_files(source) if source.is_dir() else None
-        self.capture = None if self.files is not None else cv2.VideoCapture(str(source))
+        self.capture, self.raw = (None, False) if self.files is not None else _open_video(source)
         self.next_index = 0
 
     def read(self, index: int) -> np.ndarray:
+        """Frame ``index`` decoded exactly as the tracker's readers decode it."""
         if self.files is not None:
             return read_image(self.files[index], index, cv2.IMREAD_GRAYSCALE)
         if index != self.next_index:
             self.capture.set(cv2.CAP_PROP_POS_FRAMES, index)
-        ok, image = self.capture.read()
-        if not ok:
-            raise _decode_error(self.source, index)
+        image = _read_grey(self.capture, self.raw, self.source, index)
         self.next_index = index + 1
-        return _grey(image)
+        return image
 
     def close(self) -> None:
         if self.capture is not None:
