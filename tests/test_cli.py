@@ -155,3 +155,11 @@ def test_a_port_out_of_range_is_a_usage_error(tiny_recording, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["view", str(tiny_recording), "--port", "70000"])
     assert exit_info.value.code == 2 and "0-65535" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", [["--dynamics", "kalman"], ["--motion", "none"]])
+def test_motion_models_from_the_command_line(tiny_recording, tmp_path, option):
+    from tracker.io.poses import load_poses
+
+    assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--quiet", *option]) == 0
+    assert len(load_poses(tmp_path / "poses.npz")["frame"]) == 6

@@ -83,7 +83,7 @@ def cmd_track(args: argparse.Namespace) -> int:
                                 "pick a frame inside them")
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
-    settings = settings_from(args)
+    settings = settings_from(args, rec.fps)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
@@ -416,8 +416,10 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
         "search_range": (["--search-range"], dict(
             type=_positive_int, help="edge search in the first iteration, pixels either side (default 20; the "
                                      "last uses 6)")),
-        "motion": (["--motion"], dict(choices=("none", "constant-velocity"),
-                                      help="motion model that predicts each frame's pose (default constant-velocity)")),
+        "motion": (["--dynamics", "--motion"], dict(
+            dest="motion", choices=("none", "constant-velocity", "kalman"),
+            help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
+                 "(a second-order Kalman filter per component whose prediction and covariance set the prior)")),
         "damping": (["--damping"], dict(type=_share, help="share of the last frame's motion carried into the "
                                                           "prediction (default 1; 0.5 steadies a single camera)")),
     }
@@ -426,11 +428,13 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
         parser.add_argument(*flags, **kwargs)
 
 
-def settings_from(args: argparse.Namespace):
-    """Settings with the tuning options the user gave (the others at their defaults)."""
+def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
+    """Settings with the tuning options the user gave (the others at their defaults) and the frame rate
+    of the images (the Kalman filter's time step)."""
     from tracker.track import Settings
 
     given = {key: getattr(args, key, None) for key in TUNING}
+    given["frame_rate"] = frame_rate
     return Settings(**{key: value for key, value in given.items() if value is not None})
 
 

@@ -212,6 +212,7 @@ def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
     """A tracker for ``cameras`` that goes on from ``tracker``'s poses and motion with its (pixel-scaled) settings."""
     rebuilt = Tracker(tracker.model, cameras, tracker.poses, tracker.settings)
     rebuilt.previous = tracker.previous
+    rebuilt.dynamics, rebuilt.noise_scale = tracker.dynamics, tracker.noise_scale
     return rebuilt
 
 
@@ -281,11 +282,11 @@ def run(args: argparse.Namespace) -> int:
     init = load_pose_file(args.init, model)
     from tracker.cli import settings_from
 
-    settings = settings_from(args)
     out = Path(args.out) if args.out else DEFAULT_OUT
     with ExitStack() as stack:
         sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
+        settings = settings_from(args, capture.fps)
         print("live: " + ", ".join(f"{camera.name} = {source.name} ({source.size[0]}x{source.size[1]}, "
                                    f"{source.fps:g} fps)" for camera, source in zip(cameras, sources)),
               file=sys.stderr)
