@@ -470,3 +470,24 @@ def test_error_bad_specs_and_options(tmp_path):
     assert "no camera named 'a'" in message
     message = _calibrate_error([str(tmp_path / "nothing"), "--board", "chessboard:9x6:0.03", "--out", "o.toml"])
     assert "not a folder" in message
+
+
+def test_an_error_in_one_camera_stops_the_board_search_of_the_others(tmp_path):
+    """A camera whose frames change size fails at once, and the other camera's search stops with it."""
+    import cv2
+
+    from tracker.calibrate.board import parse_board
+    from tracker.calibrate.sources import CameraViews, detect_all
+
+    good = tmp_path / "good"
+    bad = tmp_path / "bad"
+    good.mkdir()
+    bad.mkdir()
+    for index in range(40):
+        cv2.imwrite(str(good / f"{index:06d}.png"), np.full((48, 64), 128, np.uint8))
+    for index, size in enumerate(((48, 64), (40, 64))):
+        cv2.imwrite(str(bad / f"{index:06d}.png"), np.full(size, 128, np.uint8))
+    cameras = [CameraViews("bad", bad), CameraViews("good", good)]
+    with pytest.raises(TrackerInputError, match="give every frame of a camera the same size"):
+        detect_all(parse_board("chessboard:7x6:0.025"), cameras, workers=1, progress=False)
+    assert cameras[1].searched == 0  # never started: the failure cancelled it

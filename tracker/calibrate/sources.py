@@ -104,16 +104,20 @@ def _frames(source: Path, stride: int):
 def detect_all(board: Board, cameras: list[CameraViews], max_frames: int = 300, workers: int = 2,
                progress: bool = True) -> None:
     """Search every camera's frames for the board (subsampled to about ``max_frames`` per camera),
-    filling in each CameraViews; cameras run in parallel threads (OpenCV releases the GIL)."""
+    filling in each CameraViews; cameras run in parallel threads (OpenCV releases the GIL).  An error in
+    one camera or Ctrl-C stops the others after their current frame."""
     counts = [frame_count(camera.source) for camera in cameras]
     stride = max(1, math.ceil(max(counts) / max_frames)) if counts else 1
     bar = tqdm(total=sum(math.ceil(count / stride) for count in counts), unit="frame", desc="board search",
                disable=not progress, leave=False)
     lock = threading.Lock()
+    stop = threading.Event()
 
     def work(camera: CameraViews) -> None:
         detector = board.detector()
         for index, grey in _frames(camera.source, stride):
+            if stop.is_set():
+                return
             if camera.searched == 0:
                 camera.size = (grey.shape[1], grey.shape[0])
             elif (grey.shape[1], grey.shape[0]) != camera.size:
@@ -130,9 +134,11 @@ def detect_all(board: Board, cameras: list[CameraViews], max_frames: int = 300, 
         if camera.searched == 0:
             raise TrackerInputError(f"{camera.source}: no frames could be read; re-encode the video or add images")
 
+    pool = ThreadPoolExecutor(max_workers=max(1, workers))
     try:
-        with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
-            for future in [pool.submit(work, camera) for camera in cameras]:
-                future.result()
+        for future in [pool.submit(work, camera) for camera in cameras]:
+            future.result()
     finally:
+        stop.set()
+        pool.shutdown(wait=True, cancel_futures=True)
         bar.close()
