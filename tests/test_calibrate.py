@@ -491,3 +491,29 @@ def test_an_error_in_one_camera_stops_the_board_search_of_the_others(tmp_path):
     with pytest.raises(TrackerInputError, match="give every frame of a camera the same size"):
         detect_all(parse_board("chessboard:7x6:0.025"), cameras, workers=1, progress=False)
     assert cameras[1].searched == 0  # never started: the failure cancelled it
+
+
+def test_face_on_views_warn_that_the_focal_length_is_undetermined():
+    """Boards seen square-on at different places and distances fit any focal length: a warning, not a result."""
+    from tracker.calibrate.intrinsics import calibrate_intrinsics
+
+    board = parse_board(f"chessboard:9x6:{SQUARE}")
+    K = np.array([[600.0, 0, 320], [0, 600, 240], [0, 0, 1]])
+    rng = np.random.default_rng(3)
+    views = {}
+    for f in range(8):
+        tvec = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.04, 0.04), rng.uniform(0.35, 0.6)])
+        pixels, _ = cv2.projectPoints(board.object_points, np.zeros(3), tvec - board.object_points.mean(0), K, None)
+        views[f] = Detection(np.arange(54), pixels.reshape(-1, 2) + rng.normal(0, 0.1, (54, 2)))
+    with pytest.warns(UserWarning, match="leave the focal length uncertain"):
+        calibrate_intrinsics(board, views, (640, 480))
+
+
+def test_tilted_views_pin_the_focal_length_without_warning(recwarn):
+    rig = _rig()
+    board, views = _projected_views(rig, _board_poses(12, rig), noise=0.2)
+    from tracker.calibrate.intrinsics import calibrate_intrinsics
+
+    found = calibrate_intrinsics(board, views[0], rig[0].size)
+    assert abs(found.matrix[0, 0] - rig[0].matrix[0, 0]) < 0.02 * rig[0].matrix[0, 0]
+    assert not [w for w in recwarn if "focal length" in str(w.message)]

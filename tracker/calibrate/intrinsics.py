@@ -26,6 +26,7 @@ half diagonal in one camera).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import cv2
@@ -81,13 +82,27 @@ def calibrate_intrinsics(board: Board, detections: dict[int, Detection], size: t
     """K and distortion of one camera from its board detections (at least MIN_VIEWS; the caller checks)."""
     frames = select_views(detections, size, max_views)
     for attempt in range(2):
-        rms, matrix, distortions, per_view = _fit(board, [detections[f] for f in frames], size)
+        rms, matrix, distortions, per_view, tilt = _fit(board, [detections[f] for f in frames], size)
         limit = max(1.0, 3.0 * float(np.median(per_view)))
         keep = [f for f, error in zip(frames, per_view) if error <= limit]
         if attempt == 1 or len(keep) == len(frames) or len(keep) < MIN_VIEWS:
             break
         frames = keep
+    _check_tilt(matrix, tilt, size)
     return Intrinsics(matrix, distortions, rms, len(frames))
+
+
+MIN_TILT_DEG = 10.0  # the largest board tilt below which the views do not pin down the focal length
+
+
+def _check_tilt(matrix: np.ndarray, tilt: float, size: tuple[int, int]) -> None:
+    """Warn when the views leave the focal length undetermined: boards all seen face-on (the largest angle
+    between a board's normal and the optical axis, ``tilt`` degrees, under MIN_TILT_DEG) fit any focal
+    length at a matching distance, so the reprojection RMS looks perfect while fx is arbitrary."""
+    if tilt < MIN_TILT_DEG:
+        warnings.warn(f"camera of {size[0]}x{size[1]} pixels: the board views leave the focal length uncertain "
+                      f"(fx = {matrix[0, 0]:.1f} px, boards tilted {tilt:.1f} degrees at most); show the board "
+                      "tilted by 20-45 degrees in several directions", stacklevel=3)
 
 
 def corner_reach(views: list[Detection], size: tuple[int, int]) -> float:
@@ -106,8 +121,9 @@ def _fit(board: Board, views: list[Detection], size: tuple[int, int]):
         flags |= cv2.CALIB_FIX_K2
     rms, matrix, distortions, rvecs, tvecs = cv2.calibrateCamera(
         objects, images, tuple(size), None, None, flags=flags, criteria=_CRITERIA)
+    tilt = max(float(np.degrees(np.arccos(min(1.0, abs(cv2.Rodrigues(rvec)[0][2, 2]))))) for rvec in rvecs)
     per_view = []
     for obj, img, rvec, tvec in zip(objects, images, rvecs, tvecs):
         projected, _ = cv2.projectPoints(obj, rvec, tvec, matrix, distortions)
         per_view.append(float(np.sqrt(np.mean(np.sum((projected - img).reshape(-1, 2) ** 2, axis=1)))))
-    return float(rms), matrix, distortions.ravel()[:5].astype(np.float64), per_view
+    return float(rms), matrix, distortions.ravel()[:5].astype(np.float64), per_view, tilt
