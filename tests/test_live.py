@@ -98,6 +98,9 @@ def test_a_live_run_records_what_it_tracked_and_tracker_track_replays_it(tiny_re
         assert (record / name).read_bytes() == (tiny_recording / name).read_bytes()
     rows = (record / "timestamps.csv").read_text().splitlines()
     assert rows[0] == "frame,cam0,cam1" and len(rows) == frames + 1
+    # the time of every row is its capture time, whatever was dropped between rows
+    captured = np.array([float(row.split(",")[1]) for row in rows[1:]])
+    np.testing.assert_array_equal(live["time"], captured)
     times = np.array([[float(value) for value in row.split(",")] for row in rows[1:]])
     np.testing.assert_array_equal(times[:, 0], np.arange(frames))
     assert np.all(np.diff(times[:, 1]) > 0) and np.array_equal(times[:, 1], times[:, 2])

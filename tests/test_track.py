@@ -83,11 +83,11 @@ def test_ctrl_c_keeps_the_frames_done(tiny_recording, tmp_path, monkeypatch, cap
     calls = {"n": 0}
     step = Tracker.step
 
-    def interrupted_step(self, images, smoothed=False):
+    def interrupted_step(self, images, smoothed=False, dt=None):
         calls["n"] += 1
         if calls["n"] == 4:
             raise KeyboardInterrupt
-        return step(self, images, smoothed)
+        return step(self, images, smoothed, dt)
 
     monkeypatch.setattr(Tracker, "step", interrupted_step)
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--quiet"]) == 130

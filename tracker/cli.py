@@ -71,7 +71,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     from tracker.evaluate import evaluate, format_report
     from tracker.io.posefile import load_pose_file
     from tracker.io.poses import PosesWriter, load_poses
-    from tracker.io.recording import frames, open_recording
+    from tracker.io.recording import capture_times, frames, open_recording
     from tracker.model import joint_centres, load_model
     from tracker.track import LOST, TRACKED, UNCERTAIN, Tracker
 
@@ -101,16 +101,19 @@ def cmd_track(args: argparse.Namespace) -> int:
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
     residuals = []
     interrupted = False
+    times, last = capture_times(rec), None  # a live recording's capture times: its frames' time and time steps
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
             for index, images in tqdm(frames(rec, args.start, stop, prepare=tracker.smooth),
                                       total=stop - args.start, unit="frame", disable=args.quiet, file=sys.stderr):
+                at = None if times is None else float(times[index])
                 begun = time.perf_counter()
-                result = tracker.step(images, smoothed=True)
+                result = tracker.step(images, smoothed=True, dt=None if at is None or last is None else at - last)
                 spent = time.perf_counter() - begun
+                last = at
                 writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual,
-                              spent)
+                              spent, at)
                 if live is not None:
                     live.offer(index, images, result, spent)
                 if overlay is not None:

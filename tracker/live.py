@@ -233,6 +233,7 @@ def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.n
         with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), capture.fps) as writer:
             print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
             tracker.warm_up()
+            last = None  # capture time of the last set tracked
             with _StopRequest() as stop:
                 capture.start(tracker.smooth)
                 status = _Status(capture)
@@ -252,13 +253,16 @@ def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.n
                             print(f"tracker: the recording ends at its {recorder.frames} frames: a recording "
                                   "folder needs every camera in every frame", file=sys.stderr)
                             recording = False
+                    at = float(f"{frame_set.frames[0].time - capture.started:.6f}")  # as timestamps.csv has it
                     begun = time.perf_counter()
-                    result = tracker.step([frame.image for frame in frame_set.frames], smoothed=True)
+                    result = tracker.step([frame.image for frame in frame_set.frames], smoothed=True,
+                                          dt=None if last is None else at - last)
                     spent = time.perf_counter() - begun
+                    last = at
                     if recording:
                         recorder.write(frame_set, capture.started)
                     writer.append(frames, result.poses, joint_centres(result.poses), result.status,
-                                  result.residual, spent)
+                                  result.residual, spent, at)
                     if view is not None:
                         images = list(blanks)
                         for camera, frame in zip(frame_set.cameras, frame_set.frames):

@@ -149,3 +149,16 @@ def test_long_runs_flush_geometrically(tmp_path: Path, monkeypatch) -> None:
         writer.append(index, np.tile(np.eye(4), (len(COMPONENTS), 1, 1)), np.zeros((len(JOINTS), 3)), 0, 0.5)
     assert flushed_at[:4] == [25, 50, 75, 100]
     assert sum(flushed_at) < 6 * 2000 and len(flushed_at) < 30
+
+
+def test_rows_with_their_own_times_keep_them(tmp_path: Path) -> None:
+    """Live capture: rows numbered as tracked, timed as captured (stale frames dropped between them)."""
+    path = tmp_path / "poses.npz"
+    rng = np.random.default_rng(7)
+    with PosesWriter(path, COMPONENTS, JOINTS, fps=60.0) as writer:
+        for frame, at in enumerate((0.05, 0.1, 0.3)):
+            poses, joints = row(rng)
+            writer.append(frame, poses, joints, 0, 0.5, 0.01, at)
+        with pytest.raises(ValueError, match="every frame a time or none"):
+            writer.append(3, poses, joints, 0, 0.5)
+    np.testing.assert_array_equal(load_poses(path)["time"], [0.05, 0.1, 0.3])

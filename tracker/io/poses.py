@@ -66,7 +66,9 @@ class PosesWriter:
             "status": np.empty(_INITIAL_CAPACITY, np.int8),
             "residual": np.empty(_INITIAL_CAPACITY, np.float64),
             "elapsed": np.empty(_INITIAL_CAPACITY, np.float64),
+            "time": np.empty(_INITIAL_CAPACITY, np.float64),
         }
+        self._timed: bool | None = None  # whether rows come with their own times (all or none)
         self._count = 0
         self._unflushed = 0
         self._closed = False
@@ -75,13 +77,18 @@ class PosesWriter:
         return self._count
 
     def append(self, frame_index: int, poses: np.ndarray, joints: np.ndarray, status: int, residual: float,
-               elapsed: float = np.nan) -> None:
+               elapsed: float = np.nan, time: float | None = None) -> None:
         """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0/1/2, residual px,
-        and the seconds the tracker spent on it (NaN if unknown)."""
+        the seconds the tracker spent on it (NaN if unknown) and, for frames taken at measured times (live
+        capture), its time in seconds; without times, time = (frame - first frame) / fps."""
         if self._closed:
             raise ValueError(f"{self.path}: writer is closed")
+        if self._timed is None:
+            self._timed = time is not None
+        elif self._timed != (time is not None):
+            raise ValueError(f"{self.path}: give every frame a time or none")
         row = {"frame": frame_index, "poses": poses, "joints": joints, "status": status, "residual": residual,
-               "elapsed": elapsed}
+               "elapsed": elapsed, "time": np.nan if time is None else time}
         for key, value in row.items():
             if np.shape(value) != self._columns[key].shape[1:]:
                 raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._columns[key].shape[1:]}")
@@ -104,7 +111,7 @@ class PosesWriter:
         first = done["frame"][0] if self._count else 0
         return {
             "frame": done["frame"],
-            "time": (done["frame"] - first) / self.fps,
+            "time": done["time"] if self._timed else (done["frame"] - first) / self.fps,
             "component_names": self._component_names,
             "poses": done["poses"],
             "joint_names": self._joint_names,

@@ -4,6 +4,7 @@
     NAME/<camera name>.mp4|.avi|.mkv      a video per camera ...
     NAME/<camera name>/000000.png ...     ... or a folder of numbered .png/.jpg images
     NAME/model.toml, init.toml, truth.npz optional
+    NAME/timestamps.csv                   optional: capture times (``tracker live --record``)
 
 Every camera of the calibration that has a video is tracked, unless a list of
 camera names picks some. All videos must have the same number of frames and
@@ -42,6 +43,7 @@ class Recording:
     frame_count: int
     fps: float
     sources: list[Path]
+    timestamps_path: Path | None = None
 
 
 def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) -> Recording:
@@ -109,6 +111,7 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) ->
         frame_count=counts[0],
         fps=fps,
         sources=chosen_sources,
+        timestamps_path=optional("timestamps.csv"),
     )
 
 
@@ -127,6 +130,23 @@ def frames(recording: Recording, start: int = 0, stop: int | None = None,
             "pick a range inside it"
         )
     return read_frames(recording.sources, start, stop, prepare=prepare)
+
+
+def capture_times(recording: Recording) -> np.ndarray | None:
+    """Each frame's capture time in seconds (the first camera's column of timestamps.csv, as ``tracker live``
+    wrote it), or None when the recording has no timestamps.csv."""
+    path = recording.timestamps_path
+    if path is None:
+        return None
+    try:
+        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    except (OSError, ValueError) as error:
+        raise TrackerInputError(f"{path}: not a readable table of frame,time,... rows ({error}); "
+                                "fix it or remove it") from None
+    if table.shape[1] < 2 or len(table) != recording.frame_count or not np.isfinite(table[:, 1]).all():
+        raise TrackerInputError(f"{path}: needs one row of finite times per frame ({recording.frame_count}); "
+                                "fix it or remove it")
+    return table[:, 1]
 
 
 def _find_source(folder: Path, name: str) -> Path | None:
