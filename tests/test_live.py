@@ -196,3 +196,14 @@ def test_a_live_run_can_be_watched_in_the_viewer(tiny_recording, tmp_path, capsy
     assert run(_args(tiny_recording, cameras, "--out", str(tmp_path), "--view", "--port", "0")) == 0
     assert "viewer: http://127.0.0.1:" in capsys.readouterr().err
     assert len(load_poses(tmp_path / "poses.npz")["frame"]) >= 1
+
+
+def test_a_full_video_ends_the_recording_and_tracking_goes_on(tiny_recording, tmp_path, capsys, monkeypatch):
+    from tracker.io.avi import MjpegAviWriter
+
+    monkeypatch.setattr(MjpegAviWriter, "_MAX_BYTES", 20_000)  # room for a frame or two of 320x240
+    summary = _live(tiny_recording, tmp_path)
+    assert "its videos reached the 1 GiB an AVI file can hold; tracking goes on" in capsys.readouterr().err
+    assert summary.recorded < summary.frames
+    rows = (tmp_path / "rec" / "timestamps.csv").read_text().splitlines()
+    assert len(rows) == summary.recorded + 1  # videos and timestamps agree: the frame that did not fit is in neither

@@ -133,13 +133,18 @@ class Recorder:
         self.times = open(folder / "timestamps.csv", "w", buffering=1)
         self.times.write(",".join(["frame"] + [camera.name for camera in cameras]) + "\n")
 
-    def write(self, frame_set: FrameSet, origin: float) -> None:
-        """Append one set (every camera's frame) and its capture times, in seconds since ``origin``."""
-        for video, frame in zip(self.videos, frame_set.frames):
-            video.write_jpeg(frame.jpeg.tobytes())
+    def write(self, frame_set: FrameSet, origin: float) -> bool:
+        """Append one set (every camera's frame) and its capture times, in seconds since ``origin``; False,
+        writing nothing, when a video cannot take it (AVI 1.0 files end at 1 GiB)."""
+        jpegs = [frame.jpeg.tobytes() for frame in frame_set.frames]
+        if not all(video.fits(len(data)) for video, data in zip(self.videos, jpegs)):
+            return False
+        for video, data in zip(self.videos, jpegs):
+            video.write_jpeg(data)
         self.times.write(",".join([str(self.frames)] + [f"{frame.time - origin:.6f}" for frame in frame_set.frames])
                          + "\n")
         self.frames += 1
+        return True
 
     def close(self) -> None:
         for video in self.videos:
@@ -259,8 +264,10 @@ def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.n
                                           dt=None if last is None else at - last)
                     spent = time.perf_counter() - begun
                     last = at
-                    if recording:
-                        recorder.write(frame_set, capture.started)
+                    if recording and not recorder.write(frame_set, capture.started):
+                        print(f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
+                              "the 1 GiB an AVI file can hold; tracking goes on", file=sys.stderr)
+                        recording = False
                     writer.append(frames, result.poses, joint_centres(result.poses), result.status,
                                   result.residual, spent, at)
                     if view is not None:

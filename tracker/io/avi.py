@@ -56,6 +56,10 @@ class MjpegAviWriter:
             raise RuntimeError("JPEG encoding failed")
         self.write_jpeg(buffer.tobytes())
 
+    def fits(self, size: int) -> bool:
+        """Whether a frame of ``size`` JPEG bytes still fits in the 1 GiB an AVI 1.0 file can hold."""
+        return self.file.tell() + 8 + size + 1 + 16 * (len(self.index) + 1) <= self._MAX_BYTES
+
     def write_jpeg(self, data: bytes) -> None:
         """Append one frame that is already a JPEG of the writer's size, byte for byte (a camera's
         Motion-JPEG frame is stored as it came, so reading the video back decodes the same image)."""
