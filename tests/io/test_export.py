@@ -318,3 +318,11 @@ def test_c3d_refuses_frame_numbers_its_16_bit_header_cannot_hold(tmp_path: Path)
     with pytest.raises(TrackerInputError, match="export to TRC or CSV"):
         write_c3d(tmp_path / "late.c3d", ["a", "b"], 70_000, 60.0, joints)
     assert not (tmp_path / "late.c3d").exists()
+
+
+def test_frames_spread_over_a_huge_range_are_refused(tmp_path: Path) -> None:
+    from tracker.io.export import regular_rows
+
+    data = {"frame": np.array([0, 2_000_000_000]), "time": np.array([0.0, 1.0]), "joints": np.zeros((2, 3, 3))}
+    with pytest.raises(TrackerInputError, match="split the file or renumber"):
+        regular_rows(data, tmp_path / "poses.npz", fps=60.0)

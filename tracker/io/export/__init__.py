@@ -70,6 +70,9 @@ def frame_rate(data: dict[str, np.ndarray], path: Path, fps: float | None = None
     return rate
 
 
+MAX_GAP_FACTOR = 100  # frame numbers may spread over this many times the frames held (plus 1000), gaps included
+
+
 def regular_rows(data: dict[str, np.ndarray], path: Path, fps: float | None = None) -> Rows:
     """The arrays of :func:`tracker.io.poses.load_poses` on every frame index from first to last.
 
@@ -82,6 +85,10 @@ def regular_rows(data: dict[str, np.ndarray], path: Path, fps: float | None = No
     given = data["frame"]
     order = np.argsort(given)
     given = given[order]
+    span = int(given[-1] - given[0]) + 1
+    if span > MAX_GAP_FACTOR * count + 1000:
+        raise TrackerInputError(f"{path}: its {count} frames are spread over frame numbers {given[0]}..{given[-1]}; "
+                                "exports write every frame in between, so split the file or renumber its frames")
     frame = np.arange(given[0], given[-1] + 1)
     row = given - given[0]
 
