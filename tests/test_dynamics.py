@@ -306,18 +306,6 @@ def test_tracker_without_images_keeps_the_body_moving_and_weakens_its_prior():
     assert error < 0.02
 
 
-def test_batched_rotation_exp_and_log_match_the_se3_ones():
-    rng = np.random.default_rng(9)
-    w = np.concatenate([rng.normal(size=(20, 3)), rng.normal(size=(5, 3)) * 1e-6, np.zeros((1, 3)),
-                        [[np.pi - 1e-3, 0.0, 0.0], [0.0, 2.9, 0.1]]])
-    rotations = dynamics.exp_so3(w)
-    for i in range(len(w)):
-        np.testing.assert_allclose(rotations[i], se3.exp_so3(w[i]), atol=1e-14)
-    logs = dynamics.log_so3_many(rotations)
-    for i in range(len(w)):
-        np.testing.assert_allclose(logs[i], se3.log_so3(rotations[i]), atol=1e-10)
-
-
 def test_variance_factor_is_the_weighted_residual_variance_per_component():
     """sigma0_i^2 = sum w m^2 / (n_i - 6) (weighted least squares), shrunk towards the pooled value with the
     weight of 12 samples; samples without an edge (w = 0, m = NaN) do not count."""

@@ -88,7 +88,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from tracker.geometry.se3 import log_so3
+from tracker.geometry.se3 import exp_so3_many, log_so3_many
 
 TRANSLATION, ROTATION = 0, 1
 INITIAL_SPEED = 1.0  # prior standard deviation of the unknown first velocity, m/s
@@ -186,7 +186,7 @@ def predict(state: MotionState, dt: float, q=(1.0, 10.0), decay: float = 0.0) ->
     poses = state.poses.copy()
     velocity = state.velocity * b
     poses[:, :3, 3] += c * state.velocity[:, TRANSLATION]
-    step = exp_so3(c * state.velocity[:, ROTATION])
+    step = exp_so3_many(np.ascontiguousarray(c * state.velocity[:, ROTATION]))
     poses[:, :3, :3] = state.poses[:, :3, :3] @ step
     cov = propagate_covariance(state.covariance, dt, np.asarray(q, dtype=np.float64)[None, :], decay)
     cov[:, ROTATION] = _rotate_block(cov[:, ROTATION], step)
@@ -280,6 +280,14 @@ def variance_factor(component: np.ndarray, offset: np.ndarray, weight: np.ndarra
     return (sums + pooled_weight * pooled) / (np.maximum(counts - 6.0, 0.0) + pooled_weight)
 
 
+def _difference(poses: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Per component, the blocks (N, 2, 3) from ``poses`` to ``target``: ``t' - t`` and ``log(R^T R')`` (body)."""
+    diff = np.empty((poses.shape[0], 2, 3))
+    diff[:, TRANSLATION] = target[:, :3, 3] - poses[:, :3, 3]
+    diff[:, ROTATION] = log_so3_many(np.ascontiguousarray(np.swapaxes(poses[:, :3, :3], -1, -2) @ target[:, :3, :3]))
+    return diff
+
+
 def correct(state: MotionState, poses: np.ndarray, information: np.ndarray) -> MotionState:
     """The measurement update given the posterior poses ``x+`` (the tracked poses) and the data's
     information per block ``W = C / s'`` (N,2,3,3, from :func:`block_information` divided by ``s'``):
@@ -290,10 +298,7 @@ def correct(state: MotionState, poses: np.ndarray, information: np.ndarray) -> M
     with ``x+ - x = t+ - t`` (translation) and ``log(R^T R+)`` (rotation, body); the rotation block is
     then re-expressed about ``R+`` (:func:`rereference`)."""
     poses = np.array(poses, dtype=np.float64)
-    diff = np.empty((poses.shape[0], 2, 3))
-    diff[:, TRANSLATION] = poses[:, :3, 3] - state.poses[:, :3, 3]
-    turn = np.swapaxes(state.poses[:, :3, :3], -1, -2) @ poses[:, :3, :3]
-    diff[:, ROTATION] = log_so3_many(turn)
+    diff = _difference(state.poses, poses)
     cov = state.covariance
     p_xx = cov[..., :3, :3]
     p_ux = cov[..., 3:, :3]
@@ -312,48 +317,13 @@ def correct(state: MotionState, poses: np.ndarray, information: np.ndarray) -> M
 def update(state: MotionState, measured: np.ndarray, information: np.ndarray) -> MotionState:
     """The Kalman update from measured poses ``z`` with information ``W = V^-1`` per block (N,2,3,3):
     ``x+ = x + P_xx+ W (z - x)`` (information form of ``x + K (z - H x)``), then :func:`correct`."""
-    measured = np.asarray(measured, dtype=np.float64)
-    diff = np.empty((measured.shape[0], 2, 3))
-    diff[:, TRANSLATION] = measured[:, :3, 3] - state.poses[:, :3, 3]
-    turn = np.swapaxes(state.poses[:, :3, :3], -1, -2) @ measured[:, :3, :3]
-    diff[:, ROTATION] = log_so3_many(turn)
+    diff = _difference(state.poses, np.asarray(measured, dtype=np.float64))
     posterior = np.linalg.inv(np.linalg.inv(state.covariance[..., :3, :3]) + information)
     step = np.einsum("nbij,nbj->nbi", posterior @ information, diff)
     poses = state.poses.copy()
     poses[:, :3, 3] += step[:, TRANSLATION]
-    poses[:, :3, :3] = state.poses[:, :3, :3] @ exp_so3(step[:, ROTATION])
+    poses[:, :3, :3] = state.poses[:, :3, :3] @ exp_so3_many(np.ascontiguousarray(step[:, ROTATION]))
     return correct(state, poses, information)
-
-
-def log_so3_many(rotations: np.ndarray) -> np.ndarray:
-    """Rotation vectors of many rotations (N,3,3) -> (N,3): ``theta / (2 sin theta) (R - R^T)^vee`` below
-    2.5 rad (a series near 0), :func:`tracker.geometry.se3.log_so3` for the rest (near pi)."""
-    r = np.asarray(rotations, dtype=np.float64)
-    s = 0.5 * np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], axis=1)
-    sin_t = np.sqrt(np.einsum("ni,ni->n", s, s))
-    cos_t = 0.5 * (np.trace(r, axis1=1, axis2=2) - 1.0)
-    theta = np.arctan2(sin_t, cos_t)
-    small = theta < 1e-4
-    scale = np.where(small, 1.0 + theta * theta / 6.0, theta / np.where(small, 1.0, sin_t))
-    out = scale[:, None] * s
-    for i in np.flatnonzero(theta > 2.5):
-        out[i] = log_so3(np.ascontiguousarray(r[i]))
-    return out
-
-
-def exp_so3(w: np.ndarray) -> np.ndarray:
-    """Rodrigues for many rotation vectors at once: (N,3) -> (N,3,3), ``I + A W + B W^2``."""
-    w = np.asarray(w, dtype=np.float64)
-    theta2 = np.einsum("ni,ni->n", w, w)
-    theta = np.sqrt(theta2)
-    small = theta < 1e-4
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
-    k = np.zeros((w.shape[0], 3, 3))
-    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-    k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
-    return np.eye(3) + a[:, None, None] * k + b[:, None, None] * (k @ k)
 
 
 def fitting_step(x: np.ndarray, cov: np.ndarray, force: np.ndarray, hessian: np.ndarray, dt: float,

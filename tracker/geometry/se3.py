@@ -141,6 +141,24 @@ def log_so3(r):
 
 
 @njit(cache=True)
+def exp_so3_many(w):
+    """:func:`exp_so3` of every row of ``w`` (N, 3) -> (N, 3, 3)."""
+    out = np.empty((w.shape[0], 3, 3))
+    for i in range(w.shape[0]):
+        out[i] = exp_so3(w[i])
+    return out
+
+
+@njit(cache=True)
+def log_so3_many(r):
+    """:func:`log_so3` of every rotation of ``r`` (N, 3, 3) -> (N, 3)."""
+    out = np.empty((r.shape[0], 3))
+    for i in range(r.shape[0]):
+        out[i] = log_so3(r[i])
+    return out
+
+
+@njit(cache=True)
 def log(e):
     """Twist alpha = (v; w) with exp(alpha) = E: w = log_so3(R), v = V^-1 t,
     V^-1 = I - W/2 + g W^2, g = (1 - (th/2) cot(th/2)) / th^2, so v = t - (w x t)/2 + g (w x (w x t))."""
