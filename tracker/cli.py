@@ -92,7 +92,8 @@ def cmd_track(args: argparse.Namespace) -> int:
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
-    live = _live_view(args, rec, model, init, settings) if args.view else None
+    truth = _truth(rec) if args.view else None
+    live = _live_view(args, rec, model, init, settings, truth) if args.view else None
     overlay = None
     if args.overlay:
         from tracker.viewer.overlay import OverlayVideo
@@ -117,7 +118,7 @@ def cmd_track(args: argparse.Namespace) -> int:
                 if live is not None:
                     live.offer(index, images, result, spent)
                 if overlay is not None:
-                    overlay.write(images, tracker.inspect(images, smoothed=True))
+                    overlay.write(images, tracker.inspect())
                 counts[result.status] += 1
                 residuals.append(result.residual)
         except KeyboardInterrupt:
@@ -143,7 +144,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     if live is not None and done > 0:
         from tracker.viewer.review import Review
 
-        review = Review(live.scene, rec, model, load_poses(out / "poses.npz"), _truth(rec), settings)
+        review = Review(live.scene, rec, model, load_poses(out / "poses.npz"), truth, settings)
         review.show(done - 1)
         return _serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
@@ -155,22 +156,23 @@ def _truth(rec):
     return load_poses(rec.truth_path) if rec.truth_path is not None else None
 
 
-def _scene(args: argparse.Namespace, rec, model, settings):
+def _scene(args: argparse.Namespace, rec, model, settings, truth=None):
     from tracker.viewer.scene import Scene, start_server
 
-    truth = _truth(rec)
     server = start_server(args.host, args.port)
     names = None if truth is None else list(truth["joint_names"])
     return Scene(server, model, rec.cameras, settings.robust_c, names)
 
 
-def _live_view(args: argparse.Namespace, rec, model, init, settings):
-    from tracker.viewer.live import LiveView
+def _live_view(args: argparse.Namespace, rec, model, init, settings, truth):
+    import numpy as np
 
-    truth = _truth(rec)
+    from tracker.viewer.live import LiveView
+    from tracker.viewer.review import truth_rows
+
     record = Path(args.record) if args.record else None
-    return LiveView(_scene(args, rec, model, settings), model, rec.cameras, init, settings, rate=args.view_rate,
-                    truth=None if truth is None else truth["joints"], record=record)
+    return LiveView(_scene(args, rec, model, settings, truth), model, rec.cameras, init, settings,
+                    rate=args.view_rate, truth=truth_rows(truth, np.arange(rec.frame_count)), record=record)
 
 
 def _serve(message: str, *closing) -> int:
@@ -208,7 +210,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         raise TrackerInputError(f"{poses_path}: frames beyond the recording's {rec.frame_count}; "
                                 "pass the recording it was tracked from")
     settings = Settings()
-    review = Review(_scene(args, rec, model, settings), rec, model, results, _truth(rec), settings)
+    truth = _truth(rec)
+    review = Review(_scene(args, rec, model, settings, truth), rec, model, results, truth, settings)
     review.show(0)
     if args.record:
         review.record(Path(args.record), progress=not args.quiet)

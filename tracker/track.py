@@ -254,7 +254,7 @@ class Tracker:
         iterations between reuse them, each sample moved along its normal by its Jacobian row times its
         component's motion since (first order, section 3), which costs a few flops instead of a render.
         """
-        s, m, st = self.samples, self.model, self.settings
+        m, st = self.model, self.settings
         search_range = self.search_range(iteration)
         if iteration % max(st.resample_every, 1) == 0:
             self.sample(search_range)
@@ -263,10 +263,7 @@ class Tracker:
         else:
             twist = motion_since(self.sampled_poses, self.poses)
         started = time.perf_counter()
-        visible, found, sum_wm, sum_w = measure_kernel(
-            self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian, twist,
-            search_range, st.threshold, st.robust_c, m.size, self.offset, self.weight, self.information, self.eta,
-            self.lo, self.hi)
+        visible, found, sum_wm, sum_w = self.measure(search_range, twist)
         started = self.times.add("measure", started)
         self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
                                    m.constraint, m.constraint_rows, m.rest, m.joint_type, m.axis, m.lower, m.upper)
@@ -293,15 +290,24 @@ class Tracker:
             self.hi[:] = search_range
         self.times.add("ownership", started)
 
-    def inspect(self, images, smoothed: bool = False) -> Inspection:
-        """Sample and measure every outline at the current poses, as the last iteration would, without moving them."""
+    def measure(self, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
+        """Search every sample's edge (moved by ``twist`` since sampling) and fill C_i, eta_i (measure_kernel)."""
         s, st = self.samples, self.settings
-        self.load_images(images, smoothed)
-        search_range = self.search_range(st.iterations - 1)
+        return measure_kernel(self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal,
+                              s.jacobian, twist, search_range, st.threshold, st.robust_c, self.model.size,
+                              self.offset, self.weight, self.information, self.eta, self.lo, self.hi)
+
+    def inspect(self, images=None, smoothed: bool = False, poses: np.ndarray | None = None) -> Inspection:
+        """Sample and measure every outline, as the last iteration would, without moving the poses: at
+        ``poses`` if given (else the current ones), in ``images`` if given (else the frame just tracked)."""
+        s = self.samples
+        if poses is not None:
+            self.poses = poses
+        if images is not None:
+            self.load_images(images, smoothed)
+        search_range = self.search_range(self.settings.iterations - 1)
         self.sample(search_range)
-        measure_kernel(self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal, s.jacobian,
-                       self.still, search_range, st.threshold, st.robust_c, self.model.size, self.offset,
-                       self.weight, self.information, self.eta, self.lo, self.hi)
+        self.measure(search_range, self.still)
         n = s.count
         return Inspection(s.camera[:n].copy(), s.component[:n].copy(), s.pixel[:n].copy(), s.normal[:n].copy(),
                           np.clip(self.lo, -search_range, search_range), np.clip(self.hi, -search_range, search_range),

@@ -29,7 +29,10 @@ IMAGE_PERIOD = 0.1  # seconds between camera image refreshes (the body moves at 
 
 
 class LiveView:
-    """Throttled, non-blocking display of a running tracker; optionally recorded as a .viser file."""
+    """Throttled, non-blocking display of a running tracker; optionally recorded as a .viser file.
+
+    ``truth``: truth joint centres by frame index (F, J, 3), NaN where unknown (:func:`~tracker.viewer.review.truth_rows`).
+    """
 
     def __init__(self, scene: Scene, model: Model, cameras, initial_poses: np.ndarray,
                  settings: Settings = Settings(), rate: float = 30.0, truth: np.ndarray | None = None,
@@ -88,10 +91,9 @@ class LiveView:
     def _show(self, index: int, images: list[np.ndarray], result: FrameResult, with_images: bool = True) -> None:
         inspection = None
         if with_images:
-            self.inspector.poses = result.poses
-            inspection = self.inspector.inspect(images, smoothed=True)
+            inspection = self.inspector.inspect(images, smoothed=True, poses=result.poses)
         truth = None
-        if self.truth_joints is not None and index < len(self.truth_joints):
+        if self.truth_joints is not None and 0 <= index < len(self.truth_joints):
             truth = self.truth_joints[index]
         label = f"frame {index}: residual {result.residual:.2f} px, {100 * result.share:.0f} % of samples found an edge"
         self.scene.show(Frame(result.poses, images if with_images else None, inspection, truth, label))

@@ -121,6 +121,5 @@ class Placement:
         for gizmo, pose in zip(self.gizmos, self.poses):
             gizmo.wxyz = vtf.SO3.from_matrix(pose[0:3, 0:3]).wxyz
             gizmo.position = pose[0:3, 3]
-        self.inspector.poses = self.poses
-        inspection = self.inspector.inspect(self.images)
+        inspection = self.inspector.inspect(self.images, poses=self.poses)
         self.scene.show(Frame(self.poses, self.images, inspection, label="frame 0"))

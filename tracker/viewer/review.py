@@ -90,8 +90,7 @@ class Review:
             index = int(self.frames[row])
             images = [seeker.read(index) for seeker in self.seekers]
             poses = self.results["poses"][row]
-            self.inspector.poses = poses
-            inspection = self.inspector.inspect(images)
+            inspection = self.inspector.inspect(images, poses=poses)
             status = STATUS_NAMES[int(self.results["status"][row])]
             label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
             truth = None if self.truth is None else self.truth[row]
