@@ -199,7 +199,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     poses_path = Path(args.poses) if args.poses else Path("out") / rec.path.resolve().name / "poses.npz"
     if not args.poses and not poses_path.is_file():
-        raise TrackerInputError(f"{poses_path}: no poses to review; run `tracker track {rec.path}` first or pass --poses")
+        raise TrackerInputError(f"{poses_path}: no poses to review; run `tracker track {rec.path}` first "
+                                "or pass --poses")
     results = load_poses(poses_path)
     if len(results["joints"]) == 0:
         raise TrackerInputError(f"{poses_path}: holds no frames; track some first")
@@ -303,7 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_tuning_options(track)
     track.add_argument("--quiet", action="store_true", help="no progress bar")
     track.add_argument("--overlay", metavar="VIDEO",
-                       help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches")
+                       help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge "
+                            "searches")
     add_live_view_options(track, "then review the result")
     _viewer_options(track)
     track.set_defaults(run=cmd_track)

@@ -31,7 +31,8 @@ IMAGE_PERIOD = 0.1  # seconds between camera image refreshes (the body moves at 
 class LiveView:
     """Throttled, non-blocking display of a running tracker; optionally recorded as a .viser file.
 
-    ``truth``: truth joint centres by frame index (F, J, 3), NaN where unknown (:func:`~tracker.viewer.review.truth_rows`).
+    ``truth``: truth joint centres by frame index (F, J, 3), NaN where unknown
+    (:func:`~tracker.viewer.review.truth_rows`).
     """
 
     def __init__(self, scene: Scene, model: Model, cameras, initial_poses: np.ndarray,
