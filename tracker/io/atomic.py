@@ -10,7 +10,8 @@ from __future__ import annotations
 import os
 import secrets
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import BinaryIO
 
@@ -35,6 +36,41 @@ def ensure_writable_folder(folder: str | os.PathLike) -> Path:
     return folder
 
 
+def temporary_beside(path: Path) -> Path:
+    """A new hidden file name in ``path``'s folder (same file system), ending in ``path``'s suffix for
+    writers that pick the format by it, to write before :func:`replace_with`."""
+    return path.with_name(f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}.tmp{path.suffix}")
+
+
+def replace_with(temp: Path, path: Path) -> None:
+    """Rename the finished ``temp`` over ``path`` (atomic); an OS error removes ``temp`` and becomes a
+    TrackerInputError naming ``path``."""
+    try:
+        os.replace(temp, path)
+    except OSError as error:
+        temp.unlink(missing_ok=True)
+        raise _cannot_write(path, error) from None
+
+
+def _cannot_write(path: Path, error: OSError) -> TrackerInputError:
+    return TrackerInputError(
+        f"{path}: cannot write ({error.strerror or error}); free disk space or choose a writable output folder")
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """For writers that only take a file name: yields a temporary path beside ``path`` that replaces it
+    when the block ends without error (and is removed otherwise)."""
+    path = Path(path)
+    ensure_writable_folder(path.parent)
+    temp = temporary_beside(path)
+    try:
+        yield temp
+        replace_with(temp, path)
+    finally:
+        temp.unlink(missing_ok=True)
+
+
 def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], None]) -> None:
     """Write ``path`` atomically: ``write_fn(file)`` fills a temporary binary file that then replaces ``path``.
 
@@ -42,19 +78,12 @@ def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], None]) 
     (0o666 minus the umask). On any error the temporary file is removed and
     ``path`` is left as it was; OS errors become TrackerInputError naming the file.
     """
-    path = Path(path)
-    ensure_writable_folder(path.parent)
-    temp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-        with os.fdopen(fd, "wb") as file:
-            write_fn(file)
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(temp, path)
-    except OSError as error:
-        raise TrackerInputError(
-            f"{path}: cannot write ({error.strerror or error}); free disk space or choose a writable output folder"
-        ) from None
-    finally:
-        temp.unlink(missing_ok=True)
+    with atomic_path(path) as temp:
+        try:
+            fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+            with os.fdopen(fd, "wb") as file:
+                write_fn(file)
+                file.flush()
+                os.fsync(file.fileno())
+        except OSError as error:
+            raise _cannot_write(Path(path), error) from None

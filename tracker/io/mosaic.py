@@ -10,14 +10,13 @@ frames written.
 from __future__ import annotations
 
 import os
-import secrets
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import ensure_writable_folder
+from tracker.io.atomic import ensure_writable_folder, replace_with, temporary_beside
 
 CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG"}
 
@@ -36,7 +35,7 @@ class MosaicWriter:
         scale = min(1.0, max_width / sum(widths))
         self.height = max(2, int(height * scale) // 2 * 2)
         self.widths = [max(2, int(w * scale) // 2 * 2) for w in widths]
-        self.temp = self.path.with_name(f".{self.path.stem}.{os.getpid()}.{secrets.token_hex(4)}{self.path.suffix}")
+        self.temp = temporary_beside(self.path)
         self.writer = cv2.VideoWriter(str(self.temp), cv2.VideoWriter_fourcc(*codec), fps,
                                       (sum(self.widths), self.height))
         if not self.writer.isOpened():
@@ -56,9 +55,4 @@ class MosaicWriter:
         if not self.frames:
             self.temp.unlink(missing_ok=True)
             return
-        try:
-            os.replace(self.temp, self.path)
-        except OSError as error:
-            self.temp.unlink(missing_ok=True)
-            raise TrackerInputError(f"{self.path}: cannot write ({error.strerror or error}); "
-                                    "free disk space or choose a writable place for the video") from None
+        replace_with(self.temp, self.path)

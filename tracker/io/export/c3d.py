@@ -14,14 +14,12 @@ tell viewers such as Mokka that z is up.
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import atomic_write
+from tracker.io.atomic import atomic_path
 
 _MM_PER_M = 1000.0
 _C3D_MAX_FRAMES = 65535  # the header's first and last frame are 16-bit
@@ -50,11 +48,5 @@ def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, r
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"]["residuals"] = np.where(gap.T, -1.0, 0.0)[np.newaxis]
 
-    def write(file) -> None:
-        # ezc3d writes only to a path: write to a scratch folder, then copy into the atomic file
-        with tempfile.TemporaryDirectory() as folder:
-            scratch = Path(folder) / "export.c3d"
-            c3d.write(str(scratch))
-            file.write(scratch.read_bytes())
-
-    atomic_write(path, write)
+    with atomic_path(path) as temp:  # ezc3d writes only to a file name
+        c3d.write(str(temp))
