@@ -86,3 +86,39 @@ def test_a_non_loopback_host_warns_and_every_server_says_its_url(capsys):
         assert f"http://127.0.0.1:{server.get_port()}" in err
     finally:
         server.stop()
+
+
+def test_truth_skeleton_and_root_trajectory_are_drawn(server, tracked):
+    review, scene = _review(server, tracked)
+    try:
+        review.show(2)
+        truth = review.truth[2]
+        segments = scene.truth.points
+        assert segments.shape == (review.results["poses"].shape[1] - 1, 2, 3)
+        assert np.abs(segments).max() > 0.1 and np.isfinite(truth).all()
+        path = scene.trajectory.points  # one segment between consecutive root positions
+        np.testing.assert_allclose(path[:, 0], review.results["poses"][:-1, 0, 0:3, 3], atol=1e-6)
+    finally:
+        review.close()
+
+
+def test_play_advances_the_timeline(server, tracked):
+    import threading
+
+    review, _ = _review(server, tracked)
+    reached_end = threading.Event()
+    show = review.show
+
+    def watched(row):
+        show(row)
+        if row == len(review.frames) - 1:
+            reached_end.set()
+
+    review.show = watched
+    try:
+        review.speed.value = "4x"
+        review.play.value = True
+        assert reached_end.wait(timeout=30)  # the player thread walked to the last frame
+        assert review.row == len(review.frames) - 1
+    finally:
+        review.close()

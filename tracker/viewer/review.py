@@ -111,11 +111,11 @@ class Review:
             if clock is None or clock[2] != rate or self.row != played:
                 clock = (time.monotonic(), max(self.row, 0), rate)
             started, first, _ = clock
-            row = first + int((time.monotonic() - started) * rate)
-            if row >= len(self.frames):
+            row = min(first + int((time.monotonic() - started) * rate), len(self.frames) - 1)
+            self.show(row)
+            if row == len(self.frames) - 1:  # playback ends on the last frame, even when it skips to it
                 self.play.value = False
                 continue
-            self.show(row)
             played = row
             self.stopping.wait(max(0.0, started + (row + 1 - first) / rate - time.monotonic()))
 
