@@ -86,6 +86,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     settings = settings_from(args, rec.fps)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
+    background = _background(args, rec, out)
     print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
           f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
           file=sys.stderr)
@@ -99,6 +100,12 @@ def cmd_track(args: argparse.Namespace) -> int:
         from tracker.viewer.overlay import OverlayVideo
 
         overlay = OverlayVideo(Path(args.overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
+    if background is None:
+        prepare = tracker.smooth
+    else:
+        from tracker.foreground import preparers
+
+        prepare = preparers(background, tracker.smooth, keep_grey=overlay is not None)
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
     residuals = []
     interrupted = False
@@ -106,8 +113,11 @@ def cmd_track(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
-            for index, images in tqdm(frames(rec, args.start, stop, prepare=tracker.smooth),
+            for index, images in tqdm(frames(rec, args.start, stop, prepare=prepare, colour=background is not None),
                                       total=stop - args.start, unit="frame", disable=args.quiet, file=sys.stderr):
+                shown = images
+                if background is not None and overlay is not None:
+                    shown, images = zip(*images)
                 at = None if times is None else float(times[index])
                 begun = time.perf_counter()
                 result = tracker.step(images, smoothed=True, dt=None if at is None or last is None else at - last)
@@ -118,7 +128,7 @@ def cmd_track(args: argparse.Namespace) -> int:
                 if live is not None:
                     live.offer(index, images, result, spent)
                 if overlay is not None:
-                    overlay.write(images, tracker.inspect())
+                    overlay.write(shown, tracker.inspect())
                 counts[result.status] += 1
                 residuals.append(result.residual)
         except KeyboardInterrupt:
@@ -148,6 +158,26 @@ def cmd_track(args: argparse.Namespace) -> int:
         review.show(done - 1)
         return _serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
+
+
+def _background(args: argparse.Namespace, rec, out: Path):
+    """The --background of the run: None, the median of the recording (also saved under ``out``), or a folder."""
+    if args.background == "none":
+        return None
+    from tracker.foreground import SAMPLES, load_background, median_background, save_background
+
+    if args.background != "median":
+        return load_background(args.background, rec)
+    from tqdm import tqdm
+
+    def progress(reads):
+        return tqdm(reads, desc="background", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
+
+    background = median_background(rec, SAMPLES, progress)
+    folder = save_background(background, rec, out / "background")
+    print(f"background: per-pixel median of {min(SAMPLES, rec.frame_count)} frames per camera, saved in {folder} "
+          f"(reuse with --background {folder})", file=sys.stderr)
+    return background
 
 
 def _truth(rec):
@@ -302,6 +332,10 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     track.add_argument("--frames", type=_positive_int, help="number of frames to track (default: all)")
     add_tuning_options(track)
+    track.add_argument("--background", default="none", metavar="none|median|DIR",
+                       help="search edges in the difference from the empty scene instead of the grey image: "
+                            "'median' estimates it from the recording (the person must move about), DIR holds "
+                            "<camera>.png images of it (default none)")
     track.add_argument("--quiet", action="store_true", help="no progress bar")
     track.add_argument("--overlay", metavar="VIDEO",
                        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge "

@@ -1,4 +1,4 @@
-"""Decoding the frames of a recording: grey images, one reader thread per camera.
+"""Decoding the frames of a recording: grey (or colour) images, one reader thread per camera.
 
 Each camera's video (or image folder) is decoded by its own thread into a
 bounded queue, so decoding runs beside the tracker (OpenCV releases the GIL
@@ -6,7 +6,7 @@ while it decodes) and never runs more than ``queue_size`` frames ahead.
 Motion-JPEG videos are decoded straight to grey: the compressed frame is taken
 from the container as it is and libjpeg decodes only its luma plane, about
 twice as fast as decoding colour and converting.  Other codecs are decoded in
-colour and converted.
+colour and converted.  Readers asked for colour (the foreground cue needs it) decode BGR.
 """
 
 from __future__ import annotations
@@ -61,11 +61,21 @@ def _grey(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, code)
 
 
-def grey_frames(source: Path, start: int = 0) -> Iterator[np.ndarray]:
-    """Grey frames of one video file or image folder from frame ``start`` on (the caller stops)."""
+def _bgr(image: np.ndarray) -> np.ndarray:
+    """BGR uint8 (H, W, 3) from a BGR, BGRA or grey frame."""
+    if image.ndim == 3 and image.shape[2] == 3:
+        return image
+    code = cv2.COLOR_GRAY2BGR if image.ndim == 2 else cv2.COLOR_BGRA2BGR
+    return cv2.cvtColor(image, code)
+
+
+def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Iterator[np.ndarray]:
+    """Grey (or, with ``colour``, BGR) frames of one video file or image folder from frame ``start`` on
+    (the caller stops)."""
     if source.is_dir():
+        flags = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
         for index, file in enumerate(image_files(source)[start:], start):
-            yield read_image(file, index, cv2.IMREAD_GRAYSCALE)
+            yield read_image(file, index, flags)
         raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
     capture, raw = _open_video(source)
     try:
@@ -73,7 +83,7 @@ def grey_frames(source: Path, start: int = 0) -> Iterator[np.ndarray]:
             if not capture.grab():
                 raise _decode_error(source, index)
         for index in itertools.count(start):
-            yield _read_grey(capture, raw, source, index)
+            yield _read_frame(capture, raw, source, index, colour)
     finally:
         capture.release()
 
@@ -87,12 +97,16 @@ def _open_video(source: Path) -> tuple[cv2.VideoCapture, bool]:
     return capture, bool(raw)
 
 
-def _read_grey(capture: cv2.VideoCapture, raw: bool, source: Path, index: int) -> np.ndarray:
-    """The next frame as grey uint8 (raw Motion-JPEG: libjpeg's luma plane; otherwise colour converted)."""
+def _read_frame(capture: cv2.VideoCapture, raw: bool, source: Path, index: int, colour: bool = False) -> np.ndarray:
+    """The next frame as grey uint8 (raw Motion-JPEG: libjpeg's luma plane; otherwise colour converted), or
+    as BGR uint8 with ``colour``."""
     ok, data = capture.read()
     if not ok:
         raise _decode_error(source, index)
-    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if raw else _grey(data)
+    if raw:
+        image = cv2.imdecode(data, cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE)
+    else:
+        image = _bgr(data) if colour else _grey(data)
     if image is None:
         raise _decode_error(source, index)
     return image
@@ -101,15 +115,15 @@ def _read_grey(capture: cv2.VideoCapture, raw: bool, source: Path, index: int) -
 class _Reader:
     """A thread that decodes ``count`` frames of one source into a bounded queue (errors travel along)."""
 
-    def __init__(self, source: Path, start: int, count: int, queue_size: int, prepare=None):
-        self.source, self.start, self.count, self.prepare = source, start, count, prepare
+    def __init__(self, source: Path, start: int, count: int, queue_size: int, prepare=None, colour: bool = False):
+        self.source, self.start, self.count, self.prepare, self.colour = source, start, count, prepare, colour
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
         self.thread.start()
 
     def _run(self) -> None:
-        frames = grey_frames(self.source, self.start)
+        frames = grey_frames(self.source, self.start, self.colour)
         try:
             for image in itertools.islice(frames, self.count):
                 if not self._put(image if self.prepare is None else self.prepare(image)):
@@ -139,11 +153,14 @@ class _Reader:
         self.thread.join()
 
 
-def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4,
-                prepare=None) -> Iterator[tuple[int, list[np.ndarray]]]:
-    """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread;
-    ``prepare`` (image -> image), if given, runs in that thread too (e.g. the tracker's smoothing)."""
-    readers = [_Reader(source, start, stop - start, queue_size, prepare) for source in sources]
+def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4, prepare=None,
+                colour: bool = False) -> Iterator[tuple[int, list]]:
+    """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread
+    (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that thread too (e.g. the
+    tracker's smoothing); a list of them gives each source its own."""
+    preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
+    readers = [_Reader(source, start, stop - start, queue_size, each, colour)
+               for source, each in zip(sources, preparers)]
     try:
         for index in range(start, stop):
             yield index, [reader.get() for reader in readers]
@@ -153,11 +170,11 @@ def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4,
 
 
 class FrameSeeker:
-    """Random access to grey frames of one video or image folder (for viewers): reading the next frame
-    continues decoding; any other index seeks.  Motion-JPEG AVIs seek exactly."""
+    """Random access to grey (or, with ``colour``, BGR) frames of one video or image folder (for viewers):
+    reading the next frame continues decoding; any other index seeks.  Motion-JPEG AVIs seek exactly."""
 
-    def __init__(self, source: Path):
-        self.source = source
+    def __init__(self, source: Path, colour: bool = False):
+        self.source, self.colour = source, colour
         self.files = image_files(source) if source.is_dir() else None
         self.capture, self.raw = (None, False) if self.files is not None else _open_video(source)
         self.next_index = 0
@@ -165,10 +182,10 @@ class FrameSeeker:
     def read(self, index: int) -> np.ndarray:
         """Frame ``index`` decoded exactly as the tracker's readers decode it."""
         if self.files is not None:
-            return read_image(self.files[index], index, cv2.IMREAD_GRAYSCALE)
+            return read_image(self.files[index], index, cv2.IMREAD_COLOR if self.colour else cv2.IMREAD_GRAYSCALE)
         if index != self.next_index:
             self.capture.set(cv2.CAP_PROP_POS_FRAMES, index)
-        image = _read_grey(self.capture, self.raw, self.source, index)
+        image = _read_frame(self.capture, self.raw, self.source, index, self.colour)
         self.next_index = index + 1
         return image
 

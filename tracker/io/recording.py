@@ -116,11 +116,11 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) ->
 
 
 def frames(recording: Recording, start: int = 0, stop: int | None = None,
-           prepare=None) -> Iterator[tuple[int, list[np.ndarray]]]:
+           prepare=None, colour: bool = False) -> Iterator[tuple[int, list]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
 
-    One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`) and
-    applies ``prepare`` (image -> image) if given. A frame that fails to decode
+    One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
+    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails to decode
     raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
@@ -129,7 +129,7 @@ def frames(recording: Recording, start: int = 0, stop: int | None = None,
             f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
             "pick a range inside it"
         )
-    return read_frames(recording.sources, start, stop, prepare=prepare)
+    return read_frames(recording.sources, start, stop, prepare=prepare, colour=colour)
 
 
 def capture_times(recording: Recording) -> np.ndarray | None:

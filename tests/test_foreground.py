@@ -1,0 +1,196 @@
+"""The foreground cue: the channel-sum difference, the median background, its files, and the CLI."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.cli import main
+from tracker.errors import TrackerInputError
+from tracker.foreground import (Background, load_background, median_background, preparers, sample_indices,
+                                save_background)
+from tracker.io.recording import frames, open_recording
+from tracker.render import load_backgrounds
+
+WIDTH, HEIGHT, COUNT = 48, 32, 9
+
+
+def scene(camera: int) -> np.ndarray:
+    """The empty scene of camera ``camera``: seeded colour noise."""
+    return np.random.default_rng(10 + camera).integers(0, 256, (HEIGHT, WIDTH, 3), dtype=np.uint8)
+
+
+def square(index: int) -> tuple[slice, slice]:
+    """Where the moving 'person' is in frame ``index``: each pixel is covered in at most 2 of 9 frames."""
+    return slice(8, 24), slice(5 * index % (WIDTH - 8), 5 * index % (WIDTH - 8) + 8)
+
+
+def frame(camera: int, index: int) -> np.ndarray:
+    image = scene(camera).copy()
+    image[square(index)] = (30, 200, 90)
+    return image
+
+
+@pytest.fixture()
+def png_recording(tmp_path: Path) -> Path:
+    """Two cameras as lossless PNG folders, so the background comes back exactly."""
+    folder = tmp_path / "rec"
+    K = np.array([[40.0, 0.0, 24.0], [0.0, 40.0, 16.0], [0.0, 0.0, 1.0]])
+    save_calibration([Camera(f"cam{i}", (WIDTH, HEIGHT), K, np.zeros(4), np.eye(3), np.array([i, 0.0, 3.0]))
+                      for i in range(2)], folder / "calibration.toml")
+    for camera in range(2):
+        (folder / f"cam{camera}").mkdir()
+        for index in range(COUNT):
+            cv2.imwrite(str(folder / f"cam{camera}" / f"{index:06d}.png"), frame(camera, index))
+    return folder
+
+
+def test_difference_is_the_saturated_channel_sum():
+    rng = np.random.default_rng(0)
+    image, empty = rng.integers(0, 256, (2, 20, 30, 3), dtype=np.uint8)
+    expected = np.minimum(255, np.abs(image.astype(int) - empty.astype(int)).sum(axis=2))
+    got = Background((empty,)).difference(0, image)
+    assert got.dtype == np.uint8 and got.shape == (20, 30)
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_sample_indices_spread_over_the_recording():
+    np.testing.assert_array_equal(sample_indices(5, 25), np.arange(5))
+    picked = sample_indices(1000, 25)
+    assert len(picked) == 25 and picked[0] == 0 and picked[-1] == 999
+    assert np.ptp(np.diff(picked)) <= 1  # evenly spaced
+
+
+def test_median_background_recovers_the_empty_scene(png_recording):
+    recording = open_recording(png_recording)
+    seen = []
+    background = median_background(recording, progress=lambda reads: seen.extend(reads) or reads)
+    assert seen == [(camera, index) for camera in range(2) for index in range(COUNT)]
+    for camera in range(2):
+        np.testing.assert_array_equal(background.images[camera], scene(camera))
+        difference = background.difference(camera, frame(camera, 4))
+        inside = np.zeros((HEIGHT, WIDTH), bool)
+        inside[square(4)] = True
+        assert not difference[~inside].any() and (difference[inside] > 0).mean() > 0.99
+
+
+def test_readers_hand_colour_frames_to_per_camera_preparers(png_recording):
+    recording = open_recording(png_recording)
+    background = Background(tuple(scene(camera) for camera in range(2)))
+    prepared = preparers(background, lambda image: image, keep_grey=True)
+    for index, items in frames(recording, prepare=prepared, colour=True):
+        for camera, (grey, measured) in enumerate(items):
+            np.testing.assert_array_equal(grey, cv2.cvtColor(frame(camera, index), cv2.COLOR_BGR2GRAY))
+            np.testing.assert_array_equal(measured, background.difference(camera, frame(camera, index)))
+
+
+def test_saved_background_loads_back_and_is_checked(png_recording, tmp_path):
+    recording = open_recording(png_recording)
+    background = Background(tuple(scene(camera) for camera in range(2)))
+    folder = save_background(background, recording, tmp_path / "bg")
+    loaded = load_background(folder, recording)
+    for camera in range(2):
+        np.testing.assert_array_equal(loaded.images[camera], scene(camera))
+    cv2.imwrite(str(folder / "cam1.png"), scene(1)[:, :40])
+    with pytest.raises(TrackerInputError, match=r"cam1\.png: background is 40x32 but camera cam1 gives 48x32"):
+        load_background(folder, recording)
+    (folder / "cam1.png").unlink()
+    with pytest.raises(TrackerInputError, match=r"cam1\.png: no background image for camera cam1"):
+        load_background(folder, recording)
+    with pytest.raises(TrackerInputError, match="background folder not found"):
+        load_background(tmp_path / "nowhere", recording)
+
+
+def test_track_with_a_median_background(tiny_recording, tmp_path, capsys):
+    out = tmp_path / "out"
+    overlay = tmp_path / "overlay.avi"
+    assert main(["track", str(tiny_recording), "--background", "median", "--out", str(out), "--quiet",
+                 "--overlay", str(overlay)]) == 0
+    assert "background: per-pixel median of 6 frames per camera" in capsys.readouterr().err
+    for camera in ("cam0", "cam1"):
+        assert cv2.imread(str(out / "background" / f"{camera}.png")).shape == (240, 320, 3)
+    video = cv2.VideoCapture(str(overlay))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 6
+    ok, picture = video.read()
+    assert ok and picture.std() > 20  # the camera frames themselves, not the (mostly black) differences
+
+
+def test_track_against_the_empty_scene(tiny_recording, tmp_path, capsys):
+    """The rendering's own background photos as the empty scene: the body is tracked as well as by grey edges
+    (6 frames in which the body hardly moves: the median background would hold the body itself)."""
+    rig = load_calibration(tiny_recording / "calibration.toml")
+    photos, _ = load_backgrounds(rig, seed=1)
+    save_background(Background(tuple(photos)), open_recording(tiny_recording), tmp_path / "empty")
+    assert main(["track", str(tiny_recording), "--background", str(tmp_path / "empty"), "--out",
+                 str(tmp_path / "out"), "--quiet"]) == 0
+    report = capsys.readouterr().out
+    assert "0 uncertain, 0 lost" in report
+    mpjpe = float(re.search(r"MPJPE ([0-9.]+) mm", report).group(1))
+    assert mpjpe < 15.0
+
+
+def test_missing_background_folder_is_one_line_exit_2(tiny_recording, tmp_path, capsys):
+    assert main(["track", str(tiny_recording), "--background", str(tmp_path / "nowhere"), "--out",
+                 str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nowhere: background folder not found" in err[0]
+
+
+BALANCING = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim-balancing"
+MAN = Path(__file__).resolve().parents[1] / "models" / "pose2sim_man.toml"
+
+
+def cap_centres(recording, count: int) -> np.ndarray:
+    """Pixel centroid (camera, frame, 2) of the man's cyan swimming cap, the largest blob of its hue; a check
+    of the tracked head that shares nothing with the tracker (which never looks at hue)."""
+    centres = np.zeros((len(recording.sources), count, 2))
+    for index, images in frames(recording, 0, count, colour=True):
+        for camera, image in enumerate(images):
+            mask = cv2.inRange(cv2.cvtColor(image, cv2.COLOR_BGR2HSV), (80, 120, 80), (100, 255, 255))
+            _, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
+            centres[camera, index] = centroids[1 + np.argmax(stats[1:, cv2.CC_STAT_AREA])]
+    return centres
+
+
+def triangulate(cameras, pixels: np.ndarray) -> np.ndarray:
+    """The world point (3,) nearest, in the linear (DLT) sense, to the rays of ``pixels`` (camera, 2)."""
+    rows = []
+    for camera, pixel in zip(cameras, pixels):
+        x, y = camera.undistort_pixels(pixel[None])[0]
+        projection = camera.pose[:3]
+        rows += [x * projection[2] - projection[0], y * projection[2] - projection[1]]
+    point = np.linalg.svd(np.array(rows))[2][-1]
+    return point[:3] / point[3]
+
+
+@pytest.mark.skipif(not BALANCING.is_dir(), reason="shared pose2sim-balancing data not present")
+def test_real_man_head_followed_through_the_swing_into_balance():
+    """pose2sim-balancing, all 4 HD views, frames 0-59 (he swings from standing into the one-leg balance):
+    with the median background the tracked top of the head stays within 10 cm of his cap, triangulated
+    from the 4 views, in every frame."""
+    from tracker.io.posefile import load_pose_file
+    from tracker.model import load_model
+    from tracker.track import Settings, Tracker
+
+    count = 60
+    recording = open_recording(BALANCING)
+    model = load_model(MAN)
+    tracker = Tracker(model, recording.cameras, load_pose_file(MAN.with_suffix(".init.toml"), model),
+                      Settings(motion="kalman", search_range=40, iterations=16, frame_rate=recording.fps))
+    prepare = preparers(median_background(recording), tracker.smooth)
+    head = model.names.index("head")
+    top = np.array([0.0, -0.01, 0.2, 1.0])  # the crown of the head ellipsoid, in the head's frame
+    caps = cap_centres(recording, count)
+    errors = []
+    for index, images in frames(recording, 0, count, prepare=prepare, colour=True):
+        result = tracker.step(images, smoothed=True)
+        cap = triangulate(recording.cameras, caps[:, index])
+        errors.append(np.linalg.norm((result.poses[head] @ top)[:3] - cap))
+    errors = np.array(errors)
+    assert errors.max() < 0.10, (errors.argmax(), errors.max())
+    assert np.median(errors) < 0.05

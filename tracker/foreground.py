@@ -1,0 +1,121 @@
+"""The foreground cue: the edge search run on where a frame differs from the empty scene.
+
+In a cluttered room the strongest grey-level edges near a limb are often the room's own (a
+treadmill rail, a shelf, a person in the back), and skin against a light wall gives a weak one.
+The cameras do not move, so each one's background ``B_k`` can be known: given as images of the
+empty scene, or estimated as the per-pixel median of frames spread through the recording (right
+wherever the person is absent from more than half of them; where he stands still all along, he
+becomes background and his outline there is lost).  The edge search then looks at
+
+    F_k(x) = min(255, sum_c |I_c(x) - B_k,c(x)|)      (c over the three colour channels)
+
+whose edges are the person's silhouette: static clutter cancels, and colour tells skin from a
+wall of the same grey.  Edges inside the silhouette (an arm across the chest) vanish, which the
+IRLS weights and edge ownership already expect of any occluding contour.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracker.errors import TrackerInputError
+from tracker.io.atomic import atomic_path, ensure_writable_folder
+from tracker.io.readers import FrameSeeker, read_image
+from tracker.io.recording import Recording
+
+SAMPLES = 25  # frames per camera for the median background
+_SUM = np.ones((1, 3), np.float32)  # cv2.transform: the channel sum, saturated to uint8
+
+
+@dataclass(frozen=True)
+class Background:
+    """One BGR uint8 image (H, W, 3) of the empty scene per camera (rig order)."""
+
+    images: tuple[np.ndarray, ...]
+
+    def difference(self, camera: int, image: np.ndarray) -> np.ndarray:
+        """F = min(255, sum_c |I_c - B_c|) of a BGR frame of camera ``camera``, uint8 (H, W)."""
+        return cv2.transform(cv2.absdiff(image, self.images[camera]), _SUM)
+
+
+def sample_indices(frame_count: int, samples: int = SAMPLES) -> np.ndarray:
+    """``samples`` frame indices spread evenly over the recording (all of them when it is shorter)."""
+    return np.unique(np.linspace(0, frame_count - 1, min(frame_count, samples)).round().astype(int))
+
+
+def median_background(recording: Recording, samples: int = SAMPLES,
+                      progress: Callable[[Iterable], Iterable] = iter) -> Background:
+    """Per camera, the per-pixel median of ``samples`` frames spread over the recording; ``progress``
+    wraps the list of (camera, frame) reads (e.g. a tqdm bar).  One camera's frames are held at a time."""
+    indices = sample_indices(recording.frame_count, samples)
+    reads = [(camera, int(index)) for camera in range(len(recording.sources)) for index in indices]
+    images: list[np.ndarray] = []
+    stack: list[np.ndarray] = []
+    seeker = None
+    try:
+        for camera, index in progress(reads):
+            if seeker is None or seeker.source != recording.sources[camera]:
+                if seeker is not None:
+                    seeker.close()
+                seeker = FrameSeeker(recording.sources[camera], colour=True)
+            stack.append(seeker.read(index))
+            if len(stack) == len(indices):
+                images.append(np.median(np.stack(stack), axis=0).round().astype(np.uint8))
+                stack = []
+    finally:
+        if seeker is not None:
+            seeker.close()
+    return Background(tuple(images))
+
+
+def background_file(folder: Path, camera: str) -> Path:
+    return folder / f"{camera}.png"
+
+
+def load_background(folder: str | os.PathLike, recording: Recording) -> Background:
+    """``<camera>.png`` of each camera of the recording from ``folder``, checked against its image size."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise TrackerInputError(f"{folder}: background folder not found; give a folder of <camera>.png images of "
+                                "the empty scene, or --background median")
+    images = []
+    for camera in recording.cameras:
+        file = background_file(folder, camera.name)
+        if not file.is_file():
+            raise TrackerInputError(f"{file}: no background image for camera {camera.name}; add it (an image of "
+                                    "the empty scene from that camera), or use --background median")
+        image = read_image(file, 0)
+        if image.shape[1::-1] != tuple(camera.size):
+            raise TrackerInputError(f"{file}: background is {image.shape[1]}x{image.shape[0]} but camera "
+                                    f"{camera.name} gives {camera.size[0]}x{camera.size[1]} frames; "
+                                    "take it with the same camera and size")
+        images.append(image)
+    return Background(tuple(images))
+
+
+def save_background(background: Background, recording: Recording, folder: str | os.PathLike) -> Path:
+    """Write ``<camera>.png`` per camera into ``folder`` (each atomically), for reuse with --background."""
+    folder = ensure_writable_folder(folder)
+    for camera, image in zip(recording.cameras, background.images):
+        with atomic_path(background_file(folder, camera.name)) as temp:
+            if not cv2.imwrite(str(temp), image, [cv2.IMWRITE_PNG_COMPRESSION, 1]):
+                raise TrackerInputError(f"{temp}: could not write the background image; check the disk")
+    return folder
+
+
+def preparers(background: Background, smooth: Callable[[np.ndarray], np.ndarray],
+              keep_grey: bool = False) -> list[Callable[[np.ndarray], object]]:
+    """Per camera, what its reader thread makes of a BGR frame: ``smooth(F_k)`` for the edge search, or,
+    with ``keep_grey``, the pair (grey frame, smooth(F_k)) so the frame itself can still be shown."""
+
+    def prepare(camera: int, frame: np.ndarray):
+        measured = smooth(background.difference(camera, frame))
+        return (cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), measured) if keep_grey else measured
+
+    return [lambda frame, camera=camera: prepare(camera, frame) for camera in range(len(background.images))]
