@@ -111,17 +111,17 @@ def velocity_products(part: Part, qdot: np.ndarray, step: float = 1e-5) -> np.nd
     r = part.rotation
     w = qdot[3:6]
     qdot_s = qdot[SHAPE]
-    j = sq.jacobian(part.q_s, part.u, part.v)
-    pdot = j @ qdot_s + qdot[SHAPE.stop:].reshape(part.d.shape)
-    rp = _local_points(part) @ r.T
-    out = np.cross(w, np.cross(w, rp)) + 2.0 * np.cross(w, pdot @ r.T)
+    pdot = qdot[SHAPE.stop:].reshape(part.d.shape)
+    shape_term = np.zeros_like(pdot)
     speed = np.linalg.norm(qdot_s)
     if speed > 0.0:
+        pdot = pdot + sq.jacobian(part.q_s, part.u, part.v) @ qdot_s
         h = step / speed
         j_plus = sq.jacobian(part.q_s + h * qdot_s, part.u, part.v)
         j_minus = sq.jacobian(part.q_s - h * qdot_s, part.u, part.v)
-        out += ((j_plus - j_minus) @ qdot_s / (2.0 * h)) @ r.T
-    return out
+        shape_term = (j_plus - j_minus) @ qdot_s / (2.0 * h)
+    rp = _local_points(part) @ r.T
+    return np.cross(w, np.cross(w, rp) + 2.0 * pdot @ r.T) + shape_term @ r.T
 
 
 def lumped_mass(node_jacobians: np.ndarray, masses: np.ndarray, regularizer: float = 0.0) -> np.ndarray:
