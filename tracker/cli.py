@@ -241,8 +241,13 @@ def cmd_view(args: argparse.Namespace) -> int:
         raise TrackerInputError(f"{poses_path}: frames beyond the recording's {rec.frame_count}; "
                                 "pass the recording it was tracked from")
     settings = Settings()
+    background = None
+    if args.background:
+        from tracker.foreground import load_background
+
+        background = load_background(args.background, rec)
     truth = _truth(rec)
-    review = Review(_scene(args, rec, model, settings, truth), rec, model, results, truth, settings)
+    review = Review(_scene(args, rec, model, settings, truth), rec, model, results, truth, settings, background)
     review.show(0)
     if args.record:
         review.record(Path(args.record), progress=not args.quiet)
@@ -349,6 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
     view.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     view.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    view.add_argument("--background", metavar="DIR",
+                      help="the empty scene a run was tracked against (tracker track --background; a median one is "
+                           "saved in OUT/background): the panels then show and search the difference images")
     view.add_argument("--quiet", action="store_true", help="no progress bar while recording")
     _viewer_options(view)
     view.set_defaults(run=cmd_view)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from tracker.foreground import Background
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.model import Model
@@ -44,11 +45,14 @@ class Review:
     """Timeline controls and plots for one poses file over its recording."""
 
     def __init__(self, scene: Scene, recording: Recording, model: Model, results: dict, truth: dict | None = None,
-                 settings: Settings = Settings()):
+                 settings: Settings = Settings(), background: Background | None = None):
+        """``background``: the run's empty scene (``tracker track --background``), so the panels show and
+        search the same difference images the tracker did; None: grey images."""
         self.scene, self.recording, self.results = scene, recording, results
         self.frames = results["frame"]
         self.truth = truth_rows(truth, self.frames)
-        self.seekers = [FrameSeeker(source) for source in recording.sources]
+        self.background = background
+        self.seekers = [FrameSeeker(source, colour=background is not None) for source in recording.sources]
         self.inspector = Tracker(model, recording.cameras, results["poses"][0], settings)
         self.lock = threading.RLock()
         self.stopping = threading.Event()
@@ -89,6 +93,8 @@ class Review:
                 return
             index = int(self.frames[row])
             images = [seeker.read(index) for seeker in self.seekers]
+            if self.background is not None:
+                images = [self.background.difference(k, image) for k, image in enumerate(images)]
             poses = self.results["poses"][row]
             inspection = self.inspector.inspect(images, poses=poses)
             status = STATUS_NAMES[int(self.results["status"][row])]
