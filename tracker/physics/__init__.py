@@ -1,1 +1,4 @@
-"""Physics-based shape and motion estimation (Metaxas & Terzopoulos 1993): deformable superquadrics."""
+"""Physics-based shape and motion estimation (Metaxas & Terzopoulos 1993, design note
+metaxas-terzopoulos-math.md): deformable superquadric parts (:mod:`.superquadric`), their node
+kinematics and lumped mass (:mod:`.kinematics`), and point-to-point constraints held by
+Baumgarte stabilisation (:mod:`.constraints`)."""
