@@ -60,12 +60,12 @@ def median_background(recording: Recording, samples: int = SAMPLES,
     seeker = None
     try:
         for camera, index in progress(reads):
-            if seeker is None or seeker.source != recording.sources[camera]:
-                if seeker is not None:
-                    seeker.close()
+            if not stack:
                 seeker = FrameSeeker(recording.sources[camera], colour=True)
             stack.append(seeker.read(index))
             if len(stack) == len(indices):
+                seeker.close()
+                seeker = None
                 images.append(np.median(np.stack(stack), axis=0).round().astype(np.uint8))
                 stack = []
     finally:

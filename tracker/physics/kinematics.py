@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tracker.geometry.se3 import exp_so3
+from tracker.geometry.se3 import exp_so3, skew
 from tracker.physics import superquadric as sq
 
 RIGID = 6
@@ -51,15 +51,6 @@ class Part:
         return RIGID + sq.N_PARAMETERS + self.d.size
 
 
-def _cross_matrices(x: np.ndarray) -> np.ndarray:
-    """[x_i]x for every row of x (n, 3) -> (n, 3, 3)."""
-    out = np.zeros(x.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -x[..., 2], x[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = x[..., 2], -x[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -x[..., 1], x[..., 0]
-    return out
-
-
 def _local_points(part: Part) -> np.ndarray:
     """p_i = s(q_s; u_i, v_i) + d_i, shape (n, 3)."""
     return sq.shape(part.q_s, part.u, part.v) + part.d
@@ -79,7 +70,7 @@ def jacobians(part: Part) -> np.ndarray:
     r = part.rotation
     out = np.zeros((n, 3, part.n_coordinates))
     out[:, :, 0:3] = np.eye(3)
-    out[:, :, 3:6] = -_cross_matrices(_local_points(part) @ r.T)
+    out[:, :, 3:6] = -np.stack([skew(p) for p in _local_points(part) @ r.T])
     out[:, :, SHAPE] = r @ sq.jacobian(part.q_s, part.u, part.v)
     first = SHAPE.stop + 3 * np.arange(n)
     for k in range(3):
