@@ -63,6 +63,8 @@ class Placement:
             seeker.close()
         self.settings = Settings(motion="none", iterations=snap_iterations)
         self.inspector = Tracker(model, recording.cameras, poses, self.settings)
+        self.smoothed = [self.inspector.smooth(image) for image in self.images]  # frame 0 never changes:
+        self.inspector.load_images(self.smoothed, smoothed=True)  # smoothed and loaded once for every redraw
         self.poses = model.coerce(poses)
         self.lock = threading.RLock()
         self.saved = threading.Event()
@@ -104,7 +106,7 @@ class Placement:
         with self.lock:
             tracker = Tracker(self.model, self.recording.cameras, self.poses, self.settings)
             for _ in range(rounds):
-                result = tracker.step(self.images)
+                result = tracker.step(self.smoothed, smoothed=True)
             self.poses = result.poses
             self.message.content = (f"Snapped: residual {result.residual:.2f} px, "
                                     f"{100 * result.share:.0f} % of the samples found an edge.")
@@ -121,5 +123,5 @@ class Placement:
         for gizmo, pose in zip(self.gizmos, self.poses):
             gizmo.wxyz = vtf.SO3.from_matrix(pose[0:3, 0:3]).wxyz
             gizmo.position = pose[0:3, 3]
-        inspection = self.inspector.inspect(self.images, poses=self.poses)
+        inspection = self.inspector.inspect(poses=self.poses)
         self.scene.show(Frame(self.poses, self.images, inspection, label="frame 0"))
