@@ -93,7 +93,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
-    truth = _truth(rec) if args.view else None
+    truth = _truth(rec)
     live = _live_view(args, rec, model, init, settings, truth) if args.view else None
     overlay = None
     if args.overlay:
@@ -148,13 +148,13 @@ def cmd_track(args: argparse.Namespace) -> int:
     print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
     print(f"mean residual: {np.nanmean(residuals) if np.isfinite(residuals).any() else float('nan'):.2f} px")
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost")
-    if rec.truth_path is not None:
-        report = evaluate(load_poses(out / "poses.npz"), load_poses(rec.truth_path))
-        print(format_report(report))
+    results = load_poses(out / "poses.npz") if truth is not None or live is not None else None
+    if truth is not None:
+        print(format_report(evaluate(results, truth)))
     if live is not None and done > 0:
         from tracker.viewer.review import Review
 
-        review = Review(live.scene, rec, model, load_poses(out / "poses.npz"), truth, settings)
+        review = Review(live.scene, rec, model, results, truth, settings)
         review.show(done - 1)
         return _serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
@@ -164,7 +164,7 @@ def _background(args: argparse.Namespace, rec, out: Path):
     """The --background of the run: None, the median of the recording (also saved under ``out``), or a folder."""
     if args.background == "none":
         return None
-    from tracker.foreground import SAMPLES, load_background, median_background, save_background
+    from tracker.foreground import SAMPLES, load_background, median_background, sample_indices, save_background
 
     if args.background != "median":
         return load_background(args.background, rec)
@@ -175,7 +175,7 @@ def _background(args: argparse.Namespace, rec, out: Path):
 
     background = median_background(rec, SAMPLES, progress)
     folder = save_background(background, rec, out / "background")
-    print(f"background: per-pixel median of {min(SAMPLES, rec.frame_count)} frames per camera, saved in {folder} "
+    print(f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, saved in {folder} "
           f"(reuse with --background {folder})", file=sys.stderr)
     return background
 

@@ -16,8 +16,10 @@ IRLS weights and edge ownership already expect of any occluding contour.
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Callable, Iterable
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,22 +57,12 @@ def median_background(recording: Recording, samples: int = SAMPLES,
     wraps the list of (camera, frame) reads (e.g. a tqdm bar).  One camera's frames are held at a time."""
     indices = sample_indices(recording.frame_count, samples)
     reads = [(camera, int(index)) for camera in range(len(recording.sources)) for index in indices]
-    images: list[np.ndarray] = []
-    stack: list[np.ndarray] = []
-    seeker = None
-    try:
-        for camera, index in progress(reads):
-            if not stack:
-                seeker = FrameSeeker(recording.sources[camera], colour=True)
-            stack.append(seeker.read(index))
-            if len(stack) == len(indices):
-                seeker.close()
-                seeker = None
-                images.append(np.median(np.stack(stack), axis=0).round().astype(np.uint8))
-                stack = []
-    finally:
-        if seeker is not None:
-            seeker.close()
+    reading = iter(progress(reads))
+    images = []
+    for source in recording.sources:
+        with closing(FrameSeeker(source, colour=True)) as seeker:
+            stack = np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(indices))])
+        images.append(np.median(stack, axis=0).round().astype(np.uint8))
     return Background(tuple(images))
 
 
