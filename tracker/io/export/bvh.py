@@ -39,7 +39,7 @@ import numpy as np
 from tracker.chain import JOINT_TYPES
 from tracker.io.atomic import atomic_write
 from tracker.io.poses import STATUS_LOST
-from tracker.model import Model
+from tracker.model import Model, rest_poses
 
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 ROTATION_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
@@ -63,15 +63,6 @@ def euler_zxy(rotation: np.ndarray) -> np.ndarray:
     return np.degrees(np.stack([z, x, y], axis=-1))
 
 
-def rest_orientations(model: Model) -> np.ndarray:
-    """(N, 3, 3) each component's rest orientation relative to the root: A_i = A_parent R(rest_i), A_root = I."""
-    out = np.empty((model.size, 3, 3))
-    out[0] = np.eye(3)
-    for i in range(1, model.size):
-        out[i] = out[model.parent[i]] @ model.rest[i, :3, :3]
-    return out
-
-
 def usable(poses: np.ndarray, status: np.ndarray) -> np.ndarray:
     """(F,) bool: frames that are not lost (status 2) and whose poses (F, N, 4, 4) are all finite."""
     return (status != STATUS_LOST) & np.isfinite(poses).all(axis=(1, 2, 3))
@@ -90,35 +81,38 @@ def hold_lost(poses: np.ndarray, status: np.ndarray) -> np.ndarray:
     return poses[source]
 
 
-def bvh_joint_frames(model: Model, poses: np.ndarray) -> np.ndarray:
-    """(F, N, 4, 4) BVH-world-from-joint transforms: rotation C R_i A_i^T C^T, origin C t_i (metres)."""
-    rest = rest_orientations(model)
+def bvh_joint_frames(poses: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """(F, N, 4, 4) BVH-world-from-joint transforms: rotation C R_i A_i^T C^T, origin C t_i (metres).
+
+    ``rest`` (N, 4, 4) is the model's rest pose with the root at the identity, ``rest_poses(model, np.eye(4))``,
+    whose rotations are the rest orientations ``A_i``.
+    """
     out = np.zeros(poses.shape)
     out[..., 3, 3] = 1.0
-    out[..., :3, :3] = Z_UP_TO_Y_UP @ poses[..., :3, :3] @ np.swapaxes(rest, -1, -2) @ Z_UP_TO_Y_UP.T
+    out[..., :3, :3] = Z_UP_TO_Y_UP @ poses[..., :3, :3] @ np.swapaxes(rest[:, :3, :3], -1, -2) @ Z_UP_TO_Y_UP.T
     out[..., :3, 3] = poses[..., :3, 3] @ Z_UP_TO_Y_UP.T
     return out
 
 
-def offsets(model: Model) -> np.ndarray:
-    """(N, 3) BVH OFFSETs in metres: C A_parent at_i; the root's is zero."""
-    rest = rest_orientations(model)
+def offsets(model: Model, rest: np.ndarray) -> np.ndarray:
+    """(N, 3) BVH OFFSETs in metres: C A_parent at_i, the rest origin relative to the parent's; the root's is zero.
+
+    ``rest`` is ``rest_poses(model, np.eye(4))`` (see :func:`bvh_joint_frames`).
+    """
     out = np.zeros((model.size, 3))
-    for i in range(1, model.size):
-        out[i] = Z_UP_TO_Y_UP @ rest[model.parent[i]] @ model.rest[i, :3, 3]
+    out[1:] = (rest[1:, :3, 3] - rest[model.parent[1:], :3, 3]) @ Z_UP_TO_Y_UP.T
     return out
 
 
-def end_sites(model: Model) -> np.ndarray:
+def end_sites(model: Model, rest: np.ndarray) -> np.ndarray:
     """(N, 3) End Site OFFSETs in metres: C A_i (2 c), c the component's quadric centre farthest from its
-    joint (zero without quadrics)."""
-    rest = rest_orientations(model)
+    joint (zero without quadrics); ``rest`` as in :func:`bvh_joint_frames`."""
     out = np.zeros((model.size, 3))
     for i in range(model.size):
         centres = model.quadric_bound[model.quadric_component == i, :3]
         if len(centres):
             far = centres[np.argmax(np.linalg.norm(centres, axis=1))]
-            out[i] = Z_UP_TO_Y_UP @ rest[i] @ (2.0 * far)
+            out[i] = Z_UP_TO_Y_UP @ rest[i, :3, :3] @ (2.0 * far)
     return out
 
 
@@ -129,17 +123,19 @@ def has_position(model: Model) -> np.ndarray:
     return out
 
 
-def motion(model: Model, poses: np.ndarray) -> np.ndarray:
+def motion(model: Model, poses: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
     """(F, N, 6) channel values per component: position (metres) then Z, X, Y rotation (degrees).
 
-    ``poses`` (F, N, 4, 4) world-from-component, every frame finite.
+    ``poses`` (F, N, 4, 4) world-from-component, every frame finite; ``rest`` as in
+    :func:`bvh_joint_frames` (computed when not given).
     """
-    frames = bvh_joint_frames(model, poses)
+    rest = rest_poses(model, np.eye(4)) if rest is None else rest
+    frames = bvh_joint_frames(poses, rest)
     local = frames.copy()
     parent = model.parent[1:]
     local[:, 1:] = np.linalg.inv(frames[:, parent]) @ frames[:, 1:]
     out = np.empty(poses.shape[:2] + (6,))
-    out[..., :3] = local[..., :3, 3] - offsets(model)
+    out[..., :3] = local[..., :3, 3] - offsets(model, rest)
     out[..., 3:] = np.unwrap(euler_zxy(local[..., :3, :3]), period=360.0, axis=0)
     return out
 
@@ -154,9 +150,9 @@ def depth_first(model: Model) -> list[int]:
     return order
 
 
-def hierarchy_lines(model: Model) -> list[str]:
-    """The HIERARCHY section of the BVH of ``model``."""
-    offset, end, positional = offsets(model), end_sites(model), has_position(model)
+def hierarchy_lines(model: Model, rest: np.ndarray) -> list[str]:
+    """The HIERARCHY section of the BVH of ``model``; ``rest`` as in :func:`bvh_joint_frames`."""
+    offset, end, positional = offsets(model, rest), end_sites(model, rest), has_position(model)
 
     def vector(values: np.ndarray) -> str:
         return " ".join(f"{v:.8f}" for v in values)
@@ -178,12 +174,13 @@ def hierarchy_lines(model: Model) -> list[str]:
 
 def bvh_lines(model: Model, poses: np.ndarray, status: np.ndarray, rate: float) -> list[str]:
     """The lines (without newlines) of the BVH of ``poses`` (F, N, 4, 4, model order) at ``rate`` frames per second."""
-    values = motion(model, hold_lost(poses, status))
+    rest = rest_poses(model, np.eye(4))
+    values = motion(model, hold_lost(poses, status), rest)
     positional = has_position(model)
     columns = [values[:, i, 0 if positional[i] else 3:] for i in depth_first(model)]
     table = np.concatenate(columns, axis=1)
     row_format = " ".join(["%.8f"] * table.shape[1])
-    return (hierarchy_lines(model) + ["MOTION", f"Frames: {len(table)}", f"Frame Time: {1.0 / rate:.10f}"]
+    return (hierarchy_lines(model, rest) + ["MOTION", f"Frames: {len(table)}", f"Frame Time: {1.0 / rate:.10f}"]
             + [row_format % tuple(row) for row in table])
 
 
