@@ -50,6 +50,7 @@ from scipy.sparse import csr_matrix
 from tracker.calibrate.board import Board, Detection
 from tracker.calibrate.intrinsics import corner_reach
 from tracker.camera import Camera
+from tracker.geometry.se3 import exp_so3_many, log_so3
 
 _HUBER_SCALE = 1.0  # pixels
 _OUTLIER_FLOOR = 3.0  # pixels
@@ -90,27 +91,6 @@ class RigResult:
 
 # ---------------------------------------------------------------------------------------------- #
 # rotations
-
-
-def rodrigues(rvecs: np.ndarray) -> np.ndarray:
-    """Rotation matrices (n, 3, 3) of Rodrigues vectors (n, 3):
-    R = I + sin(theta) [k]x + (1 - cos(theta)) [k]x^2, k = r / theta, theta = |r|."""
-    rvecs = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    theta = np.linalg.norm(rvecs, axis=1)
-    small = theta < 1e-12
-    safe = np.where(small, 1.0, theta)
-    k = rvecs / safe[:, None]
-    cross = np.zeros((len(rvecs), 3, 3))
-    cross[:, 0, 1], cross[:, 0, 2] = -k[:, 2], k[:, 1]
-    cross[:, 1, 0], cross[:, 1, 2] = k[:, 2], -k[:, 0]
-    cross[:, 2, 0], cross[:, 2, 1] = -k[:, 1], k[:, 0]
-    sin = np.where(small, 0.0, np.sin(theta))[:, None, None]
-    cos = np.where(small, 0.0, 1.0 - np.cos(theta))[:, None, None]
-    return np.eye(3) + sin * cross + cos * (cross @ cross)
-
-
-def rvec(R: np.ndarray) -> np.ndarray:
-    return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].ravel()
 
 
 def angle_between(Ra: np.ndarray, Rb: np.ndarray) -> float:
@@ -286,8 +266,10 @@ class _Problem:
                 self.held[c, 5] = reach < 0.4  # k2
 
     def pack(self, camera_poses: dict[int, Pose], board_poses: dict[int, Pose]) -> np.ndarray:
-        cams = [np.concatenate([rvec(camera_poses[c].R), camera_poses[c].t]) for c in self.free]
-        boards = [np.concatenate([rvec(board_poses[f].R), board_poses[f].t]) for f in self.frames]
+        cams = [np.concatenate([log_so3(np.ascontiguousarray(camera_poses[c].R, dtype=np.float64)), camera_poses[c].t])
+                for c in self.free]
+        boards = [np.concatenate([log_so3(np.ascontiguousarray(board_poses[f].R, dtype=np.float64)), board_poses[f].t])
+                  for f in self.frames]
         parts = cams + boards + ([self.intrinsics.ravel()] if self.refine else [])
         return np.concatenate(parts) if parts else np.zeros(0)
 
@@ -298,14 +280,15 @@ class _Problem:
         cam_r[self.free], cam_t[self.free] = free[:, :3], free[:, 3:]
         boards = x[self.n_cam:self.n_cam + self.n_frame].reshape(-1, 6)
         intrinsics = x[self.n_cam + self.n_frame:].reshape(-1, 9) if self.refine else self.intrinsics
-        return cam_r, cam_t, boards[:, :3], boards[:, 3:], intrinsics
+        board_r = np.ascontiguousarray(boards[:, :3], dtype=np.float64)  # for se3's njit functions
+        return cam_r, cam_t, board_r, boards[:, 3:], intrinsics
 
     def residuals(self, x: np.ndarray, select: np.ndarray | None = None) -> np.ndarray:
         cam_r, cam_t, board_r, board_t, intrinsics = self.unpack(x)
         cam, frame, objects, targets = self.cam, self.frame, self.objects, self.targets
         if select is not None:
             cam, frame, objects, targets = cam[select], frame[select], objects[select], targets[select]
-        Rc, Rf = rodrigues(cam_r), rodrigues(board_r)
+        Rc, Rf = exp_so3_many(cam_r), exp_so3_many(board_r)
         in_root = np.einsum("mij,mj->mi", Rf[frame], objects) + board_t[frame]
         in_camera = np.einsum("mij,mj->mi", Rc[cam], in_root) + cam_t[cam]
         return project(intrinsics[cam], in_camera) - targets
@@ -407,7 +390,7 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
     errors = np.linalg.norm(problem.residuals(x), axis=1)
 
     cam_r, cam_t, board_r, board_t, intrinsics = problem.unpack(x)
-    rotations = rodrigues(cam_r)
+    rotations = exp_so3_many(cam_r)
     out = []
     for c, camera in enumerate(cameras):
         matrix, distortions = camera.matrix, camera.distortions
@@ -416,7 +399,7 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
             matrix = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
             distortions = intrinsics[c, 4:]
         out.append(Camera(camera.name, camera.size, matrix, distortions, rotations[c], cam_t[c], camera.fisheye))
-    board_rot = rodrigues(board_r)
+    board_rot = exp_so3_many(board_r)
     return RigResult(
         cameras=out,
         board_poses={f: Pose(board_rot[i], board_t[i]) for i, f in enumerate(frames)},
