@@ -62,9 +62,8 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-
-MJPG = cv2.VideoWriter.fourcc(*"MJPG")
-DEFAULT_FPS = 30.0  # when a device or a file does not state its frame rate
+from tracker.io.readers import MJPG, open_video
+from tracker.io.recording import DEFAULT_FPS
 STALL_TIMEOUT = 2.0  # seconds without a frame after which a camera is dropped
 MAX_PENDING = 30  # frames per camera waiting for their partners
 JOIN_WAIT = 1.0  # seconds close() waits for the capture threads (one stuck in a driver call is left behind)
@@ -179,13 +178,12 @@ class ReplaySource:
 
     def __init__(self, path: str | Path, clock: ReplayClock):
         self.name = str(path)
-        capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        capture, self.mjpeg = open_video(Path(path))
         if not capture.isOpened():
             raise TrackerInputError(f"{path}: not a readable video file; give a camera device or a video")
         self.size = (int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         fps = capture.get(cv2.CAP_PROP_FPS)
         self.fps = fps if np.isfinite(fps) and fps > 0 else DEFAULT_FPS
-        self.mjpeg = int(capture.get(cv2.CAP_PROP_FOURCC)) == MJPG and capture.set(cv2.CAP_PROP_FORMAT, -1)
         self.capture, self.clock, self.count = capture, clock, 0
 
     def read(self) -> tuple[np.ndarray, float] | None:

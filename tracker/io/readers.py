@@ -24,7 +24,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-_MJPG = int.from_bytes(b"MJPG", "little")
+MJPG = int.from_bytes(b"MJPG", "little")  # the Motion-JPEG fourcc as OpenCV gives it
 _PUT_WAIT = 0.1  # seconds between checks of the stop flag while a queue is full
 
 
@@ -53,7 +53,7 @@ def _decode_error(video: Path, index: int) -> TrackerInputError:
     return TrackerInputError(f"{video}: frame {index} failed to decode; the video is truncated or corrupt, re-encode it")
 
 
-def _grey(image: np.ndarray) -> np.ndarray:
+def grey(image: np.ndarray) -> np.ndarray:
     """Grey uint8 (H, W) from a BGR, BGRA or already grey frame."""
     if image.ndim == 2:
         return image
@@ -77,7 +77,7 @@ def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Iterator[
         for index, file in enumerate(image_files(source)[start:], start):
             yield read_image(file, index, flags)
         raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
-    capture, raw = _open_video(source)
+    capture, raw = open_video(source)
     try:
         for index in range(start):
             if not capture.grab():
@@ -88,12 +88,13 @@ def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Iterator[
         capture.release()
 
 
-def _open_video(source: Path) -> tuple[cv2.VideoCapture, bool]:
-    """A capture of the video and whether its frames come as raw Motion-JPEG (decoded to grey directly)."""
+def open_video(source: Path) -> tuple[cv2.VideoCapture, bool]:
+    """A capture of the video (FFmpeg, else any OpenCV backend) and whether its frames come as raw Motion-JPEG:
+    then each read gives the frame's JPEG bytes as stored (the readers decode them to grey directly)."""
     capture = cv2.VideoCapture(str(source), cv2.CAP_FFMPEG)
     if not capture.isOpened():
         capture = cv2.VideoCapture(str(source))
-    raw = int(capture.get(cv2.CAP_PROP_FOURCC)) == _MJPG and capture.set(cv2.CAP_PROP_FORMAT, -1)
+    raw = int(capture.get(cv2.CAP_PROP_FOURCC)) == MJPG and capture.set(cv2.CAP_PROP_FORMAT, -1)
     return capture, bool(raw)
 
 
@@ -106,7 +107,7 @@ def _read_frame(capture: cv2.VideoCapture, raw: bool, source: Path, index: int, 
     if raw:
         image = cv2.imdecode(data, cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE)
     else:
-        image = _bgr(data) if colour else _grey(data)
+        image = _bgr(data) if colour else grey(data)
     if image is None:
         raise _decode_error(source, index)
     return image
@@ -176,7 +177,7 @@ class FrameSeeker:
     def __init__(self, source: Path, colour: bool = False):
         self.source, self.colour = source, colour
         self.files = image_files(source) if source.is_dir() else None
-        self.capture, self.raw = (None, False) if self.files is not None else _open_video(source)
+        self.capture, self.raw = (None, False) if self.files is not None else open_video(source)
         self.next_index = 0
 
     def read(self, index: int) -> np.ndarray:

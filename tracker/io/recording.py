@@ -28,7 +28,7 @@ from tracker.errors import TrackerInputError
 from tracker.io.readers import image_files, read_frames, read_image
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
-DEFAULT_FPS = 30.0  # for image folders and videos that do not state a frame rate
+DEFAULT_FPS = 30.0  # for image folders, videos and camera devices that do not state a frame rate
 
 
 @dataclass
