@@ -15,14 +15,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
-import numpy as np
 from tqdm import tqdm
 
 from tracker.calibrate.board import Board, Detection
 from tracker.errors import TrackerInputError
-from tracker.io.readers import IMAGE_SUFFIXES, image_files, read_image
-
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
+from tracker.io.readers import IMAGE_SUFFIXES, grey, image_files, read_image
+from tracker.io.recording import VIDEO_SUFFIXES
 
 
 @dataclass
@@ -74,10 +72,6 @@ def frame_count(source: Path) -> int:
         capture.release()
 
 
-def _grey(image: np.ndarray) -> np.ndarray:
-    return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-
-
 def _frames(source: Path, stride: int):
     """(index, grey image) of frames 0, stride, 2 stride, ... of a source."""
     if source.is_dir():
@@ -93,7 +87,7 @@ def _frames(source: Path, stride: int):
                 ok, image = capture.read()
                 if not ok:
                     return
-                yield index, _grey(image)
+                yield index, grey(image)
             elif not capture.grab():
                 return
             index += 1
@@ -115,18 +109,18 @@ def detect_all(board: Board, cameras: list[CameraViews], max_frames: int = 300, 
 
     def work(camera: CameraViews) -> None:
         detector = board.detector()
-        for index, grey in _frames(camera.source, stride):
+        for index, image in _frames(camera.source, stride):
             if stop.is_set():
                 return
             if camera.searched == 0:
-                camera.size = (grey.shape[1], grey.shape[0])
-            elif (grey.shape[1], grey.shape[0]) != camera.size:
+                camera.size = (image.shape[1], image.shape[0])
+            elif (image.shape[1], image.shape[0]) != camera.size:
                 raise TrackerInputError(
-                    f"{camera.source}: frame {index} is {grey.shape[1]}x{grey.shape[0]} but frame 0 is "
+                    f"{camera.source}: frame {index} is {image.shape[1]}x{image.shape[0]} but frame 0 is "
                     f"{camera.size[0]}x{camera.size[1]}; give every frame of a camera the same size")
             camera.frames = index + 1
             camera.searched += 1
-            detection = detector.detect(grey)
+            detection = detector.detect(image)
             if detection is not None:
                 camera.detections[index] = detection
             with lock:
