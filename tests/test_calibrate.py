@@ -391,7 +391,7 @@ def test_robust_pose_average_rejects_flipped_estimates():
     rotations += [cv2.Rodrigues(np.array([0.0, 0.5, 0.0]))[0] @ truth for _ in range(5)]  # IPPE's mirror pose
     translations = [np.array([0.5, 0, 0]) + rng.normal(0, 0.001, 3) for _ in range(20)] + [np.array([0.2, 0.1, 0])] * 5
     from tracker.calibrate.extrinsics import robust_mean_pose
-    pose, kept, _ = robust_mean_pose(np.array(rotations), np.array(translations))
+    pose, kept = robust_mean_pose(np.array(rotations), np.array(translations))
     assert kept == 20
     assert np.degrees(angle_between(pose.R, truth)) < 0.1
     assert np.linalg.norm(pose.t - [0.5, 0, 0]) < 0.002

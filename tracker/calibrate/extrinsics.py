@@ -40,7 +40,7 @@ camera (the first camera), "f" the board at frame f, "c" a camera.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -75,7 +75,6 @@ class PairEstimate:
     pose: Pose  # T_ab: camera a from camera b
     shared: int  # frames both cameras see the board in
     kept: int  # estimates left after outlier rejection
-    spread_deg: float  # median angle of the kept estimates from their mean
 
 
 @dataclass
@@ -86,7 +85,6 @@ class RigResult:
     initial_rms: list[float]  # per camera, px, same observations, with the chained start poses
     frames: list[int]  # per camera: board views that entered the adjustment
     dropped: int = 0  # observations rejected as outliers
-    pairs: dict[tuple[int, int], PairEstimate] = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------------- #
@@ -104,13 +102,13 @@ def chordal_mean(rotations: np.ndarray) -> np.ndarray:
     return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
 
 
-def robust_mean_pose(rotations: np.ndarray, translations: np.ndarray) -> tuple[Pose, int, float]:
-    """Robust average of pose estimates (see the module docstring): pose, estimates kept, spread (deg)."""
+def robust_mean_pose(rotations: np.ndarray, translations: np.ndarray) -> tuple[Pose, int]:
+    """Robust average of pose estimates (see the module docstring): pose, estimates kept."""
     rotations = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
     translations = np.asarray(translations, dtype=np.float64).reshape(-1, 3)
     n = len(rotations)
     if n == 1:
-        return Pose(rotations[0], translations[0]), 1, 0.0
+        return Pose(rotations[0], translations[0]), 1
     probe = np.linspace(0, n - 1, min(n, 200)).round().astype(int)
     traces = np.einsum("iab,jab->ij", rotations[probe], rotations[probe])
     angles = np.arccos(np.clip((traces - 1.0) / 2.0, -1.0, 1.0))
@@ -121,9 +119,7 @@ def robust_mean_pose(rotations: np.ndarray, translations: np.ndarray) -> tuple[P
     keep = (angle <= max(np.radians(1.0), 3.0 * np.median(angle))) & (distance <= max(0.01, 3.0 * np.median(distance)))
     if not np.any(keep):
         keep = angle <= np.median(angle)
-    mean = chordal_mean(rotations[keep])
-    spread = np.degrees(np.median([angle_between(mean, R) for R in rotations[keep]]))
-    return Pose(mean, translations[keep].mean(axis=0)), int(keep.sum()), float(spread)
+    return Pose(chordal_mean(rotations[keep]), translations[keep].mean(axis=0)), int(keep.sum())
 
 
 # ---------------------------------------------------------------------------------------------- #
@@ -156,9 +152,8 @@ def pairwise_poses(poses: list[dict[int, Pose]]) -> dict[tuple[int, int], PairEs
             if not shared:
                 continue
             estimates = [poses[a][f] @ poses[b][f].inverse() for f in shared]
-            pose, kept, spread = robust_mean_pose(np.array([e.R for e in estimates]),
-                                                  np.array([e.t for e in estimates]))
-            pairs[(a, b)] = PairEstimate(pose, len(shared), kept, spread)
+            pose, kept = robust_mean_pose(np.array([e.R for e in estimates]), np.array([e.t for e in estimates]))
+            pairs[(a, b)] = PairEstimate(pose, len(shared), kept)
     return pairs
 
 
@@ -328,7 +323,7 @@ def per_camera_rms(errors: np.ndarray, cam: np.ndarray, count: int) -> list[floa
 
 
 def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Detection]],
-                  refine_intrinsics: bool = False, keep_frames: tuple[int, ...] = (), root: int = 0,
+                  refine_intrinsics: bool = False, keep_frames: tuple[int, ...] = (),
                   max_frames: int = 300) -> RigResult:
     """Extrinsics of cameras (their intrinsics given) from board detections per camera, steps 1-4.
 
@@ -347,10 +342,10 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
                 found[f] = pose
         poses.append(found)
     pairs = pairwise_poses(poses)
-    parent = spanning_tree(pairs, root)
+    parent = spanning_tree(pairs)  # the root is camera 0
     if len(parent) < count:
         raise ValueError("split rig", sorted(set(range(count)) - set(parent)))
-    camera_poses = chain_poses(parent, pairs, root)
+    camera_poses = chain_poses(parent, pairs)
 
     seen: dict[int, list[int]] = {}
     for c, found in enumerate(poses):
@@ -367,10 +362,10 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
     board_poses = {}
     for f in frames:
         estimates = [camera_poses[c].inverse() @ poses[c][f] for c in seen[f]]
-        board_poses[f], _, _ = robust_mean_pose(np.array([e.R for e in estimates]), np.array([e.t for e in estimates]))
+        board_poses[f], _ = robust_mean_pose(np.array([e.R for e in estimates]), np.array([e.t for e in estimates]))
 
     problem = _Problem(board, cameras, [{f: d for f, d in v.items() if f in poses[c]} for c, v in enumerate(views)],
-                       frames, refine_intrinsics, root)
+                       frames, refine_intrinsics, root=0)
     x = problem.pack(camera_poses, board_poses)
     select = np.ones(len(problem.cam), dtype=bool)
     initial = np.linalg.norm(problem.residuals(x), axis=1)
@@ -407,7 +402,6 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
         initial_rms=per_camera_rms(initial[select], problem.cam[select], count),
         frames=[len({f for f in poses[c] if f in set(frames)}) for c in range(count)],
         dropped=int((~select).sum()),
-        pairs=pairs,
     )
 
 

@@ -30,7 +30,6 @@ class CameraViews:
     name: str
     source: Path
     size: tuple[int, int] = (0, 0)  # width, height
-    frames: int = 0  # frames in the source
     searched: int = 0  # frames searched for the board
     detections: dict[int, Detection] = field(default_factory=dict)
 
@@ -118,7 +117,6 @@ def detect_all(board: Board, cameras: list[CameraViews], max_frames: int = 300, 
                 raise TrackerInputError(
                     f"{camera.source}: frame {index} is {image.shape[1]}x{image.shape[0]} but frame 0 is "
                     f"{camera.size[0]}x{camera.size[1]}; give every frame of a camera the same size")
-            camera.frames = index + 1
             camera.searched += 1
             detection = detector.detect(image)
             if detection is not None:
