@@ -63,10 +63,14 @@ class MjpegAviWriter:
     def write_jpeg(self, data: bytes) -> None:
         """Append one frame that is already a JPEG of the writer's size, byte for byte (a camera's
         Motion-JPEG frame is stored as it came, so reading the video back decodes the same image)."""
+        if not self.fits(len(data)):
+            raise TrackerInputError(f"{self.path}: the video would pass 1 GiB (AVI 1.0 limit); render fewer frames")
         offset = self.file.tell() - (self.movi_at + 8)
-        self.file.write(_chunk(b"00dc", data))
-        if self.file.tell() > self._MAX_BYTES:
-            raise TrackerInputError(f"{self.path}: the video passed 1 GiB (AVI 1.0 limit); render fewer frames")
+        # header, data and padding written one by one, so the (large) JPEG is not copied into a chunk
+        self.file.write(b"00dc" + struct.pack("<I", len(data)))
+        self.file.write(data)
+        if len(data) % 2:
+            self.file.write(b"\0")
         self.index.append((offset, len(data)))
         self.max_frame = max(self.max_frame, len(data))
 
