@@ -28,6 +28,12 @@ from tracker.errors import TrackerInputError
 from tracker.io.poses import STATUS_LOST, STATUS_TRACKED, load_poses
 
 FORMATS = ("trc", "c3d", "bvh", "csv")
+MM_PER_M = 1000.0  # TRC and C3D write millimetres
+
+
+def seconds(frame: np.ndarray, rate: float) -> np.ndarray:
+    """Seconds from the first of the frame indices ``frame`` (F,) at ``rate`` frames per second."""
+    return (frame - frame[0]) / rate
 
 
 @dataclass(frozen=True)
@@ -54,7 +60,7 @@ class Rows:
     @property
     def time(self) -> np.ndarray:
         """Seconds from the first frame: (frame - frame[0]) / rate."""
-        return (self.frame - self.frame[0]) / self.rate
+        return seconds(self.frame, self.rate)
 
 
 def frame_rate(data: dict[str, np.ndarray], path: Path, fps: float | None = None) -> float:

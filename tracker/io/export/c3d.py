@@ -20,8 +20,8 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_path
+from tracker.io.export import MM_PER_M
 
-_MM_PER_M = 1000.0
 _C3D_MAX_FRAMES = 65535  # the header's first and last frame are 16-bit
 
 
@@ -36,7 +36,7 @@ def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, r
                                 f"{first_frame}..{first_frame + count - 1}; export to TRC or CSV instead")
     gap = ~np.isfinite(joints).all(axis=2)  # (F, M)
     points = np.ones((4, len(names), count))
-    points[:3] = np.transpose(joints, (2, 1, 0)) * _MM_PER_M
+    points[:3] = np.transpose(joints, (2, 1, 0)) * MM_PER_M
     points[:3, gap.T] = np.nan
     c3d = ezc3d.c3d()
     c3d["parameters"]["POINT"]["RATE"]["value"] = [float(rate)]

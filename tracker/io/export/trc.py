@@ -30,11 +30,11 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_write
+from tracker.io.export import MM_PER_M, seconds
 from tracker.io.tomlfile import read_text
 
 HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units", "OrigDataRate",
                "OrigDataStartFrame", "OrigNumFrames")
-_MM_PER_M = 1000.0
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ def trc_lines(file_name: str, names: Sequence[str], frame: np.ndarray, rate: flo
         "\t\t" + axes,
         "",
     ]
-    data = np.column_stack([(frame - frame[0]) / rate, np.reshape(joints, (count, 3 * markers)) * _MM_PER_M])
+    data = np.column_stack([seconds(frame, rate), np.reshape(joints, (count, 3 * markers)) * MM_PER_M])
     row_format = "%.9f\t" + "%.6f\t" * (3 * markers)
     for index, row in zip(frame, data):
         lines.append(f"{int(index) + 1}\t" + (row_format % tuple(row)).replace("nan", "NaN"))
