@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from tracker.calibrate.board import MIN_CORNERS, Board, parse_board
 from tracker.calibrate.extrinsics import (
     FLOOR_FROM_BOARD,
     RigResult,
+    SplitRigError,
     calibrate_rig,
     to_world,
 )
@@ -116,8 +117,7 @@ def calibrate(folder, board: Board, intrinsics_only: bool = False, fixed=None, w
         if fixed_cameras is not None:
             known = fixed_cameras[camera.name]
             intrinsics.append(None)
-            cameras.append(Camera(camera.name, camera.size, known.matrix, known.distortions, np.eye(3), np.zeros(3),
-                                  known.fisheye))
+            cameras.append(replace(known, rotation=np.eye(3), translation=np.zeros(3)))  # name and size checked above
         else:
             result = calibrate_intrinsics(board, camera.detections, camera.size)
             intrinsics.append(result)
@@ -129,10 +129,8 @@ def calibrate(folder, board: Board, intrinsics_only: bool = False, fixed=None, w
     try:
         rig = calibrate_rig(board, cameras, [camera.detections for camera in views],
                             refine_intrinsics=refine_intrinsics, keep_frames=(first,))
-    except ValueError as error:
-        if len(error.args) < 2:
-            raise
-        raise _split_rig_error(folder, views, error.args[1]) from None
+    except SplitRigError as error:
+        raise _split_rig_error(folder, views, error.unreached) from None
     cameras = rig.cameras
     if world == "board":
         root_from_board = rig.board_poses.get(first)

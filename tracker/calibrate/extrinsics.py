@@ -40,7 +40,7 @@ camera (the first camera), "f" the board at frame f, "c" a camera.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -48,7 +48,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 
 from tracker.calibrate.board import Board, Detection
-from tracker.calibrate.intrinsics import corner_reach
+from tracker.calibrate.intrinsics import K2_REACH, K3_REACH, corner_reach
 from tracker.camera import Camera
 from tracker.geometry.se3 import exp_so3_many, log_so3
 
@@ -68,6 +68,14 @@ class Pose:
 
     def __matmul__(self, other: Pose) -> Pose:
         return Pose(self.R @ other.R, self.R @ other.t + self.t)
+
+
+class SplitRigError(ValueError):
+    """The rig's graph of shared views is split: ``unreached`` cameras share no view with the root."""
+
+    def __init__(self, unreached: list[int]):
+        super().__init__(f"split rig: cameras {unreached} are not linked to camera 0 by shared board views")
+        self.unreached = unreached
 
 
 @dataclass(frozen=True)
@@ -91,9 +99,14 @@ class RigResult:
 # rotations
 
 
+def angle_of_trace(trace):
+    """Geodesic angle (radians) of a rotation R (elementwise over arrays) from its trace: arccos((trace - 1) / 2)."""
+    return np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
+
+
 def angle_between(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """Geodesic angle (radians) between two rotations: arccos((trace(Ra^T Rb) - 1) / 2)."""
-    return float(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1.0) / 2.0, -1.0, 1.0)))
+    """Geodesic angle (radians) between two rotations: the angle of Ra^T Rb."""
+    return float(angle_of_trace(np.trace(Ra.T @ Rb)))
 
 
 def chordal_mean(rotations: np.ndarray) -> np.ndarray:
@@ -111,9 +124,9 @@ def robust_mean_pose(rotations: np.ndarray, translations: np.ndarray) -> tuple[P
         return Pose(rotations[0], translations[0]), 1
     probe = np.linspace(0, n - 1, min(n, 200)).round().astype(int)
     traces = np.einsum("iab,jab->ij", rotations[probe], rotations[probe])
-    angles = np.arccos(np.clip((traces - 1.0) / 2.0, -1.0, 1.0))
+    angles = angle_of_trace(traces)
     medoid = rotations[probe[int(np.argmin(angles.sum(axis=1)))]]
-    angle = np.arccos(np.clip((np.einsum("ab,iab->i", medoid, rotations) - 1.0) / 2.0, -1.0, 1.0))
+    angle = angle_of_trace(np.einsum("ab,iab->i", medoid, rotations))
     centre = np.median(translations, axis=0)
     distance = np.linalg.norm(translations - centre, axis=1)
     keep = (angle <= max(np.radians(1.0), 3.0 * np.median(angle))) & (distance <= max(0.01, 3.0 * np.median(distance)))
@@ -257,8 +270,8 @@ class _Problem:
         for c, detections in enumerate(views):
             if refine_intrinsics and detections:
                 reach = corner_reach(list(detections.values()), cameras[c].size)
-                self.held[c, 8] = reach < 0.6  # k3, as in intrinsics.py
-                self.held[c, 5] = reach < 0.4  # k2
+                self.held[c, 8] = reach < K3_REACH  # k3, as in intrinsics.py
+                self.held[c, 5] = reach < K2_REACH  # k2
 
     def pack(self, camera_poses: dict[int, Pose], board_poses: dict[int, Pose]) -> np.ndarray:
         cams = [np.concatenate([log_so3(np.ascontiguousarray(camera_poses[c].R, dtype=np.float64)), camera_poses[c].t])
@@ -329,8 +342,8 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
 
     ``views[c]`` maps frame index -> Detection for camera c. Frames seen by two or more cameras
     enter the adjustment (at most ``max_frames`` of them, evenly spread), and frames seen by one
-    camera too when intrinsics are refined; ``keep_frames`` always enter. Raises ValueError with
-    the unreached cameras' indices in ``args[1]`` when the rig's graph of shared views is split.
+    camera too when intrinsics are refined; ``keep_frames`` always enter. Raises SplitRigError (its
+    ``unreached``: the cameras' indices) when the rig's graph of shared views is split.
     """
     count = len(cameras)
     poses: list[dict[int, Pose]] = []
@@ -344,7 +357,7 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
     pairs = pairwise_poses(poses)
     parent = spanning_tree(pairs)  # the root is camera 0
     if len(parent) < count:
-        raise ValueError("split rig", sorted(set(range(count)) - set(parent)))
+        raise SplitRigError(sorted(set(range(count)) - set(parent)))
     camera_poses = chain_poses(parent, pairs)
 
     seen: dict[int, list[int]] = {}
@@ -382,7 +395,6 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
         if round_ > 0 and np.array_equal(inliers, select):
             break
         select = inliers
-    errors = np.linalg.norm(problem.residuals(x), axis=1)
 
     cam_r, cam_t, board_r, board_t, intrinsics = problem.unpack(x)
     rotations = exp_so3_many(cam_r)
@@ -393,14 +405,15 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
             fx, fy, cx, cy = intrinsics[c, :4]
             matrix = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
             distortions = intrinsics[c, 4:]
-        out.append(Camera(camera.name, camera.size, matrix, distortions, rotations[c], cam_t[c], camera.fisheye))
+        out.append(replace(camera, matrix=matrix, distortions=distortions, rotation=rotations[c], translation=cam_t[c]))
     board_rot = exp_so3_many(board_r)
+    used = set(frames)
     return RigResult(
         cameras=out,
         board_poses={f: Pose(board_rot[i], board_t[i]) for i, f in enumerate(frames)},
         rms=per_camera_rms(errors[select], problem.cam[select], count),
         initial_rms=per_camera_rms(initial[select], problem.cam[select], count),
-        frames=[len({f for f in poses[c] if f in set(frames)}) for c in range(count)],
+        frames=[len(used.intersection(poses[c])) for c in range(count)],
         dropped=int((~select).sum()),
     )
 
@@ -417,5 +430,5 @@ def to_world(cameras: list[Camera], world_from_root: Pose) -> list[Camera]:
     out = []
     for camera in cameras:
         T = Pose(camera.rotation, camera.translation) @ root_from_world
-        out.append(Camera(camera.name, camera.size, camera.matrix, camera.distortions, T.R, T.t, camera.fisheye))
+        out.append(replace(camera, rotation=T.R, translation=T.t))
     return out

@@ -18,8 +18,8 @@ dropped and the fit is repeated once.
 
 Radial terms are only estimated where the corners reach: with rho the 99th percentile of the
 corners' distances from the image centre, in units of the half diagonal, k3 (the r^6 term) is held
-at 0 unless there are at least ``FULL_MODEL_VIEWS`` views and rho >= 0.6, and k2 too when
-rho < 0.4. A polynomial fitted to the middle of the image alone extrapolates wildly towards the
+at 0 unless there are at least ``FULL_MODEL_VIEWS`` views and rho >= ``K3_REACH`` (0.6), and k2 too when
+rho < ``K2_REACH`` (0.4). A polynomial fitted to the middle of the image alone extrapolates wildly towards the
 corners (k3 of -8 and +10 on caliscope's small board, whose corners stay within a quarter of the
 half diagonal in one camera).
 """
@@ -36,6 +36,8 @@ from tracker.calibrate.board import Board, Detection
 
 MIN_VIEWS = 5  # fewer board views do not determine K and the distortion
 FULL_MODEL_VIEWS = 10  # from this many views on, k3 is estimated too
+K3_REACH = 0.6  # k3 is held at 0 where the corners reach less far (rho, see the module docstring)
+K2_REACH = 0.4  # and k2 too below this reach
 _CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
 
 
@@ -116,8 +118,8 @@ def _fit(board: Board, views: list[Detection], size: tuple[int, int]):
     reach = corner_reach(views, size)
     objects = [board.object_points[view.ids].astype(np.float32) for view in views]
     images = [view.pixels.astype(np.float32).reshape(-1, 1, 2) for view in views]
-    flags = 0 if len(views) >= FULL_MODEL_VIEWS and reach >= 0.6 else cv2.CALIB_FIX_K3
-    if reach < 0.4:
+    flags = 0 if len(views) >= FULL_MODEL_VIEWS and reach >= K3_REACH else cv2.CALIB_FIX_K3
+    if reach < K2_REACH:
         flags |= cv2.CALIB_FIX_K2
     rms, matrix, distortions, rvecs, tvecs = cv2.calibrateCamera(
         objects, images, tuple(size), None, None, flags=flags, criteria=_CRITERIA)
