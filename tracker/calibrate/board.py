@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -91,14 +92,15 @@ class Board:
         """A chessboard that looks the same turned by 180 degrees (COLS + ROWS even)."""
         return self.kind == "chessboard" and (self.cols + self.rows) % 2 == 0
 
-    @property
+    @cached_property
     def object_points(self) -> np.ndarray:
-        """(N, 3) corner positions in the board frame, metres, indexed by corner id."""
+        """(N, 3) corner positions in the board frame, metres, indexed by corner id (computed once, read-only)."""
         cols, rows = self.grid
         c, r = np.meshgrid(np.arange(cols), np.arange(rows))
         offset = 0.0 if self.kind == "chessboard" else 1.0
         points = np.stack([(c.ravel() + offset) * self.square, (r.ravel() + offset) * self.square,
                            np.zeros(c.size)], axis=1)
+        points.setflags(write=False)  # shared by every caller
         return points
 
     def describe(self) -> str:
