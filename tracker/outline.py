@@ -209,21 +209,27 @@ def _cones(sphere, cone):
         cone[j, 5] = np.arcsin(cone[j, 4])
 
 
+@njit(cache=True, nogil=True)
+def cone_gap(cone_j, cone_l, cos_w, sin_w):
+    """``cos(angle between the axes of cones j and l) - cos(a_j + w)`` for rows of :func:`_cones` and a half
+    angle ``w`` (its cosine and sine) given to cone l, its own or widened: the cones meet when this is
+    ``>= 0``, provided ``a_j + w <= pi`` (callers treat wider pairs, and whole-sphere cones, as meeting)."""
+    cos_axes = cone_j[0] * cone_l[0] + cone_j[1] * cone_l[1] + cone_j[2] * cone_l[2]
+    return cos_axes - (cone_j[3] * cos_w - cone_j[4] * sin_w)
+
+
 @njit(cache=True)
 def _occluders(j, cone, out):
     """The quadrics other than j whose ray cones meet j's (only they can hide j's outline);
     returns their count in ``out``.  Cones meet when the angle between their axes is at most
-    the sum of their half angles: cos(axes) >= cos(a_j + a_l)."""
+    the sum of their half angles, cos(axes) >= cos(a_j + a_l) (:func:`cone_gap`; a_j + a_l < pi as
+    both are below pi/2), or when either cone is the whole sphere of rays (cos = -1)."""
     count = 0
     for l in range(cone.shape[0]):
         if l == j:
             continue
-        if cone[j, 3] > -1.0 and cone[l, 3] > -1.0:
-            sum_cos = cone[j, 3] * cone[l, 3] - cone[j, 4] * cone[l, 4]
-            if cone[j, 4] * cone[l, 3] + cone[j, 3] * cone[l, 4] >= 0.0:  # a_j + a_l <= pi
-                cos_axes = cone[j, 0] * cone[l, 0] + cone[j, 1] * cone[l, 1] + cone[j, 2] * cone[l, 2]
-                if cos_axes < sum_cos:
-                    continue
+        if cone[j, 3] > -1.0 and cone[l, 3] > -1.0 and cone_gap(cone[j], cone[l], cone[l, 3], cone[l, 4]) < 0.0:
+            continue
         out[count] = l
         count += 1
     return count
@@ -376,7 +382,6 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
         sphere = placed_sphere[k]
         cone = placed_cone[k]
         for j in range(n_quadrics):
-            n_occluders = _occluders(j, cone, occluders)
             centre = sphere[j, 0:3].copy()
             radius = sphere[j, 3]
             if centre[2] + radius <= 0.0:
@@ -404,6 +409,7 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
             big = max(abs(lam[0]), abs(lam[2]))
             if big == 0.0:
                 continue
+            n_occluders = _occluders(j, cone, occluders)  # only for the quadrics that pass the culls above
             tol = 1e-9 * big
             n_pos = 0
             n_neg = 0

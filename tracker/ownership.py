@@ -26,10 +26,11 @@ point lies inside the quadric's clipping quadric wins.
 
 Speed (two numba calls per IRLS iteration, no allocation per sample):
 
-* the camera-frame quadrics, clips and bounding spheres are made once per call
-  (:func:`prepare`) into buffers the :class:`~tracker.track.Tracker` owns,
-  with per camera and quadric the short list of quadrics whose cone of rays
-  comes near it (the only ones its samples can meet);
+* the camera-frame quadrics, clips, bounding spheres and their cones of rays
+  are the ones :func:`tracker.outline.place` made for the outlines (the
+  :class:`~tracker.outline.Placed` buffers the :class:`~tracker.track.Tracker`
+  owns); per call :func:`prepare` only lists, per camera and quadric, the
+  quadrics whose cone of rays comes near it (the only ones its samples can meet);
 * per sample only the two ends of the search segment ``p +- (r + 1) n`` are
   undistorted (bilinearly in a per-camera grid of exact undistortions made
   once, :func:`undistort_grid`; Newton outside it); the rays in between are
@@ -52,6 +53,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from tracker.outline import cone_gap
 
 _UNDISTORT_ITERATIONS = 8
 _UNDISTORT_TOLERANCE = 1e-9
@@ -83,8 +86,7 @@ def prepare(cone, cam_scale, r, o_near, o_near_count):
                 wide = c[l, 5] + margin
                 near = l == j or c[j, 5] + wide >= np.pi
                 if not near:
-                    cos_axes = c[j, 0] * c[l, 0] + c[j, 1] * c[l, 1] + c[j, 2] * c[l, 2]
-                    near = cos_axes >= c[j, 3] * np.cos(wide) - c[j, 4] * np.sin(wide)
+                    near = cone_gap(c[j], c[l], np.cos(wide), np.sin(wide)) >= 0.0
                 if near:
                     o_near[k, j, count] = l
                     count += 1
