@@ -126,7 +126,7 @@ def alignments(bvh: Bvh, model: Model, path: object = "<bvh>") -> tuple[np.ndarr
             world = bvh_global(bvh)[:, :, 0:3, 0:3]
         p = model.parent[i]
         relative = np.einsum("fba,fbc->fac", world[:, joints[p]], world[:, joints[i]])
-        w = np.array([se3.log_so3(np.ascontiguousarray(r)) for r in relative])
+        w = se3.log_so3_many(np.ascontiguousarray(relative))
         w = w[np.linalg.norm(w, axis=1) > np.radians(5.0)]
         if len(w) < 3:
             continue
