@@ -172,23 +172,6 @@ def jacobian(q_s: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return j
 
 
-def jacobian_central_difference(
-    q_s: np.ndarray, u: np.ndarray, v: np.ndarray, step: float = 1e-6
-) -> np.ndarray:
-    """Test oracle for ``jacobian``: (s(q + h e_k) - s(q - h e_k)) / 2h, h = step max(0.1, |q_k|).
-
-    22 shape evaluations per point (section 1); shape (..., 3, 11).
-    """
-    q_s = np.asarray(q_s, dtype=np.float64)
-    columns = []
-    for k in range(N_PARAMETERS):
-        h = step * max(0.1, abs(q_s[k]))
-        dq = np.zeros(N_PARAMETERS)
-        dq[k] = h
-        columns.append((shape(q_s + dq, u, v) - shape(q_s - dq, u, v)) / (2.0 * h))
-    return np.stack(columns, axis=-1)
-
-
 def normals(q_s: np.ndarray, u: np.ndarray, v: np.ndarray, step: float = 1e-6) -> np.ndarray:
     """Outward unit normals of the reference shape at (u, v), shape (..., 3).
 
