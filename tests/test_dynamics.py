@@ -20,6 +20,35 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "recordings" / "demo"
 
 
+def update(state: dynamics.MotionState, measured: np.ndarray, information: np.ndarray) -> dynamics.MotionState:
+    """The Kalman update from measured poses ``z`` with information ``W = V^-1`` per block (N,2,3,3):
+    ``x+ = x + P_xx+ W (z - x)`` (information form of ``x + K (z - H x)``), then :func:`tracker.dynamics.correct`."""
+    diff = dynamics._difference(state.poses, np.asarray(measured, dtype=np.float64))
+    posterior = np.linalg.inv(np.linalg.inv(state.covariance[..., :3, :3]) + information)
+    step = np.einsum("nbij,nbj->nbi", posterior @ information, diff)
+    poses = state.poses.copy()
+    poses[:, :3, 3] += step[:, dynamics.TRANSLATION]
+    poses[:, :3, :3] = state.poses[:, :3, :3] @ se3.exp_so3_many(np.ascontiguousarray(step[:, dynamics.ROTATION]))
+    return dynamics.correct(state, poses, information)
+
+
+def fitting_step(x: np.ndarray, cov: np.ndarray, force: np.ndarray, hessian: np.ndarray, dt: float,
+                 stiffness: np.ndarray | None = None, q: float = 0.0, riccati: bool = True):
+    """One inner iteration of the note's first-order continuous EKF for one block (section 5):
+
+        x <- x + dt (P g - K x),   P <- P + dt (-K P - P K + q I - P A P),   P <- (P + P^T) / 2
+
+    with ``g = H^T V^-1 r`` (``force``) and ``A = H^T V^-1 H`` (``hessian``), both at the current ``x``.
+    With ``riccati=False`` and ``P = I`` this is dynamic fitting (eqs. 16/18).  For comparison and tests;
+    the tracker uses the discrete form (:func:`tracker.dynamics.correct`)."""
+    k = np.zeros_like(cov) if stiffness is None else stiffness
+    x = x + dt * (cov @ force - k @ x)
+    if riccati:
+        cov = cov + dt * (-k @ cov - cov @ k + q * np.eye(len(x)) - cov @ hessian @ cov)
+        cov = 0.5 * (cov + cov.T)
+    return x, cov
+
+
 def _spd(rng, n=6, scale=1.0):
     a = rng.normal(size=(n, n))
     return scale * (a @ a.T + 0.5 * np.eye(n))
@@ -80,7 +109,7 @@ def test_identity_covariance_and_no_data_is_plain_dynamic_fitting():
         return h.T @ (z - h @ x) / sigma2
 
     x = rng.normal(size=3)
-    stepped, cov = dynamics.fitting_step(x, np.eye(3), force(x), a, 0.01, k, riccati=False)
+    stepped, cov = fitting_step(x, np.eye(3), force(x), a, 0.01, k, riccati=False)
     np.testing.assert_allclose(stepped, x + 0.01 * (force(x) - k @ x), rtol=1e-15)
     np.testing.assert_array_equal(cov, np.eye(3))
 
@@ -88,8 +117,8 @@ def test_identity_covariance_and_no_data_is_plain_dynamic_fitting():
     fixed_point = np.linalg.solve(a, h.T @ z / sigma2)
     fitting, kalman, p = x.copy(), x.copy(), np.eye(3)
     for _ in range(3000):
-        fitting, _ = dynamics.fitting_step(fitting, np.eye(3), force(fitting), a, 0.02, riccati=False)
-        kalman, p = dynamics.fitting_step(kalman, p, force(kalman), a, 0.02, q=0.1)
+        fitting, _ = fitting_step(fitting, np.eye(3), force(fitting), a, 0.02, riccati=False)
+        kalman, p = fitting_step(kalman, p, force(kalman), a, 0.02, q=0.1)
     np.testing.assert_allclose(fitting, fixed_point, rtol=1e-9)
     np.testing.assert_allclose(kalman, fixed_point, rtol=1e-9)
     assert not np.allclose(p, np.eye(3))  # the Riccati step changed the metric, not the answer
@@ -97,13 +126,13 @@ def test_identity_covariance_and_no_data_is_plain_dynamic_fitting():
     # stops where P g = K x
     fitting, kalman, p = x.copy(), x.copy(), np.eye(3)
     for _ in range(6000):
-        fitting, _ = dynamics.fitting_step(fitting, np.eye(3), force(fitting), a, 0.02, k, riccati=False)
-        kalman, p = dynamics.fitting_step(kalman, p, force(kalman), a, 0.02, k, q=0.1)
+        fitting, _ = fitting_step(fitting, np.eye(3), force(fitting), a, 0.02, k, riccati=False)
+        kalman, p = fitting_step(kalman, p, force(kalman), a, 0.02, k, q=0.1)
     np.testing.assert_allclose(fitting, np.linalg.solve(a + k, h.T @ z / sigma2), rtol=1e-9)
     np.testing.assert_allclose(p @ force(kalman), k @ kalman, atol=1e-9)
     assert np.abs(force(kalman) - k @ kalman).max() > 1e-3
 
-    still, p = dynamics.fitting_step(x, np.eye(3), np.zeros(3), np.zeros((3, 3)), 0.5)
+    still, p = fitting_step(x, np.eye(3), np.zeros(3), np.zeros((3, 3)), 0.5)
     np.testing.assert_array_equal(p, np.eye(3))
     np.testing.assert_array_equal(still, x)
 
@@ -120,7 +149,7 @@ def test_section5_filter_over_unit_pseudo_time_is_the_discrete_update():
     info = np.stack([_spd(rng, 3, 50.0), _spd(rng, 3, 50.0)])[None]
     measured = np.eye(4)[None].copy()
     measured[0, :3, 3] = rng.normal(size=3) * 0.05
-    updated = dynamics.update(state, measured, info)
+    updated = update(state, measured, info)
 
     hm = np.hstack([np.eye(3), np.zeros((3, 3))])
     x = np.concatenate([np.zeros(3), state.velocity[0, 0]])
@@ -128,7 +157,7 @@ def test_section5_filter_over_unit_pseudo_time_is_the_discrete_update():
     steps = 20000
     for _ in range(steps):
         g = hm.T @ info[0, 0] @ (measured[0, :3, 3] - x[:3])
-        x, p = dynamics.fitting_step(x, p, g, hm.T @ info[0, 0] @ hm, 1.0 / steps)
+        x, p = fitting_step(x, p, g, hm.T @ info[0, 0] @ hm, 1.0 / steps)
     np.testing.assert_allclose(x[:3], updated.poses[0, :3, 3], rtol=2e-3, atol=1e-6)
     np.testing.assert_allclose(x[3:], updated.velocity[0, 0], rtol=2e-3, atol=1e-6)
     np.testing.assert_allclose(p, updated.covariance[0, 0], rtol=5e-3, atol=1e-3 * np.abs(p).max())
@@ -144,7 +173,7 @@ def test_update_is_the_textbook_kalman_update():
     state = dynamics.MotionState(poses, rng.normal(size=(n, 2, 3)), cov)
     info = np.stack([np.stack([_spd(rng, 3, 100.0), _spd(rng, 3, 100.0)]) for _ in range(n)])
     measured = np.stack([poses[i] @ se3.exp(rng.normal(size=6) * 0.05) for i in range(n)])
-    updated = dynamics.update(state, measured, info)
+    updated = update(state, measured, info)
     hm = np.hstack([np.eye(3), np.zeros((3, 3))])
     for i in range(n):
         for b in range(2):
@@ -192,7 +221,7 @@ def test_a_constant_velocity_trajectory_is_tracked_exactly_without_lag():
     for k in range(1, count):
         state = dynamics.predict(state, dt, (1.0, 30.0))
         errors.append(max(np.abs(state.poses - truth[k]).max() for _ in [0]))
-        state = dynamics.update(state, truth[k], info)
+        state = update(state, truth[k], info)
     assert errors[0] > 1e-3  # started at rest: the first prediction lags
     assert max(errors[-20:]) < 1e-10  # converged: the prediction is the next true pose (no lag)
     np.testing.assert_allclose(state.velocity[:, 0], velocity, atol=1e-9)

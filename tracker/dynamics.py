@@ -63,10 +63,10 @@ that depend on ``x`` only)
     u+ = u + P_ux P_xx^-1 (x+ - x),    P+ = P - J (P_xx - P_xx+) J^T,    J = [I3; P_ux P_xx^-1],
     P_xx+ = (P_xx^-1 + C / s')^-1,
 
-which equals the textbook update ``K = P H^T (H P H^T + V)^-1``, ``H = [I3 0]`` (:func:`update` does
-that from a measured pose and is tested against it).  A component's ``C_i`` counts its own edges only,
-not what its neighbours say through the joints, so its ``P_xx+`` errs on the large side (its prior
-on the next frame on the weak side).
+which equals the textbook update ``K = P H^T (H P H^T + V)^-1``, ``H = [I3 0]`` (``update`` in
+tests/test_dynamics.py does that from a measured pose and is tested against it).  A component's
+``C_i`` counts its own edges only, not what its neighbours say through the joints, so its ``P_xx+``
+errs on the large side (its prior on the next frame on the weak side).
 
 **Prior about the prediction.**  The information ``s' P_xx^-1`` of the predicted position replaces the
 fixed ``prior_translation``/``prior_rotation``, which remain as its floor (eigenvalues below them are
@@ -74,8 +74,8 @@ raised to them): that keeps every ``C_i`` invertible (drummond-cipolla note, sec
 far the prior can fade while a component has no data; a component without data keeps moving with its
 velocity while its covariance grows (``q dt^3 / 3`` per frame and more).
 
-Relation to the note's section 5 (:func:`fitting_step`): its first-order filter runs the Riccati
-equation over inner iterations of one frame; integrated over unit pseudo-time on a linear measurement
+Relation to the note's section 5 (``fitting_step`` in tests/test_dynamics.py): its first-order filter
+runs the Riccati equation over inner iterations of one frame; integrated over unit pseudo-time on a linear measurement
 it gives exactly our discrete update, and with ``P = I`` held (no Riccati step) it is plain dynamic
 fitting, ``qdot = H^T V^-1 r - K q`` (eqs. 16/18).  The note's "same fixed point" holds for rigid
 blocks (``K = 0``, ours); with stiffness the filter stops where ``P g = K q``, not ``g = K q``.
@@ -217,15 +217,21 @@ def _rotate_block(cov: np.ndarray, turn: np.ndarray) -> np.ndarray:
     return 0.5 * (out + np.swapaxes(out, -1, -2))
 
 
-def prior_information(state: MotionState, scale=1.0, floor=(0.0, 0.0)) -> np.ndarray:
+def position_inverse(state: MotionState) -> np.ndarray:
+    """``P_xx^-1`` (N,2,3,3): the inverse position covariance of each block, for :func:`prior_information`
+    and :func:`correct` of the same state to share."""
+    return np.linalg.inv(state.covariance[:, :, :3, :3])
+
+
+def prior_information(state: MotionState, scale=1.0, floor=(0.0, 0.0), p_xx_inv=None) -> np.ndarray:
     """The tracker's prior (N,6,6) about ``state.poses`` in body twist coordinates (translation first):
     ``s blockdiag(R^T Pt_xx^-1 R, Pr_xx^-1)``, each 3x3 block's eigenvalues raised to at least
     ``floor = (per m^2, per rad^2)``; ``scale`` s a scalar or one per component.  (A body twist ``(v, w)``
-    moves the origin by ``R v``.)"""
+    moves the origin by ``R v``.)  ``p_xx_inv``: :func:`position_inverse` of ``state`` if at hand."""
     n = state.poses.shape[0]
     rot = state.poses[:, :3, :3]
     scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (n,))[:, None, None, None]
-    info = scale * np.linalg.inv(state.covariance[:, :, :3, :3])  # (N,2,3,3)
+    info = scale * (position_inverse(state) if p_xx_inv is None else p_xx_inv)  # (N,2,3,3)
     info[:, TRANSLATION] = np.swapaxes(rot, -1, -2) @ info[:, TRANSLATION] @ rot
     info = _floored(info, np.array([max(floor[0], 0.0), max(floor[1], 0.0)]))
     out = np.zeros((n, 6, 6))
@@ -288,56 +294,27 @@ def _difference(poses: np.ndarray, target: np.ndarray) -> np.ndarray:
     return diff
 
 
-def correct(state: MotionState, poses: np.ndarray, information: np.ndarray) -> MotionState:
+def correct(state: MotionState, poses: np.ndarray, information: np.ndarray, p_xx_inv=None) -> MotionState:
     """The measurement update given the posterior poses ``x+`` (the tracked poses) and the data's
-    information per block ``W = C / s'`` (N,2,3,3, from :func:`block_information` divided by ``s'``):
+    information per block ``W = C / s'`` (N,2,3,3, symmetric: from :func:`block_information` divided by
+    ``s'``; ``p_xx_inv``: :func:`position_inverse` of ``state`` if at hand):
 
         P_xx+ = (P_xx^-1 + W)^-1,  G = P_ux P_xx^-1,  u+ = u + G (x+ - x),  P+ = P - J (P_xx - P_xx+) J^T,
         J = [I3; G]
 
     with ``x+ - x = t+ - t`` (translation) and ``log(R^T R+)`` (rotation, body); the rotation block is
     then re-expressed about ``R+`` (:func:`rereference`)."""
-    poses = np.array(poses, dtype=np.float64)
+    poses = np.asarray(poses, dtype=np.float64)
     diff = _difference(state.poses, poses)
     cov = state.covariance
     p_xx = cov[..., :3, :3]
     p_ux = cov[..., 3:, :3]
-    p_xx_inv = np.linalg.inv(p_xx)
-    posterior = np.linalg.inv(p_xx_inv + 0.5 * (information + np.swapaxes(information, -1, -2)))
+    if p_xx_inv is None:
+        p_xx_inv = position_inverse(state)
+    posterior = np.linalg.inv(p_xx_inv + information)
     gain = p_ux @ p_xx_inv
     velocity = state.velocity + np.einsum("nbij,nbj->nbi", gain, diff)
     j = np.concatenate([np.broadcast_to(np.eye(3), gain.shape), gain], axis=-2)  # (N,2,6,3)
     cov = cov - j @ (p_xx - posterior) @ np.swapaxes(j, -1, -2)
     cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
-    updated = MotionState(state.poses.copy(), velocity, cov)
-    updated.poses[:, :3, 3] = poses[:, :3, 3]
-    return rereference(updated, poses)
-
-
-def update(state: MotionState, measured: np.ndarray, information: np.ndarray) -> MotionState:
-    """The Kalman update from measured poses ``z`` with information ``W = V^-1`` per block (N,2,3,3):
-    ``x+ = x + P_xx+ W (z - x)`` (information form of ``x + K (z - H x)``), then :func:`correct`."""
-    diff = _difference(state.poses, np.asarray(measured, dtype=np.float64))
-    posterior = np.linalg.inv(np.linalg.inv(state.covariance[..., :3, :3]) + information)
-    step = np.einsum("nbij,nbj->nbi", posterior @ information, diff)
-    poses = state.poses.copy()
-    poses[:, :3, 3] += step[:, TRANSLATION]
-    poses[:, :3, :3] = state.poses[:, :3, :3] @ exp_so3_many(np.ascontiguousarray(step[:, ROTATION]))
-    return correct(state, poses, information)
-
-
-def fitting_step(x: np.ndarray, cov: np.ndarray, force: np.ndarray, hessian: np.ndarray, dt: float,
-                 stiffness: np.ndarray | None = None, q: float = 0.0, riccati: bool = True):
-    """One inner iteration of the note's first-order continuous EKF for one block (section 5):
-
-        x <- x + dt (P g - K x),   P <- P + dt (-K P - P K + q I - P A P),   P <- (P + P^T) / 2
-
-    with ``g = H^T V^-1 r`` (``force``) and ``A = H^T V^-1 H`` (``hessian``), both at the current ``x``.
-    With ``riccati=False`` and ``P = I`` this is dynamic fitting (eqs. 16/18).  For comparison and tests;
-    the tracker uses the discrete form (:func:`correct`)."""
-    k = np.zeros_like(cov) if stiffness is None else stiffness
-    x = x + dt * (cov @ force - k @ x)
-    if riccati:
-        cov = cov + dt * (-k @ cov - cov @ k + q * np.eye(len(x)) - cov @ hessian @ cov)
-        cov = 0.5 * (cov + cov.T)
-    return x, cov
+    return rereference(MotionState(state.poses, velocity, cov), poses)  # takes x+ (a copy of poses) as the means
