@@ -42,6 +42,9 @@ rest transform ``T0_i`` (parent from child):
     a' = a - D_i^T (D_i D_i^T)^-1 D_i a               (eq. 24, projection onto null(D_i))
     E_i <- E_p T0_i exp(a')                           (eq. 25)
 
+``D_i`` is a model constant, so the projector ``Pi_i = D_i^T (D_i D_i^T)^-1 D_i`` is made once
+(:func:`row_projectors`, kept on the model) and eq. 24 is ``a' = a - Pi_i a``.
+
 ``exp(a')`` is an exact joint motion (a rotation about p, about the line (p, d),
 a translation along d), so the repair holds to round-off.  The same map
 projects arbitrary poses onto the model's joint set.
@@ -119,6 +122,20 @@ def pack_constraints(blocks) -> tuple[np.ndarray, np.ndarray]:
         packed[i, : block.shape[0]] = block
         rows[i] = block.shape[0]
     return packed, rows
+
+
+def row_projectors(D, rows) -> np.ndarray:
+    """Per component the projector ``Pi_i = D_i^T (D_i D_i^T)^-1 D_i`` (N, 6, 6) onto the row space of its
+    ``rows[i]`` constraint rows (zero for free components): coercion's eq. 24 is ``a' = a - Pi_i a``."""
+    D = np.ascontiguousarray(D, dtype=np.float64)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    out = np.zeros((D.shape[0], 6, 6))
+    for i in range(D.shape[0]):
+        k = int(rows[i])
+        if k > 0:
+            d = D[i, :k]
+            out[i] = d.T @ np.linalg.solve(d @ d.T, d)
+    return out
 
 
 @njit(cache=True)
@@ -290,42 +307,32 @@ def solve(information, eta, parent, D, rows, poses) -> np.ndarray:
 
 
 @njit(cache=True)
-def coerce_kernel(poses, parent, rest, D, rows, joint_type, axis, lower, upper):
+def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower, upper):
     """Repair the joints parents first (section 5, eqs. 23-25 with T0), within the joint limits.
 
     For each constrained child i with p = parent(i): a = log(T0_i^-1 E_p^-1 E_i),
-    a' = a - D_i^T (D_i D_i^T)^-1 D_i a, E_i <- E_p T0_i exp(a').  Roots and free
+    a' = a - Pi_i a with Pi_i = D_i^T (D_i D_i^T)^-1 D_i (``projector``, :func:`row_projectors`),
+    E_i <- E_p T0_i exp(a').  Roots and free
     children keep their poses.  A hinge's a' = theta (p x d, d) and a slide's
     a' = (s d, 0) are then scaled so that theta (or s) lies in [lower_i, upper_i];
     a ball's a' = (p x w, w) so that its rotation from rest |w| <= upper_i.
     """
     out = poses.copy()
-    gram = np.empty((6, 6))
-    gram_inv = np.empty((6, 6))
-    work = np.empty((6, 12))
-    d_a = np.empty(6)
+    pi_a = np.empty(6)
     for i in range(out.shape[0]):
         p = parent[i]
-        k = rows[i]
-        if p < 0 or k == 0:
+        if p < 0 or rows[i] == 0:
             continue
         at_rest = out[p] @ rest[i]
         a = log(between(at_rest, out[i]))
-        d_i = D[i]
-        for r in range(k):
-            d_a[r] = 0.0
+        pi_i = projector[i]
+        for r in range(6):
+            value = 0.0
             for c in range(6):
-                d_a[r] += d_i[r, c] * a[c]
-            for q in range(k):
-                value = 0.0
-                for c in range(6):
-                    value += d_i[r, c] * d_i[q, c]
-                gram[r, q] = value
-        _invert(gram, k, gram_inv, work)
-        for c in range(6):
-            for r in range(k):
-                for q in range(k):
-                    a[c] -= d_i[r, c] * gram_inv[r, q] * d_a[q]
+                value += pi_i[r, c] * a[c]
+            pi_a[r] = value
+        for r in range(6):
+            a[r] -= pi_a[r]
         if joint_type[i] == BALL and upper[i] < np.inf:
             angle = np.sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5])
             if angle > upper[i]:
@@ -354,12 +361,13 @@ def coerce(poses, parent, rest, D, rows, joint_type=None, axis=None, lower=None,
     """
     parent = _check_order(parent)
     n = parent.shape[0]
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
     return coerce_kernel(
         np.ascontiguousarray(poses, dtype=np.float64),
         parent,
         np.ascontiguousarray(rest, dtype=np.float64),
-        np.ascontiguousarray(D, dtype=np.float64),
-        np.ascontiguousarray(rows, dtype=np.int64),
+        row_projectors(D, rows),
+        rows,
         np.zeros(n, np.int64) if joint_type is None else np.ascontiguousarray(joint_type, dtype=np.int64),
         np.zeros((n, 3)) if axis is None else np.ascontiguousarray(axis, dtype=np.float64),
         np.full(n, -np.inf) if lower is None else np.ascontiguousarray(lower, dtype=np.float64),

@@ -215,10 +215,7 @@ def _drops(counts: Counts) -> str:
 
 def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
     """A tracker for ``cameras`` that goes on from ``tracker``'s poses and motion with its (pixel-scaled) settings."""
-    rebuilt = Tracker(tracker.model, cameras, tracker.poses, tracker.settings)
-    rebuilt.previous = tracker.previous
-    rebuilt.dynamics, rebuilt.noise_scale = tracker.dynamics, tracker.noise_scale
-    return rebuilt
+    return tracker.with_cameras(cameras)
 
 
 def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.ndarray, settings: Settings,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.chain import JOINT_TYPES, coerce_kernel, constraint_rows, pack_constraints
+from tracker.chain import JOINT_TYPES, coerce_kernel, constraint_rows, pack_constraints, row_projectors
 from tracker.errors import TrackerInputError
 from tracker.geometry import quadric, se3
 from tracker.io.tomlfile import read_toml
@@ -30,7 +30,8 @@ class Model:
     Per component (N): ``names``, ``parent`` (-1 for the root), ``joint_type``
     (codes of :mod:`tracker.chain`), ``rest`` (N,4,4) parent-from-child rest
     transforms ``T0``, ``axis`` (N,3), constraint rows ``constraint`` (N,6,6)
-    zero-padded with ``constraint_rows`` (N,) rows each, and the joint limits
+    zero-padded with ``constraint_rows`` (N,) rows each, their row-space projectors
+    ``constraint_projector`` (N,6,6) (:func:`tracker.chain.row_projectors`, for coercion), and the joint limits
     ``lower``/``upper`` (N,) of hinges (radians) and slides (metres), the largest
     rotation from rest of a ball joint in ``upper``; +-inf if none.
     Per quadric (Q): ``quadric`` (Q,4,4) surfaces and ``clip`` (Q,4,4) clipping
@@ -46,6 +47,7 @@ class Model:
     axis: np.ndarray
     constraint: np.ndarray
     constraint_rows: np.ndarray
+    constraint_projector: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
     quadric: np.ndarray
@@ -62,7 +64,7 @@ class Model:
     def coerce(self, poses: np.ndarray) -> np.ndarray:
         """The poses with every joint repaired exactly and within its limits (chain.coerce_kernel)."""
         return coerce_kernel(np.ascontiguousarray(poses, dtype=np.float64), self.parent, self.rest,
-                             self.constraint, self.constraint_rows, self.joint_type, self.axis,
+                             self.constraint_projector, self.constraint_rows, self.joint_type, self.axis,
                              self.lower, self.upper)
 
     def index(self, name: str) -> int:
@@ -231,6 +233,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
         axis=np.asarray(axis),
         constraint=constraint,
         constraint_rows=n_rows,
+        constraint_projector=row_projectors(constraint, n_rows),
         lower=np.array([lo for lo, _ in limits]),
         upper=np.array([hi for _, hi in limits]),
         quadric=np.asarray(quadrics),

@@ -128,14 +128,19 @@ def add_prior(information, eta, prior, poses, anchor):
 
 
 @njit(cache=True, nogil=True)
-def update_kernel(information, eta, prior, poses, anchor, parent, D, rows, rest, joint_type, axis, lower, upper):
-    """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5)."""
+def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, rows, rest, joint_type, axis, lower,
+                  upper):
+    """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5).
+
+    The prior is added to copies: ``information`` and ``eta`` keep the data's C_i and eta_i."""
+    information = information.copy()
+    eta = eta.copy()
     add_prior(information, eta, prior, poses, anchor)
     alpha = solve_kernel(information, eta, parent, D, rows, poses)
     moved = np.empty_like(poses)
     for i in range(poses.shape[0]):
         moved[i] = poses[i] @ exp(alpha[i])
-    return coerce_kernel(moved, parent, rest, D, rows, joint_type, axis, lower, upper)
+    return coerce_kernel(moved, parent, rest, projector, rows, joint_type, axis, lower, upper)
 
 
 @njit(cache=True, nogil=True)
@@ -150,9 +155,10 @@ def motion_since(sampled, current):
 @njit(cache=True, nogil=True)
 def constant_velocity(previous, current, damping):
     """Predict E_{t+1} = E_t exp(d log(E_{t-1}^-1 E_t)) for every component (d = damping)."""
+    twist = motion_since(previous, current)
     out = np.empty_like(current)
     for i in range(current.shape[0]):
-        out[i] = current[i] @ exp(damping * log(between(previous[i], current[i])))
+        out[i] = current[i] @ exp(damping * twist[i])
     return out
 
 
@@ -161,8 +167,9 @@ STAGES = ("grey", "outline", "ownership", "measure", "solve")
 
 @dataclass
 class StageTimes:
-    """Seconds spent per stage since creation: smoothing the grey images, outline sampling
-    and visibility, search limits (ownership), edge search and Jacobians, prior + chain solve + coercion."""
+    """Seconds spent per stage since creation: copying the grey images into the frame buffer (with their
+    smoothing unless reader threads smoothed them, ``step(..., smoothed=True)``), outline sampling and
+    visibility, search limits (ownership), edge search and Jacobians, prior + chain solve + coercion."""
 
     seconds: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
 
@@ -205,6 +212,7 @@ class Tracker:
         self.previous: np.ndarray | None = None
         self.anchor = self.poses
         self.dynamics: dynamics.MotionState | None = None
+        self.position_inverse = None  # (state, its dynamics.position_inverse) of the last prediction
         self.noise_scale = np.full(n, float(settings.kalman_noise_scale))  # s' per component (kalman)
         if settings.motion == "kalman":
             s = settings.kalman_noise_scale
@@ -214,6 +222,15 @@ class Tracker:
         self.still = np.zeros((n, 6))
         self.lo = self.hi = None
         self.times = StageTimes()
+
+    def with_cameras(self, cameras) -> Tracker:
+        """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
+        settings, from the current poses, with the previous frame's poses (constant velocity) and the motion
+        filter's state and noise scales (kalman); buffers and timings start afresh."""
+        other = Tracker(self.model, cameras, self.poses, self.settings)
+        other.previous = self.previous
+        other.dynamics, other.noise_scale = self.dynamics, self.noise_scale
+        return other
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
@@ -266,7 +283,8 @@ class Tracker:
         visible, found, sum_wm, sum_w = self.measure(search_range, twist)
         started = self.times.add("measure", started)
         self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
-                                   m.constraint, m.constraint_rows, m.rest, m.joint_type, m.axis, m.lower, m.upper)
+                                   m.constraint, m.constraint_projector, m.constraint_rows, m.rest, m.joint_type,
+                                   m.axis, m.lower, m.upper)
         self.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(visible, found, residual)
@@ -310,7 +328,7 @@ class Tracker:
         self.measure(search_range, self.still)
         n = s.count
         return Inspection(s.camera[:n].copy(), s.component[:n].copy(), s.pixel[:n].copy(), s.normal[:n].copy(),
-                          np.clip(self.lo, -search_range, search_range), np.clip(self.hi, -search_range, search_range),
+                          self.lo.copy(), self.hi.copy(),
                           self.offset[:n].copy(), self.weight[:n].copy())
 
     def step(self, images, smoothed: bool = False, dt: float | None = None) -> FrameResult:
@@ -344,12 +362,14 @@ class Tracker:
                                      st.kalman_decay)
         self.poses = self.model.coerce(predicted.poses)
         self.dynamics = dynamics.rereference(predicted, self.poses)
+        inverse = dynamics.position_inverse(self.dynamics)
+        self.position_inverse = (self.dynamics, inverse)  # correct_kalman reuses it for the same state
         self.prior = dynamics.prior_information(self.dynamics, self.noise_scale,
-                                                (st.prior_translation, st.prior_rotation))
+                                                (st.prior_translation, st.prior_rotation), inverse)
 
     def correct_kalman(self) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
-        (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
+        (``self.information``; the prior is only added to the solve's copies) over the noise scale
         ``s' = s sigma0_i^2`` (:func:`tracker.dynamics.variance_factor` of the same samples)."""
         st = self.settings
         s = float(st.kalman_noise_scale)
@@ -358,9 +378,10 @@ class Tracker:
             self.noise_scale = s * dynamics.variance_factor(self.samples.component[:n], self.offset[:n],
                                                             self.weight[:n], self.model.size,
                                                             fallback=self.noise_scale / s)
-        data = self.information - self.prior
-        information = dynamics.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
-        self.dynamics = dynamics.correct(self.dynamics, self.poses, information)
+        information = dynamics.block_information(self.information, self.poses) / self.noise_scale[:, None, None, None]
+        state, inverse = self.position_inverse or (None, None)
+        self.dynamics = dynamics.correct(self.dynamics, self.poses, information,
+                                         inverse if state is self.dynamics else None)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings
