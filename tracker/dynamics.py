@@ -296,8 +296,8 @@ def _difference(poses: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 def correct(state: MotionState, poses: np.ndarray, information: np.ndarray, p_xx_inv=None) -> MotionState:
     """The measurement update given the posterior poses ``x+`` (the tracked poses) and the data's
-    information per block ``W = C / s'`` (N,2,3,3, symmetric: from :func:`block_information` divided by
-    ``s'``; ``p_xx_inv``: :func:`position_inverse` of ``state`` if at hand):
+    information per block ``W = C / s'`` (N,2,3,3, from :func:`block_information` divided by ``s'``;
+    ``p_xx_inv``: :func:`position_inverse` of ``state`` if at hand):
 
         P_xx+ = (P_xx^-1 + W)^-1,  G = P_ux P_xx^-1,  u+ = u + G (x+ - x),  P+ = P - J (P_xx - P_xx+) J^T,
         J = [I3; G]
@@ -311,7 +311,9 @@ def correct(state: MotionState, poses: np.ndarray, information: np.ndarray, p_xx
     p_ux = cov[..., 3:, :3]
     if p_xx_inv is None:
         p_xx_inv = position_inverse(state)
-    posterior = np.linalg.inv(p_xx_inv + information)
+    # W's symmetric part: block_information's V diag(l) V^T is symmetric only to round-off relative to its
+    # largest eigenvalue, and with a nearly unobservable direction that asymmetry moves P_xx+ visibly
+    posterior = np.linalg.inv(p_xx_inv + 0.5 * (information + np.swapaxes(information, -1, -2)))
     gain = p_ux @ p_xx_inv
     velocity = state.velocity + np.einsum("nbij,nbj->nbi", gain, diff)
     j = np.concatenate([np.broadcast_to(np.eye(3), gain.shape), gain], axis=-2)  # (N,2,6,3)
