@@ -130,11 +130,7 @@ def add_prior(information, eta, prior, poses, anchor):
 @njit(cache=True, nogil=True)
 def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, rows, rest, joint_type, axis, lower,
                   upper):
-    """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5).
-
-    The prior is added to copies: ``information`` and ``eta`` keep the data's C_i and eta_i."""
-    information = information.copy()
-    eta = eta.copy()
+    """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5)."""
     add_prior(information, eta, prior, poses, anchor)
     alpha = solve_kernel(information, eta, parent, D, rows, poses)
     moved = np.empty_like(poses)
@@ -369,7 +365,7 @@ class Tracker:
 
     def correct_kalman(self) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
-        (``self.information``; the prior is only added to the solve's copies) over the noise scale
+        (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
         ``s' = s sigma0_i^2`` (:func:`tracker.dynamics.variance_factor` of the same samples)."""
         st = self.settings
         s = float(st.kalman_noise_scale)
@@ -378,7 +374,8 @@ class Tracker:
             self.noise_scale = s * dynamics.variance_factor(self.samples.component[:n], self.offset[:n],
                                                             self.weight[:n], self.model.size,
                                                             fallback=self.noise_scale / s)
-        information = dynamics.block_information(self.information, self.poses) / self.noise_scale[:, None, None, None]
+        data = self.information - self.prior
+        information = dynamics.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
         state, inverse = self.position_inverse or (None, None)
         self.dynamics = dynamics.correct(self.dynamics, self.poses, information,
                                          inverse if state is self.dynamics else None)
