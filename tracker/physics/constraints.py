@@ -73,7 +73,7 @@ def second_order_system(
 
 def first_order_system(
     g: np.ndarray,
-    damping_blocks: list[np.ndarray],
+    damping_blocks: list[np.ndarray] | None,
     qdot_free: np.ndarray,
     violation: np.ndarray,
     a: float,
@@ -83,8 +83,10 @@ def first_order_system(
         N = G D^-1 G^T,   r = a C + G qdot_free,   qdot_free = D^-1 F
 
     (section 4, first order); then qdot = qdot_free + D^-1 G^T f_c and C(t) = C0 e^{-at}.
+    ``damping_blocks`` None stands for D = I (the paper's fitting), N = G G^T, without a solve.
     """
-    return g @ block_solve(damping_blocks, g.T), a * violation + g @ qdot_free
+    d_inv_gt = g.T if damping_blocks is None else block_solve(damping_blocks, g.T)
+    return g @ d_inv_gt, a * violation + g @ qdot_free
 
 
 def solve_forces(n: np.ndarray, r: np.ndarray, rcond: float = 1e-10) -> np.ndarray:
