@@ -242,7 +242,8 @@ def test_constrained_fit_of_a_three_part_chain_recovers_joints_and_nodes():
     the joints are found by facing_poles) 200 global and 400 local constrained steps give:
     max |C| 1.6e-12; joint positions within 1.5e-3 of the truth (measured 5.7e-4, 3.3e-4); node
     RMS per part 7.8e-4, 6.9e-4, 1.0e-2 (the hand, thin, ends with a few data points shared by
-    neighbouring nodes); per-part residual RMS 7.8e-4, 6.9e-4, 6.5e-3.  Re-attaching to the nearest node
+    neighbouring nodes); per-part residual RMS 7.8e-4, 6.9e-4, 6.5e-3; NaN points (hidden
+    markers) are left out (NaN residual for a part with none).  Re-attaching to the nearest node
     over all parts (no labels) assigns every point to its own part, except the nodes at the
     joints, which coincide with a node of the neighbour (ties)."""
     rng = np.random.default_rng(4)
@@ -272,6 +273,11 @@ def test_constrained_fit_of_a_three_part_chain_recovers_joints_and_nodes():
     before = np.sqrt(np.mean(np.sum((np.concatenate(bd.all_positions(start)) - points) ** 2, axis=1)))
     assert before > 0.08
     assert np.all(bd.residuals(fitted, points, labels) < 2e-2)
+    hidden = points.copy()
+    hidden[labels == 1] = np.nan
+    per_part = bd.residuals(fitted, hidden, labels)
+    assert np.isnan(per_part[1]) and np.all(per_part[[0, 2]] < 2e-2)
+    assert [len(a.points) for a in bd.attach(fitted, hidden)][1] < 3
     unlabelled = bd.attach(fitted, points)
     joint_points = np.concatenate([true_a, true_b])
     for p, att in enumerate(unlabelled):

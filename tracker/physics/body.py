@@ -277,17 +277,19 @@ def attach(body: Body, points: np.ndarray, labels: np.ndarray | None = None) -> 
 
     With labels (m,) (the part of each point, e.g. a marker's segment; -1 for none) a point
     attaches to the nearest node of its part; without, to the nearest node over all parts.
+    Points with a non-finite coordinate (e.g. occluded markers stored as NaN) are left out.
     """
     points = np.asarray(points, dtype=np.float64)
+    seen = np.isfinite(points).all(axis=1)
     nodes = all_positions(body)
     if labels is None:
-        sizes = np.array([len(x) for x in nodes])
-        offsets = np.concatenate([[0], np.cumsum(sizes)])
+        points = points[seen]
+        offsets = np.concatenate([[0], np.cumsum([len(x) for x in nodes])])
         flat = fit.nearest_nodes(points, np.concatenate(nodes))
         labels = np.searchsorted(offsets, flat, side="right") - 1
         local = flat - offsets[labels]
         return [Attachment(points[labels == p], local[labels == p]) for p in range(len(nodes))]
-    labels = np.asarray(labels)
+    labels = np.where(seen, labels, -1)
     out = []
     for p, x in enumerate(nodes):
         mine = points[labels == p]
