@@ -51,8 +51,9 @@ def test_dense_and_sparse_tracking_keep_the_joints_and_follow_the_insect(runs):
     per frame.  Measured: max |C| 3.1e-6 (dense) and 1.5e-6 (sparse), against joints 0.2-0.29
     (dense) and 0.26-0.54 (sparse) apart at the moment initialisation; node position error
     (RMS over the 135 nodes) dense 2e-4 at frame 0, mean 7.4e-3, max 1.06e-2 (the 30 steps
-    per frame lag the flap); sparse 7.1e-2 at frame 0, mean 9.9e-2, max 0.125 (the seven points leave the local displacements
-    and the taper/bend of the wings underdetermined, as the paper notes for Fig. 10)."""
+    per frame lag the flap); sparse 7.1e-2 at frame 0, mean 9.9e-2, max 0.125 (the seven
+    points leave the local displacements and the taper/bend of the wings underdetermined, as
+    the paper notes for Fig. 10)."""
     dense, sparse = runs[False], runs[True]
     for result in (dense, sparse):
         assert result.violation.shape == result.position_error.shape == (FRAMES,)
