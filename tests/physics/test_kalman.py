@@ -90,9 +90,9 @@ def test_filter_with_identity_covariance_is_dynamic_fitting(local):
         assert not filtered.d.any()
 
 
-def test_information_blocks_are_diagonal_blocks_of_h_transpose_h():
-    """A_c, A_phi, A_s (without a0) and A_d = diag(n_i / v) (x) I3 are the diagonal blocks of
-    the dense sum_j L_k(j)^T L_k(j) / v over 10 random parts on the 27-node mesh."""
+def test_information_blocks_are_blocks_of_h_transpose_h():
+    """A_g (c, phi, q_s without a0, cross blocks included) and A_d = diag(n_i / v) (x) I3 are
+    blocks of the dense sum_j L_k(j)^T L_k(j) / v over 10 random parts on the 27-node mesh."""
     rng = np.random.default_rng(11)
     m = sq.mesh(5, 5)
     for _ in range(10):
@@ -102,10 +102,7 @@ def test_information_blocks_are_diagonal_blocks_of_h_transpose_h():
         dense = dense_information(part, assignment)
         info = kf.information(part, assignment, VARIANCE)
         scale = np.max(np.abs(dense))
-        np.testing.assert_allclose(info.c, dense[0:3, 0:3], rtol=0, atol=1e-12 * scale)
-        np.testing.assert_allclose(info.phi, dense[3:6, 3:6], rtol=0, atol=1e-12 * scale)
-        np.testing.assert_allclose(info.s, dense[kin.SHAPE.start + 1:START, kin.SHAPE.start + 1:START],
-                                   rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(info.global_, dense[np.ix_(kf.GLOBAL, kf.GLOBAL)], rtol=0, atol=1e-12 * scale)
         np.testing.assert_allclose(np.kron(np.diag(info.node), np.eye(3)), dense[START:, START:],
                                    rtol=0, atol=1e-12 * scale)
 
@@ -120,7 +117,8 @@ def test_shape_block_step_matches_dense_computation():
     points = noisy_points(rng, part, 60, noise=0.02)
     assignment = fit.nearest_nodes(points, kin.positions(part))
     settings = kf.Settings(measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0)
-    state = replace(kf.initial_state(part), p_s=random_spd(rng, kf.N_SHAPE))
+    state = kf.initial_state(part)
+    state.p_global[kin.RIGID:, kin.RIGID:] = random_spd(rng, kf.N_SHAPE)
     k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
 
     moved, _ = kf.iteration(state, points, assignment, k_node, settings)
@@ -282,3 +280,116 @@ def test_local_block_equals_the_full_covariance():
         p_full = 0.5 * (p_full + p_full.T)
         np.testing.assert_allclose(np.kron(state.p_node, np.eye(3)), p_full, rtol=0, atol=1e-12)
     assert np.max(np.abs(state.p_node - kf.mesh_covariance(m.triangles, len(m.u), 0.2))) > 0.1
+
+
+def dense_stiffness(state, k_node, settings):
+    """K' over the free coordinates (a0 out): blockdiag(K_g, K_node (x) I3) in the prior form,
+    P^-1 K by blocks in the dynamics form."""
+    k_g = kf.global_stiffness(settings)
+    k_n = k_node.toarray()
+    if not settings.prior_stiffness:
+        k_g = np.linalg.solve(state.p_global, k_g)
+        k_n = np.linalg.solve(state.p_node, k_n)
+    n = kf.N_GLOBAL + 3 * len(k_n)
+    out = np.zeros((n, n))
+    out[:kf.N_GLOBAL, :kf.N_GLOBAL] = k_g
+    out[kf.N_GLOBAL:, kf.N_GLOBAL:] = np.kron(k_n, np.eye(3))
+    return out
+
+
+@pytest.mark.parametrize("prior", [True, False])
+def test_newton_step_solves_the_dense_gauss_newton_system(prior):
+    """newton_step (Schur complement over the local block) equals the dense solve of
+    (A + K') delta = g - K' q over all free coordinates of a random part on the 27-node mesh,
+    with random positive-definite P_g, P_node and a bend stiffness; K' = K (prior form) or
+    P^-1 K (dynamics form).  With d frozen it is the 16 x 16 rigid + global solve."""
+    rng = np.random.default_rng(15)
+    m = sq.mesh(5, 5)
+    part = random_part(rng, m)
+    points = noisy_points(rng, part, 60, noise=0.05)
+    assignment = fit.nearest_nodes(points, kin.positions(part))
+    settings = kf.Settings(measurement_variance=VARIANCE, bend_stiffness=0.5, prior_stiffness=prior)
+    state = kf.State(part, random_spd(rng, kf.N_GLOBAL), random_spd(rng, len(m.u)))
+    k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
+
+    free = np.r_[kf.GLOBAL, START:part.n_coordinates]
+    a = dense_information(part, assignment)[np.ix_(free, free)]
+    k = dense_stiffness(state, k_node, settings)
+    force = fit.data_force(part, points, assignment, np.sqrt(VARIANCE))[free]
+    q = np.concatenate([kf.global_vector(part), part.d.ravel()])
+    expected = np.linalg.solve(a + k, force - k @ q)
+    np.testing.assert_allclose(kf.newton_step(state, points, assignment, k_node, settings), expected,
+                               rtol=1e-8, atol=1e-10 * np.max(np.abs(expected)))
+
+    rigid = replace(settings, local=False)
+    g = kf.N_GLOBAL
+    expected = np.linalg.solve(a[:g, :g] + k[:g, :g], force[:g] - k[:g, :g] @ q[:g])
+    np.testing.assert_allclose(kf.newton_step(state, points, assignment, k_node, rigid), expected, rtol=1e-8)
+
+
+def test_prior_form_state_and_riccati_steps_match_dense_computation():
+    """Prior form, joint block: one iteration's qdot = P (g - K q) for the rigid + global and
+    the local blocks, and P <- P + dt (q I - P (A + K) P), against dense computations with
+    the full 16 x 16 A_g and K_node (x) I3."""
+    rng = np.random.default_rng(16)
+    m = sq.mesh(5, 5)
+    part = random_part(rng, m)
+    points = noisy_points(rng, part, 60, noise=0.05)
+    assignment = fit.nearest_nodes(points, kin.positions(part))
+    settings = kf.Settings(measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0,
+                           coupling="joint", prior_stiffness=True)
+    state = kf.State(part, random_spd(rng, kf.N_GLOBAL), random_spd(rng, len(m.u)))
+    k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
+    info = kf.information(part, assignment, VARIANCE)
+
+    force = fit.data_force(part, points, assignment, np.sqrt(VARIANCE))
+    k = dense_stiffness(state, k_node, settings)
+    q = np.concatenate([kf.global_vector(part), part.d.ravel()])
+    p = np.zeros_like(k)
+    p[:kf.N_GLOBAL, :kf.N_GLOBAL] = state.p_global
+    p[kf.N_GLOBAL:, kf.N_GLOBAL:] = np.kron(state.p_node, np.eye(3))
+    free = np.r_[kf.GLOBAL, START:part.n_coordinates]
+    rate = kf.state_rate(state, force, k_node, settings)
+    np.testing.assert_allclose(rate[free], p @ (force[free] - k @ q), rtol=1e-10, atol=1e-12 * np.max(np.abs(rate)))
+    assert rate[kin.SHAPE.start] == 0.0  # a0
+
+    dt = kf.step_size(state, info, k_node, settings)
+    moved = kf.riccati(state, info, k_node, settings, dt)
+    k_g = kf.global_stiffness(settings)
+    expected = state.p_global + dt * (0.3 * np.eye(kf.N_GLOBAL) - state.p_global @ (info.global_ + k_g) @ state.p_global)
+    np.testing.assert_allclose(moved.p_global, expected, rtol=1e-12, atol=1e-14)
+    a_node = np.diag(info.node) + k_node.toarray()
+    expected = state.p_node + dt * (0.3 * np.eye(len(m.u)) - state.p_node @ a_node @ state.p_node)
+    np.testing.assert_allclose(moved.p_node, expected, rtol=1e-12, atol=1e-14)
+
+
+def test_decoupled_covariance_stays_block_diagonal_and_cap_bounds_eigenvalues():
+    """The decoupled filter keeps P_g exactly block-diagonal (c | phi | q_s) over 50
+    iterations; the joint one fills the cross blocks.  cap_eigenvalues sets eigenvalues above
+    the cap to it and keeps the others and the eigenvectors; with the cap at 1 no eigenvalue of
+    the joint P_g exceeds 1 although Q = 0.1 I is larger than what the data see along b2, b3
+    (their J columns vanish at b1 = 0)."""
+    rng = np.random.default_rng(17)
+    m = sq.mesh()
+    target = random_part(rng, m)
+    points = kin.positions(target)
+    start = fit.initial_part(points, m.u, m.v)
+    for coupling in ("decoupled", "joint"):
+        settings = kf.Settings(max_iterations=50, tol=0.0, local=False, coupling=coupling, covariance_cap=1.0)
+        state, _ = kf.filter_frame(kf.initial_state(start), points, m.triangles, settings)
+        off = np.ones((kf.N_GLOBAL, kf.N_GLOBAL), bool)
+        for b in kf.BLOCKS["decoupled"]:
+            off[b, b] = False
+        if coupling == "decoupled":
+            assert not state.p_global[off].any()
+        else:
+            assert np.max(np.abs(state.p_global[off])) > 1e-4
+        assert np.linalg.eigvalsh(state.p_global)[-1] <= 1.0 + 1e-12
+
+    p = random_spd(rng, 6) * 3.0
+    values, vectors = np.linalg.eigh(p)
+    capped = kf.cap_eigenvalues(p, 1.5)
+    np.testing.assert_allclose(capped, (vectors * np.minimum(values, 1.5)) @ vectors.T, atol=1e-12)
+    assert kf.cap_eigenvalues(p, np.inf) is p
+    with pytest.raises(ValueError, match="coupling"):
+        kf.Settings(coupling="full")

@@ -14,46 +14,60 @@ with r_j = z_j - x_k(j).  The gain P H^T V^-1 scales the data forces f_q = H^T V
 ``fitting.data_force`` (eq 16) per direction, so P acts as a (learnt) preconditioner of
 dynamic fitting; with P = I the filter *is* dynamic fitting (``fitting.euler_step``).
 
-Decoupling (section 5).  P keeps only the diagonal blocks of the four coordinate sets, each
-integrated on its own: P_c (3x3), P_phi (3x3 over the world-frame increment dphi of
-``kinematics.retract``), P_s (10x10 over q_s without a0) and P_d.  With isotropic V, Q and
-P_d(0) the local block stays exactly P_d = P_node (x) I3 (n x n P_node), because K_dd =
-K_node (x) I3 and H_d^T V^-1 H_d = diag(#points at node i / v) (x) I3: every term of the
-Riccati equation keeps the (x) I3 structure.  Only P_node is stored.
+Blocks (section 5).  P keeps diagonal blocks, each integrated on its own: P_g over the
+rigid + global vector (c, dphi, q_s without a0; 16 x 16, dphi the world-frame increment of
+``kinematics.retract``) and P_d over q_d.  P_g is either the paper's decoupled c | phi | q_s
+(3x3, 3x3, 10x10; ``Settings.coupling`` "decoupled") or one joint block ("joint", the note's
+"joint rigid+global block").  With isotropic V, Q and P_d(0) the local block stays exactly
+P_d = P_node (x) I3 (n x n P_node), because K_dd = K_node (x) I3 and H_d^T V^-1 H_d =
+diag(#points at node i / v) (x) I3: every term of the Riccati equation keeps the (x) I3
+structure.  Only P_node is stored.
+
+Two forms of the stiffness K (``Settings.prior_stiffness``):
+
+* dynamics form (the paper's, F = -K):  qdot = P g - K q,     Pdot = -K P - P K + Q - P A P;
+* prior form (F = 0, the membrane energy q^T K q / 2 a Gaussian prior on q, i.e. a
+  pseudo-measurement 0 = K^(1/2) q of unit information):
+                                        qdot = P (g - K q),   Pdot = Q - P (A + K) P.
 
 One inner iteration (``iteration``) with information blocks A_b = H_b^T V^-1 H_b and forces
 g_b = H_b^T V^-1 r:
 
-    dt  = kappa / max_b rho(P_b A_b + K_b)         (rho: spectral radius)
-    q_b <- q_b + dt (P_b g_b - K_b q_b)           (phi by R <- Exp([dphi]x) R, q_s clamped)
-    P_b <- P_b + dt (-K_b P_b - P_b K_b + q I - P_b A_b P_b),  P_b <- (P_b + P_b^T) / 2
+    dt  = kappa / max_b rho(P_b A_b + K_b)  or  kappa / max_b rho(P_b (A_b + K_b))
+    q_b <- q_b + dt qdot_b                     (phi by R <- Exp([dphi]x) R, q_s clamped)
+    P_b <- P_b + dt Pdot_b,  P_b <- (P_b + P_b^T) / 2,  then capped (``cap_eigenvalues``)
 
-K_b is zero for c and phi, K_node (the loaded membrane over the current shell) for d, and for
-q_s zero unless ``Settings.bend_stiffness`` is set (see below).
+K_b is zero for c and phi, K_node (the loaded membrane over the current shell) for d, and
+for b1 ``Settings.bend_stiffness`` (zero by default).
 
 Findings of the note handled here:
 
-* Gauge (section 1, degeneracy 4): a0 is frozen; P_s leaves it out and its step is zero.
+* Gauge (section 1, degeneracy 4): a0 is frozen; P_g leaves it out and its step is zero.
 * Initial covariance: the paper's P(0) (1 on the diagonal, 0.4 on the stiffness pattern) is
   indefinite at node level on the 123-node mesh (minimum eigenvalue -0.17).  The default is
   P(0) = I; ``initial_state`` validates any given P_node(0) with a Cholesky factorisation, and
   ``mesh_covariance`` builds the paper's pattern for a chosen off-diagonal value (positive
   definite on that mesh up to about 0.2).
-* Stopping rule: the paper's "change below 1e-4 per step" bounds a rate, not convergence;
-  ``filter_frame`` stops at ``Settings.max_iterations`` or when the largest coordinate change
-  of one iteration falls below ``Settings.tol``, whichever comes first.
 * The slow mode: with the blocks decoupled, c_x and b1 (with b3 small, cos r is nearly
   constant and b1 moves the shell along the model x axis like c does) form the weakest
-  direction of H^T H, and the decoupled filter needs 1e4-1e5 iterations to settle it.  A
-  small ``bend_stiffness`` k adds K_ss = k e_b1 e_b1^T, pulling b1 towards 0, which damps
-  that mode at the price of a bias in b1.
+  direction of H^T H, which the block-diagonal P cannot precondition: 1e4-1e5 iterations.
+  The joint block's Riccati equation does (its steady state sqrt(q) A^-1/2 turns the rate
+  matrix P A into sqrt(q) A^1/2, whose condition number is the square root of A's), but
+  along nearly unobservable directions (information lambda < q) that steady state exceeds
+  P(0); ``Settings.covariance_cap`` bounds the eigenvalues of each block of P_g, and the
+  optional b1 stiffness damps the mode at the price of a bias in b1.
+* Fixed point and the membrane: the fixed point of the dynamics form is P_b g_b = K_b q_b.
+  For c, phi and q_s (K = 0) that is dynamic fitting's H^T V^-1 r = 0, but for d the
+  membrane acts as P_node^-1 K_node: as P_node settles (about 0.03 I with Q = V = 0.1 I on
+  the 123-node mesh) the filter smooths the local deformation some 30 times more than dynamic
+  fitting does (the paper's remark that the filter "does not force the local deformations to
+  interpolate").  The prior form's fixed point is g = K q, dynamic fitting's, for any P; P
+  then only sets the path and speed.
+* Stopping rule: the paper's "change below 1e-4 per step" bounds a rate, not convergence.
+  ``filter_frame`` stops when the Gauss-Newton estimate of the distance to the frame's fixed
+  point (``newton_step``) is below ``Settings.tol``, or at ``Settings.max_iterations``.
 * P is a gain: the Riccati equation runs over inner iterations of one frame, so P shrinks with
   pseudo-time, not with evidence; q and v are tuning parameters.
-* Fixed point: P_b g_b = K_b q_b.  For c, phi and q_s (K = 0) that is dynamic fitting's
-  H^T V^-1 r = 0, but for d the membrane acts as P_node^-1 K_node: as P_node settles (about
-  0.03 I with Q = V = 0.1 I on the 123-node mesh) the filter smooths the local deformation
-  some 30 times more than dynamic fitting does and no longer interpolates the data (the
-  paper's remark that the filter "does not force the local deformations to interpolate").
 """
 
 from __future__ import annotations
@@ -61,6 +75,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 
 from tracker.physics import fitting as fit
@@ -68,10 +83,23 @@ from tracker.physics import kinematics as kin
 from tracker.physics import superquadric as sq
 
 N_SHAPE = sq.N_PARAMETERS - 1
-"""Size of P_s: q_s without the frozen a0."""
+"""Length of q_s without the frozen a0."""
 
-B1 = 8 - 1
-"""Index of b1 in q_s without a0 (q_s = (a0, a1, a2, a3, eps1, eps2, t1, t2, b1, b2, b3))."""
+N_GLOBAL = kin.RIGID + N_SHAPE
+"""Length of the rigid + global vector (c, phi, q_s without a0) that P_g covers."""
+
+GLOBAL = np.r_[0:kin.RIGID, kin.SHAPE.start + 1:kin.SHAPE.stop]
+"""Where the rigid + global vector sits in q (a0 left out)."""
+
+B1 = kin.RIGID + 7
+"""Index of b1 in the rigid + global vector (q_s = (a0, a1, a2, a3, eps1, eps2, t1, t2, b1, b2, b3))."""
+
+BLOCKS = {
+    "decoupled": (slice(0, 3), slice(3, kin.RIGID), slice(kin.RIGID, N_GLOBAL)),
+    "joint": (slice(0, N_GLOBAL),),
+}
+"""The diagonal blocks of P_g for each ``Settings.coupling``: the paper's c | phi | q_s, or
+one block."""
 
 
 @dataclass(frozen=True)
@@ -82,9 +110,12 @@ class Settings:
     process_noise q: Q = q I.  kappa: the step as a fraction of 1 / rho (Euler on a linear
     mode of rate lambda is stable for dt lambda < 2).  max_iterations, tol: the stopping rule of
     ``filter_frame``.  w0, w1: the loaded membrane K_node.  reassign_every: the nearest nodes
-    k(j) and K_node are recomputed every that many iterations (the paper's footnote 5).
-    bend_stiffness: the optional K_ss regulariser of b1.  local: False freezes d and P_node
-    (a rigid + global part).
+    k(j) and K_node are recomputed (and the stopping rule checked) every that many iterations
+    (the paper's footnote 5).  bend_stiffness: the optional K_g regulariser of b1.  local:
+    False freezes d and P_node (a rigid + global part).  coupling: "decoupled" (the paper's
+    c | phi | q_s blocks) or "joint" (one 16 x 16 block).  prior_stiffness: K enters as a
+    prior instead of as the dynamics F = -K (see the module docstring).  covariance_cap: the
+    largest eigenvalue allowed in each block of P_g.
     """
 
     measurement_variance: float = 0.1
@@ -97,28 +128,43 @@ class Settings:
     reassign_every: int = 10
     bend_stiffness: float = 0.0
     local: bool = True
+    coupling: str = "decoupled"
+    prior_stiffness: bool = False
+    covariance_cap: float = np.inf
+
+    def __post_init__(self):
+        if self.coupling not in BLOCKS:
+            raise ValueError(f"coupling must be one of {tuple(BLOCKS)}, got {self.coupling!r}")
 
 
 @dataclass(frozen=True)
 class State:
-    """A part and its covariance blocks: P_c, P_phi (3, 3), P_s (10, 10, q_s without a0),
-    P_node (n, n) with P_d = P_node (x) I3."""
+    """A part and its covariance: P_g (16, 16) over (c, phi, q_s without a0), block-diagonal
+    in the decoupled filter, and P_node (n, n) with P_d = P_node (x) I3."""
 
     part: kin.Part
-    p_c: np.ndarray
-    p_phi: np.ndarray
-    p_s: np.ndarray
+    p_global: np.ndarray
     p_node: np.ndarray
+
+    @property
+    def p_c(self) -> np.ndarray:
+        return self.p_global[0:3, 0:3]
+
+    @property
+    def p_phi(self) -> np.ndarray:
+        return self.p_global[3:kin.RIGID, 3:kin.RIGID]
+
+    @property
+    def p_s(self) -> np.ndarray:
+        return self.p_global[kin.RIGID:, kin.RIGID:]
 
 
 @dataclass(frozen=True)
 class Information:
-    """A_b = H_b^T V^-1 H_b of each block: c, phi (3, 3), s (10, 10), and the diagonal of
-    A_node (n,), with A_d = diag(node) (x) I3."""
+    """A_g = H_g^T V^-1 H_g over (c, phi, q_s without a0) with its cross blocks (16, 16), and
+    the diagonal of A_node (n,), with A_d = diag(node) (x) I3."""
 
-    c: np.ndarray
-    phi: np.ndarray
-    s: np.ndarray
+    global_: np.ndarray
     node: np.ndarray
 
 
@@ -156,39 +202,64 @@ def mesh_covariance(triangles: np.ndarray, n_nodes: int, off_diagonal: float, di
 
 
 def initial_state(part: kin.Part, scale: float = 1.0, p_node: np.ndarray | None = None) -> State:
-    """P_c = P_phi = scale I3, P_s = scale I10 and P_node = scale I (default) or the given
-    P_node(0), which must be symmetric positive definite (``check_covariance``)."""
+    """P_g = scale I16 and P_node = scale I (default) or the given P_node(0), which must be
+    symmetric positive definite (``check_covariance``)."""
     n = len(part.u)
     if p_node is None:
         p_node = scale * np.eye(n)
     p_node = check_covariance(p_node, "P_node(0)")
     if p_node.shape != (n, n):
         raise ValueError(f"P_node(0) must be {n} x {n} for this part, got {p_node.shape}")
-    return State(part, scale * np.eye(3), scale * np.eye(3), scale * np.eye(N_SHAPE), p_node)
+    return State(part, scale * np.eye(N_GLOBAL), p_node)
+
+
+def global_jacobians(part: kin.Part) -> np.ndarray:
+    """L_g,i = [ I3 | -[y_i]x | R J_i ] (y_i = R p_i, J_i without its a0 column): the rigid +
+    global columns of L_i (section 2), shape (n, 3, 16)."""
+    n = len(part.u)
+    y = (sq.shape(part.q_s, part.u, part.v) + part.d) @ part.rotation.T
+    out = np.zeros((n, 3, N_GLOBAL))
+    out[:, :, 0:3] = np.eye(3)
+    out[:, 0, 4], out[:, 0, 5] = y[:, 2], -y[:, 1]
+    out[:, 1, 3], out[:, 1, 5] = -y[:, 2], y[:, 0]
+    out[:, 2, 3], out[:, 2, 4] = y[:, 1], -y[:, 0]
+    out[:, :, kin.RIGID:] = part.rotation @ sq.jacobian(part.q_s, part.u, part.v)[:, :, 1:]
+    return out
 
 
 def information(part: kin.Part, assignment: np.ndarray, variance: float) -> Information:
-    """The diagonal blocks of H^T V^-1 H = sum_j L_k(j)^T L_k(j) / v (section 5).
+    """The information H^T V^-1 H = sum_j L_k(j)^T L_k(j) / v by blocks (section 5).
 
-    With n_i points attached to node i, y_i = R p_i and J_i without its a0 column:
-
-        A_c = (sum n_i) I3 / v,   A_phi = sum n_i [y_i]x^T [y_i]x / v = sum n_i (|y_i|^2 I3 - y_i y_i^T) / v
-        A_s = sum n_i J_i^T J_i / v   (R^T R = I),   A_node = diag(n_i / v)
+    With n_i points attached to node i: A_g = sum n_i L_g,i^T L_g,i / v (``global_jacobians``;
+    its diagonal blocks are A_c = (sum n_i) I3 / v, A_phi = sum n_i (|y_i|^2 I3 - y_i y_i^T) / v
+    and A_s = sum n_i J_i^T J_i / v) and A_node = diag(n_i / v).
     """
     counts = np.bincount(assignment, minlength=len(part.u)).astype(np.float64)
-    y = (sq.shape(part.q_s, part.u, part.v) + part.d) @ part.rotation.T
-    jac = sq.jacobian(part.q_s, part.u, part.v)[:, :, 1:]
-    squared = np.einsum("i,ia,ia->", counts, y, y)
-    a_phi = squared * np.eye(3) - np.einsum("i,ia,ib->ab", counts, y, y)
-    a_s = np.einsum("i,iak,ial->kl", counts, jac, jac)
-    return Information(counts.sum() * np.eye(3) / variance, a_phi / variance, a_s / variance, counts / variance)
+    jac = global_jacobians(part)
+    a_g = np.einsum("i,iak,ial->kl", counts, jac, jac)
+    return Information(a_g / variance, counts / variance)
 
 
-def shape_stiffness(settings: Settings) -> np.ndarray:
-    """K_ss (10 x 10 over q_s without a0): bend_stiffness at b1, zero elsewhere."""
-    k = np.zeros((N_SHAPE, N_SHAPE))
+def global_stiffness(settings: Settings) -> np.ndarray:
+    """K_g (16 x 16 over c, phi, q_s without a0): bend_stiffness at b1, zero elsewhere."""
+    k = np.zeros((N_GLOBAL, N_GLOBAL))
     k[B1, B1] = settings.bend_stiffness
     return k
+
+
+def global_vector(part: kin.Part) -> np.ndarray:
+    """The vector K_g acts on: zeros for c and phi (K_g has no entries there; phi is an
+    increment, not a coordinate), then q_s without a0."""
+    return np.concatenate([np.zeros(kin.RIGID), part.q_s[1:]])
+
+
+def coupled(a_g: np.ndarray, settings: Settings) -> np.ndarray:
+    """A_g as the filter's Riccati equation and step see it: whole ("joint") or only its
+    diagonal blocks ("decoupled", the paper's choice)."""
+    out = np.zeros_like(a_g)
+    for b in BLOCKS[settings.coupling]:
+        out[b, b] = a_g[b, b]
+    return out
 
 
 def _spectral_radius(m: np.ndarray) -> float:
@@ -196,41 +267,43 @@ def _spectral_radius(m: np.ndarray) -> float:
 
 
 def step_size(state: State, info: Information, k_node: sp.spmatrix, settings: Settings) -> float:
-    """dt = kappa / max_b rho(P_b A_b + K_b) over the blocks (section 5).
+    """dt = kappa / max_b rho(rate matrix of block b) (section 5).
 
-    P_b A_b + K_b is the rate matrix of block b's state equation linearised in the
-    Gauss-Newton sense; Euler with dt rho < 2 is stable on its real eigenvalues.  rho is
-    exact for c, phi and q_s.  For the local block (whose n x n P_node A_node + K_node has the
-    spectrum of the 3n x 3n block) it is bounded by the infinity norm, the largest absolute
-    row sum: an O(n^2) upper bound (any induced norm bounds rho) instead of a dense
-    eigensolve per iteration, so dt can only come out smaller.
+    The rate matrix is P_b A_b + K_b (dynamics form) or P_b (A_b + K_b) (prior form): the
+    Jacobian of block b's state equation linearised in the Gauss-Newton sense; Euler with
+    dt rho < 2 is stable on its real eigenvalues.  rho is exact for P_g (block-diagonal in the
+    decoupled filter, so its rho is the largest of the blocks').  For the local block (whose
+    n x n matrix has the spectrum of the 3n x 3n block) it is bounded by the infinity norm, the
+    largest absolute row sum: any induced norm bounds rho, so dt can only come out smaller.
     """
-    rates = [
-        _spectral_radius(state.p_c @ info.c),
-        _spectral_radius(state.p_phi @ info.phi),
-        _spectral_radius(state.p_s @ info.s + shape_stiffness(settings)),
-    ]
+    a_g, k_g = coupled(info.global_, settings), global_stiffness(settings)
+    p = state.p_global
+    rates = [_spectral_radius(p @ (a_g + k_g) if settings.prior_stiffness else p @ a_g + k_g)]
     if settings.local:
-        rates.append(np.max(np.sum(np.abs(state.p_node * info.node + k_node.toarray()), axis=1)))
+        k = k_node.toarray()
+        m = state.p_node @ (np.diag(info.node) + k) if settings.prior_stiffness else state.p_node * info.node + k
+        rates.append(np.max(np.sum(np.abs(m), axis=1)))
     return settings.kappa / max(rates)
 
 
 def state_rate(state: State, force: np.ndarray, k_node: sp.spmatrix, settings: Settings) -> np.ndarray:
-    """qdot = P g - K q by blocks, shape (part.n_coordinates,), from g = ``fitting.data_force``
-    (section 5, eq 37).
+    """qdot by blocks, shape (part.n_coordinates,), from g = ``fitting.data_force`` (eq 37).
 
-    c: P_c g_c.  phi: P_phi g_phi.  q_s: (0, P_s g_s - K_ss q_s) with a0 frozen.  d:
-    (P_node G - K_node d).ravel() with G the (n, 3) rows of g_d, which is P_d g_d - K_dd q_d for
-    P_d = P_node (x) I3; zero if d is frozen (``Settings.local`` False).
+    Dynamics form: P_g g_g - K_g theta and (P_node G - K_node d).ravel(); prior form: P_g (g_g -
+    K_g theta) and (P_node (G - K_node d)).ravel().  theta = ``global_vector``, G the (n, 3) rows
+    of g_d (P_d g_d = (P_node G).ravel() for P_d = P_node (x) I3).  a0 is frozen, and d too if
+    ``Settings.local`` is False.
     """
     part = state.part
     start = kin.SHAPE.stop
     rate = np.zeros(part.n_coordinates)
-    rate[0:3] = state.p_c @ force[0:3]
-    rate[3:6] = state.p_phi @ force[3:6]
-    rate[kin.SHAPE.start + 1:start] = state.p_s @ force[kin.SHAPE.start + 1:start] - shape_stiffness(settings) @ part.q_s[1:]
+    kq = global_stiffness(settings) @ global_vector(part)
+    p = state.p_global
+    rate[GLOBAL] = p @ (force[GLOBAL] - kq) if settings.prior_stiffness else p @ force[GLOBAL] - kq
     if settings.local:
-        rate[start:] = (state.p_node @ force[start:].reshape(part.d.shape) - k_node @ part.d).ravel()
+        g, kd = force[start:].reshape(part.d.shape), k_node @ part.d
+        local = state.p_node @ (g - kd) if settings.prior_stiffness else state.p_node @ g - kd
+        rate[start:] = local.ravel()
     return rate
 
 
@@ -240,31 +313,88 @@ def update_part(part: kin.Part, rate: np.ndarray, dt: float) -> kin.Part:
     return replace(moved, q_s=sq.clamp(moved.q_s))
 
 
-def riccati_block(p: np.ndarray, a: np.ndarray, k: np.ndarray | sp.spmatrix | None, q: float, dt: float) -> np.ndarray:
-    """One Euler step of Pdot = -K P - P K + q I - P A P for one block, symmetrised (eq 38).
+def riccati_block(
+    p: np.ndarray, a: np.ndarray, k: np.ndarray | sp.spmatrix | None, q: float, dt: float, prior: bool = False,
+) -> np.ndarray:
+    """One Euler step of the Riccati equation (eq 38) for one block, symmetrised.
 
-    A is a matrix, or a vector holding a diagonal A; K a (sparse) matrix or None for K = 0.
+    Dynamics form (F = -K): Pdot = -K P - P K + q I - P A P.  Prior form (F = 0, K a
+    pseudo-measurement of information K): Pdot = q I - P (A + K) P.  A is a matrix, or a
+    vector holding a diagonal A; K a (sparse) matrix or None for K = 0.
     """
     pap = (p * a) @ p if a.ndim == 1 else p @ a @ p
     rate = q * np.eye(len(p)) - pap
     if k is not None:
         kp = np.asarray(k @ p)
-        rate -= kp + kp.T
+        rate -= p @ kp if prior else kp + kp.T
     out = p + dt * rate
     return 0.5 * (out + out.T)
 
 
+def cap_eigenvalues(p: np.ndarray, cap: float) -> np.ndarray:
+    """p with its eigenvalues above ``cap`` set to cap (V min(Lambda, cap) V^T); p itself if
+    none is."""
+    values, vectors = np.linalg.eigh(p)
+    if values[-1] <= cap:
+        return p
+    out = (vectors * np.minimum(values, cap)) @ vectors.T
+    return 0.5 * (out + out.T)
+
+
 def riccati(state: State, info: Information, k_node: sp.spmatrix, settings: Settings, dt: float) -> State:
-    """The Riccati step of every block (``riccati_block``); P_node is kept if d is frozen."""
-    q = settings.process_noise
-    p_node = riccati_block(state.p_node, info.node, k_node, q, dt) if settings.local else state.p_node
-    return replace(
-        state,
-        p_c=riccati_block(state.p_c, info.c, None, q, dt),
-        p_phi=riccati_block(state.p_phi, info.phi, None, q, dt),
-        p_s=riccati_block(state.p_s, info.s, shape_stiffness(settings), q, dt),
-        p_node=p_node,
-    )
+    """The Riccati step of every block of P_g (``riccati_block``, then ``cap_eigenvalues``) and
+    of P_node (kept if d is frozen)."""
+    q, prior = settings.process_noise, settings.prior_stiffness
+    k_g = global_stiffness(settings)
+    p_g = np.zeros_like(state.p_global)
+    for b in BLOCKS[settings.coupling]:
+        block = riccati_block(state.p_global[b, b], info.global_[b, b], k_g[b, b], q, dt, prior)
+        p_g[b, b] = cap_eigenvalues(block, settings.covariance_cap)
+    p_node = riccati_block(state.p_node, info.node, k_node, q, dt, prior) if settings.local else state.p_node
+    return replace(state, p_global=p_g, p_node=p_node)
+
+
+def newton_step(
+    state: State, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings
+) -> np.ndarray:
+    """The Gauss-Newton estimate of the way from the current q to the filter's fixed point on
+    this frame: delta (16 + 3n, or 16 with d frozen) over (c, phi, q_s without a0, q_d).
+
+    Linearised in the Gauss-Newton sense, the data force is g(q + delta) = g - A delta with the
+    full A = H^T V^-1 H (cross blocks included, whatever the filter's coupling: they are
+    terms of the force, not of P).  The fixed point qdot = 0 is g = K' q with the effective
+    stiffness K' = K (prior form) or P^-1 K (dynamics form, from P g = K q), so
+
+        (A + K') delta = g - K' q.
+
+    Solved through the Schur complement of the local block: N = diag(n_i / v) + K'_node
+    (n x n) acts on d (n, 3) column by column, and A_dg has rows (n_i / v) R^T L_g,i.
+    Directions A + K' does not see at all (b2, b3 at b1 = 0) get no step (least squares).
+    """
+    part, v = state.part, settings.measurement_variance
+    force = fit.data_force(part, points, assignment, np.sqrt(v))
+    counts = np.bincount(assignment, minlength=len(part.u)).astype(np.float64)
+    jac = global_jacobians(part)
+    weighted = counts[:, None, None] * jac / v
+    k_g = global_stiffness(settings)
+    if not settings.prior_stiffness:
+        k_g = np.linalg.solve(state.p_global, k_g)
+    schur = np.einsum("iak,ial->kl", weighted, jac) + k_g
+    rhs = force[GLOBAL] - k_g @ global_vector(part)
+    if not settings.local:
+        return np.linalg.lstsq(schur, rhs, rcond=None)[0]
+    k_node = k_node.toarray()
+    if not settings.prior_stiffness:
+        k_node = np.linalg.solve(state.p_node, k_node)
+    n = len(part.u)
+    coupling = np.einsum("ba,ibk->iak", part.rotation, weighted)  # rows of A_dg
+    factor = sla.lu_factor(np.diag(counts / v) + k_node)
+    z = sla.lu_solve(factor, force[kin.SHAPE.stop:].reshape(n, 3) - k_node @ part.d)
+    zz = sla.lu_solve(factor, coupling.reshape(n, -1)).reshape(coupling.shape)
+    schur -= np.einsum("iak,ial->kl", coupling, zz)
+    rhs -= np.einsum("iak,ia->k", coupling, z)
+    step = np.linalg.lstsq(schur, rhs, rcond=None)[0]
+    return np.concatenate([step, (z - zz @ step).ravel()])
 
 
 def iteration(
@@ -285,16 +415,17 @@ def iteration(
 def filter_frame(
     state: State, points: np.ndarray, triangles: np.ndarray, settings: Settings
 ) -> tuple[State, int]:
-    """Inner iterations on one frame of points (m, 3) until the largest coordinate change of an
-    iteration is below ``settings.tol`` or ``settings.max_iterations`` are done.  Every
-    ``settings.reassign_every`` iterations the nearest nodes and K_node (over the current
-    shell) are recomputed.  Returns the state to carry to the next frame (q and P) and the
-    number of iterations run."""
+    """Inner iterations on one frame of points (m, 3) until converged or
+    ``settings.max_iterations`` are done.  Every ``settings.reassign_every`` iterations
+    (before the first included) the nearest nodes and K_node (over the current shell) are
+    recomputed and the stopping rule is checked: stop when the largest entry of the
+    ``newton_step`` to the fixed point is below ``settings.tol``.  Returns the state to carry
+    to the next frame (q and P) and the number of iterations run."""
     for done in range(settings.max_iterations):
         if done % settings.reassign_every == 0:
             assignment = fit.nearest_nodes(points, kin.positions(state.part))
             k_node = fit.stiffness(state.part, triangles, settings.w0, settings.w1)
-        state, change = iteration(state, points, assignment, k_node, settings)
-        if change < settings.tol:
-            return state, done + 1
+            if np.max(np.abs(newton_step(state, points, assignment, k_node, settings))) < settings.tol:
+                return state, done
+        state, _ = iteration(state, points, assignment, k_node, settings)
     return state, settings.max_iterations
