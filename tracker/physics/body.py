@@ -357,18 +357,19 @@ def first_order_step(
 
 def first_order_limit(
     body: Body, attachments: Sequence[Attachment | None], sigma: float,
-    k_nodes: Sequence[sp.spmatrix | None],
+    k_nodes: Sequence[sp.spmatrix | None], cap: int = LOCAL,
 ) -> float:
-    """min over parts of ``fitting.stability_limit`` = 2 / lambda_max(H^T H / s^2 + K)
-    (section 3, Euler).  It bounds the constrained step too: with D = I, qdot = P F (plus the
-    Baumgarte term) with P the orthogonal projector onto G qdot = 0, and P A P has no larger
-    eigenvalue than A.  Parts with neither data nor stiffness do not limit dt (inf)."""
+    """min over parts of ``fitting.stability_limit`` = 2 / lambda_max(H^T H / s^2 + K) on each
+    part's active coordinates at min(level, cap) (section 3, Euler).  It bounds the constrained
+    step too: with D = I, qdot = P F (plus the Baumgarte term) with P the orthogonal projector
+    onto G qdot = 0, and P A P has no larger eigenvalue than A.  Parts with neither data nor
+    stiffness do not limit dt (inf)."""
     limits = [np.inf]
-    for part, att, k_node in zip(body.parts, attachments, k_nodes):
+    for part, att, k_node, idx in zip(body.parts, attachments, k_nodes, active(body, cap)):
         nodes = att.nodes if att is not None else np.zeros(0, dtype=np.int64)
         if len(nodes) or k_node is not None:
             k = k_node if k_node is not None else sp.csr_matrix((len(part.u),) * 2)
-            limits.append(fit.stability_limit(part, nodes, sigma, k))
+            limits.append(fit.stability_limit(part, nodes, sigma, k, idx))
     return min(limits)
 
 
@@ -394,7 +395,7 @@ def fit_frame(
         if step % reassign_every == 0 or step == n_global:
             attachments = attach(body, points, labels)
             k_nodes = stiffnesses(body, w0, w1) if cap == LOCAL else [None] * len(body.parts)
-            dt = step_fraction * first_order_limit(body, attachments, sigma, k_nodes)
+            dt = step_fraction * first_order_limit(body, attachments, sigma, k_nodes, cap)
         history.append(_progress(body, attachments))
         body = first_order_step(body, attachments, sigma, k_nodes, dt, decay / dt, cap)
     history.append(_progress(body, attach(body, points, labels)))

@@ -73,23 +73,30 @@ def stiffness(part: kin.Part, triangles: np.ndarray, w0: float, w1: float) -> sp
 
 
 def stability_limit(
-    part: kin.Part, assignment: np.ndarray, sigma: float, k_node: sp.spmatrix
+    part: kin.Part, assignment: np.ndarray, sigma: float, k_node: sp.spmatrix,
+    coordinates: np.ndarray | None = None,
 ) -> float:
-    """2 / lambda_max(H^T H / sigma^2 + K) over the free coordinates (section 3, Euler).
+    """2 / lambda_max(H^T H / sigma^2 + K) over the coordinates that move (section 3, Euler).
 
     H^T H = sum_i n_i L_i^T L_i with n_i the number of points attached to node i, and
-    K = blockdiag(0, 0, 0, K_node (x) I3); a0 (frozen) is left out.  lambda_max is the largest
-    eigenvalue of that symmetric matrix (size part.n_coordinates - 1), found by Lanczos
-    iteration on its products with vectors.  The bound is that of the dynamics linearised in
-    the Gauss-Newton sense (the r . d^2x/dq^2 terms dropped).  It also bounds any subset of
-    the coordinates (a principal submatrix has no larger eigenvalue), e.g. ``local=False``.
+    K = blockdiag(0, 0, 0, K_node (x) I3).  ``coordinates`` (indices into q) are the ones that
+    move, by default all but a0 (frozen); a subset has the limit of its principal submatrix,
+    which is never smaller (e.g. a rigid part is not held to the step its shape and nodal
+    displacements would need).  lambda_max is the largest eigenvalue of that symmetric matrix,
+    found by Lanczos iteration on its products with vectors (directly for fewer than 3
+    coordinates).  The bound is that of the dynamics linearised in the Gauss-Newton sense (the
+    r . d^2x/dq^2 terms dropped).
     """
+    if coordinates is None:
+        coordinates = np.delete(np.arange(part.n_coordinates), [FROZEN])
     counts = np.bincount(assignment, minlength=len(part.u)).astype(np.float64)
     h = (np.sqrt(counts)[:, None, None] * kin.jacobians(part)).reshape(-1, part.n_coordinates)
-    free = np.arange(part.n_coordinates) != FROZEN
-    h = h[:, free] / sigma
-    k = sp.block_diag([sp.csr_matrix((kin.SHAPE.stop - 1,) * 2), sp.kron(k_node, sp.identity(3))])
-    a = LinearOperator((len(free) - 1,) * 2, matvec=lambda x: h.T @ (h @ x) + k @ x, dtype=np.float64)
+    h = h[:, coordinates] / sigma
+    k = sp.block_diag([sp.csr_matrix((kin.SHAPE.stop,) * 2), sp.kron(k_node, sp.identity(3))]).tocsr()
+    k = k[coordinates][:, coordinates]
+    if len(coordinates) < 3:
+        return 2.0 / np.linalg.eigvalsh(h.T @ h + k.toarray())[-1]
+    a = LinearOperator((len(coordinates),) * 2, matvec=lambda x: h.T @ (h @ x) + k @ x, dtype=np.float64)
     top = eigsh(a, k=1, which="LA", v0=np.ones(a.shape[0]), return_eigenvectors=False)[0]
     return 2.0 / top
 
