@@ -324,6 +324,67 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_points(args: argparse.Namespace) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from tracker.io.markers import read_markers
+    from tracker.io.poses import PosesWriter
+    from tracker.io.shapes import ShapesWriter
+    from tracker.physics.points import PointsSettings, load_points_model, start_frame, track
+    from tracker.track import LOST, TRACKED, UNCERTAIN
+
+    markers = read_markers(args.markers)
+    model = load_points_model(args.model)
+    points = markers.select(model.marker_names)
+    first = start_frame(points, model) if args.start is None else args.start
+    if not 0 <= first < len(points):
+        raise TrackerInputError(f"{markers.path}: --start {first} is outside its frames 0..{len(points) - 1}; "
+                                "pick a frame inside them")
+    frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames),
+                   args.every)
+    settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level)
+    out = Path(args.out) if args.out else Path("out") / markers.path.stem
+    print(f"fitting {markers.path} frames {frames.start}..{frames[-1]} (every {args.every}, "
+          f"{markers.rate:g} Hz) with model {model.name!r}: {len(model.parts)} parts, "
+          f"{len(model.joint_names)} joints, {len(model.marker_names)} markers", file=sys.stderr)
+    shapes = ShapesWriter(out / "shapes.npz", model)
+    residuals, counts, interrupted = [], {TRACKED: 0, UNCERTAIN: 0, LOST: 0}, False
+    started = time.perf_counter()
+    with PosesWriter(out / "poses.npz", list(model.parts), list(model.joint_names),
+                     markers.rate / args.every) as writer:
+        try:
+            fits = track((points[f] for f in frames), model, settings)
+            for index, fitted in tqdm(zip(frames, fits), total=len(frames), unit="frame", disable=args.quiet,
+                                      file=sys.stderr):
+                finite = np.isfinite(fitted.poses).all() and np.isfinite(fitted.joints).all()
+                status = LOST if not finite else UNCERTAIN if np.isnan(fitted.residual).any() else TRACKED
+                writer.append(markers.first_frame + index, fitted.poses, fitted.joints, status, fitted.rms * 1000.0)
+                shapes.append(markers.first_frame + index, fitted)
+                residuals.append(fitted.residual)
+                counts[status] += 1
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            shapes.write()
+    elapsed = time.perf_counter() - started
+    done = len(residuals)
+    print(f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "
+          f"({done / elapsed if elapsed else 0:.1f} frames/s): {counts[TRACKED]} with every part seen, "
+          f"{counts[UNCERTAIN]} with a part unseen, {counts[LOST]} lost")
+    if done:
+        table = np.array(residuals) * 1000.0
+        print("RMS marker-to-node distance per part, mm (median / 95th percentile / max over frames):")
+        for p, name in enumerate(model.parts):
+            column = table[:, p][np.isfinite(table[:, p])]
+            if len(column):
+                print(f"  {name:<14} {len(model.markers[p]):>2} markers  {np.median(column):6.1f} "
+                      f"{np.percentile(column, 95):6.1f} {column.max():6.1f}")
+        print(f"joint violation: max {shapes.arrays()['violation'].max() * 1000.0:.3g} mm")
+    print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
+    return 130 if interrupted else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tracker", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -440,6 +501,23 @@ def build_parser() -> argparse.ArgumentParser:
     exporter.add_argument("--fps", type=_positive_float,
                           help="frames per second (default: from the poses file's frame and time arrays)")
     exporter.set_defaults(run=cmd_export)
+
+    points = sub.add_parser("points", help="fit and track a deformable multi-part model to 3-D markers (C3D, TRC)")
+    points.add_argument("markers", metavar="FILE", help="marker file: .c3d or .trc")
+    points.add_argument("--model", required=True, help="points model TOML: parts, their markers and parents")
+    points.add_argument("--out", help="output folder for poses.npz and shapes.npz (default: out/<file name>)")
+    points.add_argument("--start", type=int,
+                        help="first frame, counted from 0 (default: the first with 3 markers seen on every part)")
+    points.add_argument("--frames", type=_positive_int, help="number of frames to span (default: all)")
+    points.add_argument("--every", type=_positive_int, default=1, help="fit every N-th frame (default 1)")
+    points.add_argument("--level", choices=("rigid", "global", "local"), default="rigid",
+                        help="what moves after the first frame: rigid (pose only, the shapes fitted on the first "
+                             "frame; default), global (also the superquadric shape) or local (also the nodes)")
+    points.add_argument("--steps", type=_positive_int, default=40, help="fitting steps per frame (default 40)")
+    points.add_argument("--sigma", type=_positive_float, default=0.01,
+                        help="marker noise, metres: how much the data weigh against the membrane (default 0.01)")
+    points.add_argument("--quiet", action="store_true", help="no progress bar")
+    points.set_defaults(run=cmd_points)
 
     bench = sub.add_parser("bench", help="per-stage timings, frames per second and the decode-only floor")
     bench.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
