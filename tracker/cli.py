@@ -52,6 +52,27 @@ def _port(text: str) -> int:
     return value
 
 
+def _percentages(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or not all(0 < v <= 100 for v in values):
+        raise argparse.ArgumentTypeError(f"must be percentages 1-100 separated by commas, e.g. 100,25, got {text}")
+    return values
+
+
+def _variances(text: str) -> tuple[float, ...]:
+    """Comma-separated variances; whole numbers stay ints so they print as the paper's 10, 5, 1, 0."""
+    try:
+        values = tuple(int(float(v)) if float(v).is_integer() else float(v) for v in text.split(","))
+    except (ValueError, OverflowError):
+        values = ()
+    if not values or not all(0 <= v < float("inf") for v in values):
+        raise argparse.ArgumentTypeError(f"must be variances >= 0 separated by commas, e.g. 10,0, got {text}")
+    return values
+
+
 def _cameras(text: str | None) -> list[str] | None:
     return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
@@ -385,6 +406,47 @@ def cmd_points(args: argparse.Namespace) -> int:
     return 130 if interrupted else 0
 
 
+def cmd_experiment(args: argparse.Namespace) -> int:
+    import json
+
+    from tqdm import tqdm
+
+    from tracker.physics import tables
+
+    if args.name == "superquadric":
+        from tracker.physics import experiment
+
+        densities = args.densities or experiment.DENSITIES
+        variances = args.variances or experiment.VARIANCES
+        with tqdm(total=len(densities) * len(variances), unit="cell", disable=args.quiet, file=sys.stderr) as bar:
+            rows = experiment.run(densities, variances, frames=args.frames or 20, seed=args.seed,
+                                  progress=lambda row: bar.update())
+        claims = experiment.check_claims(rows)
+        if args.json:
+            print(json.dumps({"rows": rows, "paper": {f"{d}/{v}": list(e) for (d, v), e in
+                                                       experiment.PAPER_TABLES.items()},
+                              "errors": list(experiment.ERRORS),
+                              "claims": [{"claim": c, "held": h, "detail": d} for c, h, d in claims]}, indent=1))
+        else:
+            print("\n".join(tables.superquadric_table(rows) + ["", "claims:"] + tables.claims_lines(claims)))
+        return 0
+    from tracker.physics import insect
+
+    frames = args.frames or insect.PERIOD
+    results = {}
+    for name, sparse in (("dense", False), ("sparse (7 points per part)", True)):
+        with tqdm(total=frames, unit="frame", desc=name.split()[0], disable=args.quiet, file=sys.stderr) as bar:
+            results[name] = insect.run(sparse, frames=frames, seed=args.seed,
+                                       progress=lambda *_: bar.update())
+    if args.json:
+        print(json.dumps({name: {**r.summary, "violation": r.violation.tolist(),
+                                 "position_error": r.position_error.tolist()} for name, r in results.items()},
+                         indent=1))
+    else:
+        print("\n".join(tables.insect_table(results)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tracker", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -518,6 +580,22 @@ def build_parser() -> argparse.ArgumentParser:
                         help="marker noise, metres: how much the data weigh against the membrane (default 0.01)")
     points.add_argument("--quiet", action="store_true", help="no progress bar")
     points.set_defaults(run=cmd_points)
+
+    experiment = sub.add_parser("experiment", help="the physics paper's experiments: Tables I-IV, or the insect")
+    experiment.add_argument("name", choices=("superquadric", "insect"),
+                            help="superquadric: the error analysis of Tables I-IV (4 densities x 4 noise levels, "
+                                 "beside the paper's values); insect: five parts and four joints tracked from dense "
+                                 "and sparse points")
+    experiment.add_argument("--frames", type=_positive_int,
+                            help="frames per run (default: 20 for superquadric, 36 for insect)")
+    experiment.add_argument("--seed", type=int, default=0, help="random seed of the data and noise (default 0)")
+    experiment.add_argument("--densities", type=_percentages, metavar="LIST",
+                            help="superquadric: comma-separated data densities in percent (default 100,75,50,25)")
+    experiment.add_argument("--variances", type=_variances, metavar="LIST",
+                            help="superquadric: comma-separated noise variances (default 10,5,1,0)")
+    experiment.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    experiment.add_argument("--quiet", action="store_true", help="no progress bar")
+    experiment.set_defaults(run=cmd_experiment)
 
     bench = sub.add_parser("bench", help="per-stage timings, frames per second and the decode-only floor")
     bench.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
