@@ -403,7 +403,20 @@ def cmd_points(args: argparse.Namespace) -> int:
                       f"{np.percentile(column, 95):6.1f} {column.max():6.1f}")
         print(f"joint violation: max {shapes.arrays()['violation'].max() * 1000.0:.3g} mm")
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
-    return 130 if interrupted else 0
+    if interrupted or not done or not (args.view or args.record):
+        return 130 if interrupted else 0
+    from tracker.io.poses import load_poses
+    from tracker.viewer.points import PointsView
+    from tracker.viewer.scene import start_server
+
+    results = load_poses(out / "poses.npz")
+    view = PointsView(start_server(args.host, args.port, quiet=not args.view), results, dict(np.load(out / "shapes.npz")),
+                      points[results["frame"] - markers.first_frame], markers.rate / args.every)
+    view.show(0)
+    if args.record:
+        view.record(Path(args.record), progress=not args.quiet)
+        print(f"wrote {args.record}")
+    return _serve(f"showing {out} ({done} frames)") if args.view else 0
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -579,6 +592,9 @@ def build_parser() -> argparse.ArgumentParser:
     points.add_argument("--sigma", type=_positive_float, default=0.01,
                         help="marker noise, metres: how much the data weigh against the membrane (default 0.01)")
     points.add_argument("--quiet", action="store_true", help="no progress bar")
+    points.add_argument("--view", action="store_true",
+                        help="then show the fitted parts, markers and joints in the browser viewer")
+    _viewer_options(points)
     points.set_defaults(run=cmd_points)
 
     experiment = sub.add_parser("experiment", help="the physics paper's experiments: Tables I-IV, or the insect")
