@@ -1,15 +1,31 @@
-"""Shared fixtures: small rendered recordings with ground truth (made once per test session)."""
+"""Shared fixtures: small rendered recordings with ground truth (made once per test session), and the
+check that bad input gets a one-line error."""
 
 from pathlib import Path
 
 import pytest
 
 from tracker.camera import save_calibration
+from tracker.errors import TrackerInputError
 from tracker.synth import look_at_camera, synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 HUMAN = ROOT / "models" / "human.toml"
 CMU = ROOT.parent / "shared" / "data" / "cmu-mocap" / "131_01.bvh"
+
+
+@pytest.fixture
+def one_line_error():
+    """Call a function that must raise TrackerInputError with a one-line message; returns the message."""
+
+    def check(call) -> str:
+        with pytest.raises(TrackerInputError) as error:
+            call()
+        message = str(error.value)
+        assert "\n" not in message
+        return message
+
+    return check
 
 
 @pytest.fixture(scope="session")

@@ -281,15 +281,7 @@ def test_truth_file_exports_with_fps(tmp_path: Path, truth: dict[str, np.ndarray
     np.testing.assert_allclose(trc.markers / 1000.0, truth["joints"], rtol=0, atol=1e-9)
 
 
-def one_line_error(call) -> str:
-    with pytest.raises(TrackerInputError) as error:
-        call()
-    message = str(error.value)
-    assert "\n" not in message
-    return message
-
-
-def test_bad_input(tmp_path: Path, tracked: Path, truth: dict[str, np.ndarray]) -> None:
+def test_bad_input(tmp_path: Path, tracked: Path, truth: dict[str, np.ndarray], one_line_error) -> None:
     message = one_line_error(lambda: export(tracked, "fbx"))
     assert str(tracked) in message and "--to trc, c3d, bvh, csv" in message
     missing = tmp_path / "nowhere" / "poses.npz"

@@ -8,19 +8,10 @@ import ezc3d
 import numpy as np
 import pytest
 
-from tracker.errors import TrackerInputError
 from tracker.io.export.c3d import write_c3d
 from tracker.io.markers import read_markers
 
 MARKERS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "markers"
-
-
-def one_line_error(call) -> str:
-    with pytest.raises(TrackerInputError) as error:
-        call()
-    message = str(error.value)
-    assert "\n" not in message
-    return message
 
 
 def test_vicon_c3d_in_metres_with_its_gaps() -> None:
@@ -60,7 +51,7 @@ def test_c3d_round_trip_keeps_gaps_and_first_frame(tmp_path: Path) -> None:
     assert np.allclose(markers.positions[np.isfinite(joints)], joints[np.isfinite(joints)], atol=1e-6)
 
 
-def test_names_match_after_a_subject_prefix_and_errors_name_the_file() -> None:
+def test_names_match_after_a_subject_prefix_and_errors_name_the_file(one_line_error) -> None:
     markers = read_markers(MARKERS / "Vicon.c3d")
     assert markers.index("EPICl") == markers.labels.index("Daphnee:EPICl")
     assert markers.index("Daphnee:EPICl") == markers.index("EPICl")
@@ -72,14 +63,14 @@ def test_names_match_after_a_subject_prefix_and_errors_name_the_file() -> None:
     (b"not a c3d file at all" * 20, "not a readable C3D file"),
     (b"", "not a readable C3D file"),
 ])
-def test_corrupt_c3d_is_one_line(tmp_path: Path, content: bytes, fix: str) -> None:
+def test_corrupt_c3d_is_one_line(tmp_path: Path, content: bytes, fix: str, one_line_error) -> None:
     bad = tmp_path / "bad.c3d"
     bad.write_bytes(content)
     message = one_line_error(lambda: read_markers(bad))
     assert str(bad) in message and fix in message
 
 
-def test_missing_file_wrong_suffix_and_unknown_units(tmp_path: Path) -> None:
+def test_missing_file_wrong_suffix_and_unknown_units(tmp_path: Path, one_line_error) -> None:
     assert "not found" in one_line_error(lambda: read_markers(tmp_path / "none.c3d"))
     assert "give a .c3d or .trc file" in one_line_error(lambda: read_markers(tmp_path / "walk.csv"))
     source = (MARKERS / "subject01_walk1.trc").read_text().splitlines()
