@@ -372,8 +372,7 @@ def cmd_points(args: argparse.Namespace) -> int:
     shapes = ShapesWriter(out / "shapes.npz", model)
     residuals, counts, interrupted = [], {TRACKED: 0, UNCERTAIN: 0, LOST: 0}, False
     started = time.perf_counter()
-    with PosesWriter(out / "poses.npz", list(model.parts), list(model.joint_names),
-                     markers.rate / args.every) as writer:
+    with PosesWriter(out / "poses.npz", list(model.parts), list(model.joint_names), markers.rate) as writer:
         try:
             fits = track((points[f] for f in frames), model, settings)
             for index, fitted in tqdm(zip(frames, fits), total=len(frames), unit="frame", disable=args.quiet,

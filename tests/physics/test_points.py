@@ -153,11 +153,19 @@ def test_points_command_on_the_vicon_arm(tmp_path: Path, capsys) -> None:
     assert list(poses["component_names"]) == ["thorax", "upper_arm", "forearm", "hand"]
     assert list(poses["joint_names"]) == ["shoulder", "elbow", "wrist"]
     assert poses["poses"].shape == (30, 4, 4, 4) and np.all(poses["status"] == 0)
+    assert np.allclose(poses["time"], np.arange(30) / 100.0)  # the file's 100 Hz
     assert np.all(poses["residual"] < 25.0)  # mm
     shapes = np.load(tmp_path / "shapes.npz")
     assert shapes["q_s"].shape == (30, 4, 11) and shapes["d"].shape == (30, 4, 11 * 11 + 2, 3)
     assert np.all(shapes["residual"] < 0.025) and np.all(shapes["violation"] < 1e-6)
     assert np.all(shapes["q_s"][:, :, 0] == 1.0)  # the a0 gauge
+
+
+def test_every_other_frame_keeps_the_file_s_clock(tmp_path: Path) -> None:
+    assert main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--out", str(tmp_path),
+                 "--start", "10", "--frames", "6", "--every", "2", "--quiet"]) == 0
+    poses = load_poses(tmp_path / "poses.npz")
+    assert list(poses["frame"]) == [10, 12, 14] and np.allclose(poses["time"], [0.0, 0.02, 0.04])
 
 
 def test_points_command_errors_are_one_line(tmp_path: Path, capsys) -> None:
