@@ -66,16 +66,6 @@ Findings of the note handled here:
 * Stopping rule: the paper's "change below 1e-4 per step" bounds a rate, not convergence.
   ``filter_frame`` stops when the Gauss-Newton estimate of the distance to the frame's fixed
   point (``newton_step``) is below ``Settings.tol``, or at ``Settings.max_iterations``.
-* Reaching the fixed point cheaply (``solve_frame``): in the prior form the fixed point
-  g = K q is the stationary point of the frame's fitting energy E(q) (``energy``: the data
-  term sum |z_j - x_k(j)|^2 / 2v plus the membrane and b1 priors), so it can be found by a
-  damped Gauss-Newton (Levenberg-Marquardt) solve on E: the ``newton_step`` with a damping mu,
-  accepted only if E falls.  Plain Gauss-Newton reached it in 3-7 steps on clean data but
-  diverged with noise and at 25 % density; the damping fixes that.  The nearest nodes and
-  K_node change only between converged solves.  The filter's Euler / Riccati iterations
-  (``filter_frame``) can then run from there for P; q stays at the fixed point, which does not
-  depend on P.  The dynamics form's fixed point P g = K q is no stationary point of any
-  energy (P_node^-1 K_node is not symmetric), so this solve applies to the prior form only.
 * P is a gain: the Riccati equation runs over inner iterations of one frame, so P shrinks with
   pseudo-time, not with evidence; q and v are tuning parameters.
 """
@@ -125,9 +115,7 @@ class Settings:
     False freezes d and P_node (a rigid + global part).  coupling: "decoupled" (the paper's
     c | phi | q_s blocks) or "joint" (one 16 x 16 block).  prior_stiffness: K enters as a
     prior instead of as the dynamics F = -K (see the module docstring).  covariance_cap: the
-    largest eigenvalue allowed in each block of P_g.  newton_iterations, newton_rounds: the
-    trials per damped Gauss-Newton solve and the reassignment rounds of ``solve_frame``
-    (which stops on ``tol`` too).
+    largest eigenvalue allowed in each block of P_g.
     """
 
     measurement_variance: float = 0.1
@@ -143,8 +131,6 @@ class Settings:
     coupling: str = "decoupled"
     prior_stiffness: bool = False
     covariance_cap: float = np.inf
-    newton_iterations: int = 50
-    newton_rounds: int = 20
 
     def __post_init__(self):
         if self.coupling not in BLOCKS:
@@ -369,8 +355,7 @@ def riccati(state: State, info: Information, k_node: sp.spmatrix, settings: Sett
 
 
 def newton_step(
-    state: State, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings,
-    damping: float = 0.0,
+    state: State, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings
 ) -> np.ndarray:
     """The Gauss-Newton estimate of the way from the current q to the filter's fixed point on
     this frame: delta (16 + 3n, or 16 with d frozen) over (c, phi, q_s without a0, q_d).
@@ -385,8 +370,6 @@ def newton_step(
     Solved through the Schur complement of the local block: N = diag(n_i / v) + K'_node
     (n x n) acts on d (n, 3) column by column, and A_dg has rows (n_i / v) R^T L_g,i.
     Directions A + K' does not see at all (b2, b3 at b1 = 0) get no step (least squares).
-    ``damping`` mu > 0 solves (A + K' + mu I) delta = g - K' q instead: the Levenberg-Marquardt
-    step of ``solve_frame``.
     """
     part, v = state.part, settings.measurement_variance
     force = fit.data_force(part, points, assignment, np.sqrt(v))
@@ -396,7 +379,7 @@ def newton_step(
     k_g = global_stiffness(settings)
     if not settings.prior_stiffness:
         k_g = np.linalg.solve(state.p_global, k_g)
-    schur = np.einsum("iak,ial->kl", weighted, jac) + k_g + damping * np.eye(N_GLOBAL)
+    schur = np.einsum("iak,ial->kl", weighted, jac) + k_g
     rhs = force[GLOBAL] - k_g @ global_vector(part)
     if not settings.local:
         return np.linalg.lstsq(schur, rhs, rcond=None)[0]
@@ -405,99 +388,13 @@ def newton_step(
         k_node = np.linalg.solve(state.p_node, k_node)
     n = len(part.u)
     coupling = np.einsum("ba,ibk->iak", part.rotation, weighted)  # rows of A_dg
-    factor = sla.lu_factor(np.diag(counts / v + damping) + k_node)
+    factor = sla.lu_factor(np.diag(counts / v) + k_node)
     z = sla.lu_solve(factor, force[kin.SHAPE.stop:].reshape(n, 3) - k_node @ part.d)
     zz = sla.lu_solve(factor, coupling.reshape(n, -1)).reshape(coupling.shape)
     schur -= np.einsum("iak,ial->kl", coupling, zz)
     rhs -= np.einsum("iak,ia->k", coupling, z)
     step = np.linalg.lstsq(schur, rhs, rcond=None)[0]
     return np.concatenate([step, (z - zz @ step).ravel()])
-
-
-def energy(part: kin.Part, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings) -> float:
-    """The frame's fitting energy E(q) = sum_j |z_j - x_k(j)|^2 / 2v + tr(d^T K_node d) / 2
-    + theta^T K_g theta / 2 (d^T K d left out with d frozen): the negative log posterior whose
-    stationary point g = K q is the prior form's fixed point."""
-    r = points - kin.positions(part)[assignment]
-    theta = global_vector(part)
-    out = 0.5 * np.sum(r * r) / settings.measurement_variance + 0.5 * theta @ global_stiffness(settings) @ theta
-    if settings.local:
-        out += 0.5 * np.sum(part.d * (k_node @ part.d))
-    return float(out)
-
-
-def step_part(part: kin.Part, delta: np.ndarray) -> kin.Part:
-    """q (+) delta for a ``newton_step`` delta (16 + 3n or 16 entries; a0 gets none), q_s clamped."""
-    dq = np.zeros(part.n_coordinates)
-    dq[GLOBAL] = delta[:N_GLOBAL]
-    dq[kin.SHAPE.stop:kin.SHAPE.stop + len(delta) - N_GLOBAL] = delta[N_GLOBAL:]
-    moved = kin.retract(part, dq)
-    return replace(moved, q_s=sq.clamp(moved.q_s))
-
-
-def levenberg_marquardt(
-    state: State, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings,
-    iterations: int,
-) -> tuple[State, int, bool]:
-    """Damped Gauss-Newton on ``energy`` with the assignment and K_node held (prior form only).
-
-    Each trial is the ``newton_step`` with damping mu, (A + K + mu I) delta = g - K q; it is
-    accepted if E falls, and mu follows the gain ratio rho = actual / predicted decrease
-    (predicted delta^T (mu delta + g - K q) / 2): mu <- mu max(1/3, 1 - (2 rho - 1)^3) on
-    acceptance, mu <- nu mu and nu <- 2 nu on rejection (Nielsen's rule).  mu starts at 1e-3
-    of the largest diagonal entry of the information (the c block's m / v).  Stops when an
-    accepted step has max |delta| < ``settings.tol`` (converged) or after ``iterations`` trials.
-    Returns the state, the trials made and whether it converged."""
-    if not settings.prior_stiffness:
-        raise ValueError("levenberg_marquardt minimises the prior form's energy; the dynamics form has none")
-    part = state.part
-    e = energy(part, points, assignment, k_node, settings)
-    mu, nu = 1e-3 * len(points) / settings.measurement_variance, 2.0
-    for trial in range(1, iterations + 1):
-        force = fit.data_force(part, points, assignment, np.sqrt(settings.measurement_variance))
-        delta = newton_step(replace(state, part=part), points, assignment, k_node, settings, damping=mu)
-        rhs = np.concatenate([force[GLOBAL] - global_stiffness(settings) @ global_vector(part)]
-                             + ([(force[kin.SHAPE.stop:].reshape(part.d.shape) - k_node @ part.d).ravel()]
-                                if settings.local else []))
-        predicted = 0.5 * delta @ (mu * delta + rhs)
-        moved = step_part(part, delta)
-        e_moved = energy(moved, points, assignment, k_node, settings)
-        if e_moved < e:
-            rho = (e - e_moved) / predicted if predicted > 0 else 1.0
-            part, e = moved, e_moved
-            mu, nu = mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 2.0
-            if np.max(np.abs(delta)) < settings.tol:
-                return replace(state, part=part), trial, True
-        else:
-            mu, nu = mu * nu, 2.0 * nu
-            if np.max(np.abs(delta)) < 1e-3 * settings.tol:
-                return replace(state, part=part), trial, True
-    return replace(state, part=part), iterations, False
-
-
-def solve_frame(
-    state: State, points: np.ndarray, triangles: np.ndarray, settings: Settings
-) -> tuple[State, int, bool]:
-    """The frame's fixed point by rounds of ``levenberg_marquardt`` (at most
-    ``settings.newton_iterations`` trials each) with the nearest nodes k(j) and K_node (over the
-    current shell) recomputed only between rounds, so that an assignment never changes in the
-    middle of a solve.  Before every round the undamped ``newton_step`` with the fresh k(j) and
-    K_node is checked: below ``settings.tol`` the frame is at its fixed point (the assignment,
-    K_node and q consistent) and the solve stops.  At most ``settings.newton_rounds`` rounds.
-    P is untouched.  Returns the state, the trials (checks included) and whether it converged."""
-    trials = 0
-    for _ in range(settings.newton_rounds + 1):
-        assignment = fit.nearest_nodes(points, kin.positions(state.part))
-        k_node = fit.stiffness(state.part, triangles, settings.w0, settings.w1)
-        trials += 1
-        if np.max(np.abs(newton_step(state, points, assignment, k_node, settings))) < settings.tol:
-            return state, trials, True
-        if _ == settings.newton_rounds:
-            break
-        state, done, _converged = levenberg_marquardt(state, points, assignment, k_node, settings,
-                                                      settings.newton_iterations)
-        trials += done
-    return state, trials, False
 
 
 def iteration(
