@@ -364,7 +364,7 @@ def cmd_points(args: argparse.Namespace) -> int:
                                 "pick a frame inside them")
     frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames),
                    args.every)
-    settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level)
+    settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level, dynamics=args.dynamics)
     out = Path(args.out) if args.out else Path("out") / markers.path.stem
     print(f"fitting {markers.path} frames {frames.start}..{frames[-1]} (every {args.every}, "
           f"{markers.rate:g} Hz) with model {model.name!r}: {len(model.parts)} parts, "
@@ -374,7 +374,7 @@ def cmd_points(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.parts), list(model.joint_names), markers.rate) as writer:
         try:
-            fits = track((points[f] for f in frames), model, settings)
+            fits = track((points[f] for f in frames), model, settings, args.every / markers.rate)
             for index, fitted in tqdm(zip(frames, fits), total=len(frames), unit="frame", disable=args.quiet,
                                       file=sys.stderr):
                 finite = np.isfinite(fitted.poses).all() and np.isfinite(fitted.joints).all()
@@ -587,7 +587,12 @@ def build_parser() -> argparse.ArgumentParser:
     points.add_argument("--level", choices=("rigid", "global", "local"), default="rigid",
                         help="what moves after the first frame: rigid (pose only, the shapes fitted on the first "
                              "frame; default), global (also the superquadric shape) or local (also the nodes)")
-    points.add_argument("--steps", type=_positive_int, default=40, help="fitting steps per frame (default 40)")
+    points.add_argument("--dynamics", choices=("second-order", "first-order"), default="second-order",
+                        help="second-order (default): parts with mass and momentum follow the markers in time, "
+                             "and a part whose markers vanish keeps moving; first-order: --steps fitting steps per "
+                             "frame, no momentum")
+    points.add_argument("--steps", type=_positive_int, default=40,
+                        help="fitting steps per frame with --dynamics first-order (default 40)")
     points.add_argument("--sigma", type=_positive_float, default=0.01,
                         help="marker noise, metres: how much the data weigh against the membrane (default 0.01)")
     points.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -10,7 +10,7 @@ import pytest
 
 from tracker.cli import main
 from tracker.errors import TrackerInputError
-from tracker.geometry.se3 import exp_so3
+from tracker.geometry.se3 import exp_so3, log_so3
 from tracker.io.markers import read_markers
 from tracker.io.poses import load_poses
 from tracker.physics import body as bd
@@ -68,35 +68,47 @@ def _markers(frame: int) -> np.ndarray:
     return np.concatenate([kin.positions(part)[MARKER_NODES] for part in parts])
 
 
-def test_synthetic_arm_is_tracked_with_its_joints() -> None:
-    """Nine markers per part at nodes of the true superquadrics; over 12 frames the elbow bends by
-    0.66 rad and the wrist by 0.33 while the arm turns and moves (the elbow travels 5.6 cm, the wrist 17).  The fit keeps the joints
-    (|C| < 1e-5 m) and puts the elbow and wrist within 5 cm of the true centres, from a model that
-    knows only its markers: measured 22 mm at frame 0 (nearest-node fitting of 9 markers settles
-    with the upper arm 2.7 cm too long) growing to 41 mm at frame 11; RMS marker-to-node distance
-    10-17 mm over all markers, at most 20 mm for one part."""
+@pytest.mark.parametrize("dynamics", pts.DYNAMICS)
+def test_synthetic_arm_is_tracked_with_its_joints(dynamics: str) -> None:
+    """Nine markers per part at nodes of the true superquadrics, 100 frames a second; over 12 frames
+    the elbow bends by 0.66 rad and the wrist by 0.33 while the arm turns and moves (the elbow
+    travels 5.6 cm, the wrist 17).  The fit keeps the joints (|C| < 0.1 mm) and puts the elbow and
+    wrist within 3.5 cm of the true centres, from a model that knows only its markers: measured
+    22 mm at frame 0 (nearest-node fitting of 9 markers settles with the upper arm 2.7 cm too
+    long), then 20-24 mm (second-order) or 25-28 mm (first-order); RMS marker-to-node distance
+    under 3 cm for every part (the second-order hand, lagging its fast bend, reaches 26 mm)."""
     model = _model()
     frames = [_markers(f) for f in range(12)]
-    fits = list(pts.track(frames, model, pts.PointsSettings(first_steps=300, steps=40)))
+    fits = list(pts.track(frames, model, pts.PointsSettings(dynamics=dynamics), 0.01))
     assert len(fits) == 12
     for f, fitted in enumerate(fits):
         _, true_joints = _truth(f)
-        assert fitted.violation < 1e-5
-        assert np.linalg.norm(fitted.joints - true_joints, axis=1).max() < 0.05, f
-        assert np.all(fitted.residual < 0.025) and np.all(fitted.seen == len(MARKER_NODES))
+        assert fitted.violation < 1e-4
+        assert np.linalg.norm(fitted.joints - true_joints, axis=1).max() < 0.035, f
+        assert np.all(fitted.residual < 0.03) and np.all(fitted.seen == len(MARKER_NODES))
         assert fitted.rms == pytest.approx(np.sqrt(np.mean(fitted.residual ** 2)))
     moved = np.linalg.norm(_truth(11)[1] - _truth(0)[1], axis=1)
     assert moved.min() > 0.05  # the joints travel: following them is not standing still
 
 
-def test_a_part_without_markers_is_carried_by_its_joints() -> None:
+def test_a_part_without_markers_keeps_moving_on_its_joint() -> None:
+    """The hand's markers vanish for frames 6-9.  Second-order: undamped without data, the hand goes
+    on turning about the wrist (0.18 rad a frame relative to the forearm, more than the true 0.03:
+    the velocity it carries is the noisy one of the fit) while the wrist joint holds; it stays
+    within 7 cm of the true hand and is reported unseen (NaN residual)."""
     model = _model()
-    frames = [_markers(f) for f in range(4)]
-    frames[3] = frames[3].copy()
-    frames[3][model.labels == 2] = np.nan
-    last = list(pts.track(frames, model, pts.PointsSettings(first_steps=300, steps=40)))[-1]
-    assert np.isnan(last.residual[2]) and last.seen[2] == 0
-    assert np.isfinite(last.poses).all() and last.violation < 1e-5
+    frames = [_markers(f) for f in range(10)]
+    for f in range(6, 10):
+        frames[f] = frames[f].copy()
+        frames[f][model.labels == 2] = np.nan
+    fits = list(pts.track(frames, model, pts.PointsSettings(), 0.01))
+    turned = [np.linalg.norm(log_so3(fit.body.parts[1].rotation.T @ fit.body.parts[2].rotation)
+                             - log_so3(fits[5].body.parts[1].rotation.T @ fits[5].body.parts[2].rotation))
+              for fit in fits[6:]]
+    assert np.all(np.diff(turned) > 0.05) and turned[0] > 0.05
+    for f, fitted in enumerate(fits[6:], start=6):
+        assert np.isnan(fitted.residual[2]) and fitted.seen[2] == 0 and fitted.violation < 1e-4
+        assert np.linalg.norm(fitted.body.parts[2].c - _truth(f)[0][2].c) < 0.07
 
 
 def test_start_frame_waits_for_three_markers_per_part() -> None:

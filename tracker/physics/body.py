@@ -460,10 +460,14 @@ def lumped_masses(
 
 @dataclass(frozen=True)
 class Damping:
-    """D = alpha M + beta I (section 3)."""
+    """D = alpha M + beta I (section 3); ``alpha`` one rate for every part or one per part."""
 
-    alpha: float = 0.0
+    alpha: float | Sequence[float] = 0.0
     beta: float = 0.0
+
+    def rate(self, part: int) -> float:
+        """alpha of part ``part``."""
+        return float(self.alpha if np.isscalar(self.alpha) else self.alpha[part])
 
 
 def second_order_step(
@@ -487,7 +491,7 @@ def second_order_step(
     forces = free_forces(body, attachments, sigma, k_nodes, index)
     for p, (part, l, m, qdot) in enumerate(zip(body.parts, jacobians, masses, qdots)):
         g_q = -np.einsum("iak,ia->k", l, kin.velocity_products(part, full[p])) * (mass / len(part.u))
-        forces[p] = forces[p] + g_q - damping.alpha * (m @ qdot) - damping.beta * qdot
+        forces[p] = forces[p] + g_q - damping.rate(p) * (m @ qdot) - damping.beta * qdot
     force = np.concatenate(forces)
     qdot = np.concatenate(qdots)
     g = constraint_jacobian(body, index)
@@ -513,9 +517,9 @@ def second_order_limit(
     index = active(body)
     jacobians = node_jacobians(body, index)
     limits = []
-    for part, att, k_node, idx, l, m in zip(
+    for p, (part, att, k_node, idx, l, m) in enumerate(zip(
         body.parts, attachments, k_nodes, index, jacobians, lumped_masses(body, jacobians, mass, regularizer)
-    ):
+    )):
         stiff = np.zeros((len(idx),) * 2)
         if att is not None and len(att.points):
             counts = np.bincount(att.nodes, minlength=len(part.u)).astype(np.float64)
@@ -527,7 +531,7 @@ def second_order_limit(
             stiff += k_full[np.ix_(idx, idx)]
         top = len(idx) - 1
         w2 = sla.eigh(stiff, m, eigvals_only=True, subset_by_index=[top, top])[0]
-        c = damping.alpha + damping.beta / np.linalg.eigvalsh(m)[0]
+        c = damping.rate(p) + damping.beta / np.linalg.eigvalsh(m)[0]
         if w2 > 0.0:
             limits.append((np.sqrt(c * c + 4.0 * w2) - c) / w2)
         elif c > 0.0:

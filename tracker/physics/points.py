@@ -27,12 +27,23 @@ The fit (:func:`first_fit`, :func:`track`) is the first-order constrained dynami
 3. every joint joins the child's end (pole) nearest to its parent to the parent's node nearest
    to that end (:func:`joint_to_parent`), and the body is fitted (pose and global shape) with
    the joints held by Baumgarte stabilisation (section 4);
-4. every later frame starts from the previous fit and takes ``steps`` steps at the tracking
-   level: ``rigid`` (pose only, the shapes of step 3 kept), ``global`` (pose and the 10 free
-   global shape parameters) or ``local`` (also the nodal displacements, under the membrane).
+4. every later frame starts from the previous fit and moves at the tracking level: ``rigid``
+   (pose only, the shapes of step 3 kept), ``global`` (pose and the 10 free global shape
+   parameters) or ``local`` (also the nodal displacements, under the membrane), by
+
+   - ``second-order`` dynamics (the default; section 3, eq 11, and section 4): each part has a
+     unit mass lumped on its nodes, M qddot + D qdot = f_q + G^T f_c is integrated over the
+     time between the frames by semi-implicit Euler sub-steps below half the stable step
+     (``body.second_order_limit``), and the velocities carry over to the next frame, so a part
+     whose markers vanish keeps moving and is caught again when they return; D = alpha_p M per
+     part with alpha_p = 2 sqrt(n_p / (sigma^2 m)), n_p its markers seen in the frame: critical
+     damping of its translation under their pull (stiffness n_p / sigma^2, mass m), so it follows
+     them without ringing, and no damping, so pure coasting, for a part with no marker seen;
+   - or ``first-order`` fitting, ``steps`` Euler steps of D qdot = f_q + G^T f_c per frame
+     (``body.fit_frame``): no momentum, so a part whose markers vanish stops.
 
 A marker that is not seen in a frame (NaN) exerts no force; a part with no marker seen is
-carried by its joints and reported as uncertain.
+carried by its joints (and its momentum) and reported as uncertain.
 """
 
 from __future__ import annotations
@@ -54,6 +65,17 @@ MIN_MARKERS = 3
 """Markers a part needs in the start frame: its moments need three non-collinear points."""
 
 LEVELS = {"rigid": bd.RIGID, "global": bd.GLOBAL, "local": bd.LOCAL}
+DYNAMICS = ("second-order", "first-order")
+
+MASS = 1.0
+"""Mass of every part (second-order tracking), lumped equally on its nodes."""
+
+STEP_FRACTION = 0.5
+"""Second-order sub-steps are at most this share of the stable step."""
+
+DECAY = 0.5
+"""Second-order Baumgarte rate a = DECAY / dt (stable for a dt < 1, ``body.second_order_limit``):
+on a bending arm at 100 Hz the joints hold to 31 micrometres, against 108 with 0.2."""
 
 
 @dataclass(frozen=True)
@@ -144,17 +166,25 @@ def _check_acyclic(names: Sequence[str], parents: Sequence[int]) -> None:
 
 @dataclass(frozen=True)
 class PointsSettings:
-    """``sigma``: the data's standard deviation V = sigma^2 I, metres (it sets the time step, dt ~
-    sigma^2, and how much the membrane weighs against the data); ``first_steps``: steps of the
-    start-frame fit; ``steps``: steps per later frame; ``level``: ``rigid``,
-    ``global`` or ``local`` (module docstring); ``w0``, ``w1``: the membrane (section 3)."""
+    """``sigma``: the data's standard deviation V = sigma^2 I, metres (it sets the stiffness of the
+    markers' pull, the time steps and how much the membrane weighs against the data);
+    ``first_steps``: steps of the start-frame fit; ``level``: ``rigid``, ``global`` or ``local``;
+    ``dynamics``: ``second-order`` or ``first-order``; ``steps``: first-order steps per later
+    frame (module docstring); ``w0``, ``w1``: the membrane (section 3)."""
 
     sigma: float = 0.01
     first_steps: int = 300
     steps: int = 40
-    level: str = "global"
+    level: str = "rigid"
+    dynamics: str = "second-order"
     w0: float = 0.1
     w1: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.level not in LEVELS:
+            raise ValueError(f"level must be one of {', '.join(LEVELS)}, got {self.level!r}")
+        if self.dynamics not in DYNAMICS:
+            raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, got {self.dynamics!r}")
 
 
 def start_frame(points: np.ndarray, model: PointsModel) -> int:
@@ -246,16 +276,47 @@ def measure(body: bd.Body, points: np.ndarray, model: PointsModel) -> FrameFit:
                     float(np.abs(bd.violation(body)).max(initial=0.0)))
 
 
-def track(frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSettings) -> Iterator[FrameFit]:
-    """Fit ``frames`` (each (M, 3), the first the start frame) one after another (module docstring)."""
-    if settings.level not in LEVELS:
-        raise ValueError(f"level must be one of {', '.join(LEVELS)}, got {settings.level!r}")
+def damping(seen: np.ndarray, settings: PointsSettings) -> bd.Damping:
+    """D = alpha_p M with alpha_p = 2 sqrt(n_p / (sigma^2 m)) for ``seen`` = n_p markers seen per part:
+    critical damping of each part's translation under its markers' pull, none without markers
+    (module docstring)."""
+    return bd.Damping(alpha=2.0 * np.sqrt(np.asarray(seen, dtype=np.float64) / (settings.sigma ** 2 * MASS)))
+
+
+def second_order_frame(
+    body: bd.Body, velocities: list[np.ndarray], points: np.ndarray, model: PointsModel,
+    settings: PointsSettings, seconds: float,
+) -> tuple[bd.Body, list[np.ndarray]]:
+    """Move the body and its velocities (on each part's active coordinates) ``seconds`` ahead
+    under the pull of one frame of points (M, 3), attached to their parts' nearest nodes at the
+    start (module docstring, step 4)."""
+    attachments = bd.attach(body, points, model.labels)
+    k_nodes = (bd.stiffnesses(body, settings.w0, settings.w1) if max(body.levels) == bd.LOCAL
+               else [None] * len(body.parts))
+    seen = np.bincount(model.labels[np.isfinite(points).all(axis=1)], minlength=len(model.parts))
+    d = damping(seen, settings)
+    limit = bd.second_order_limit(body, attachments, settings.sigma, k_nodes, d, MASS)
+    substeps = max(1, int(np.ceil(seconds / (STEP_FRACTION * limit))))
+    dt = seconds / substeps
+    for _ in range(substeps):
+        body, velocities = bd.second_order_step(body, velocities, attachments, settings.sigma, k_nodes, dt,
+                                                DECAY / dt, d, MASS)
+    return body, velocities
+
+
+def track(frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSettings,
+          interval: float) -> Iterator[FrameFit]:
+    """Fit ``frames`` (each (M, 3), the first the start frame, ``interval`` seconds apart) one after
+    another (module docstring)."""
     level = LEVELS[settings.level]
-    body = None
+    body = velocities = None
     for points in frames:
         if body is None:
             body = first_fit(points, model, settings)
             body = replace(body, levels=(level,) * len(body.parts))
+            velocities = [np.zeros(len(index)) for index in bd.active(body)]
+        elif settings.dynamics == "second-order":
+            body, velocities = second_order_frame(body, velocities, points, model, settings, interval)
         else:
             n_global, n_local = (settings.steps, 0) if level < bd.LOCAL else (0, settings.steps)
             body, _ = bd.fit_frame(body, points, settings.sigma, n_global, n_local, labels=model.labels,
