@@ -15,23 +15,10 @@ from tracker.physics import kalman as kf
 from tracker.physics import kinematics as kin
 from tracker.physics import superquadric as sq
 
+from .test_fitting import random_part
+
 VARIANCE = 0.1
 START = kin.SHAPE.stop  # first coordinate of q_d
-
-
-def random_part(rng, m):
-    """A part with random pose, shape and displacements on the nodes of mesh m."""
-    return kin.Part(
-        c=rng.normal(size=3),
-        rotation=exp_so3(rng.normal(size=3)),
-        q_s=rng.uniform(
-            [0.5, 0.3, 0.3, 0.3, 0.4, 0.4, -0.5, -0.5, -0.3, -0.3, 0.1],
-            [2.0, 1.0, 1.0, 1.0, 1.6, 1.6, 0.5, 0.5, 0.3, 0.3, 0.9],
-        ),
-        d=0.05 * rng.normal(size=(len(m.u), 3)),
-        u=m.u,
-        v=m.v,
-    )
 
 
 def noisy_points(rng, part, m_points, noise=0.1):
