@@ -101,7 +101,7 @@ def test_a_part_without_markers_keeps_moving_on_its_joint() -> None:
     for f in range(6, 10):
         frames[f] = frames[f].copy()
         frames[f][model.labels == 2] = np.nan
-    fits = list(pts.track(frames, model, pts.PointsSettings(), 0.01))
+    fits = list(pts.track(frames, model, pts.PointsSettings(dynamics="second-order"), 0.01))
     turned = [np.linalg.norm(log_so3(fit.body.parts[1].rotation.T @ fit.body.parts[2].rotation)
                              - log_so3(fits[5].body.parts[1].rotation.T @ fits[5].body.parts[2].rotation))
               for fit in fits[6:]]

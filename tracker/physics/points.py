@@ -31,16 +31,19 @@ The fit (:func:`first_fit`, :func:`track`) is the first-order constrained dynami
    (pose only, the shapes of step 3 kept), ``global`` (pose and the 10 free global shape
    parameters) or ``local`` (also the nodal displacements, under the membrane), by
 
-   - ``second-order`` dynamics (the default; section 3, eq 11, and section 4): each part has a
+   - ``first-order`` fitting (the default), ``steps`` Euler steps of D qdot = f_q + G^T f_c
+     per frame (``body.fit_frame``): no momentum, so a part whose markers vanish stops;
+   - or ``second-order`` dynamics (section 3, eq 11, and section 4): each part has a
      unit mass lumped on its nodes, M qddot + D qdot = f_q + G^T f_c is integrated over the
      time between the frames by semi-implicit Euler sub-steps below half the stable step
      (``body.second_order_limit``), and the velocities carry over to the next frame, so a part
      whose markers vanish keeps moving and is caught again when they return; D = alpha_p M per
      part with alpha_p = 2 sqrt(n_p / (sigma^2 m)), n_p its markers seen in the frame: critical
      damping of its translation under their pull (stiffness n_p / sigma^2, mass m), so it follows
-     them without ringing, and no damping, so pure coasting, for a part with no marker seen;
-   - or ``first-order`` fitting, ``steps`` Euler steps of D qdot = f_q + G^T f_c per frame
-     (``body.fit_frame``): no momentum, so a part whose markers vanish stops.
+     them without ringing, and no damping, so pure coasting, for a part with no marker seen.
+     It is 4-9 times faster on the real marker files, but lags fast limbs (walking feet at
+     200 Hz) and carries the fit's noisy velocities through gaps, so its residuals are larger
+     (README).
 
 A marker that is not seen in a frame (NaN) exerts no force; a part with no marker seen is
 carried by its joints (and its momentum) and reported as uncertain.
@@ -65,7 +68,7 @@ MIN_MARKERS = 3
 """Markers a part needs in the start frame: its moments need three non-collinear points."""
 
 LEVELS = {"rigid": bd.RIGID, "global": bd.GLOBAL, "local": bd.LOCAL}
-DYNAMICS = ("second-order", "first-order")
+DYNAMICS = ("first-order", "second-order")
 
 MASS = 1.0
 """Mass of every part (second-order tracking), lumped equally on its nodes."""
@@ -176,7 +179,7 @@ class PointsSettings:
     first_steps: int = 300
     steps: int = 40
     level: str = "rigid"
-    dynamics: str = "second-order"
+    dynamics: str = "first-order"
     w0: float = 0.1
     w1: float = 0.5
 
