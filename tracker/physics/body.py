@@ -426,17 +426,6 @@ def material_points(part: kin.Part, mesh: sq.Mesh, points: Sequence[tuple[float,
     return kin.positions(_anchor_part(part, _anchors(mesh, list(points))))
 
 
-def facing_poles(body: Body, a: int, b: int) -> Joint:
-    """The joint between the pole of part a and the pole of part b nearest to each other,
-    e.g. the elbow between an upper arm and a forearm initialised by ``initial_body`` (whose
-    long axis is model z, so the ends of a limb segment are its poles)."""
-    poles = (SOUTH, NORTH)
-    ends = [material_points(body.parts[p], body.meshes[p], poles) for p in (a, b)]
-    gaps = np.linalg.norm(ends[0][:, None] - ends[1][None], axis=2)
-    i, j = np.unravel_index(np.argmin(gaps), gaps.shape)
-    return Joint(a, poles[i], b, poles[j])
-
-
 def node_jacobians(body: Body, index: Sequence[np.ndarray]) -> list[np.ndarray]:
     """L_i of every node of every part on its active coordinates, (n, 3, len(index[p]))."""
     return [kin.jacobians(p)[:, :, idx] for p, idx in zip(body.parts, index)]
@@ -537,19 +526,3 @@ def second_order_limit(
         elif c > 0.0:
             limits.append(2.0 / c)
     return min(limits, default=np.inf)
-
-
-def kinetic_energy(body: Body, qdots: Sequence[np.ndarray], mass: float = 1.0) -> float:
-    """T = sum_i m_i |xdot_i|^2 / 2 = qdot^T M qdot / 2 without the regulariser, xdot_i = L_i qdot."""
-    total = 0.0
-    for part, qdot, idx in zip(body.parts, qdots, active(body)):
-        xdot = kin.jacobians(part)[:, :, idx] @ qdot
-        total += 0.5 * mass / len(part.u) * np.sum(xdot**2)
-    return total
-
-
-def elastic_energy(body: Body, k_nodes: Sequence[sp.spmatrix | None]) -> float:
-    """V = sum over LOCAL parts of tr(d^T K_node d) / 2 (section 3, the loaded membrane)."""
-    return sum(
-        0.5 * float(np.sum(part.d * (k @ part.d))) for part, k in zip(body.parts, k_nodes) if k is not None
-    )
