@@ -345,6 +345,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+SHAPES_FLUSH_EVERY = 25  # frames between rewrites of shapes.npz during a run of tracker points
+
+
 def cmd_points(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
@@ -358,15 +361,13 @@ def cmd_points(args: argparse.Namespace) -> int:
     markers = read_markers(args.markers)
     model = load_points_model(args.model)
     points = markers.select(model.marker_names)
-    first = start_frame(points, model) if args.start is None else args.start
-    if not 0 <= first < len(points):
-        raise TrackerInputError(f"{markers.path}: --start {first} is outside its frames 0..{len(points) - 1}; "
-                                "pick a frame inside them")
+    first = start_frame(points, model, args.start)
     frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames),
                    args.every)
     settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level, dynamics=args.dynamics)
     out = Path(args.out) if args.out else Path("out") / markers.path.stem
-    print(f"fitting {markers.path} frames {frames.start}..{frames[-1]} (every {args.every}, "
+    print(f"fitting {markers.path} frames {markers.first_frame + frames.start}..{markers.first_frame + frames[-1]} "
+          f"(every {args.every}, "
           f"{markers.rate:g} Hz) with model {model.name!r}: {len(model.parts)} parts, "
           f"{len(model.joint_names)} joints, {len(model.marker_names)} markers", file=sys.stderr)
     shapes = ShapesWriter(out / "shapes.npz", model)
@@ -379,16 +380,19 @@ def cmd_points(args: argparse.Namespace) -> int:
                                       file=sys.stderr):
                 finite = np.isfinite(fitted.poses).all() and np.isfinite(fitted.joints).all()
                 status = LOST if not finite else UNCERTAIN if np.isnan(fitted.residual).any() else TRACKED
+                shapes.append(markers.first_frame + index, fitted)  # before poses: see shapes.write below
                 writer.append(markers.first_frame + index, fitted.poses, fitted.joints, status, fitted.rms * 1000.0)
-                shapes.append(markers.first_frame + index, fitted)
                 residuals.append(fitted.residual)
                 counts[status] += 1
+                if len(writer) % SHAPES_FLUSH_EVERY == 0:
+                    shapes.write(len(writer))
         except KeyboardInterrupt:
             interrupted = True
         finally:
-            shapes.write()
+            shapes.write(len(writer))  # the frames poses.npz holds, even if Ctrl-C fell between the two appends
     elapsed = time.perf_counter() - started
-    done = len(residuals)
+    done = len(writer)
+    residuals = residuals[:done]
     print(f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "
           f"({done / elapsed if elapsed else 0:.1f} frames/s): {counts[TRACKED]} with every part seen, "
           f"{counts[UNCERTAIN]} with a part unseen, {counts[LOST]} lost")
@@ -400,7 +404,7 @@ def cmd_points(args: argparse.Namespace) -> int:
             if len(column):
                 print(f"  {name:<14} {len(model.markers[p]):>2} markers  {np.median(column):6.1f} "
                       f"{np.percentile(column, 95):6.1f} {column.max():6.1f}")
-        print(f"joint violation: max {shapes.arrays()['violation'].max() * 1000.0:.3g} mm")
+        print(f"joint violation: max {shapes.arrays(done)['violation'].max() * 1000.0:.3g} mm")
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
     if interrupted or not done or not (args.view or args.record):
         return 130 if interrupted else 0
@@ -425,14 +429,16 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     from tracker.physics import tables
 
+    if args.name == "insect" and (args.densities or args.variances):
+        raise TrackerInputError("--densities and --variances choose the superquadric grid; the insect has neither")
     if args.name == "superquadric":
         from tracker.physics import experiment
 
         densities = args.densities or experiment.DENSITIES
         variances = args.variances or experiment.VARIANCES
+        frames = {} if args.frames is None else {"frames": args.frames}
         with tqdm(total=len(densities) * len(variances), unit="cell", disable=args.quiet, file=sys.stderr) as bar:
-            rows = experiment.run(densities, variances, frames=args.frames or 20, seed=args.seed,
-                                  progress=lambda row: bar.update())
+            rows = experiment.run(densities, variances, seed=args.seed, progress=lambda row: bar.update(), **frames)
         claims = experiment.check_claims(rows)
         if args.json:
             print(json.dumps({"rows": rows, "paper": {f"{d}/{v}": list(e) for (d, v), e in
@@ -581,7 +587,8 @@ def build_parser() -> argparse.ArgumentParser:
     points.add_argument("--model", required=True, help="points model TOML: parts, their markers and parents")
     points.add_argument("--out", help="output folder for poses.npz and shapes.npz (default: out/<file name>)")
     points.add_argument("--start", type=int,
-                        help="first frame, counted from 0 (default: the first with 3 markers seen on every part)")
+                        help="first frame, counted from 0 in the file (default: the first with 3 markers seen on "
+                             "every part)")
     points.add_argument("--frames", type=_positive_int, help="number of frames to span (default: all)")
     points.add_argument("--every", type=_positive_int, default=1, help="fit every N-th frame (default 1)")
     points.add_argument("--level", choices=("rigid", "global", "local"), default="rigid",
@@ -589,8 +596,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "frame; default), global (also the superquadric shape) or local (also the nodes)")
     points.add_argument("--dynamics", choices=("first-order", "second-order"), default="first-order",
                         help="first-order (default): --steps fitting steps per frame, no momentum; second-order: "
-                             "parts with mass and momentum follow the markers in time (4-9x faster, looser), and a "
-                             "part whose markers vanish keeps moving")
+                             "parts with mass and momentum follow the markers in time (about 4-6x faster, looser), "
+                             "and a part whose markers vanish keeps moving")
     points.add_argument("--steps", type=_positive_int, default=40,
                         help="fitting steps per frame with --dynamics first-order (default 40)")
     points.add_argument("--sigma", type=_positive_float, default=0.01,

@@ -203,7 +203,8 @@ def test_euler_step_limit_is_real(step_fraction, stable):
 
 
 def test_stability_limit_bounds_the_largest_eigenvalue():
-    """The Lanczos lambda_max equals the dense one of H^T H / s^2 + K without the a0 row."""
+    """The Lanczos lambda_max equals the dense one of H^T H / s^2 + K without the a0 row, and that of
+    its principal submatrix when only the rigid or the rigid and global coordinates move."""
     rng = np.random.default_rng(7)
     m = sq.mesh(5, 5)
     part = random_part(rng, m)
@@ -218,3 +219,7 @@ def test_stability_limit_bounds_the_largest_eigenvalue():
     dense = 2.0 / np.linalg.eigvalsh(a[np.ix_(free, free)])[-1]
 
     assert fit.stability_limit(part, k, SIGMA, k_node) == pytest.approx(dense, rel=1e-9)
+    for moving in (np.arange(kin.RIGID), np.delete(np.arange(kin.SHAPE.stop), fit.FROZEN)):  # rigid, global
+        sub = 2.0 / np.linalg.eigvalsh(a[np.ix_(moving, moving)])[-1]
+        assert fit.stability_limit(part, k, SIGMA, k_node, moving) == pytest.approx(sub, rel=1e-9)
+        assert sub > dense  # a part that moves less may take longer steps

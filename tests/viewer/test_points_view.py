@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import viser
 from scipy.spatial import cKDTree
 
 from tracker.cli import main
@@ -38,20 +37,18 @@ def test_points_run_is_rebuilt_and_recorded_for_the_viewer(tmp_path: Path) -> No
             assert np.sqrt(np.mean(distances ** 2)) == pytest.approx(shapes["residual"][row, p], rel=1e-9)
 
 
-def test_view_draws_each_frame_and_skips_unseen_markers(tmp_path: Path) -> None:
+def test_view_draws_each_frame_and_skips_unseen_markers(tmp_path: Path, server) -> None:
     assert main(["points", str(VICON), "--model", str(MODEL), "--out", str(tmp_path), "--frames", "2",
                  "--quiet"]) == 0
     results, shapes = load_poses(tmp_path / "poses.npz"), dict(np.load(tmp_path / "shapes.npz"))
     markers = read_markers(VICON).select([str(name) for name in shapes["marker_names"]])[:2].copy()
     markers[1, :3] = np.nan
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        view = PointsView(server, results, shapes, markers, 100.0)
-        view.show(1)
-        assert len(view.dots.points) == len(shapes["marker_names"]) - 3
-        assert np.allclose(view.joints.points, results["joints"][1], atol=1e-3)  # viser sends float16
-        view.show(99)  # clamped to the last row
-        assert view.slider.value == 1
-        assert "frame 1:" in view.status.content
-    finally:
-        server.stop()
+    view = PointsView(server, results, shapes, markers, 100.0)
+    view.show(1)
+    assert len(view.dots.points) == len(shapes["marker_names"]) - 3
+    assert np.allclose(view.joints.points, results["joints"][1], atol=1e-3)  # viser sends float16
+    view.show(99)  # clamped to the last row
+    assert view.slider.value == 1 and view.row == 1
+    assert "frame 1:" in view.status.content
+    view.show(0)
+    assert view.row == 0 and np.allclose(view.joints.points, results["joints"][0], atol=1e-3)

@@ -9,7 +9,8 @@ Arrays (formats.md), F frames, N components, J joints:
     joint_names (J,) str
     joints (F, J, 3) float64    joint centres in world, metres
     status (F,) int8            0 tracked, 1 uncertain, 2 lost
-    residual (F,) float64       robust mean edge distance, pixels
+    residual (F,) float64       robust mean edge distance, pixels (tracker points: the RMS
+                                marker-to-node distance, mm)
 
 The writer rewrites the whole file atomically, after ``flush_every`` new frames
 or a quarter more frames than the file holds (whichever is more), and on close,

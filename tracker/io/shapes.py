@@ -38,8 +38,12 @@ class ShapesWriter:
     def append(self, frame: int, fitted: FrameFit) -> None:
         self.rows.append((frame, fitted))
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        model, rows = self.model, self.rows
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def arrays(self, count: int | None = None) -> dict[str, np.ndarray]:
+        """The first ``count`` frames (default all) as the shapes.npz arrays."""
+        model, rows = self.model, self.rows[:count]
         parts = len(model.parts)
         nodes = len(model.mesh.u)
         return {
@@ -54,6 +58,7 @@ class ShapesWriter:
             "marker_part": model.labels.astype(np.int64),
         }
 
-    def write(self) -> None:
-        arrays = self.arrays()
+    def write(self, count: int | None = None) -> None:
+        """Rewrite shapes.npz with the first ``count`` frames (default all), atomically."""
+        arrays = self.arrays(count)
         atomic_write(self.path, lambda file: np.savez(file, **arrays))

@@ -415,8 +415,10 @@ def initial_body(
     levels: int | Sequence[int] = LOCAL,
 ) -> Body:
     """Each part from the centroid and central moments of its labelled points
-    (``fitting.initial_part``; section 6 and the paper's arm experiment)."""
-    labels = np.asarray(labels)
+    (``fitting.initial_part``; section 6 and the paper's arm experiment); points with a
+    non-finite coordinate (hidden markers) are left out."""
+    seen = np.isfinite(points).all(axis=1)
+    labels = np.where(seen, labels, -1)
     parts = [fit.initial_part(points[labels == p], m.u, m.v) for p, m in enumerate(meshes)]
     return assemble(parts, meshes, joints, levels)
 

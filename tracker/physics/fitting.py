@@ -83,8 +83,7 @@ def stability_limit(
     move, by default all but a0 (frozen); a subset has the limit of its principal submatrix,
     which is never smaller (e.g. a rigid part is not held to the step its shape and nodal
     displacements would need).  lambda_max is the largest eigenvalue of that symmetric matrix,
-    found by Lanczos iteration on its products with vectors (directly for fewer than 3
-    coordinates).  The bound is that of the dynamics linearised in the Gauss-Newton sense (the
+    found by Lanczos iteration on its products with vectors.  The bound is that of the dynamics linearised in the Gauss-Newton sense (the
     r . d^2x/dq^2 terms dropped).
     """
     if coordinates is None:
@@ -94,8 +93,6 @@ def stability_limit(
     h = h[:, coordinates] / sigma
     k = sp.block_diag([sp.csr_matrix((kin.SHAPE.stop,) * 2), sp.kron(k_node, sp.identity(3))]).tocsr()
     k = k[coordinates][:, coordinates]
-    if len(coordinates) < 3:
-        return 2.0 / np.linalg.eigvalsh(h.T @ h + k.toarray())[-1]
     a = LinearOperator((len(coordinates),) * 2, matvec=lambda x: h.T @ (h @ x) + k @ x, dtype=np.float64)
     top = eigsh(a, k=1, which="LA", v0=np.ones(a.shape[0]), return_eigenvectors=False)[0]
     return 2.0 / top

@@ -41,12 +41,13 @@ The fit (:func:`first_fit`, :func:`track`) is the first-order constrained dynami
      part with alpha_p = 2 sqrt(n_p / (sigma^2 m)), n_p its markers seen in the frame: critical
      damping of its translation under their pull (stiffness n_p / sigma^2, mass m), so it follows
      them without ringing, and no damping, so pure coasting, for a part with no marker seen.
-     It is 4-9 times faster on the real marker files, but lags fast limbs (walking feet at
+     It is about 4-6 times faster on the real marker files, but lags fast limbs (walking feet at
      200 Hz) and carries the fit's noisy velocities through gaps, so its residuals are larger
      (README).
 
 A marker that is not seen in a frame (NaN) exerts no force; a part with no marker seen is
-carried by its joints (and its momentum) and reported as uncertain.
+carried by its joints (and its momentum) and reported as uncertain; in a frame with no marker
+seen at all the first-order body stays where it was and the second-order one coasts.
 """
 
 from __future__ import annotations
@@ -150,9 +151,14 @@ def _points_model(path: Path, data: dict) -> PointsModel:
         if parent:
             joint_names.append(str(entry.get("joint", name)))
     _check_acyclic(names, parents)
-    rings, longitudes = data.get("mesh", [11, 11])
-    if not (isinstance(rings, int) and isinstance(longitudes, int) and rings >= 1 and longitudes >= 3):
-        raise ValueError(f"mesh = [{rings}, {longitudes}] must be [rings >= 1, longitudes >= 3]")
+    repeated = sorted({joint for joint in joint_names if joint_names.count(joint) > 1})
+    if repeated:
+        raise ValueError(f"joint {repeated[0]!r} is named twice; give every joint its own name")
+    mesh = data.get("mesh", [11, 11])
+    if not (isinstance(mesh, list) and len(mesh) == 2 and all(isinstance(n, int) for n in mesh)
+            and mesh[0] >= 1 and mesh[1] >= 3):
+        raise ValueError(f"mesh = {mesh} must be [rings, longitudes] with rings >= 1 and longitudes >= 3")
+    rings, longitudes = mesh
     return PointsModel(path, str(data.get("name", path.stem)), tuple(names), tuple(markers), tuple(parents),
                        tuple(joint_names), sq.mesh(rings, longitudes))
 
@@ -190,10 +196,26 @@ class PointsSettings:
             raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, got {self.dynamics!r}")
 
 
-def start_frame(points: np.ndarray, model: PointsModel) -> int:
-    """The first frame in which every part has at least MIN_MARKERS markers seen (points (F, M, 3))."""
-    seen = np.isfinite(points).all(axis=2)  # (F, M)
-    counts = np.stack([seen[:, model.labels == p].sum(axis=1) for p in range(len(model.parts))], axis=1)
+def seen_per_part(points: np.ndarray, model: PointsModel) -> np.ndarray:
+    """Markers seen (finite) per part: points (M, 3) -> (P,), or (F, M, 3) -> (F, P)."""
+    seen = np.isfinite(points).all(axis=-1)
+    return np.stack([seen[..., model.labels == p].sum(axis=-1) for p in range(len(model.parts))], axis=-1)
+
+
+def start_frame(points: np.ndarray, model: PointsModel, start: int | None = None) -> int:
+    """The frame to start from (points (F, M, 3)): ``start`` if every part has at least MIN_MARKERS
+    markers seen there, else a one-line error; by default the first such frame."""
+    counts = seen_per_part(points, model)
+    if start is not None:
+        if not 0 <= start < len(points):
+            raise TrackerInputError(f"{model.path}: --start {start} is outside the marker file's frames "
+                                    f"0..{len(points) - 1}; pick a frame inside them")
+        short = np.nonzero(counts[start] < MIN_MARKERS)[0]
+        if len(short):
+            raise TrackerInputError(
+                f"{model.path}: part {model.parts[short[0]]!r} has {counts[start, short[0]]} markers seen in frame "
+                f"{start}, fewer than {MIN_MARKERS}; start from another frame (without --start: the first that has them)")
+        return start
     ready = np.nonzero((counts >= MIN_MARKERS).all(axis=1))[0]
     if not len(ready):
         worst = int(np.argmin(counts.max(axis=0)))
@@ -242,9 +264,11 @@ class FrameFit:
 
     @property
     def rms(self) -> float:
-        """RMS marker-to-node distance over every marker seen, metres."""
+        """RMS marker-to-node distance over every marker seen, metres (NaN when none is seen)."""
         seen = self.seen > 0
-        return float(np.sqrt(np.sum(self.residual[seen] ** 2 * self.seen[seen]) / max(self.seen.sum(), 1)))
+        if not seen.any():
+            return float("nan")
+        return float(np.sqrt(np.sum(self.residual[seen] ** 2 * self.seen[seen]) / self.seen.sum()))
 
     @property
     def poses(self) -> np.ndarray:
@@ -274,8 +298,7 @@ class FrameFit:
 
 def measure(body: bd.Body, points: np.ndarray, model: PointsModel) -> FrameFit:
     """The residual and joint violation of ``body`` on one frame of points (M, 3)."""
-    seen = np.bincount(model.labels[np.isfinite(points).all(axis=1)], minlength=len(model.parts))
-    return FrameFit(body, bd.residuals(body, points, model.labels), seen,
+    return FrameFit(body, bd.residuals(body, points, model.labels), seen_per_part(points, model),
                     float(np.abs(bd.violation(body)).max(initial=0.0)))
 
 
@@ -296,8 +319,7 @@ def second_order_frame(
     attachments = bd.attach(body, points, model.labels)
     k_nodes = (bd.stiffnesses(body, settings.w0, settings.w1) if max(body.levels) == bd.LOCAL
                else [None] * len(body.parts))
-    seen = np.bincount(model.labels[np.isfinite(points).all(axis=1)], minlength=len(model.parts))
-    d = damping(seen, settings)
+    d = damping(seen_per_part(points, model), settings)
     limit = bd.second_order_limit(body, attachments, settings.sigma, k_nodes, d, MASS)
     substeps = max(1, int(np.ceil(seconds / (STEP_FRACTION * limit))))
     dt = seconds / substeps
@@ -320,7 +342,7 @@ def track(frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSett
             velocities = [np.zeros(len(index)) for index in bd.active(body)]
         elif settings.dynamics == "second-order":
             body, velocities = second_order_frame(body, velocities, points, model, settings, interval)
-        else:
+        elif np.isfinite(points).all(axis=1).any():  # first order: without any marker nothing moves
             n_global, n_local = (settings.steps, 0) if level < bd.LOCAL else (0, settings.steps)
             body, _ = bd.fit_frame(body, points, settings.sigma, n_global, n_local, labels=model.labels,
                                    w0=settings.w0, w1=settings.w1)

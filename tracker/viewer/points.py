@@ -8,6 +8,7 @@ dots in their part's colour, the joints black dots.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,8 @@ class PointsView:
                                           colors=self.marker_colours, point_size=0.012, point_shape="circle")
         self.joints = scene.add_point_cloud("/joints", np.zeros((results["joints"].shape[1], 3), np.float32),
                                             colors=(20, 20, 20), point_size=0.025, point_shape="circle")
+        self.lock = threading.Lock()  # browsers move the slider from viser's threads
+        self.row = -1
         self.status = server.gui.add_markdown("")
         self.slider = server.gui.add_slider("frame", min=0, max=max(len(results["frame"]) - 1, 1), step=1,
                                             initial_value=0)
@@ -58,19 +61,24 @@ class PointsView:
         server.initial_camera.position = tuple(centre + np.array([2.0, -2.0, 1.0]))
 
     def show(self, row: int) -> None:
-        """Draw row ``row`` of the run (clamped to its rows)."""
+        """Draw row ``row`` of the run (clamped to its rows; a row already shown is not redrawn)."""
         row = min(max(int(row), 0), len(self.results["frame"]) - 1)
-        nodes = node_positions(self.results["poses"][row], self.shapes["q_s"][row], self.shapes["d"][row], self.mesh)
-        with self.server.atomic():
-            for handle, part_nodes in zip(self.parts, nodes):
-                handle.vertices = part_nodes.astype(np.float32)
-            seen = np.isfinite(self.markers[row]).all(axis=1)  # markers not seen this frame are not drawn
-            self.dots.points = self.markers[row][seen].astype(np.float32)
-            self.dots.colors = self.marker_colours[seen]
-            self.joints.points = self.results["joints"][row].astype(np.float32)
-            self.status.content = (f"frame {int(self.results['frame'][row])}: RMS marker-to-node distance "
-                                   f"{self.results['residual'][row]:.1f} mm")
-        self.slider.value = row
+        with self.lock:
+            if row == self.row:
+                return
+            nodes = node_positions(self.results["poses"][row], self.shapes["q_s"][row], self.shapes["d"][row],
+                                   self.mesh)
+            with self.server.atomic():
+                for handle, part_nodes in zip(self.parts, nodes):
+                    handle.vertices = part_nodes.astype(np.float32)
+                seen = np.isfinite(self.markers[row]).all(axis=1)  # markers not seen this frame are not drawn
+                self.dots.points = self.markers[row][seen].astype(np.float32)
+                self.dots.colors = self.marker_colours[seen]
+                self.joints.points = self.results["joints"][row].astype(np.float32)
+                self.status.content = (f"frame {int(self.results['frame'][row])}: RMS marker-to-node distance "
+                                       f"{self.results['residual'][row]:.1f} mm")
+            self.row = row
+        self.slider.value = row  # its callback finds the row shown and returns
 
     def record(self, path: Path, progress: bool = True) -> None:
         """Write every frame, at the marker file's rate, as a .viser file for viser's static client."""
