@@ -596,7 +596,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "frame; default), global (also the superquadric shape) or local (also the nodes)")
     points.add_argument("--dynamics", choices=("first-order", "second-order"), default="first-order",
                         help="first-order (default): --steps fitting steps per frame, no momentum; second-order: "
-                             "parts with mass and momentum follow the markers in time (about 4-6x faster, looser), "
+                             "parts with mass and momentum follow the markers in time (about 3-5x faster, looser), "
                              "and a part whose markers vanish keeps moving")
     points.add_argument("--steps", type=_positive_int, default=40,
                         help="fitting steps per frame with --dynamics first-order (default 40)")
