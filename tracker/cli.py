@@ -345,9 +345,6 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-SHAPES_FLUSH_EVERY = 25  # frames between rewrites of shapes.npz during a run of tracker points
-
-
 def cmd_points(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
@@ -371,40 +368,37 @@ def cmd_points(args: argparse.Namespace) -> int:
           f"{markers.rate:g} Hz) with model {model.name!r}: {len(model.parts)} parts, "
           f"{len(model.joint_names)} joints, {len(model.marker_names)} markers", file=sys.stderr)
     shapes = ShapesWriter(out / "shapes.npz", model)
-    residuals, counts, interrupted = [], {TRACKED: 0, UNCERTAIN: 0, LOST: 0}, False
+    interrupted = False
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.parts), list(model.joint_names), markers.rate) as writer:
         try:
             fits = track((points[f] for f in frames), model, settings, args.every / markers.rate)
             for index, fitted in tqdm(zip(frames, fits), total=len(frames), unit="frame", disable=args.quiet,
                                       file=sys.stderr):
-                finite = np.isfinite(fitted.poses).all() and np.isfinite(fitted.joints).all()
+                poses, joints = fitted.poses, fitted.joints
+                finite = np.isfinite(poses).all() and np.isfinite(joints).all()
                 status = LOST if not finite else UNCERTAIN if np.isnan(fitted.residual).any() else TRACKED
                 shapes.append(markers.first_frame + index, fitted)  # before poses: see shapes.write below
-                writer.append(markers.first_frame + index, fitted.poses, fitted.joints, status, fitted.rms * 1000.0)
-                residuals.append(fitted.residual)
-                counts[status] += 1
-                if len(writer) % SHAPES_FLUSH_EVERY == 0:
-                    shapes.write(len(writer))
+                writer.append(markers.first_frame + index, poses, joints, status, fitted.rms * 1000.0)
         except KeyboardInterrupt:
             interrupted = True
         finally:
-            shapes.write(len(writer))  # the frames poses.npz holds, even if Ctrl-C fell between the two appends
+            done = len(writer)
+            final = shapes.write(done)  # the frames poses.npz holds, even if Ctrl-C fell between the two appends
     elapsed = time.perf_counter() - started
-    done = len(writer)
-    residuals = residuals[:done]
+    counts = np.bincount(writer.arrays()["status"], minlength=3)
     print(f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "
           f"({done / elapsed if elapsed else 0:.1f} frames/s): {counts[TRACKED]} with every part seen, "
           f"{counts[UNCERTAIN]} with a part unseen, {counts[LOST]} lost")
     if done:
-        table = np.array(residuals) * 1000.0
+        table = final["residual"] * 1000.0
         print("RMS marker-to-node distance per part, mm (median / 95th percentile / max over frames):")
         for p, name in enumerate(model.parts):
             column = table[:, p][np.isfinite(table[:, p])]
             if len(column):
                 print(f"  {name:<14} {len(model.markers[p]):>2} markers  {np.median(column):6.1f} "
                       f"{np.percentile(column, 95):6.1f} {column.max():6.1f}")
-        print(f"joint violation: max {shapes.arrays(done)['violation'].max() * 1000.0:.3g} mm")
+        print(f"joint violation: max {final['violation'].max() * 1000.0:.3g} mm")
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
     if interrupted or not done or not (args.view or args.record):
         return 130 if interrupted else 0
@@ -413,7 +407,7 @@ def cmd_points(args: argparse.Namespace) -> int:
     from tracker.viewer.scene import start_server
 
     results = load_poses(out / "poses.npz")
-    view = PointsView(start_server(args.host, args.port, quiet=not args.view), results, dict(np.load(out / "shapes.npz")),
+    view = PointsView(start_server(args.host, args.port, quiet=not args.view), results, final,
                       points[results["frame"] - markers.first_frame], markers.rate / args.every)
     view.show(0)
     if args.record:

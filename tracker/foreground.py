@@ -28,7 +28,7 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_path, ensure_writable_folder
-from tracker.io.readers import FrameSeeker, read_image
+from tracker.io.readers import FrameSeeker, grey, read_image
 from tracker.io.recording import Recording
 
 SAMPLES = 25  # frames per camera for the median background
@@ -108,6 +108,6 @@ def preparers(background: Background, smooth: Callable[[np.ndarray], np.ndarray]
 
     def prepare(camera: int, frame: np.ndarray):
         measured = smooth(background.difference(camera, frame))
-        return (cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), measured) if keep_grey else measured
+        return (grey(frame), measured) if keep_grey else measured
 
     return [lambda frame, camera=camera: prepare(camera, frame) for camera in range(len(background.images))]

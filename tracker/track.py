@@ -208,7 +208,6 @@ class Tracker:
         self.previous: np.ndarray | None = None
         self.anchor = self.poses
         self.dynamics: dynamics.MotionState | None = None
-        self.position_inverse = None  # (state, its dynamics.position_inverse) of the last prediction
         self.noise_scale = np.full(n, float(settings.kalman_noise_scale))  # s' per component (kalman)
         if settings.motion == "kalman":
             s = settings.kalman_noise_scale
@@ -338,35 +337,37 @@ class Tracker:
         if st.motion == "constant-velocity" and self.previous is not None:
             self.poses = self.model.coerce(constant_velocity(self.previous, current, st.damping))
         elif st.motion == "kalman":
-            self.predict_kalman(1.0 / st.frame_rate if dt is None else dt)
+            inverse = self.predict_kalman(1.0 / st.frame_rate if dt is None else dt)
         self.anchor = self.poses
         for iteration in range(st.iterations):
             stats = self.iterate(iteration)
         if st.motion == "kalman":
-            self.correct_kalman()
+            self.correct_kalman(inverse)
         self.previous = current
         share = stats.found / stats.visible if stats.visible else 0.0
         return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)
 
-    def predict_kalman(self, dt: float) -> None:
+    def predict_kalman(self, dt: float) -> np.ndarray:
         """Predict every component ``dt`` ahead independently (:func:`tracker.dynamics.predict`), coerce the
         predicted poses onto the joints (the filter's means follow), and set the prior about them to the
         predicted information ``s' P_xx^-1`` (floored at prior_translation/prior_rotation; ``s'`` of the
-        previous frame)."""
+        previous frame).  Returns the predicted state's ``dynamics.position_inverse``, which the
+        correction reuses."""
         st = self.settings
         predicted = dynamics.predict(self.dynamics, dt, (st.kalman_q_translation, st.kalman_q_rotation),
                                      st.kalman_decay)
         self.poses = self.model.coerce(predicted.poses)
         self.dynamics = dynamics.rereference(predicted, self.poses)
         inverse = dynamics.position_inverse(self.dynamics)
-        self.position_inverse = (self.dynamics, inverse)  # correct_kalman reuses it for the same state
         self.prior = dynamics.prior_information(self.dynamics, self.noise_scale,
                                                 (st.prior_translation, st.prior_rotation), inverse)
+        return inverse
 
-    def correct_kalman(self) -> None:
+    def correct_kalman(self, inverse: np.ndarray) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
         (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
-        ``s' = s sigma0_i^2`` (:func:`tracker.dynamics.variance_factor` of the same samples)."""
+        ``s' = s sigma0_i^2`` (:func:`tracker.dynamics.variance_factor` of the same samples); ``inverse``
+        is the predicted state's P_xx^-1 that :meth:`predict_kalman` returned."""
         st = self.settings
         s = float(st.kalman_noise_scale)
         if st.kalman_residual_variance:  # without any edge the last frame's values stay
@@ -376,9 +377,7 @@ class Tracker:
                                                             fallback=self.noise_scale / s)
         data = self.information - self.prior
         information = dynamics.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
-        state, inverse = self.position_inverse or (None, None)
-        self.dynamics = dynamics.correct(self.dynamics, self.poses, information,
-                                         inverse if state is self.dynamics else None)
+        self.dynamics = dynamics.correct(self.dynamics, self.poses, information, inverse)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings

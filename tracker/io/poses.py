@@ -36,6 +36,13 @@ STATUS_TRACKED, STATUS_UNCERTAIN, STATUS_LOST = 0, 1, 2
 _INITIAL_CAPACITY = 64
 
 
+def flush_due(unflushed: int, count: int, every: int) -> bool:
+    """Whether a writer that rewrites its whole file should flush, holding ``count`` frames of which
+    ``unflushed`` are new: after a quarter more frames than the file holds (at least ``every``), which
+    keeps the bytes written in a long run proportional to its length."""
+    return unflushed >= max(every, (count - unflushed) // 4)
+
+
 class PosesWriter:
     """Collects one row per tracked frame and keeps ``path`` (poses.npz) up to date.
 
@@ -101,9 +108,7 @@ class PosesWriter:
             self._columns[key][self._count] = value
         self._count += 1
         self._unflushed += 1
-        # every flush rewrites the whole file: flushing after a quarter more frames (at least
-        # flush_every) keeps the bytes written in a long run proportional to its length
-        if self._unflushed >= max(self.flush_every, (self._count - self._unflushed) // 4):
+        if flush_due(self._unflushed, self._count, self.flush_every):
             self.flush()
 
     def arrays(self) -> dict[str, np.ndarray]:

@@ -24,41 +24,50 @@ import os
 import numpy as np
 
 from tracker.io.atomic import atomic_write
+from tracker.io.poses import flush_due
 from tracker.physics.points import FrameFit, PointsModel
 
 
 class ShapesWriter:
-    """Collects one :class:`FrameFit` per frame; ``write`` rewrites shapes.npz with the frames so far."""
+    """Collects each frame's shapes, residuals and joint violation of a :class:`FrameFit` and keeps
+    shapes.npz up to date on PosesWriter's schedule (:func:`tracker.io.poses.flush_due`); ``write``
+    rewrites it with the frames so far (or the first ``count``)."""
 
-    def __init__(self, path: str | os.PathLike, model: PointsModel) -> None:
+    def __init__(self, path: str | os.PathLike, model: PointsModel, flush_every: int = 25) -> None:
         self.path = path
         self.model = model
-        self.rows: list[tuple[int, FrameFit]] = []
+        self.flush_every = flush_every
+        self.columns: dict[str, list] = {"frame": [], "q_s": [], "d": [], "residual": [], "violation": []}
+        self._unflushed = 0
 
     def append(self, frame: int, fitted: FrameFit) -> None:
-        self.rows.append((frame, fitted))
-
-    def __len__(self) -> int:
-        return len(self.rows)
+        row = {"frame": frame, "q_s": fitted.shapes, "d": fitted.displacements, "residual": fitted.residual,
+               "violation": fitted.violation}
+        for key, value in row.items():
+            self.columns[key].append(value)
+        self._unflushed += 1
+        if flush_due(self._unflushed, len(self.columns["frame"]), self.flush_every):
+            self.write()
 
     def arrays(self, count: int | None = None) -> dict[str, np.ndarray]:
         """The first ``count`` frames (default all) as the shapes.npz arrays."""
-        model, rows = self.model, self.rows[:count]
-        parts = len(model.parts)
-        nodes = len(model.mesh.u)
+        model, columns = self.model, {key: values[:count] for key, values in self.columns.items()}
+        frames, parts, nodes = len(columns["frame"]), len(model.parts), len(model.mesh.u)
         return {
-            "frame": np.array([frame for frame, _ in rows], dtype=np.int64),
+            "frame": np.array(columns["frame"], dtype=np.int64),
             "part_names": np.array(model.parts, dtype=str),
-            "q_s": np.array([fit.shapes for _, fit in rows]).reshape(len(rows), parts, 11),
-            "d": np.array([fit.displacements for _, fit in rows]).reshape(len(rows), parts, nodes, 3),
+            "q_s": np.array(columns["q_s"]).reshape(frames, parts, 11),
+            "d": np.array(columns["d"]).reshape(frames, parts, nodes, 3),
             "mesh": np.array([model.mesh.n_rings, model.mesh.n_longitudes], dtype=np.int64),
-            "residual": np.array([fit.residual for _, fit in rows]).reshape(len(rows), parts),
-            "violation": np.array([fit.violation for _, fit in rows], dtype=np.float64),
+            "residual": np.array(columns["residual"]).reshape(frames, parts),
+            "violation": np.array(columns["violation"], dtype=np.float64),
             "marker_names": np.array(model.marker_names, dtype=str),
             "marker_part": model.labels.astype(np.int64),
         }
 
-    def write(self, count: int | None = None) -> None:
-        """Rewrite shapes.npz with the first ``count`` frames (default all), atomically."""
+    def write(self, count: int | None = None) -> dict[str, np.ndarray]:
+        """Rewrite shapes.npz with the first ``count`` frames (default all), atomically; returns its arrays."""
         arrays = self.arrays(count)
         atomic_write(self.path, lambda file: np.savez(file, **arrays))
+        self._unflushed = 0
+        return arrays

@@ -52,6 +52,7 @@ seen at all the first-order body stays where it was and the second-order one coa
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
@@ -95,12 +96,12 @@ class PointsModel:
     joint_names: tuple[str, ...]
     mesh: sq.Mesh
 
-    @property
+    @functools.cached_property
     def marker_names(self) -> tuple[str, ...]:
         """Every part's markers, part after part."""
         return tuple(name for names in self.markers for name in names)
 
-    @property
+    @functools.cached_property
     def labels(self) -> np.ndarray:
         """The part of each of ``marker_names``."""
         return np.repeat(np.arange(len(self.parts)), [len(names) for names in self.markers])
