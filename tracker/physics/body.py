@@ -215,7 +215,7 @@ def anchor_jacobians(part: kin.Part, anchors: Anchors) -> np.ndarray:
     out = np.empty((k, 3, part.n_coordinates))
     if k == 0:
         return out
-    out[:, :, :_LOCAL_START] = kin.jacobians(_anchor_part(part, anchors))[:, :, :_LOCAL_START]
+    out[:, :, :_LOCAL_START] = kin.rigid_global_jacobians(_anchor_part(part, anchors))
     out[:, :, _LOCAL_START:] = np.einsum("rn,ab->ranb", anchors.weights, part.rotation).reshape(k, 3, -1)
     return out
 

@@ -216,15 +216,7 @@ def initial_state(part: kin.Part, scale: float = 1.0, p_node: np.ndarray | None 
 def global_jacobians(part: kin.Part) -> np.ndarray:
     """L_g,i = [ I3 | -[y_i]x | R J_i ] (y_i = R p_i, J_i without its a0 column): the rigid +
     global columns of L_i (section 2), shape (n, 3, 16)."""
-    n = len(part.u)
-    y = (sq.shape(part.q_s, part.u, part.v) + part.d) @ part.rotation.T
-    out = np.zeros((n, 3, N_GLOBAL))
-    out[:, :, 0:3] = np.eye(3)
-    out[:, 0, 4], out[:, 0, 5] = y[:, 2], -y[:, 1]
-    out[:, 1, 3], out[:, 1, 5] = -y[:, 2], y[:, 0]
-    out[:, 2, 3], out[:, 2, 4] = y[:, 1], -y[:, 0]
-    out[:, :, kin.RIGID:] = part.rotation @ sq.jacobian(part.q_s, part.u, part.v)[:, :, 1:]
-    return out
+    return kin.rigid_global_jacobians(part)[:, :, GLOBAL]
 
 
 def information(part: kin.Part, assignment: np.ndarray, variance: float) -> Information:

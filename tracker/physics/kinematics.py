@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tracker.geometry.se3 import exp_so3, skew
+from tracker.geometry.se3 import exp_so3
 from tracker.physics import superquadric as sq
 
 RIGID = 6
@@ -61,6 +61,18 @@ def positions(part: Part) -> np.ndarray:
     return part.c + _local_points(part) @ part.rotation.T
 
 
+def rigid_global_jacobians(part: Part) -> np.ndarray:
+    """The c, phi and q_s columns of L_i, [ I3 | -[R p_i]x | R J_i ], for every node, shape (n, 3, 17)."""
+    y = _local_points(part) @ part.rotation.T
+    out = np.zeros((len(part.u), 3, SHAPE.stop))
+    out[:, :, 0:3] = np.eye(3)
+    out[:, 0, 4], out[:, 0, 5] = y[:, 2], -y[:, 1]
+    out[:, 1, 3], out[:, 1, 5] = -y[:, 2], y[:, 0]
+    out[:, 2, 3], out[:, 2, 4] = y[:, 1], -y[:, 0]
+    out[:, :, SHAPE] = part.rotation @ sq.jacobian(part.q_s, part.u, part.v)
+    return out
+
+
 def jacobians(part: Part) -> np.ndarray:
     """L_i = [ I3 | -[R p_i]x | R J_i | R S_i ] for every node, shape (n, 3, part.n_coordinates).
 
@@ -69,9 +81,7 @@ def jacobians(part: Part) -> np.ndarray:
     n = len(part.u)
     r = part.rotation
     out = np.zeros((n, 3, part.n_coordinates))
-    out[:, :, 0:3] = np.eye(3)
-    out[:, :, 3:6] = -np.stack([skew(p) for p in _local_points(part) @ r.T])
-    out[:, :, SHAPE] = r @ sq.jacobian(part.q_s, part.u, part.v)
+    out[:, :, :SHAPE.stop] = rigid_global_jacobians(part)
     first = SHAPE.stop + 3 * np.arange(n)
     for k in range(3):
         out[np.arange(n), :, first + k] = r[:, k]
