@@ -61,7 +61,7 @@ def data_force(part: kin.Part, points: np.ndarray, assignment: np.ndarray, sigma
     g = node_residuals(part, points, assignment)
     r = part.rotation
     local_g = g @ r  # rows R^T g_i
-    p = sq.shape(part.q_s, part.u, part.v) + part.d
+    p = kin.local_points(part)
     f_s = np.einsum("iak,ia->k", sq.jacobian(part.q_s, part.u, part.v), local_g)
     f = np.concatenate([g.sum(axis=0), np.cross(p @ r.T, g).sum(axis=0), f_s, local_g.ravel()])
     return f / sigma**2

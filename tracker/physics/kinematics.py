@@ -51,19 +51,19 @@ class Part:
         return RIGID + sq.N_PARAMETERS + self.d.size
 
 
-def _local_points(part: Part) -> np.ndarray:
+def local_points(part: Part) -> np.ndarray:
     """p_i = s(q_s; u_i, v_i) + d_i, shape (n, 3)."""
     return sq.shape(part.q_s, part.u, part.v) + part.d
 
 
 def positions(part: Part) -> np.ndarray:
     """World node positions x_i = c + R (s_i + d_i), shape (n, 3)."""
-    return part.c + _local_points(part) @ part.rotation.T
+    return part.c + local_points(part) @ part.rotation.T
 
 
 def rigid_global_jacobians(part: Part) -> np.ndarray:
     """The c, phi and q_s columns of L_i, [ I3 | -[R p_i]x | R J_i ], for every node, shape (n, 3, 17)."""
-    y = _local_points(part) @ part.rotation.T
+    y = local_points(part) @ part.rotation.T
     out = np.zeros((len(part.u), 3, SHAPE.stop))
     out[:, :, 0:3] = np.eye(3)
     out[:, 0, 4], out[:, 0, 5] = y[:, 2], -y[:, 1]
@@ -121,7 +121,7 @@ def velocity_products(part: Part, qdot: np.ndarray, step: float = 1e-5) -> np.nd
         j_plus = sq.jacobian(part.q_s + h * qdot_s, part.u, part.v)
         j_minus = sq.jacobian(part.q_s - h * qdot_s, part.u, part.v)
         shape_term = (j_plus - j_minus) @ qdot_s / (2.0 * h)
-    rp = _local_points(part) @ r.T
+    rp = local_points(part) @ r.T
     return np.cross(w, np.cross(w, rp) + 2.0 * pdot @ r.T) + shape_term @ r.T
 
 
