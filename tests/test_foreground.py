@@ -12,10 +12,13 @@ import pytest
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.cli import main
 from tracker.errors import TrackerInputError
-from tracker.foreground import (Background, load_background, median_background, preparers, sample_indices,
-                                save_background)
+from tracker.foreground import (Background, cleared_background, load_background, median_background, preparers,
+                                reduced_camera, sample_indices, save_background)
+from tracker.io.poses import PosesWriter
 from tracker.io.recording import frames, open_recording
-from tracker.render import load_backgrounds
+from tracker.model import joint_centres, load_model, rest_poses
+from tracker.render import Renderer, load_backgrounds
+from tracker.synth import look_at_camera
 
 WIDTH, HEIGHT, COUNT = 48, 32, 9
 
@@ -196,3 +199,103 @@ def test_real_man_head_followed_through_the_swing_into_balance():
     errors = np.array(errors)
     assert errors.max() < 0.10, (errors.argmax(), errors.max())
     assert np.median(errors) < 0.05
+
+
+MODELS = Path(__file__).resolve().parents[1] / "models"
+STILL = 6  # frames the body stands at the centre; the other three put it far to each side
+
+
+def standing_poses(model) -> np.ndarray:
+    """(9, N, 4, 4): the rest pose at x = 0 in frames 0-5, then at x = -1.4, +1.4 and +2.8."""
+    places = [0.0] * STILL + [-1.4, 1.4, 2.8]
+    poses = []
+    for x in places:
+        root = np.eye(4)
+        root[:3, 3] = (x, 0.0, 0.95)
+        poses.append(rest_poses(model, root))
+    return np.array(poses)
+
+
+@pytest.fixture()
+def standing_recording(tmp_path: Path):
+    """One PNG camera watching a body that stands still in two thirds of the frames, so the plain
+    median keeps it; the scene is seeded colour noise and the rendering has no sensor noise."""
+    model = load_model(MODELS / "human.toml")
+    camera = look_at_camera("cam0", eye=(0.0, -5.0, 1.0), size=(96, 72), focal=100.0)
+    folder = tmp_path / "standing"
+    save_calibration([camera], folder / "calibration.toml")
+    empty = np.random.default_rng(3).integers(0, 256, (72, 96, 3), dtype=np.uint8)
+    renderer = Renderer(model, camera, empty, noise=0.0)
+    poses = standing_poses(model)
+    (folder / "cam0").mkdir()
+    for index, pose in enumerate(poses):
+        cv2.imwrite(str(folder / "cam0" / f"{index:06d}.png"), renderer.render(pose))
+    body = renderer.cast(poses[0])[0] >= 0
+    return folder, model, poses, empty, body
+
+
+def test_cleared_background_removes_a_body_that_stands_still(standing_recording):
+    folder, model, poses, empty, body = standing_recording
+    recording = open_recording(folder)
+    plain = median_background(recording).images[0]
+    assert body.sum() > 150
+    assert np.abs(plain.astype(int) - empty).sum(axis=2)[body].mean() > 60  # the median keeps him
+    cleared = cleared_background(recording, model, np.arange(9), poses, margin=2)
+    got = cleared.background.images[0]
+    np.testing.assert_array_equal(got[body], empty[body])
+    assert (got == empty).all(axis=2).mean() > 0.999
+    assert cleared.replaced[0] >= body.mean() and cleared.hidden == (0.0,)
+    np.testing.assert_array_equal(cleared.frames, np.arange(9))
+
+
+def test_cleared_background_keeps_the_plain_median_where_the_track_sees_no_body(standing_recording):
+    folder, model, poses, empty, body = standing_recording
+    recording = open_recording(folder)
+    away = poses.copy()
+    away[:, :, 0, 3] += 20.0  # a track that puts him out of view: nothing is masked
+    cleared = cleared_background(recording, model, np.arange(9), away, margin=2)
+    np.testing.assert_array_equal(cleared.background.images[0], median_background(recording).images[0])
+    assert cleared.replaced == (0.0,)
+
+
+def test_reduced_camera_keeps_pixel_centres():
+    camera = look_at_camera("c", eye=(0.5, -4.0, 1.2), size=(101, 75), focal=80.0, distortions=(-0.1, 0.02, 0, 0))
+    small = reduced_camera(camera, 4.0)
+    assert small.size == (26, 19)
+    points = np.random.default_rng(1).uniform((-0.5, -0.5, 0.5), (0.5, 0.5, 1.5), (20, 3))
+    np.testing.assert_allclose(small.project(points)[0], (camera.project(points)[0] + 0.5) / 4.0 - 0.5, atol=1e-9)
+
+
+def test_background_command_writes_the_cleared_scene(standing_recording, tmp_path, capsys):
+    folder, model, poses, empty, body = standing_recording
+    out = tmp_path / "run"
+    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), 30.0) as writer:
+        for index, pose in enumerate(poses):
+            writer.append(index, pose, joint_centres(pose), 0, 1.0)
+    assert main(["background", str(folder), "--model", str(MODELS / "human.toml"), "--poses",
+                 str(out / "poses.npz"), "--margin", "2", "--quiet"]) == 0
+    got = cv2.imread(str(out / "background-cleared" / "cam0.png"))
+    np.testing.assert_array_equal(got[body], empty[body])
+    printed = capsys.readouterr().out
+    assert "median of 9 tracked frames" in printed and "cam0:" in printed
+
+
+def test_background_command_errors(standing_recording, tmp_path, capsys):
+    folder, model, poses, empty, body = standing_recording
+    human = str(MODELS / "human.toml")
+
+    def error(*argv: str) -> str:
+        assert main(["background", str(folder), *argv]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1
+        return lines[0]
+
+    assert "none.npz: file not found" in error("--model", human, "--poses", str(tmp_path / "none.npz"))
+    lost = tmp_path / "lost" / "poses.npz"
+    with PosesWriter(lost, list(model.names), list(model.joint_names), 30.0) as writer:
+        for index, pose in enumerate(poses):
+            writer.append(index, pose, joint_centres(pose), 2, float("nan"))
+    assert "0 frames with a pose that is not lost" in error("--model", human, "--poses", str(lost))
+    other = tmp_path / "other.toml"
+    other.write_text((MODELS / "human.toml").read_text().replace('"pelvis"', '"hips"'))
+    assert "do not match the model" in error("--model", str(other), "--poses", str(lost))

@@ -239,8 +239,62 @@ def _serve(message: str, *closing) -> int:
     return 0
 
 
-def cmd_view(args: argparse.Namespace) -> int:
+def _tracked(given: str | None, rec, model) -> tuple[Path, dict]:
+    """The poses.npz a run of ``model`` on ``rec`` wrote (``given``, else out/<recording name>/poses.npz),
+    loaded and checked against both."""
     from tracker.io.poses import load_poses
+
+    path = Path(given) if given else Path("out") / rec.path.resolve().name / "poses.npz"
+    if not given and not path.is_file():
+        raise TrackerInputError(f"{path}: no poses; run `tracker track {rec.path}` first or pass --poses")
+    results = load_poses(path)
+    if len(results["joints"]) == 0:
+        raise TrackerInputError(f"{path}: holds no frames; track some first")
+    if "poses" not in results or list(results["component_names"]) != list(model.names):
+        raise TrackerInputError(f"{path}: its components do not match the model {model.name!r}; "
+                                "pass the --model it was tracked with")
+    if results["frame"].max(initial=0) >= rec.frame_count:
+        raise TrackerInputError(f"{path}: frames beyond the recording's {rec.frame_count}; "
+                                "pass the recording it was tracked from")
+    return path, results
+
+
+def cmd_background(args: argparse.Namespace) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from tracker.foreground import MINIMUM_FREE, cleared_background, save_background
+    from tracker.io.recording import open_recording
+    from tracker.model import load_model
+    from tracker.track import LOST
+
+    rec = open_recording(args.recording, _cameras(args.cameras))
+    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    poses_path, results = _tracked(args.poses, rec, model)
+    usable = np.isfinite(results["poses"]).all(axis=(1, 2, 3))
+    if "status" in results:
+        usable &= results["status"] != LOST
+    if usable.sum() < MINIMUM_FREE + 2:
+        raise TrackerInputError(f"{poses_path}: only {usable.sum()} frames with a pose that is not lost; "
+                                "track more frames, or mend the run first")
+    out = Path(args.out) if args.out else poses_path.parent / "background-cleared"
+
+    def progress(reads):
+        return tqdm(reads, desc="background", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
+
+    given = {key: value for key, value in (("samples", args.samples), ("margin", args.margin)) if value is not None}
+    cleared = cleared_background(rec, model, results["frame"][usable], results["poses"][usable],
+                                 progress=progress, **given)
+    folder = save_background(cleared.background, rec, out)
+    print(f"background: median of {len(cleared.frames)} tracked frames per camera with the body masked out "
+          f"(frames {cleared.frames[0]}..{cleared.frames[-1]}), saved in {folder} (use with --background {folder})")
+    for camera, replaced, hidden in zip(rec.cameras, cleared.replaced, cleared.hidden):
+        print(f"  {camera.name}: {100 * replaced:.1f} % of pixels cleared of the body, "
+              f"{100 * hidden:.1f} % covered in nearly every frame (kept as the plain median)")
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
     from tracker.io.recording import open_recording
     from tracker.model import load_model
     from tracker.track import Settings
@@ -248,19 +302,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     rec = open_recording(args.recording, _cameras(args.cameras))
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
-    poses_path = Path(args.poses) if args.poses else Path("out") / rec.path.resolve().name / "poses.npz"
-    if not args.poses and not poses_path.is_file():
-        raise TrackerInputError(f"{poses_path}: no poses to review; run `tracker track {rec.path}` first "
-                                "or pass --poses")
-    results = load_poses(poses_path)
-    if len(results["joints"]) == 0:
-        raise TrackerInputError(f"{poses_path}: holds no frames; track some first")
-    if "poses" not in results or list(results["component_names"]) != list(model.names):
-        raise TrackerInputError(f"{poses_path}: its components do not match the model {model.name!r}; "
-                                "pass the --model it was tracked with")
-    if results["frame"].max(initial=0) >= rec.frame_count:
-        raise TrackerInputError(f"{poses_path}: frames beyond the recording's {rec.frame_count}; "
-                                "pass the recording it was tracked from")
+    poses_path, results = _tracked(args.poses, rec, model)
     settings = Settings()
     background = None
     if args.background:
@@ -483,6 +525,22 @@ def build_parser() -> argparse.ArgumentParser:
     add_live_view_options(track, "then review the result")
     _viewer_options(track)
     track.set_defaults(run=cmd_track)
+
+    background = sub.add_parser("background", help="estimate the empty scene with a tracked run's body masked out, "
+                                                   "for tracker track --background")
+    background.add_argument("recording", help="recording folder")
+    background.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
+    background.add_argument("--model", help="body model TOML it was tracked with (default: the recording's "
+                                            "model.toml)")
+    background.add_argument("--out", help="folder for <camera>.png (default: background-cleared beside the poses)")
+    background.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    background.add_argument("--samples", type=_positive_int,
+                            help="tracked frames per camera the median is taken over (default 50)")
+    background.add_argument("--margin", type=_positive_float,
+                            help="pixels the tracked silhouette is widened by, at a 480-pixel short side; grows "
+                                 "with the image (default 12)")
+    background.add_argument("--quiet", action="store_true", help="no progress bar")
+    background.set_defaults(run=cmd_background)
 
     view = sub.add_parser("view", help="review poses.npz over its recording in the browser viewer")
     view.add_argument("recording", help="recording folder")

@@ -12,10 +12,16 @@ becomes background and his outline there is lost).  The edge search then looks a
 whose edges are the person's silhouette: static clutter cancels, and colour tells skin from a
 wall of the same grey.  Edges inside the silhouette (an arm across the chest) vanish, which the
 IRLS weights and edge ownership already expect of any occluding contour.
+
+A person who stays in one place (balancing, sitting) is in most of the frames a median is taken
+over, and the median keeps him.  :func:`cleared_background` takes the median again with a
+tracked run's body masked out of each frame: the model's silhouette, rendered from the tracked
+poses and widened by a margin, marks the pixels where a frame shows him and not the scene.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
 from collections.abc import Callable, Iterable
@@ -26,12 +32,20 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import atomic_path, ensure_writable_folder
 from tracker.io.readers import FrameSeeker, grey, read_image
 from tracker.io.recording import Recording
+from tracker.model import Model
+from tracker.render import Renderer
 
 SAMPLES = 25  # frames per camera for the median background
+CLEARED_SAMPLES = 50  # frames per camera for the median with the tracked body masked out
+MARGIN = 12  # pixels (at a 480-pixel short side) the tracked silhouette is widened by: loose fit, blur
+COVERAGE = 0.3  # share of the samples the body must cover before a pixel's plain median is replaced
+MINIMUM_FREE = 3  # samples free of the body a replaced pixel needs
+MASK_SIDE = 272  # short side, pixels, the silhouettes are rendered at before being scaled up
 _SUM = np.ones((1, 3), np.float32)  # cv2.transform: the channel sum, saturated to uint8
 
 
@@ -111,3 +125,79 @@ def preparers(background: Background, smooth: Callable[[np.ndarray], np.ndarray]
         return (grey(frame), measured) if keep_grey else measured
 
     return [lambda frame, camera=camera: prepare(camera, frame) for camera in range(len(background.images))]
+
+
+@dataclass(frozen=True)
+class Cleared:
+    """A background estimated with the tracked body masked out, and per camera how much it changed:
+    ``replaced`` the share of pixels whose plain median was replaced (the body covered at least
+    :data:`COVERAGE` of the samples there), ``hidden`` the share the body covered in almost every
+    sample (fewer than :data:`MINIMUM_FREE` free), which keep the plain median."""
+
+    background: Background
+    frames: np.ndarray
+    replaced: tuple[float, ...]
+    hidden: tuple[float, ...]
+
+
+def reduced_camera(camera: Camera, factor: float) -> Camera:
+    """The camera imaging the same rays onto pixels ``factor`` times larger (pixel centres kept:
+    u' = (u + 1/2) / factor - 1/2), its size rounded up."""
+    matrix = np.array(camera.matrix)
+    matrix[0:2, 0:2] /= factor
+    matrix[0:2, 2] = (matrix[0:2, 2] + 0.5) / factor - 0.5
+    size = (int(np.ceil(camera.size[0] / factor)), int(np.ceil(camera.size[1] / factor)))
+    return dataclasses.replace(camera, matrix=matrix, size=size)
+
+
+def silhouette(renderer: Renderer, poses: np.ndarray, size: tuple[int, int], margin: int) -> np.ndarray:
+    """Pixels (H, W) bool of a ``size`` = (W, H) image that the body at ``poses`` covers, widened by a disc
+    of radius ``margin`` pixels; ray cast at the renderer's (reduced) size and scaled up."""
+    covered = (renderer.cast(poses)[0] >= 0).astype(np.uint8)
+    mask = cv2.resize(covered, size, interpolation=cv2.INTER_NEAREST)
+    if margin > 0:
+        mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin + 1, 2 * margin + 1)))
+    return mask.astype(bool)
+
+
+def cleared_background(recording: Recording, model: Model, frames: np.ndarray, poses: np.ndarray,
+                       samples: int = CLEARED_SAMPLES, margin: float = MARGIN,
+                       progress: Callable[[Iterable], Iterable] = iter) -> Cleared:
+    """The empty scene from a recording and a track of the person in it.
+
+    ``frames`` (F,) are recording frame indices and ``poses`` (F, N, 4, 4) the model's tracked poses
+    there (lost frames left out by the caller).  Per camera, from ``samples`` of those frames spread
+    evenly, with S(x) the samples whose widened silhouette misses pixel x,
+
+        B(x) = median over S(x) of I_s(x)    where the body covers >= COVERAGE of the samples at x
+                                             and |S(x)| >= MINIMUM_FREE,
+        B(x) = median over all samples       elsewhere (the plain median, right where he is absent
+                                             from most samples; a poor track there cannot spoil it).
+
+    ``margin`` is in pixels at a 480-pixel short side and grows with the image like the tracker's
+    pixel settings.  ``progress`` wraps the list of (camera, frame) reads.
+    """
+    chosen = sample_indices(len(frames), samples)
+    reads = [(camera, int(frames[i])) for camera in range(len(recording.sources)) for i in chosen]
+    reading = iter(progress(reads))
+    images, replaced, hidden = [], [], []
+    for camera, source in zip(recording.cameras, recording.sources):
+        short = min(camera.size)
+        widen = round(margin * max(1.0, short / 480))
+        renderer = Renderer(model, reduced_camera(camera, max(1.0, short / MASK_SIDE)))
+        with closing(FrameSeeker(source, colour=True)) as seeker:
+            stack = np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(chosen))])
+        masks = np.stack([silhouette(renderer, poses[i], camera.size, widen) for i in chosen])
+        free = len(chosen) - masks.sum(axis=0)
+        image = np.median(stack, axis=0)
+        swap = (masks.sum(axis=0) >= COVERAGE * len(chosen)) & (free >= MINIMUM_FREE)
+        rows, cols = np.nonzero(swap)
+        for part in range(0, len(rows), 65536):
+            r, c = rows[part:part + 65536], cols[part:part + 65536]
+            values = stack[:, r, c].astype(np.float32)
+            values[masks[:, r, c]] = np.nan
+            image[r, c] = np.nanmedian(values, axis=0)
+        images.append(image.round().astype(np.uint8))
+        replaced.append(float(swap.mean()))
+        hidden.append(float((free < MINIMUM_FREE).mean()))
+    return Cleared(Background(tuple(images)), np.asarray(frames)[chosen], tuple(replaced), tuple(hidden))
