@@ -263,7 +263,7 @@ def test_reduced_camera_keeps_pixel_centres():
     small = reduced_camera(camera, 4.0)
     assert small.size == (26, 19)
     points = np.random.default_rng(1).uniform((-0.5, -0.5, 0.5), (0.5, 0.5, 1.5), (20, 3))
-    np.testing.assert_allclose(small.project(points)[0], (camera.project(points)[0] + 0.5) / 4.0 - 0.5, atol=1e-9)
+    np.testing.assert_allclose(small.project(points), (camera.project(points) + 0.5) / 4.0 - 0.5, atol=1e-9)
 
 
 def test_background_command_writes_the_cleared_scene(standing_recording, tmp_path, capsys):

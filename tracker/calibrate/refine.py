@@ -1,0 +1,119 @@
+"""Refine a rig's extrinsics to the outlines of a body tracked in its views (self-calibration).
+
+A camera moved by a small twist xi, camera_from_world ``P_k <- exp(xi) P_k``, images component i
+as the body moved by ``alpha_i = Ad((P_k E_i)^-1) xi`` would, since
+``exp(xi) P_k E_i = P_k E_i exp(Ad((P_k E_i)^-1) xi)``.  So an outline sample's Jacobian row L_s
+with respect to its component's motion (design note, section 3) gives the row
+``J_s = L_s Ad((P_k E_i)^-1)`` with respect to its camera's, and holding the tracked body fixed,
+the edge distances m_s of many frames with the IRLS weights w_s = 1/(c + |m_s|) give each camera's
+motion as the tracker gives a component's, with a weak prior P = diag(lt I3, lr I3) (the tracker's)
+holding the camera's accumulated move d_k = log(P_k P0_k^-1) from its calibration P0_k where the body
+does not tell (a body in one place hardly separates a camera's sideways shift from its turn):
+
+    (sum_s w_s J_s^T J_s + P) xi_k = sum_s w_s J_s^T m_s - P d_k,
+
+repeated over rounds whose edge searches narrow from the settings' first search range to their
+last.  Each camera is moved against the same body, so a camera whose calibration disagrees with
+the others moves the most; tracking again with the refined rig and refining once more lets the
+body and the rig settle together.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from tracker.camera import Camera
+from tracker.geometry import se3
+from tracker.model import Model
+from tracker.track import Settings, Tracker
+
+ROUNDS = 8
+
+
+@dataclass(frozen=True)
+class Refined:
+    """The refined cameras, and per camera how far each moved (degrees, metres of its centre) and its
+    robust mean edge distance (pixels, at the last search range) before and after."""
+
+    cameras: tuple[Camera, ...]
+    rotation_deg: np.ndarray
+    shift_m: np.ndarray
+    residual_before: np.ndarray
+    residual_after: np.ndarray
+
+
+def camera_rows(jacobian: np.ndarray, camera_from_component: np.ndarray) -> np.ndarray:
+    """Rows J_s = L_s Ad((P_k E_i)^-1) (S, 6) of samples with rows L_s (S, 6) whose camera-from-component
+    transforms are ``camera_from_component`` (S, 4, 4)."""
+    inverse = np.linalg.inv(camera_from_component)
+    rotation, translation = inverse[:, :3, :3], inverse[:, :3, 3]
+    skew = np.zeros_like(rotation)
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -translation[:, 2], translation[:, 1], -translation[:, 0]
+    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = translation[:, 2], -translation[:, 1], translation[:, 0]
+    adjoint = np.zeros((len(inverse), 6, 6))
+    adjoint[:, :3, :3] = rotation
+    adjoint[:, :3, 3:] = skew @ rotation
+    adjoint[:, 3:, 3:] = rotation
+    return np.einsum("sa,sab->sb", jacobian, adjoint)
+
+
+def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], search_range: int):
+    """Sample the body at ``poses`` in every camera, search each sample's edge in ``images`` (smoothed, rig
+    order); return per sample (camera, J row, offset m, weight w) for the samples that found an edge."""
+    tracker.poses = poses
+    tracker.load_images(images, smoothed=True)
+    tracker.sample(search_range)
+    tracker.measure(search_range, tracker.still)
+    s, n = tracker.samples, tracker.samples.count
+    camera, component = s.camera[:n], s.component[:n]
+    found = tracker.weight[:n] > 0
+    transforms = tracker.rig.pose[camera[found]] @ poses[component[found]]
+    rows = camera_rows(s.jacobian[:n][found], transforms)
+    return camera[found], rows, tracker.offset[:n][found], tracker.weight[:n][found]
+
+
+def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]], cameras: int,
+               search_range: int) -> np.ndarray:
+    """Per camera the robust mean edge distance sum w|m| / sum w over all frames (NaN: no edge found)."""
+    sum_wm, sum_w = np.zeros(cameras), np.zeros(cameras)
+    for frame_poses, images in zip(poses, frames):
+        camera, _, offset, weight = _measure(tracker, frame_poses, images, search_range)
+        np.add.at(sum_wm, camera, weight * np.abs(offset))
+        np.add.at(sum_w, camera, weight)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return sum_wm / sum_w
+
+
+def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]],
+               settings: Settings = Settings(), rounds: int = ROUNDS, fixed: Iterable[int] = (),
+               progress: Callable[[Iterable], Iterable] = iter) -> Refined:
+    """Move each camera not in ``fixed`` to fit the outlines of the body at ``poses`` (F, N, 4, 4) in
+    ``frames`` (F lists of one smoothed edge-search image per camera, as the tracker takes them).
+    ``progress`` wraps the rounds (e.g. a tqdm bar)."""
+    start, cameras = tuple(cameras), list(cameras)
+    fixed = set(fixed)
+    tracker = Tracker(model, cameras, poses[0], settings)
+    prior = np.diag([settings.prior_translation] * 3 + [settings.prior_rotation] * 3)
+    first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
+    before = _residuals(tracker, poses, frames, len(cameras), last)
+    for round_ in progress(range(rounds)):
+        search_range = max(1, round(first * (last / first) ** (round_ / max(rounds - 1, 1))))
+        information, eta = np.zeros((len(cameras), 6, 6)), np.zeros((len(cameras), 6))
+        for frame_poses, images in zip(poses, frames):
+            camera, rows, offset, weight = _measure(tracker, frame_poses, images, search_range)
+            weighted = rows * weight[:, None]
+            np.add.at(information, camera, weighted[:, :, None] * rows[:, None, :])
+            np.add.at(eta, camera, weighted * offset[:, None])
+        for k in set(range(len(cameras))) - fixed:
+            moved = se3.log(cameras[k].pose @ se3.inverse(start[k].pose))
+            xi = np.linalg.solve(information[k] + prior, eta[k] - prior @ moved)
+            pose = se3.exp(xi) @ cameras[k].pose
+            cameras[k] = replace(cameras[k], rotation=pose[:3, :3], translation=pose[:3, 3])
+        tracker = tracker.with_cameras(cameras)
+    after = _residuals(tracker, poses, frames, len(cameras), last)
+    turn = [np.degrees(np.linalg.norm(se3.log_so3(b.rotation @ a.rotation.T))) for a, b in zip(start, cameras)]
+    shift = [np.linalg.norm(b.rotation.T @ b.translation - a.rotation.T @ a.translation) for a, b in zip(start, cameras)]
+    return Refined(tuple(cameras), np.array(turn), np.array(shift), before, after)
