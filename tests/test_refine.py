@@ -8,6 +8,8 @@ import numpy as np
 
 from tracker.bench import HUMAN
 from tracker.calibrate.refine import camera_rows, refine_rig
+from tracker.camera import load_calibration, save_calibration
+from tracker.cli import main
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
@@ -48,7 +50,7 @@ def test_refine_rig_recovers_a_disturbed_camera(tiny_recording):
     smooth = Tracker(model, rig, truth[0]).smooth
     seekers = [FrameSeeker(source) for source in recording.sources]
     frames = [[smooth(seeker.read(index)) for seeker in seekers] for index in range(len(truth))]
-    refined = refine_rig(model, rig, truth, frames, Settings(), fixed=[0])
+    refined = refine_rig(model, rig, truth, frames, Settings(), fixed=[0], refit=False)
     fixed, moved = refined.cameras
     assert fixed == rig[0] and refined.rotation_deg[0] == 0.0 and refined.shift_m[0] == 0.0
     joints = np.concatenate([joint_centres(pose) for pose in truth])
@@ -63,3 +65,39 @@ def test_refine_rig_recovers_a_disturbed_camera(tiny_recording):
     assert turn < 1.0 and np.linalg.norm(centre(moved) - centre(true_rig[1])) < 0.04  # 0.51 deg, 22 mm
     assert refined.residual_after[1] < 0.5 * refined.residual_before[1]  # 1.94 -> 0.40 px
     np.testing.assert_allclose(refined.rotation_deg[1], 1.5, atol=1.0)
+
+
+def test_refine_command_writes_a_calibration_that_track_takes(tiny_recording, tmp_path, capsys):
+    recording = open_recording(tiny_recording)
+    true_rig = load_calibration(tiny_recording / "calibration.toml")
+    disturbed_rig = tmp_path / "disturbed.toml"
+    save_calibration([true_rig[0], disturbed(true_rig[1], 1.5, 0.04, seed=2)], disturbed_rig)
+    refined_rig = tmp_path / "refined.toml"
+    assert main(["refine", str(tiny_recording), "--model", str(HUMAN), "--poses", str(tiny_recording / "truth.npz"),
+                 "--calib", str(disturbed_rig), "--fix", "cam0", "--hold-poses", "--out", str(refined_rig),
+                 "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "cam0: turned 0.00 deg, moved 0 mm" in printed and "(fixed)" in printed
+    truth = load_poses(tiny_recording / "truth.npz")["joints"].reshape(-1, 3)
+    moved = load_calibration(refined_rig)[1]
+    assert np.linalg.norm(moved.project(truth) - true_rig[1].project(truth), axis=1).mean() < 1.0
+    np.testing.assert_array_equal(open_recording(tiny_recording, calibration=refined_rig).cameras[1].rotation,
+                                  moved.rotation)
+    assert recording.calibration_path == tiny_recording / "calibration.toml"
+    assert main(["track", str(tiny_recording), "--calib", str(refined_rig), "--out", str(tmp_path / "run"),
+                 "--quiet"]) == 0
+
+
+def test_refine_command_errors(tiny_recording, tmp_path, capsys):
+    def error(*argv: str) -> str:
+        assert main(["refine", str(tiny_recording), "--model", str(HUMAN), "--out", str(tmp_path / "r.toml"),
+                     *argv]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1
+        return lines[0]
+
+    truth = str(tiny_recording / "truth.npz")
+    assert "--fix names cam9" in error("--poses", truth, "--fix", "cam9")
+    assert "no frame in 100..105" in error("--poses", truth, "--start", "100", "--frames", "6")
+    assert "nowhere.toml" in error("--poses", truth, "--calib", str(tmp_path / "nowhere.toml"))
+    assert not (tmp_path / "r.toml").exists()

@@ -7,6 +7,7 @@ an interrupted run (Ctrl-C) keeps the frames already written and exits 130.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import threading
@@ -98,7 +99,7 @@ def cmd_track(args: argparse.Namespace) -> int:
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
-    rec = open_recording(args.recording, _cameras(args.cameras))
+    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
     if not 0 <= args.start < rec.frame_count:
         raise TrackerInputError(f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; "
                                 "pick a frame inside them")
@@ -268,7 +269,7 @@ def cmd_background(args: argparse.Namespace) -> int:
     from tracker.model import load_model
     from tracker.track import LOST
 
-    rec = open_recording(args.recording, _cameras(args.cameras))
+    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     poses_path, results = _tracked(args.poses, rec, model)
     usable = np.isfinite(results["poses"]).all(axis=(1, 2, 3))
@@ -294,13 +295,80 @@ def cmd_background(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_refine(args: argparse.Namespace) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from tracker.calibrate.refine import ROUNDS, refine_rig
+    from tracker.camera import load_calibration, save_calibration
+    from tracker.foreground import sample_indices
+    from tracker.io.readers import FrameSeeker, grey
+    from tracker.io.recording import open_recording
+    from tracker.model import load_model
+    from tracker.track import LOST, Tracker
+
+    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
+    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    poses_path, results = _tracked(args.poses, rec, model)
+    names = [camera.name for camera in rec.cameras]
+    fixed = _cameras(args.fix) or []
+    unknown = [name for name in fixed if name not in names]
+    if unknown:
+        raise TrackerInputError(f"{rec.calibration_path}: --fix names {', '.join(unknown)}, not among the cameras "
+                                f"tracked ({', '.join(names)})")
+    stop = rec.frame_count if args.frames is None else args.start + args.frames
+    usable = np.isfinite(results["poses"]).all(axis=(1, 2, 3)) & (results["frame"] >= args.start)
+    usable &= results["frame"] < stop
+    if "status" in results:
+        usable &= results["status"] != LOST
+    if usable.sum() == 0:
+        raise TrackerInputError(f"{poses_path}: no frame in {args.start}..{stop - 1} has a pose that is not lost; "
+                                "pick frames the run tracked (--start, --frames)")
+    picked = np.flatnonzero(usable)[sample_indices(int(usable.sum()), args.samples)]
+    settings = settings_from(args, rec.fps)
+    smooth = Tracker(model, rec.cameras, results["poses"][picked[0]], settings).smooth
+    if args.background:
+        from tracker.foreground import load_background, preparers
+
+        prepare = preparers(load_background(args.background, rec), smooth)
+    else:
+        prepare = [lambda frame: smooth(grey(frame))] * len(rec.cameras)
+    seekers = [FrameSeeker(source, colour=True) for source in rec.sources]
+    try:
+        reads = tqdm(picked, desc="reading", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
+        frames = [[prepare[k](seeker.read(int(results["frame"][i]))) for k, seeker in enumerate(seekers)]
+                  for i in reads]
+    finally:
+        for seeker in seekers:
+            seeker.close()
+
+    def progress(rounds):
+        return tqdm(rounds, desc="refining", unit="round", disable=args.quiet, file=sys.stderr, leave=False)
+
+    refined = refine_rig(model, rec.cameras, results["poses"][picked], frames, settings, args.rounds or ROUNDS,
+                         [names.index(name) for name in fixed], not args.hold_poses, progress)
+    moved = {camera.name: camera for camera in refined.cameras}
+    rig = [dataclasses.replace(camera, rotation=moved[camera.name].rotation,
+                               translation=moved[camera.name].translation) if camera.name in moved else camera
+           for camera in load_calibration(rec.calibration_path)]
+    out = Path(args.out)
+    save_calibration(rig, out)
+    print(f"refined {rec.calibration_path} to the body of {poses_path} in {len(picked)} frames "
+          f"({results['frame'][picked[0]]}..{results['frame'][picked[-1]]}); wrote {out} (use with --calib {out})")
+    for k, name in enumerate(names):
+        print(f"  {name}: turned {refined.rotation_deg[k]:.2f} deg, moved {1000 * refined.shift_m[k]:.0f} mm; "
+              f"edge distance {refined.residual_before[k]:.2f} -> {refined.residual_after[k]:.2f} px"
+              + (" (fixed)" if name in fixed else ""))
+    return 0
+
+
 def cmd_view(args: argparse.Namespace) -> int:
     from tracker.io.recording import open_recording
     from tracker.model import load_model
     from tracker.track import Settings
     from tracker.viewer.review import Review
 
-    rec = open_recording(args.recording, _cameras(args.cameras))
+    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     poses_path, results = _tracked(args.poses, rec, model)
     settings = Settings()
@@ -327,7 +395,7 @@ def cmd_init(args: argparse.Namespace) -> int:
     from tracker.track import Settings
     from tracker.viewer.placement import Placement, in_view
 
-    rec = open_recording(args.recording, _cameras(args.cameras))
+    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     start = Path(args.init) if args.init else rec.init_path
     poses = load_pose_file(start, model) if start is not None else rest_poses(model, in_view(rec.cameras))
@@ -510,7 +578,7 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     track.add_argument("--init", help="pose at the first frame (default: the recording's init.toml)")
     track.add_argument("--out", help="output folder (default: out/<recording name>)")
-    track.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    _recording_options(track)
     track.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     track.add_argument("--frames", type=_positive_int, help="number of frames to track (default: all)")
     add_tuning_options(track)
@@ -533,7 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     background.add_argument("--model", help="body model TOML it was tracked with (default: the recording's "
                                             "model.toml)")
     background.add_argument("--out", help="folder for <camera>.png (default: background-cleared beside the poses)")
-    background.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    _recording_options(background)
     background.add_argument("--samples", type=_positive_int,
                             help="tracked frames per camera the median is taken over (default 50)")
     background.add_argument("--margin", type=_positive_float,
@@ -542,11 +610,34 @@ def build_parser() -> argparse.ArgumentParser:
     background.add_argument("--quiet", action="store_true", help="no progress bar")
     background.set_defaults(run=cmd_background)
 
+    refine = sub.add_parser("refine", help="refine the rig's extrinsics to the outlines of a tracked body, "
+                                           "write a calibration.toml")
+    refine.add_argument("recording", help="recording folder")
+    refine.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
+    refine.add_argument("--model", help="body model TOML it was tracked with (default: the recording's model.toml)")
+    refine.add_argument("--out", required=True, help="calibration TOML to write")
+    _recording_options(refine)
+    refine.add_argument("--fix", metavar="CAMERAS", help="comma-separated cameras to hold as calibrated")
+    refine.add_argument("--start", type=int, default=0, help="first frame to use (default 0)")
+    refine.add_argument("--frames", type=_positive_int, help="number of frames to use from there (default: all)")
+    refine.add_argument("--samples", type=_positive_int, default=30,
+                        help="tracked frames the outlines are measured in, spread evenly (default 30)")
+    refine.add_argument("--rounds", type=_positive_int,
+                        help="rounds of measuring and moving the cameras, searches narrowing (default 8)")
+    refine.add_argument("--background", metavar="DIR",
+                        help="the empty scene the run was tracked against (<camera>.png): search the differences")
+    refine.add_argument("--hold-poses", action="store_true",
+                        help="take the poses as right (e.g. ground truth, motion capture) and move only the cameras; "
+                             "by default each frame's body is fitted again after every round")
+    add_tuning_options(refine, ("spacing", "search_range"))
+    refine.add_argument("--quiet", action="store_true", help="no progress bars")
+    refine.set_defaults(run=cmd_refine)
+
     view = sub.add_parser("view", help="review poses.npz over its recording in the browser viewer")
     view.add_argument("recording", help="recording folder")
     view.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
     view.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    view.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    _recording_options(view)
     view.add_argument("--background", metavar="DIR",
                       help="the empty scene a run was tracked against (tracker track --background; a median one is "
                            "saved in OUT/background): the panels then show and search the difference images")
@@ -559,7 +650,7 @@ def build_parser() -> argparse.ArgumentParser:
     init.add_argument("--out", required=True, help="init.toml to write")
     init.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     init.add_argument("--init", help="pose to start from (default: the recording's init.toml, else the rest pose)")
-    init.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    _recording_options(init)
     _viewer_options(init, record=False)
     init.set_defaults(run=cmd_init)
 
@@ -688,6 +779,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 TUNING = ("iterations", "spacing", "resample_every", "search_range", "motion", "damping")
+
+
+def _recording_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    parser.add_argument("--calib", metavar="TOML",
+                        help="calibration to use instead of the recording's calibration.toml (e.g. from tracker refine)")
 
 
 def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] = TUNING) -> None:

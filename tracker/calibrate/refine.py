@@ -13,9 +13,10 @@ does not tell (a body in one place hardly separates a camera's sideways shift fr
     (sum_s w_s J_s^T J_s + P) xi_k = sum_s w_s J_s^T m_s - P d_k,
 
 repeated over rounds whose edge searches narrow from the settings' first search range to their
-last.  Each camera is moved against the same body, so a camera whose calibration disagrees with
-the others moves the most; tracking again with the refined rig and refining once more lets the
-body and the rig settle together.
+last.  After each round every frame's body is fitted again to all the (moved) cameras, as the
+tracker fits a frame (``refit``): cameras and bodies then settle together, block by block, and a
+camera whose calibration disagrees with the others is no longer met half way by a body that
+compromised between them.
 """
 
 from __future__ import annotations
@@ -35,10 +36,12 @@ ROUNDS = 8
 
 @dataclass(frozen=True)
 class Refined:
-    """The refined cameras, and per camera how far each moved (degrees, metres of its centre) and its
-    robust mean edge distance (pixels, at the last search range) before and after."""
+    """The refined cameras and the bodies fitted to them (F, N, 4, 4), and per camera how far each moved
+    (degrees, metres of its centre) and its robust mean edge distance (pixels, at the last search range)
+    before and after."""
 
     cameras: tuple[Camera, ...]
+    poses: np.ndarray
     rotation_deg: np.ndarray
     shift_m: np.ndarray
     residual_before: np.ndarray
@@ -89,12 +92,14 @@ def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np
 
 def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]],
                settings: Settings = Settings(), rounds: int = ROUNDS, fixed: Iterable[int] = (),
-               progress: Callable[[Iterable], Iterable] = iter) -> Refined:
+               refit: bool = True, progress: Callable[[Iterable], Iterable] = iter) -> Refined:
     """Move each camera not in ``fixed`` to fit the outlines of the body at ``poses`` (F, N, 4, 4) in
-    ``frames`` (F lists of one smoothed edge-search image per camera, as the tracker takes them).
-    ``progress`` wraps the rounds (e.g. a tqdm bar)."""
+    ``frames`` (F lists of one smoothed edge-search image per camera, as the tracker takes them), and
+    with ``refit`` fit the bodies again after each round.  ``progress`` wraps the rounds (e.g. tqdm)."""
     start, cameras = tuple(cameras), list(cameras)
     fixed = set(fixed)
+    poses = np.array(poses)
+    settings = replace(settings, motion="none")  # each frame's fit starts from its own body, as tracked
     tracker = Tracker(model, cameras, poses[0], settings)
     prior = np.diag([settings.prior_translation] * 3 + [settings.prior_rotation] * 3)
     first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
@@ -113,7 +118,11 @@ def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frame
             pose = se3.exp(xi) @ cameras[k].pose
             cameras[k] = replace(cameras[k], rotation=pose[:3, :3], translation=pose[:3, 3])
         tracker = tracker.with_cameras(cameras)
+        if refit:
+            for f, images in enumerate(frames):
+                tracker.poses = model.coerce(poses[f])
+                poses[f] = tracker.step(images, smoothed=True).poses
     after = _residuals(tracker, poses, frames, len(cameras), last)
     turn = [np.degrees(np.linalg.norm(se3.log_so3(b.rotation @ a.rotation.T))) for a, b in zip(start, cameras)]
     shift = [np.linalg.norm(b.rotation.T @ b.translation - a.rotation.T @ a.translation) for a, b in zip(start, cameras)]
-    return Refined(tuple(cameras), np.array(turn), np.array(shift), before, after)
+    return Refined(tuple(cameras), poses, np.array(turn), np.array(shift), before, after)

@@ -44,24 +44,29 @@ class Recording:
     fps: float
     sources: list[Path]
     timestamps_path: Path | None = None
+    calibration_path: Path | None = None
 
 
-def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) -> Recording:
+def open_recording(path: str | os.PathLike, cameras: list[str] | None = None,
+                   calibration: str | os.PathLike | None = None) -> Recording:
     """Open a recording folder, checking that its videos decode and agree with the calibration.
 
     ``cameras`` picks cameras by name (in that order); by default every camera
     in calibration.toml that has a video, in calibration order. The first frame
     of every video is decoded here, so a corrupt file fails now rather than
-    mid-run. Problems raise TrackerInputError naming the file.
+    mid-run. ``calibration`` replaces the folder's calibration.toml (e.g. a rig
+    refined by ``tracker refine``). Problems raise TrackerInputError naming the file.
     """
     folder = Path(path)
     if not folder.is_dir():
         raise TrackerInputError(
             f"{folder}: recording folder not found; give a folder holding calibration.toml and one video per camera"
         )
-    calibration = folder / "calibration.toml"
-    if not calibration.is_file():
-        raise TrackerInputError(f"{calibration}: not found; a recording folder needs the calibration of its cameras")
+    if calibration is None:
+        calibration = folder / "calibration.toml"
+        if not calibration.is_file():
+            raise TrackerInputError(f"{calibration}: not found; a recording folder needs the calibration of its cameras")
+    calibration = Path(calibration)
     rig = {camera.name: camera for camera in load_calibration(calibration)}
     sources = {name: _find_source(folder, name) for name in rig}
     available = [name for name, source in sources.items() if source is not None]
@@ -104,6 +109,7 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None) ->
 
     return Recording(
         path=folder,
+        calibration_path=calibration,
         cameras=[camera for _, _, camera in probes],
         model_path=optional("model.toml"),
         init_path=optional("init.toml"),
