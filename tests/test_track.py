@@ -125,3 +125,27 @@ def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
     assert hd.spacing == pytest.approx(9.0) and hd.search_range == 45 and hd.final_search_range == 14
     assert hd.blur_sigma == pytest.approx(2.25) and hd.threshold == pytest.approx(6.0 / 2.25)
     assert scaled_to(hd, 1080) == hd  # already scaled: unchanged
+
+
+def _largest_turn(before: np.ndarray, after: np.ndarray) -> float:
+    return max(np.linalg.norm(se3.log_so3(np.ascontiguousarray(a[:3, :3] @ b[:3, :3].T))) for a, b in zip(after, before))
+
+
+def test_max_turn_scales_the_whole_step():
+    """An iteration from a pose turned 0.4 rad away turns the body further than 0.03 rad unlimited; with
+    max_turn = 0.03 no component turns more, and the joints stay exact."""
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    start = load_pose_file(rec.init_path, model)
+    turned = start.copy()
+    turned[0] = start[0] @ se3.exp(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.4]))
+    images = next(iter(frames(rec)))[1]
+    turns = []
+    for max_turn in (float("inf"), 0.03):
+        tracker = Tracker(model, rec.cameras, turned, Settings(motion="none", max_turn=max_turn))
+        tracker.load_images(images)
+        before = tracker.poses
+        tracker.iterate(0)
+        turns.append(_largest_turn(before, tracker.poses))
+        np.testing.assert_allclose(tracker.poses, model.coerce(tracker.poses), atol=1e-9)
+    assert turns[0] > 0.1 and turns[1] <= 0.03 + 1e-9, turns

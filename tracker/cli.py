@@ -778,7 +778,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-TUNING = ("iterations", "spacing", "resample_every", "search_range", "motion", "damping")
+TUNING = ("iterations", "spacing", "resample_every", "search_range", "motion", "damping", "max_turn")
 
 
 def _recording_options(parser: argparse.ArgumentParser) -> None:
@@ -802,6 +802,10 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
             dest="motion", choices=("none", "constant-velocity", "kalman"),
             help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
                  "(a second-order Kalman filter per component whose prediction and covariance set the prior)")),
+        "max_turn": (["--max-turn"], dict(
+            type=_positive_float, metavar="RAD",
+            help="largest rotation of any component in one iteration; a larger step is scaled down whole, which "
+                 "keeps a body from flipping on clutter but slows it in fast motion (default: no limit)")),
         "damping": (["--damping"], dict(type=_share, help="share of the last frame's motion carried into the "
                                                           "prediction (default 1; 0.5 steadies a single camera)")),
     }

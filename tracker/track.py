@@ -72,6 +72,7 @@ class Settings:
     ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
     reference_size: int = 480  # the pixel settings above are for images this many pixels on their short side
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
+    max_turn: float = float("inf")  # largest rotation (rad) any component makes in one iteration; the step is scaled
 
 
 def scaled_to(settings: Settings, short_side: int) -> Settings:
@@ -129,10 +130,19 @@ def add_prior(information, eta, prior, poses, anchor):
 
 @njit(cache=True, nogil=True)
 def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, rows, rest, joint_type, axis, lower,
-                  upper):
-    """Prior, tree solve, E_i <- E_i exp(alpha_i) and coercion in one call (sections 3-5)."""
+                  upper, max_turn):
+    """Prior, tree solve, E_i <- E_i exp(s alpha_i) and coercion in one call (sections 3-5).
+
+    ``s = min(1, max_turn / max_i |w_i|)`` scales the whole body's step (all twists alike, so the
+    linearised joint constraints still hold) when a component would turn by more than ``max_turn``
+    radians: the linearisation only holds for small motions."""
     add_prior(information, eta, prior, poses, anchor)
     alpha = solve_kernel(information, eta, parent, D, rows, poses)
+    largest = 0.0
+    for i in range(poses.shape[0]):
+        largest = max(largest, np.sqrt(alpha[i, 3] ** 2 + alpha[i, 4] ** 2 + alpha[i, 5] ** 2))
+    if largest > max_turn:
+        alpha *= max_turn / largest
     moved = np.empty_like(poses)
     for i in range(poses.shape[0]):
         moved[i] = poses[i] @ exp(alpha[i])
@@ -279,7 +289,7 @@ class Tracker:
         started = self.times.add("measure", started)
         self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
                                    m.constraint, m.constraint_projector, m.constraint_rows, m.rest, m.joint_type,
-                                   m.axis, m.lower, m.upper)
+                                   m.axis, m.lower, m.upper, st.max_turn)
         self.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(visible, found, residual)
