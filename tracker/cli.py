@@ -629,7 +629,7 @@ def build_parser() -> argparse.ArgumentParser:
     refine.add_argument("--hold-poses", action="store_true",
                         help="take the poses as right (e.g. ground truth, motion capture) and move only the cameras; "
                              "by default each frame's body is fitted again after every round")
-    add_tuning_options(refine, ("spacing", "search_range"))
+    add_tuning_options(refine, ("spacing", "search_range", "iterations", "max_turn"))
     refine.add_argument("--quiet", action="store_true", help="no progress bars")
     refine.set_defaults(run=cmd_refine)
 
