@@ -299,3 +299,8 @@ def test_background_command_errors(standing_recording, tmp_path, capsys):
     other = tmp_path / "other.toml"
     other.write_text((MODELS / "human.toml").read_text().replace('"pelvis"', '"hips"'))
     assert "do not match the model" in error("--model", str(other), "--poses", str(lost))
+    good = tmp_path / "good" / "poses.npz"
+    with PosesWriter(good, list(model.names), list(model.joint_names), 30.0) as writer:
+        for index, pose in enumerate(poses):
+            writer.append(index, pose, joint_centres(pose), 0, 1.0)
+    assert "--samples 3: too few" in error("--model", human, "--poses", str(good), "--samples", "3")

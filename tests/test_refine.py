@@ -23,12 +23,15 @@ from test_foreground import cap_centres, triangulate
 
 
 def test_camera_rows_move_the_body_as_the_camera_moves():
-    """exp(xi) T = T exp(J xi) with J = camera_rows(I, T): the camera's twist seen as a body twist."""
+    """exp(xi) T = T exp(J xi) with J = camera_rows(I, ...) and T = P_k E_i: the camera's twist as a body twist."""
     rng = np.random.default_rng(4)
+    rig_pose = np.array([se3.exp(rng.normal(0.0, 0.8, 6)) for _ in range(3)])
+    poses = np.array([se3.exp(rng.normal(0.0, 0.8, 6)) for _ in range(4)])
     for _ in range(20):
-        transform = se3.exp(rng.normal(0.0, 0.8, 6))
+        k, i = rng.integers(3), rng.integers(4)
         xi = rng.normal(0.0, 0.3, 6)
-        rows = camera_rows(np.eye(6), np.broadcast_to(transform, (6, 4, 4)))
+        rows = camera_rows(np.eye(6), np.full(6, k), np.full(6, i), rig_pose, poses)
+        transform = rig_pose[k] @ poses[i]
         np.testing.assert_allclose(transform @ se3.exp(rows @ xi), se3.exp(xi) @ transform, atol=1e-12)
 
 
@@ -69,6 +72,10 @@ def test_refine_rig_recovers_a_disturbed_camera(tiny_recording):
     assert turn < 1.0 and np.linalg.norm(centre(moved) - centre(true_rig[1])) < 0.04  # 0.51 deg, 22 mm
     assert refined.residual_after[1] < 0.5 * refined.residual_before[1]  # 1.94 -> 0.40 px
     np.testing.assert_allclose(refined.rotation_deg[1], 1.5, atol=1.0)
+    # refitting the bodies too: both views fit again (two views let the body and cam1 trade a little)
+    refitted = refine_rig(model, rig, truth, frames, Settings(), rounds=2, fixed=[0])
+    assert refitted.residual_after.max() < 0.5 * refined.residual_before[1]  # 1.94 -> 0.53 px measured
+    assert offset(refitted.cameras[1]) < 0.8 * offset(rig[1])
 
 
 def test_refine_command_writes_a_calibration_that_track_takes(tiny_recording, tmp_path, capsys):
@@ -105,6 +112,8 @@ def test_refine_command_errors(tiny_recording, tmp_path, capsys):
     assert "no frame in 100..105" in error("--poses", truth, "--start", "100", "--frames", "6")
     assert "nowhere.toml" in error("--poses", truth, "--calib", str(tmp_path / "nowhere.toml"))
     assert not (tmp_path / "r.toml").exists()
+    message = error("--poses", truth, "--out", str(tiny_recording / "calibration.toml"))
+    assert "is the calibration being refined" in message
 
 
 BALANCING = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim-balancing"

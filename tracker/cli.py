@@ -7,6 +7,7 @@ an interrupted run (Ctrl-C) keeps the frames already written and exits 130.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import os
 import sys
@@ -242,12 +243,16 @@ def _serve(message: str, *closing) -> int:
 
 def _tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     """The poses.npz a run of ``model`` on ``rec`` wrote (``given``, else out/<recording name>/poses.npz),
-    loaded and checked against both."""
+    loaded and checked against both; ``usable`` marks its frames with a finite pose that is not lost."""
+    import numpy as np
+
     from tracker.io.poses import load_poses
+    from tracker.track import LOST
 
     path = Path(given) if given else Path("out") / rec.path.resolve().name / "poses.npz"
     if not given and not path.is_file():
-        raise TrackerInputError(f"{path}: no poses; run `tracker track {rec.path}` first or pass --poses")
+        raise TrackerInputError(f"{path}: no poses to review or refine; run `tracker track {rec.path}` first "
+                                "or pass --poses")
     results = load_poses(path)
     if len(results["joints"]) == 0:
         raise TrackerInputError(f"{path}: holds no frames; track some first")
@@ -257,28 +262,31 @@ def _tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     if results["frame"].max(initial=0) >= rec.frame_count:
         raise TrackerInputError(f"{path}: frames beyond the recording's {rec.frame_count}; "
                                 "pass the recording it was tracked from")
+    results["usable"] = np.isfinite(results["poses"]).all(axis=(1, 2, 3))
+    if "status" in results:
+        results["usable"] &= results["status"] != LOST
     return path, results
 
 
 def cmd_background(args: argparse.Namespace) -> int:
-    import numpy as np
     from tqdm import tqdm
 
     from tracker.foreground import MINIMUM_FREE, cleared_background, save_background
+    from tracker.io.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording
     from tracker.model import load_model
-    from tracker.track import LOST
 
     rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     poses_path, results = _tracked(args.poses, rec, model)
-    usable = np.isfinite(results["poses"]).all(axis=(1, 2, 3))
-    if "status" in results:
-        usable &= results["status"] != LOST
+    usable = results["usable"]
     if usable.sum() < MINIMUM_FREE + 2:
         raise TrackerInputError(f"{poses_path}: only {usable.sum()} frames with a pose that is not lost; "
                                 "track more frames, or mend the run first")
-    out = Path(args.out) if args.out else poses_path.parent / "background-cleared"
+    if args.samples is not None and args.samples < MINIMUM_FREE + 2:
+        raise TrackerInputError(f"--samples {args.samples}: too few to clear anything (a pixel needs "
+                                f"{MINIMUM_FREE} frames free of the body); use {MINIMUM_FREE + 2} or more")
+    out = ensure_writable_folder(Path(args.out) if args.out else poses_path.parent / "background-cleared")
 
     def progress(reads):
         return tqdm(reads, desc="background", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
@@ -302,10 +310,11 @@ def cmd_refine(args: argparse.Namespace) -> int:
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
     from tracker.foreground import sample_indices
+    from tracker.io.atomic import ensure_writable_folder
     from tracker.io.readers import FrameSeeker, grey
     from tracker.io.recording import open_recording
     from tracker.model import load_model
-    from tracker.track import LOST, Tracker
+    from tracker.track import Tracker
 
     rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
     model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
@@ -316,11 +325,12 @@ def cmd_refine(args: argparse.Namespace) -> int:
     if unknown:
         raise TrackerInputError(f"{rec.calibration_path}: --fix names {', '.join(unknown)}, not among the cameras "
                                 f"tracked ({', '.join(names)})")
+    out = Path(args.out)
+    if out.resolve() == rec.calibration_path.resolve():
+        raise TrackerInputError(f"{out}: is the calibration being refined; write the refined rig to another file")
+    ensure_writable_folder(out.parent)
     stop = rec.frame_count if args.frames is None else args.start + args.frames
-    usable = np.isfinite(results["poses"]).all(axis=(1, 2, 3)) & (results["frame"] >= args.start)
-    usable &= results["frame"] < stop
-    if "status" in results:
-        usable &= results["status"] != LOST
+    usable = results["usable"] & (results["frame"] >= args.start) & (results["frame"] < stop)
     if usable.sum() == 0:
         raise TrackerInputError(f"{poses_path}: no frame in {args.start}..{stop - 1} has a pose that is not lost; "
                                 "pick frames the run tracked (--start, --frames)")
@@ -333,14 +343,11 @@ def cmd_refine(args: argparse.Namespace) -> int:
         prepare = preparers(load_background(args.background, rec), smooth)
     else:
         prepare = [lambda frame: smooth(grey(frame))] * len(rec.cameras)
-    seekers = [FrameSeeker(source, colour=True) for source in rec.sources]
-    try:
+    with contextlib.ExitStack() as stack:
+        seekers = [stack.enter_context(contextlib.closing(FrameSeeker(source, colour=True))) for source in rec.sources]
         reads = tqdm(picked, desc="reading", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
         frames = [[prepare[k](seeker.read(int(results["frame"][i]))) for k, seeker in enumerate(seekers)]
                   for i in reads]
-    finally:
-        for seeker in seekers:
-            seeker.close()
 
     def progress(rounds):
         return tqdm(rounds, desc="refining", unit="round", disable=args.quiet, file=sys.stderr, leave=False)
@@ -351,7 +358,6 @@ def cmd_refine(args: argparse.Namespace) -> int:
     rig = [dataclasses.replace(camera, rotation=moved[camera.name].rotation,
                                translation=moved[camera.name].translation) if camera.name in moved else camera
            for camera in load_calibration(rec.calibration_path)]
-    out = Path(args.out)
     save_calibration(rig, out)
     print(f"refined {rec.calibration_path} to the body of {poses_path} in {len(picked)} frames "
           f"({results['frame'][picked[0]]}..{results['frame'][picked[-1]]}); wrote {out} (use with --calib {out})")
@@ -625,7 +631,8 @@ def build_parser() -> argparse.ArgumentParser:
     refine.add_argument("--rounds", type=_positive_int,
                         help="rounds of measuring and moving the cameras, searches narrowing (default 8)")
     refine.add_argument("--background", metavar="DIR",
-                        help="the empty scene the run was tracked against (<camera>.png): search the differences")
+                        help="an empty scene (<camera>.png, e.g. from tracker background): search the differences "
+                             "from it instead of the grey images")
     refine.add_argument("--hold-poses", action="store_true",
                         help="take the poses as right (e.g. ground truth, motion capture) and move only the cameras; "
                              "by default each frame's body is fitted again after every round")

@@ -150,11 +150,16 @@ def reduced_camera(camera: Camera, factor: float) -> Camera:
     return dataclasses.replace(camera, matrix=matrix, size=size)
 
 
-def silhouette(renderer: Renderer, poses: np.ndarray, size: tuple[int, int], margin: int) -> np.ndarray:
+def silhouette(renderer: Renderer, poses: np.ndarray, size: tuple[int, int], factor: float,
+               margin: int) -> np.ndarray:
     """Pixels (H, W) bool of a ``size`` = (W, H) image that the body at ``poses`` covers, widened by a disc
-    of radius ``margin`` pixels; ray cast at the renderer's (reduced) size and scaled up."""
+    of radius ``margin`` pixels; ray cast by a renderer of the camera reduced by ``factor``
+    (:func:`reduced_camera`), each pixel u taking the reduced pixel nearest (u + 1/2) / factor - 1/2."""
     covered = (renderer.cast(poses)[0] >= 0).astype(np.uint8)
-    mask = cv2.resize(covered, size, interpolation=cv2.INTER_NEAREST)
+    height, width = covered.shape
+    cols = np.clip(np.rint((np.arange(size[0]) + 0.5) / factor - 0.5), 0, width - 1).astype(int)
+    rows = np.clip(np.rint((np.arange(size[1]) + 0.5) / factor - 0.5), 0, height - 1).astype(int)
+    mask = covered[rows[:, None], cols[None, :]]
     if margin > 0:
         mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin + 1, 2 * margin + 1)))
     return mask.astype(bool)
@@ -184,13 +189,15 @@ def cleared_background(recording: Recording, model: Model, frames: np.ndarray, p
     for camera, source in zip(recording.cameras, recording.sources):
         short = min(camera.size)
         widen = round(margin * max(1.0, short / 480))
-        renderer = Renderer(model, reduced_camera(camera, max(1.0, short / MASK_SIDE)))
+        factor = max(1.0, short / MASK_SIDE)
+        renderer = Renderer(model, reduced_camera(camera, factor))
         with closing(FrameSeeker(source, colour=True)) as seeker:
             stack = np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(chosen))])
-        masks = np.stack([silhouette(renderer, poses[i], camera.size, widen) for i in chosen])
-        free = len(chosen) - masks.sum(axis=0)
+        masks = np.stack([silhouette(renderer, poses[i], camera.size, factor, widen) for i in chosen])
+        covered = masks.sum(axis=0)
+        free = len(chosen) - covered
         image = np.median(stack, axis=0)
-        swap = (masks.sum(axis=0) >= COVERAGE * len(chosen)) & (free >= MINIMUM_FREE)
+        swap = (covered >= COVERAGE * len(chosen)) & (free >= MINIMUM_FREE)
         rows, cols = np.nonzero(swap)
         for part in range(0, len(rows), 65536):
             r, c = rows[part:part + 65536], cols[part:part + 65536]

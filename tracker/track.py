@@ -72,7 +72,7 @@ class Settings:
     ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
     reference_size: int = 480  # the pixel settings above are for images this many pixels on their short side
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
-    max_turn: float = float("inf")  # largest rotation (rad) any component makes in one iteration; the step is scaled
+    max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
 
 
 def scaled_to(settings: Settings, short_side: int) -> Settings:
@@ -135,7 +135,8 @@ def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, 
 
     ``s = min(1, max_turn / max_i |w_i|)`` scales the whole body's step (all twists alike, so the
     linearised joint constraints still hold) when a component would turn by more than ``max_turn``
-    radians: the linearisation only holds for small motions."""
+    radians (before the coercion, which may turn it a little more): the linearisation only holds
+    for small motions."""
     add_prior(information, eta, prior, poses, anchor)
     alpha = solve_kernel(information, eta, parent, D, rows, poses)
     largest = 0.0

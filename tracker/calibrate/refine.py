@@ -48,19 +48,13 @@ class Refined:
     residual_after: np.ndarray
 
 
-def camera_rows(jacobian: np.ndarray, camera_from_component: np.ndarray) -> np.ndarray:
-    """Rows J_s = L_s Ad((P_k E_i)^-1) (S, 6) of samples with rows L_s (S, 6) whose camera-from-component
-    transforms are ``camera_from_component`` (S, 4, 4)."""
-    inverse = np.linalg.inv(camera_from_component)
-    rotation, translation = inverse[:, :3, :3], inverse[:, :3, 3]
-    skew = np.zeros_like(rotation)
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -translation[:, 2], translation[:, 1], -translation[:, 0]
-    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = translation[:, 2], -translation[:, 1], translation[:, 0]
-    adjoint = np.zeros((len(inverse), 6, 6))
-    adjoint[:, :3, :3] = rotation
-    adjoint[:, :3, 3:] = skew @ rotation
-    adjoint[:, 3:, 3:] = rotation
-    return np.einsum("sa,sab->sb", jacobian, adjoint)
+def camera_rows(jacobian: np.ndarray, camera: np.ndarray, component: np.ndarray, rig_pose: np.ndarray,
+                poses: np.ndarray) -> np.ndarray:
+    """Rows J_s = L_s Ad((P_k E_i)^-1) (S, 6) of samples with rows L_s (S, 6) seen by cameras ``camera`` (S,)
+    of components ``component`` (S,), with camera-from-world ``rig_pose`` (K, 4, 4) and world-from-component
+    ``poses`` (N, 4, 4); one adjoint per (camera, component) pair."""
+    adjoints = np.array([[se3.adjoint(se3.inverse(view @ pose)) for pose in poses] for view in rig_pose])
+    return np.einsum("sa,sab->sb", jacobian, adjoints[camera, component])
 
 
 def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], search_range: int):
@@ -71,11 +65,10 @@ def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], 
     tracker.sample(search_range)
     tracker.measure(search_range, tracker.still)
     s, n = tracker.samples, tracker.samples.count
-    camera, component = s.camera[:n], s.component[:n]
     found = tracker.weight[:n] > 0
-    transforms = tracker.rig.pose[camera[found]] @ poses[component[found]]
-    rows = camera_rows(s.jacobian[:n][found], transforms)
-    return camera[found], rows, tracker.offset[:n][found], tracker.weight[:n][found]
+    camera, component = s.camera[:n][found], s.component[:n][found]
+    rows = camera_rows(s.jacobian[:n][found], camera, component, tracker.rig.pose, poses)
+    return camera, rows, tracker.offset[:n][found], tracker.weight[:n][found]
 
 
 def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]], cameras: int,
@@ -105,7 +98,7 @@ def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frame
     first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
     before = _residuals(tracker, poses, frames, len(cameras), last)
     for round_ in progress(range(rounds)):
-        search_range = max(1, round(first * (last / first) ** (round_ / max(rounds - 1, 1))))
+        search_range = last if rounds == 1 else max(1, round(first * (last / first) ** (round_ / (rounds - 1))))
         information, eta = np.zeros((len(cameras), 6, 6)), np.zeros((len(cameras), 6))
         for frame_poses, images in zip(poses, frames):
             camera, rows, offset, weight = _measure(tracker, frame_poses, images, search_range)

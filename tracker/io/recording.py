@@ -74,7 +74,7 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None,
     if cameras is None:
         if not available:
             raise TrackerInputError(
-                f"{folder}: no camera of calibration.toml ({', '.join(rig)}) has a video; "
+                f"{folder}: no camera of {calibration.name} ({', '.join(rig)}) has a video; "
                 f"add <name>{'|'.join(VIDEO_SUFFIXES)} or a folder <name>/ of numbered images"
             )
         chosen = available
