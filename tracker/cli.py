@@ -7,7 +7,6 @@ an interrupted run (Ctrl-C) keeps the frames already written and exits 130.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import os
 import sys
@@ -309,9 +308,9 @@ def cmd_refine(args: argparse.Namespace) -> int:
 
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
-    from tracker.foreground import sample_indices
+    from tracker.foreground import camera_stacks, sample_indices
     from tracker.io.atomic import ensure_writable_folder
-    from tracker.io.readers import FrameSeeker, grey
+    from tracker.io.readers import grey
     from tracker.io.recording import open_recording
     from tracker.model import load_model
     from tracker.track import Tracker
@@ -343,11 +342,11 @@ def cmd_refine(args: argparse.Namespace) -> int:
         prepare = preparers(load_background(args.background, rec), smooth)
     else:
         prepare = [lambda frame: smooth(grey(frame))] * len(rec.cameras)
-    with contextlib.ExitStack() as stack:
-        seekers = [stack.enter_context(contextlib.closing(FrameSeeker(source, colour=True))) for source in rec.sources]
-        reads = tqdm(picked, desc="reading", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
-        frames = [[prepare[k](seeker.read(int(results["frame"][i]))) for k, seeker in enumerate(seekers)]
-                  for i in reads]
+    def reading(reads):
+        return tqdm(reads, desc="reading", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
+
+    stacks = camera_stacks(rec, results["frame"][picked], reading)
+    frames = list(zip(*([prepare[k](image) for image in stack] for k, stack in enumerate(stacks))))
 
     def progress(rounds):
         return tqdm(rounds, desc="refining", unit="round", disable=args.quiet, file=sys.stderr, leave=False)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,19 +65,24 @@ def sample_indices(frame_count: int, samples: int = SAMPLES) -> np.ndarray:
     return np.unique(np.linspace(0, frame_count - 1, min(frame_count, samples)).round().astype(int))
 
 
+def camera_stacks(recording: Recording, indices: Iterable[int],
+                  progress: Callable[[Iterable], Iterable] = iter) -> Iterator[np.ndarray]:
+    """Per camera (rig order) the BGR frames ``indices`` stacked (len(indices), H, W, 3), one camera's
+    frames held at a time; ``progress`` wraps the list of (camera, frame) reads (e.g. a tqdm bar)."""
+    indices = [int(index) for index in indices]
+    reads = [(camera, index) for camera in range(len(recording.sources)) for index in indices]
+    reading = iter(progress(reads))
+    for source in recording.sources:
+        with closing(FrameSeeker(source, colour=True)) as seeker:
+            yield np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(indices))])
+
+
 def median_background(recording: Recording, samples: int = SAMPLES,
                       progress: Callable[[Iterable], Iterable] = iter) -> Background:
     """Per camera, the per-pixel median of ``samples`` frames spread over the recording; ``progress``
     wraps the list of (camera, frame) reads (e.g. a tqdm bar).  One camera's frames are held at a time."""
-    indices = sample_indices(recording.frame_count, samples)
-    reads = [(camera, int(index)) for camera in range(len(recording.sources)) for index in indices]
-    reading = iter(progress(reads))
-    images = []
-    for source in recording.sources:
-        with closing(FrameSeeker(source, colour=True)) as seeker:
-            stack = np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(indices))])
-        images.append(np.median(stack, axis=0).round().astype(np.uint8))
-    return Background(tuple(images))
+    stacks = camera_stacks(recording, sample_indices(recording.frame_count, samples), progress)
+    return Background(tuple(np.median(stack, axis=0).round().astype(np.uint8) for stack in stacks))
 
 
 def background_file(folder: Path, camera: str) -> Path:
@@ -150,19 +155,22 @@ def reduced_camera(camera: Camera, factor: float) -> Camera:
     return dataclasses.replace(camera, matrix=matrix, size=size)
 
 
-def silhouette(renderer: Renderer, poses: np.ndarray, size: tuple[int, int], factor: float,
-               margin: int) -> np.ndarray:
-    """Pixels (H, W) bool of a ``size`` = (W, H) image that the body at ``poses`` covers, widened by a disc
-    of radius ``margin`` pixels; ray cast by a renderer of the camera reduced by ``factor``
-    (:func:`reduced_camera`), each pixel u taking the reduced pixel nearest (u + 1/2) / factor - 1/2."""
-    covered = (renderer.cast(poses)[0] >= 0).astype(np.uint8)
-    height, width = covered.shape
+def silhouettes(renderer: Renderer, size: tuple[int, int], factor: float,
+                margin: int) -> Callable[[np.ndarray], np.ndarray]:
+    """The function from poses to the pixels (H, W) bool of a ``size`` = (W, H) image that the body
+    covers, widened by a disc of radius ``margin`` pixels: ray cast by a renderer of the camera reduced
+    by ``factor`` (:func:`reduced_camera`), each pixel u taking the reduced pixel nearest
+    (u + 1/2) / factor - 1/2."""
+    width, height = renderer.camera.size
     cols = np.clip(np.rint((np.arange(size[0]) + 0.5) / factor - 0.5), 0, width - 1).astype(int)
     rows = np.clip(np.rint((np.arange(size[1]) + 0.5) / factor - 0.5), 0, height - 1).astype(int)
-    mask = covered[rows[:, None], cols[None, :]]
-    if margin > 0:
-        mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin + 1, 2 * margin + 1)))
-    return mask.astype(bool)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin + 1, 2 * margin + 1))
+
+    def silhouette(poses: np.ndarray) -> np.ndarray:
+        mask = (renderer.cast(poses)[0] >= 0).astype(np.uint8)[rows[:, None], cols[None, :]]
+        return (cv2.dilate(mask, disc) if margin > 0 else mask).astype(bool)
+
+    return silhouette
 
 
 def cleared_background(recording: Recording, model: Model, frames: np.ndarray, poses: np.ndarray,
@@ -183,17 +191,13 @@ def cleared_background(recording: Recording, model: Model, frames: np.ndarray, p
     pixel settings.  ``progress`` wraps the list of (camera, frame) reads.
     """
     chosen = sample_indices(len(frames), samples)
-    reads = [(camera, int(frames[i])) for camera in range(len(recording.sources)) for i in chosen]
-    reading = iter(progress(reads))
     images, replaced, hidden = [], [], []
-    for camera, source in zip(recording.cameras, recording.sources):
+    for camera, stack in zip(recording.cameras, camera_stacks(recording, np.asarray(frames)[chosen], progress)):
         short = min(camera.size)
-        widen = round(margin * max(1.0, short / 480))
         factor = max(1.0, short / MASK_SIDE)
-        renderer = Renderer(model, reduced_camera(camera, factor))
-        with closing(FrameSeeker(source, colour=True)) as seeker:
-            stack = np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(chosen))])
-        masks = np.stack([silhouette(renderer, poses[i], camera.size, factor, widen) for i in chosen])
+        silhouette = silhouettes(Renderer(model, reduced_camera(camera, factor)), camera.size, factor,
+                                 round(margin * max(1.0, short / 480)))
+        masks = np.stack([silhouette(poses[i]) for i in chosen])
         covered = masks.sum(axis=0)
         free = len(chosen) - covered
         image = np.median(stack, axis=0)

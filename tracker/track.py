@@ -150,6 +150,12 @@ def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, 
     return coerce_kernel(moved, parent, rest, projector, rows, joint_type, axis, lower, upper)
 
 
+def narrowing(first: int, last: int, step: int, steps: int) -> int:
+    """Search range of step ``step`` of ``steps`` (>= 2) narrowing geometrically from ``first`` to ``last``:
+    r_i = r_0 (r_last / r_0)^(i / (n - 1)), rounded, at least 1."""
+    return max(1, round(first * (last / first) ** (step / (steps - 1))))
+
+
 @njit(cache=True, nogil=True)
 def motion_since(sampled, current):
     """Each component's body twist log(E_sampled^-1 E_current) since its outline was sampled."""
@@ -263,12 +269,11 @@ class Tracker:
         self.times.add("grey", started)
 
     def search_range(self, iteration: int) -> int:
-        """Coarse to fine when final_search_range > 0: r_i = r_0 (r_last / r_0)^(i / (n - 1)), rounded."""
+        """Coarse to fine when final_search_range > 0 (:func:`narrowing` over the iterations)."""
         st = self.settings
         if st.final_search_range <= 0 or st.iterations < 2:
             return st.search_range
-        ratio = st.final_search_range / st.search_range
-        return max(1, round(st.search_range * ratio ** (min(iteration, st.iterations - 1) / (st.iterations - 1))))
+        return narrowing(st.search_range, st.final_search_range, min(iteration, st.iterations - 1), st.iterations)
 
     def iterate(self, iteration: int = 0) -> Statistics:
         """One IRLS iteration at the current poses: sample, limit the searches, measure, solve, update, coerce.
@@ -321,15 +326,18 @@ class Tracker:
                               s.jacobian, twist, search_range, st.threshold, st.robust_c, self.model.size,
                               self.offset, self.weight, self.information, self.eta, self.lo, self.hi)
 
-    def inspect(self, images=None, smoothed: bool = False, poses: np.ndarray | None = None) -> Inspection:
-        """Sample and measure every outline, as the last iteration would, without moving the poses: at
-        ``poses`` if given (else the current ones), in ``images`` if given (else the frame just tracked)."""
+    def inspect(self, images=None, smoothed: bool = False, poses: np.ndarray | None = None,
+                search_range: int | None = None) -> Inspection:
+        """Sample and measure every outline, as the last iteration would (or with ``search_range``), without
+        moving the poses: at ``poses`` if given (else the current ones), in ``images`` if given (else the
+        frame just tracked)."""
         s = self.samples
         if poses is not None:
             self.poses = poses
         if images is not None:
             self.load_images(images, smoothed)
-        search_range = self.search_range(self.settings.iterations - 1)
+        if search_range is None:
+            search_range = self.search_range(self.settings.iterations - 1)
         self.sample(search_range)
         self.measure(search_range, self.still)
         n = s.count

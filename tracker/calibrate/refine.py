@@ -29,7 +29,7 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.model import Model
-from tracker.track import Settings, Tracker
+from tracker.track import Settings, Tracker, narrowing
 
 ROUNDS = 8
 
@@ -60,15 +60,11 @@ def camera_rows(jacobian: np.ndarray, camera: np.ndarray, component: np.ndarray,
 def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], search_range: int):
     """Sample the body at ``poses`` in every camera, search each sample's edge in ``images`` (smoothed, rig
     order); return per sample (camera, J row, offset m, weight w) for the samples that found an edge."""
-    tracker.poses = poses
-    tracker.load_images(images, smoothed=True)
-    tracker.sample(search_range)
-    tracker.measure(search_range, tracker.still)
-    s, n = tracker.samples, tracker.samples.count
-    found = tracker.weight[:n] > 0
-    camera, component = s.camera[:n][found], s.component[:n][found]
-    rows = camera_rows(s.jacobian[:n][found], camera, component, tracker.rig.pose, poses)
-    return camera, rows, tracker.offset[:n][found], tracker.weight[:n][found]
+    seen = tracker.inspect(images, smoothed=True, poses=poses, search_range=search_range)
+    found = seen.weight > 0
+    camera, component = seen.camera[found], seen.component[found]
+    rows = camera_rows(tracker.samples.jacobian[:len(found)][found], camera, component, tracker.rig.pose, poses)
+    return camera, rows, seen.offset[found], seen.weight[found]
 
 
 def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]], cameras: int,
@@ -94,11 +90,11 @@ def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frame
     poses = np.array(poses)
     settings = replace(settings, motion="none")  # each frame's fit starts from its own body, as tracked
     tracker = Tracker(model, cameras, poses[0], settings)
-    prior = np.diag([settings.prior_translation] * 3 + [settings.prior_rotation] * 3)
+    prior = tracker.prior[0]  # the tracker's P = diag(lt I3, lr I3), the same for every component
     first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
     before = _residuals(tracker, poses, frames, len(cameras), last)
     for round_ in progress(range(rounds)):
-        search_range = last if rounds == 1 else max(1, round(first * (last / first) ** (round_ / (rounds - 1))))
+        search_range = last if rounds == 1 else narrowing(first, last, round_, rounds)
         information, eta = np.zeros((len(cameras), 6, 6)), np.zeros((len(cameras), 6))
         for frame_poses, images in zip(poses, frames):
             camera, rows, offset, weight = _measure(tracker, frame_poses, images, search_range)
@@ -117,5 +113,5 @@ def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frame
                 poses[f] = tracker.step(images, smoothed=True).poses
     after = _residuals(tracker, poses, frames, len(cameras), last)
     turn = [np.degrees(np.linalg.norm(se3.log_so3(b.rotation @ a.rotation.T))) for a, b in zip(start, cameras)]
-    shift = [np.linalg.norm(b.rotation.T @ b.translation - a.rotation.T @ a.translation) for a, b in zip(start, cameras)]
+    shift = [np.linalg.norm(b.center - a.center) for a, b in zip(start, cameras)]
     return Refined(tuple(cameras), poses, np.array(turn), np.array(shift), before, after)
