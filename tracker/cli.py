@@ -490,18 +490,17 @@ def cmd_points(args: argparse.Namespace) -> int:
             fits = track((points[f] for f in frames), model, settings, args.every / markers.rate)
             for index, fitted in tqdm(zip(frames, fits), total=len(frames), unit="frame", disable=args.quiet,
                                       file=sys.stderr):
-                poses, joints = fitted.poses, fitted.joints
-                finite = np.isfinite(poses).all() and np.isfinite(joints).all()
-                status = LOST if not finite else UNCERTAIN if np.isnan(fitted.residual).any() else TRACKED
                 shapes.append(markers.first_frame + index, fitted)  # before poses: see shapes.write below
-                writer.append(markers.first_frame + index, poses, joints, status, fitted.rms * 1000.0)
+                writer.append(markers.first_frame + index, fitted.poses, fitted.joints, fitted.status,
+                              fitted.rms * 1000.0)
         except KeyboardInterrupt:
             interrupted = True
         finally:
             done = len(writer)
             final = shapes.write(done)  # the frames poses.npz holds, even if Ctrl-C fell between the two appends
     elapsed = time.perf_counter() - started
-    counts = np.bincount(writer.arrays()["status"], minlength=3)
+    results = writer.arrays()
+    counts = np.bincount(results["status"], minlength=3)
     print(f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "
           f"({done / elapsed if elapsed else 0:.1f} frames/s): {counts[TRACKED]} with every part seen, "
           f"{counts[UNCERTAIN]} with a part unseen, {counts[LOST]} lost")
@@ -517,11 +516,9 @@ def cmd_points(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
     if interrupted or not done or not (args.view or args.record):
         return 130 if interrupted else 0
-    from tracker.io.poses import load_poses
     from tracker.viewer.points import PointsView
     from tracker.viewer.scene import start_server
 
-    results = load_poses(out / "poses.npz")
     view = PointsView(start_server(args.host, args.port, quiet=not args.view), results, final,
                       points[results["frame"] - markers.first_frame], markers.rate / args.every)
     view.show(0)

@@ -430,7 +430,7 @@ def material_points(part: kin.Part, mesh: sq.Mesh, points: Sequence[tuple[float,
 
 def node_jacobians(body: Body, index: Sequence[np.ndarray]) -> list[np.ndarray]:
     """L_i of every node of every part on its active coordinates, (n, 3, len(index[p]))."""
-    return [kin.jacobians(p)[:, :, idx] for p, idx in zip(body.parts, index)]
+    return [kin.active_jacobians(p, idx) for p, idx in zip(body.parts, index)]
 
 
 def lumped_masses(

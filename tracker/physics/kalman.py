@@ -326,6 +326,8 @@ def riccati_block(
 def cap_eigenvalues(p: np.ndarray, cap: float) -> np.ndarray:
     """p with its eigenvalues above ``cap`` set to cap (V min(Lambda, cap) V^T); p itself if
     none is."""
+    if cap == np.inf:
+        return p
     values, vectors = np.linalg.eigh(p)
     if values[-1] <= cap:
         return p

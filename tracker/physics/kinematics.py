@@ -73,6 +73,15 @@ def rigid_global_jacobians(part: Part) -> np.ndarray:
     return out
 
 
+def active_jacobians(part: Part, coordinates: np.ndarray) -> np.ndarray:
+    """The columns ``coordinates`` (indices into q) of every node's L_i, (n, 3, len(coordinates)):
+    from :func:`rigid_global_jacobians` when none is a nodal displacement, without building the 3n d
+    columns."""
+    if len(coordinates) and max(coordinates) < SHAPE.stop:
+        return rigid_global_jacobians(part)[:, :, coordinates]
+    return jacobians(part)[:, :, coordinates]
+
+
 def jacobians(part: Part) -> np.ndarray:
     """L_i = [ I3 | -[R p_i]x | R J_i | R S_i ] for every node, shape (n, 3, part.n_coordinates).
 

@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
+from tracker.io.poses import STATUS_LOST, STATUS_TRACKED, STATUS_UNCERTAIN
 from tracker.io.tomlfile import read_toml
 from tracker.physics import body as bd
 from tracker.physics import kinematics as kin
@@ -272,6 +273,14 @@ class FrameFit:
         return float(np.sqrt(np.sum(self.residual[seen] ** 2 * self.seen[seen]) / self.seen.sum()))
 
     @property
+    def status(self) -> int:
+        """The frame's poses.npz status: lost when a pose or joint is not finite, uncertain when a part
+        had no marker seen, else tracked."""
+        if not (np.isfinite(self.poses).all() and np.isfinite(self.joints).all()):
+            return STATUS_LOST
+        return STATUS_UNCERTAIN if np.isnan(self.residual).any() else STATUS_TRACKED
+
+    @property
     def poses(self) -> np.ndarray:
         """world_from_part (P, 4, 4): the part frame's rotation R and origin c."""
         out = np.zeros((len(self.body.parts), 4, 4))
@@ -318,8 +327,7 @@ def second_order_frame(
     under the pull of one frame of points (M, 3), attached to their parts' nearest nodes at the
     start (module docstring, step 4)."""
     attachments = bd.attach(body, points, model.labels)
-    k_nodes = (bd.stiffnesses(body, settings.w0, settings.w1) if max(body.levels) == bd.LOCAL
-               else [None] * len(body.parts))
+    k_nodes = bd.stiffnesses(body, settings.w0, settings.w1)  # None for parts below LOCAL
     d = damping(seen_per_part(points, model), settings)
     limit = bd.second_order_limit(body, attachments, settings.sigma, k_nodes, d, MASS)
     substeps = max(1, int(np.ceil(seconds / (STEP_FRACTION * limit))))
@@ -344,7 +352,6 @@ def track(frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSett
         elif settings.dynamics == "second-order":
             body, velocities = second_order_frame(body, velocities, points, model, settings, interval)
         elif np.isfinite(points).all(axis=1).any():  # first order: without any marker nothing moves
-            n_global, n_local = (settings.steps, 0) if level < bd.LOCAL else (0, settings.steps)
-            body, _ = bd.fit_frame(body, points, settings.sigma, n_global, n_local, labels=model.labels,
-                                   w0=settings.w0, w1=settings.w1)
+            body, _ = bd.fit_frame(body, points, settings.sigma, 0, settings.steps, labels=model.labels,
+                                   w0=settings.w0, w1=settings.w1)  # every part at its own level
         yield measure(body, points, model)
