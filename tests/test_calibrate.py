@@ -175,8 +175,8 @@ def test_caliscope_rig_against_caliscope(tmp_path, capsys):
     assert all(a < b for a, b in zip(after, before)) and max(after) < 1.5
 
     # caliscope's world is (to 3 mm and 0.2 degrees) camera 1's frame: compare every camera's pose
-    # relative to camera 1. Measured: cam_0 11.2 mm 0.89 deg, cam_2 7.7 mm 0.30 deg, cam_3 10.2 mm
-    # 0.85 deg. Most of that is caliscope's: fed caliscope's own corners (xy.csv) and intrinsics,
+    # relative to camera 1. Measured: cam_0 3.5 mm 0.12 deg, cam_2 4.3 mm 0.15 deg, cam_3 4.1 mm
+    # 0.39 deg. Most of that is caliscope's: fed caliscope's own corners (xy.csv) and intrinsics,
     # this bundle adjustment lands as far from camera_array.toml, and the four cameras' frames are
     # up to 20 ms apart (timestamps.csv) while the board moves.
     for index in range(4):
