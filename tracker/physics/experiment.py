@@ -63,7 +63,7 @@ nearest-node fit (node RMS 0.14).  "Far more noise-sensitive" fails: translation
 2.07x, position 4.8x; local error at var 0 (0.30) is the membrane's shrinking of the bump and
 the global/local split (position error there is 0.15), so its ratio stays small.  With the
 paper's w1 = 0.5 and b1 free (the previous settings) two claims held: translation 27x, and
-density 9/12.  Seed 1 fails more with either settings: the frame-0 fit from the paper's
+density 9/12.  Seed 1 holds none of the five with these settings: the frame-0 fit from the paper's
 ellipsoid settles in a wrong basin at 25 % density (every variance; node RMS 0.52 at var 0)
 and at 100 %/var 1 (node RMS 0.21), and every later frame inherits it.  Every frame stops at
 the 300-iteration cap (the slow global/local split).
