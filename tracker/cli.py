@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import os
 import sys
 import threading
@@ -93,17 +94,16 @@ def cmd_track(args: argparse.Namespace) -> int:
     from tracker.evaluate import evaluate, format_report
     from tracker.io.posefile import load_pose_file
     from tracker.io.poses import PosesWriter, load_poses
-    from tracker.io.recording import capture_times, frames, open_recording
-    from tracker.model import joint_centres, load_model
+    from tracker.io.recording import capture_times, frames
+    from tracker.model import joint_centres
     from tracker.track import LOST, TRACKED, UNCERTAIN, Tracker
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
-    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
+    rec, model = _opened(args)
     if not 0 <= args.start < rec.frame_count:
         raise TrackerInputError(f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; "
                                 "pick a frame inside them")
-    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
     init = load_pose_file(_choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
     settings = settings_from(args, rec.fps)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
@@ -190,12 +190,7 @@ def _background(args: argparse.Namespace, rec, out: Path):
 
     if args.background != "median":
         return load_background(args.background, rec)
-    from tqdm import tqdm
-
-    def progress(reads):
-        return tqdm(reads, desc="background", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
-
-    background = median_background(rec, SAMPLES, progress)
+    background = median_background(rec, SAMPLES, _bar(args, "background", "frame"))
     folder = save_background(background, rec, out / "background")
     print(f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, saved in {folder} "
           f"(reuse with --background {folder})", file=sys.stderr)
@@ -240,6 +235,23 @@ def _serve(message: str, *closing) -> int:
     return 0
 
 
+def _opened(args: argparse.Namespace):
+    """The recording (``--cameras``, ``--calib``) and the body model (``--model``, else the recording's) a
+    command works on."""
+    from tracker.io.recording import open_recording
+    from tracker.model import load_model
+
+    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
+    return rec, load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+
+
+def _bar(args: argparse.Namespace, desc: str, unit: str):
+    """A transient progress bar on stderr (off with --quiet) to wrap an iterable in."""
+    from tqdm import tqdm
+
+    return functools.partial(tqdm, desc=desc, unit=unit, disable=args.quiet, file=sys.stderr, leave=False)
+
+
 def _tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     """The poses.npz a run of ``model`` on ``rec`` wrote (``given``, else out/<recording name>/poses.npz),
     loaded and checked against both; ``usable`` marks its frames with a finite pose that is not lost."""
@@ -268,15 +280,10 @@ def _tracked(given: str | None, rec, model) -> tuple[Path, dict]:
 
 
 def cmd_background(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from tracker.foreground import MINIMUM_FREE, cleared_background, save_background
     from tracker.io.atomic import ensure_writable_folder
-    from tracker.io.recording import open_recording
-    from tracker.model import load_model
 
-    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
-    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    rec, model = _opened(args)
     poses_path, results = _tracked(args.poses, rec, model)
     usable = results["usable"]
     if usable.sum() < MINIMUM_FREE + 2:
@@ -286,13 +293,9 @@ def cmd_background(args: argparse.Namespace) -> int:
         raise TrackerInputError(f"--samples {args.samples}: too few to clear anything (a pixel needs "
                                 f"{MINIMUM_FREE} frames free of the body); use {MINIMUM_FREE + 2} or more")
     out = ensure_writable_folder(Path(args.out) if args.out else poses_path.parent / "background-cleared")
-
-    def progress(reads):
-        return tqdm(reads, desc="background", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
-
     given = {key: value for key, value in (("samples", args.samples), ("margin", args.margin)) if value is not None}
     cleared = cleared_background(rec, model, results["frame"][usable], results["poses"][usable],
-                                 progress=progress, **given)
+                                 progress=_bar(args, "background", "frame"), **given)
     folder = save_background(cleared.background, rec, out)
     print(f"background: median of {len(cleared.frames)} tracked frames per camera with the body masked out "
           f"(frames {cleared.frames[0]}..{cleared.frames[-1]}), saved in {folder} (use with --background {folder})")
@@ -304,19 +307,15 @@ def cmd_background(args: argparse.Namespace) -> int:
 
 def cmd_refine(args: argparse.Namespace) -> int:
     import numpy as np
-    from tqdm import tqdm
 
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
     from tracker.foreground import camera_stacks, sample_indices
     from tracker.io.atomic import ensure_writable_folder
     from tracker.io.readers import grey
-    from tracker.io.recording import open_recording
-    from tracker.model import load_model
     from tracker.track import Tracker
 
-    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
-    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    rec, model = _opened(args)
     poses_path, results = _tracked(args.poses, rec, model)
     names = [camera.name for camera in rec.cameras]
     fixed = _cameras(args.fix) or []
@@ -342,17 +341,10 @@ def cmd_refine(args: argparse.Namespace) -> int:
         prepare = preparers(load_background(args.background, rec), smooth)
     else:
         prepare = [lambda frame: smooth(grey(frame))] * len(rec.cameras)
-    def reading(reads):
-        return tqdm(reads, desc="reading", unit="frame", disable=args.quiet, file=sys.stderr, leave=False)
-
-    stacks = camera_stacks(rec, results["frame"][picked], reading)
+    stacks = camera_stacks(rec, results["frame"][picked], _bar(args, "reading", "frame"))
     frames = list(zip(*([prepare[k](image) for image in stack] for k, stack in enumerate(stacks))))
-
-    def progress(rounds):
-        return tqdm(rounds, desc="refining", unit="round", disable=args.quiet, file=sys.stderr, leave=False)
-
     refined = refine_rig(model, rec.cameras, results["poses"][picked], frames, settings, args.rounds or ROUNDS,
-                         [names.index(name) for name in fixed], not args.hold_poses, progress)
+                         [names.index(name) for name in fixed], not args.hold_poses, _bar(args, "refining", "round"))
     moved = {camera.name: camera for camera in refined.cameras}
     rig = [dataclasses.replace(camera, rotation=moved[camera.name].rotation,
                                translation=moved[camera.name].translation) if camera.name in moved else camera
@@ -368,13 +360,10 @@ def cmd_refine(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from tracker.io.recording import open_recording
-    from tracker.model import load_model
     from tracker.track import Settings
     from tracker.viewer.review import Review
 
-    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
-    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    rec, model = _opened(args)
     poses_path, results = _tracked(args.poses, rec, model)
     settings = Settings()
     background = None
@@ -395,13 +384,11 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_init(args: argparse.Namespace) -> int:
     from tracker.io.posefile import load_pose_file
-    from tracker.io.recording import open_recording
-    from tracker.model import load_model, rest_poses
+    from tracker.model import rest_poses
     from tracker.track import Settings
     from tracker.viewer.placement import Placement, in_view
 
-    rec = open_recording(args.recording, _cameras(args.cameras), args.calib)
-    model = load_model(_choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    rec, model = _opened(args)
     start = Path(args.init) if args.init else rec.init_path
     poses = load_pose_file(start, model) if start is not None else rest_poses(model, in_view(rec.cameras))
     out = Path(args.out)

@@ -39,13 +39,15 @@ from tracker.io.readers import FrameSeeker, grey, read_image
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.render import Renderer
+from tracker.track import Settings
 
 SAMPLES = 25  # frames per camera for the median background
 CLEARED_SAMPLES = 50  # frames per camera for the median with the tracked body masked out
-MARGIN = 12  # pixels (at a 480-pixel short side) the tracked silhouette is widened by: loose fit, blur
+MARGIN = 12  # pixels (at the tracker's reference short side, 480) the tracked silhouette is widened by: loose fit, blur
 COVERAGE = 0.3  # share of the samples the body must cover before a pixel's plain median is replaced
 MINIMUM_FREE = 3  # samples free of the body a replaced pixel needs
 MASK_SIDE = 272  # short side, pixels, the silhouettes are rendered at before being scaled up
+CHUNK = 65536  # pixels whose masked median is taken at once (bounds the float copy of the stack)
 _SUM = np.ones((1, 3), np.float32)  # cv2.transform: the channel sum, saturated to uint8
 
 
@@ -168,7 +170,7 @@ def silhouettes(renderer: Renderer, size: tuple[int, int], factor: float,
 
     def silhouette(poses: np.ndarray) -> np.ndarray:
         mask = (renderer.cast(poses)[0] >= 0).astype(np.uint8)[rows[:, None], cols[None, :]]
-        return (cv2.dilate(mask, disc) if margin > 0 else mask).astype(bool)
+        return cv2.dilate(mask, disc).astype(bool)
 
     return silhouette
 
@@ -187,28 +189,29 @@ def cleared_background(recording: Recording, model: Model, frames: np.ndarray, p
         B(x) = median over all samples       elsewhere (the plain median, right where he is absent
                                              from most samples; a poor track there cannot spoil it).
 
-    ``margin`` is in pixels at a 480-pixel short side and grows with the image like the tracker's
-    pixel settings.  ``progress`` wraps the list of (camera, frame) reads.
+    ``margin`` is in pixels at the tracker's reference short side (``Settings.reference_size``) and grows
+    with the image like the tracker's pixel settings.  ``progress`` wraps the list of (camera, frame) reads.
     """
     chosen = sample_indices(len(frames), samples)
+    sampled = np.asarray(frames)[chosen]
     images, replaced, hidden = [], [], []
-    for camera, stack in zip(recording.cameras, camera_stacks(recording, np.asarray(frames)[chosen], progress)):
+    for camera, stack in zip(recording.cameras, camera_stacks(recording, sampled, progress)):
         short = min(camera.size)
         factor = max(1.0, short / MASK_SIDE)
         silhouette = silhouettes(Renderer(model, reduced_camera(camera, factor)), camera.size, factor,
-                                 round(margin * max(1.0, short / 480)))
+                                 round(margin * max(1.0, short / Settings.reference_size)))
         masks = np.stack([silhouette(poses[i]) for i in chosen])
         covered = masks.sum(axis=0)
         free = len(chosen) - covered
         image = np.median(stack, axis=0)
         swap = (covered >= COVERAGE * len(chosen)) & (free >= MINIMUM_FREE)
         rows, cols = np.nonzero(swap)
-        for part in range(0, len(rows), 65536):
-            r, c = rows[part:part + 65536], cols[part:part + 65536]
+        for part in range(0, len(rows), CHUNK):
+            r, c = rows[part:part + CHUNK], cols[part:part + CHUNK]
             values = stack[:, r, c].astype(np.float32)
             values[masks[:, r, c]] = np.nan
             image[r, c] = np.nanmedian(values, axis=0)
         images.append(image.round().astype(np.uint8))
         replaced.append(float(swap.mean()))
         hidden.append(float((free < MINIMUM_FREE).mean()))
-    return Cleared(Background(tuple(images)), np.asarray(frames)[chosen], tuple(replaced), tuple(hidden))
+    return Cleared(Background(tuple(images)), sampled, tuple(replaced), tuple(hidden))

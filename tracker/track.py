@@ -151,8 +151,10 @@ def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, 
 
 
 def narrowing(first: int, last: int, step: int, steps: int) -> int:
-    """Search range of step ``step`` of ``steps`` (>= 2) narrowing geometrically from ``first`` to ``last``:
-    r_i = r_0 (r_last / r_0)^(i / (n - 1)), rounded, at least 1."""
+    """Search range of step ``step`` of ``steps`` narrowing geometrically from ``first`` to ``last``:
+    r_i = r_0 (r_last / r_0)^(i / (n - 1)), rounded, at least 1; ``last`` when there is a single step."""
+    if steps < 2:
+        return last
     return max(1, round(first * (last / first) ** (step / (steps - 1))))
 
 

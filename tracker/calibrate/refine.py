@@ -36,12 +36,10 @@ ROUNDS = 8
 
 @dataclass(frozen=True)
 class Refined:
-    """The refined cameras and the bodies fitted to them (F, N, 4, 4), and per camera how far each moved
-    (degrees, metres of its centre) and its robust mean edge distance (pixels, at the last search range)
-    before and after."""
+    """The refined cameras, and per camera how far each moved (degrees, metres of its centre) and its robust
+    mean edge distance (pixels, at the last search range) before and after."""
 
     cameras: tuple[Camera, ...]
-    poses: np.ndarray
     rotation_deg: np.ndarray
     shift_m: np.ndarray
     residual_before: np.ndarray
@@ -72,9 +70,10 @@ def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np
     """Per camera the robust mean edge distance sum w|m| / sum w over all frames (NaN: no edge found)."""
     sum_wm, sum_w = np.zeros(cameras), np.zeros(cameras)
     for frame_poses, images in zip(poses, frames):
-        camera, _, offset, weight = _measure(tracker, frame_poses, images, search_range)
-        np.add.at(sum_wm, camera, weight * np.abs(offset))
-        np.add.at(sum_w, camera, weight)
+        seen = tracker.inspect(images, smoothed=True, poses=frame_poses, search_range=search_range)
+        found = seen.weight > 0
+        np.add.at(sum_wm, seen.camera[found], seen.weight[found] * np.abs(seen.offset[found]))
+        np.add.at(sum_w, seen.camera[found], seen.weight[found])
     with np.errstate(invalid="ignore", divide="ignore"):
         return sum_wm / sum_w
 
@@ -94,7 +93,7 @@ def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frame
     first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
     before = _residuals(tracker, poses, frames, len(cameras), last)
     for round_ in progress(range(rounds)):
-        search_range = last if rounds == 1 else narrowing(first, last, round_, rounds)
+        search_range = narrowing(first, last, round_, rounds)
         information, eta = np.zeros((len(cameras), 6, 6)), np.zeros((len(cameras), 6))
         for frame_poses, images in zip(poses, frames):
             camera, rows, offset, weight = _measure(tracker, frame_poses, images, search_range)
@@ -114,4 +113,4 @@ def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frame
     after = _residuals(tracker, poses, frames, len(cameras), last)
     turn = [np.degrees(np.linalg.norm(se3.log_so3(b.rotation @ a.rotation.T))) for a, b in zip(start, cameras)]
     shift = [np.linalg.norm(b.center - a.center) for a, b in zip(start, cameras)]
-    return Refined(tuple(cameras), poses, np.array(turn), np.array(shift), before, after)
+    return Refined(tuple(cameras), np.array(turn), np.array(shift), before, after)
