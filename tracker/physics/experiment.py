@@ -7,11 +7,11 @@ the true node positions on a fixed random subset of the nodes (100/75/50/25 %) w
 noise of variance 0/1/5/10 per coordinate.  The paper gives no noise units; for an object of
 size 2-3 its variance 10 (sigma 3.2) is ruled out by its own errors, so absolute values cannot
 be reproduced and the noise is scaled to the object, sigma = 0.027 sqrt(variance) (section 6,
-"Units").  Estimator: the continuous EKF of ``kalman`` with the paper's P(0) = I, Q = V = 0.1 I,
-w0 = 0.1 (w1 below), started from the paper's ellipsoid q_s = (2.7, .1, .2, .7, 1, 1, 0, 0, 0,
+"Units").  Estimator: the continuous EKF of ``kalman`` with P(0) = I (the paper's is indefinite, see
+``kalman``), the paper's Q = V = 0.1 I and w0 = 0.1 (w1 below), started from the paper's ellipsoid q_s = (2.7, .1, .2, .7, 1, 1, 0, 0, 0,
 0, .2) with R = I and the centre offset from the data centroid, q and P carried from frame to
-frame, and five departures from the paper (``SETTINGS``), the first three called for by the
-note's findings on its decoupled filter:
+frame, and five departures from the paper (``SETTINGS``), all but the stiffer membrane called
+for by the note's findings on its decoupled filter:
 
 * joint rigid + global block (section 5, "Joint rigid+global block"): the paper's c | phi |
   q_s decoupling leaves the (c_x, b1, b3) mode to 1e4-1e5 iterations; one 16 x 16 block with
@@ -26,8 +26,8 @@ note's findings on its decoupled filter:
   ``SETTINGS.max_iterations``; ``run`` reports how many frames hit that cap;
 * a stiffer membrane, w1 = 5 instead of 0.5: with the paper's w1 the nodal displacements
   follow the per-node noise at every observed node (about 60 % of it at variance 10), so
-  observing fewer nodes meant fitting less noise, and node-position error fell as density
-  fell in 3 of 12 comparisons (9/12 on seed 0; 12/12 at w1 = 5, and 12/12 at w1 = 20).  The
+  observing fewer nodes meant fitting less noise, and "node-position error grows as density
+  falls" held in only 9 of 12 comparisons on seed 0 (12/12 at w1 = 5 and at w1 = 20).  The
   note (section 3): the paper's w0, w1 "depend on an unstated normalisation; tune them";
 * the b1 stiffness of section 5 ("regularise b1"), K_g = 1 on b1
   (``kalman.Settings.bend_stiffness``): with b1 free, the frame-0 fit at variance 5 and 10

@@ -89,8 +89,7 @@ def stability_limit(
     if coordinates is None:
         coordinates = np.delete(np.arange(part.n_coordinates), [FROZEN])
     counts = np.bincount(assignment, minlength=len(part.u)).astype(np.float64)
-    h = (np.sqrt(counts)[:, None, None] * kin.active_jacobians(part, coordinates)).reshape(-1, len(coordinates))
-    h = h / sigma
+    h = (np.sqrt(counts)[:, None, None] * kin.active_jacobians(part, coordinates)).reshape(-1, len(coordinates)) / sigma
     k = sp.block_diag([sp.csr_matrix((kin.SHAPE.stop,) * 2), sp.kron(k_node, sp.identity(3))]).tocsr()
     k = k[coordinates][:, coordinates]
     a = LinearOperator((len(coordinates),) * 2, matvec=lambda x: h.T @ (h @ x) + k @ x, dtype=np.float64)

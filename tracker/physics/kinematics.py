@@ -77,7 +77,7 @@ def active_jacobians(part: Part, coordinates: np.ndarray) -> np.ndarray:
     """The columns ``coordinates`` (indices into q) of every node's L_i, (n, 3, len(coordinates)):
     from :func:`rigid_global_jacobians` when none is a nodal displacement, without building the 3n d
     columns."""
-    if len(coordinates) and max(coordinates) < SHAPE.stop:
+    if max(coordinates, default=-1) < SHAPE.stop:
         return rigid_global_jacobians(part)[:, :, coordinates]
     return jacobians(part)[:, :, coordinates]
 

@@ -280,7 +280,7 @@ class FrameFit:
             return STATUS_LOST
         return STATUS_UNCERTAIN if np.isnan(self.residual).any() else STATUS_TRACKED
 
-    @property
+    @functools.cached_property
     def poses(self) -> np.ndarray:
         """world_from_part (P, 4, 4): the part frame's rotation R and origin c."""
         out = np.zeros((len(self.body.parts), 4, 4))
@@ -289,7 +289,7 @@ class FrameFit:
         out[:, 3, 3] = 1.0
         return out
 
-    @property
+    @functools.cached_property
     def joints(self) -> np.ndarray:
         """Joint centres (J, 3): the midpoint of each joint's two material points."""
         a, b = bd.joint_positions(self.body)
