@@ -407,17 +407,20 @@ def iteration(
 
 
 def filter_frame(
-    state: State, points: np.ndarray, triangles: np.ndarray, settings: Settings
+    state: State, points: np.ndarray, triangles: np.ndarray, settings: Settings,
+    nodes: np.ndarray | None = None,
 ) -> tuple[State, int]:
     """Inner iterations on one frame of points (m, 3) until converged or
     ``settings.max_iterations`` are done.  Every ``settings.reassign_every`` iterations
     (before the first included) the nearest nodes and K_node (over the current shell) are
     recomputed and the stopping rule is checked: stop when the largest entry of the
-    ``newton_step`` to the fixed point is below ``settings.tol``.  Returns the state to carry
-    to the next frame (q and P) and the number of iterations run."""
+    ``newton_step`` to the fixed point is below ``settings.tol``.  ``nodes`` (m,), if given,
+    is the known node of every point (one-to-one correspondence), used instead of the
+    nearest nodes.  Returns the state to carry to the next frame (q and P) and the number of
+    iterations run."""
     for done in range(settings.max_iterations):
         if done % settings.reassign_every == 0:
-            assignment = fit.nearest_nodes(points, kin.positions(state.part))
+            assignment = fit.nearest_nodes(points, kin.positions(state.part)) if nodes is None else nodes
             k_node = fit.stiffness(state.part, triangles, settings.w0, settings.w1)
             if np.max(np.abs(newton_step(state, points, assignment, k_node, settings))) < settings.tol:
                 return state, done
