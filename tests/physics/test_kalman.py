@@ -208,6 +208,52 @@ def test_filter_recovers_a_tapered_superquadric_from_clean_data():
     np.testing.assert_allclose(part.q_s[9:], q_s[9:], rtol=0, atol=0.01)
 
 
+def test_split_moves_a_global_change_out_of_d():
+    """d = s(q_s') - s(q_s) plus a turn and a shift, i.e. a shape the rigid + global model
+    expresses exactly: undamped rounds of split return (c', R', q_s') with d = 0, the node
+    positions never move, and a random d keeps only its part orthogonal to the rigid + global
+    span (L_g^T R d = 0).  The bend b1 = 0.15 keeps b2 and b3 observable: at b1 = 0 their
+    columns vanish and the undamped solve is singular."""
+    rng = np.random.default_rng(5)
+    m = sq.mesh()
+    part = replace(random_part(rng, m), d=np.zeros((len(m.u), 3)))
+    part = replace(part, q_s=np.array([1.0, 0.5, 0.35, 1.2, 0.7, 1.2, 0.3, -0.2, 0.15, 0.1, 0.6]))
+    target = replace(
+        part, c=part.c + [0.02, -0.01, 0.03], rotation=exp_so3(np.array([0.02, 0.01, -0.03])) @ part.rotation,
+        q_s=part.q_s + [0.0, 0.03, -0.02, 0.05, 0.04, -0.03, 0.05, 0.02, 0.03, 0.0, 0.0],
+    )
+    x = kin.positions(target)
+    carried = replace(part, d=(x - part.c) @ part.rotation - sq.shape(part.q_s, m.u, m.v))
+    np.testing.assert_allclose(kin.positions(carried), x, atol=1e-12)
+
+    moved = kf.split(carried, rounds=8)
+
+    np.testing.assert_allclose(kin.positions(moved), x, atol=1e-12)
+    np.testing.assert_allclose(moved.d, 0.0, atol=1e-9)
+    np.testing.assert_allclose(moved.c, target.c, atol=1e-9)
+    np.testing.assert_allclose(moved.q_s, target.q_s, atol=1e-9)
+    assert np.linalg.norm(log_so3(moved.rotation.T @ target.rotation)) < 1e-9
+
+    noisy = replace(part, d=0.05 * rng.normal(size=part.d.shape))
+    moved = kf.split(noisy, rounds=8)
+    jac = kf.global_jacobians(moved).reshape(-1, kf.N_GLOBAL)
+    np.testing.assert_allclose(kin.positions(moved), kin.positions(noisy), atol=1e-12)
+    np.testing.assert_allclose(jac.T @ (moved.d @ moved.rotation.T).ravel(), 0.0, atol=1e-9)
+
+
+def test_damped_split_moves_less_and_keeps_positions():
+    """One damped round moves the global coordinates less than an undamped one (least squares
+    shrunk towards zero), and the node positions stay exactly where they were."""
+    rng = np.random.default_rng(6)
+    noisy = random_part(rng, sq.mesh())
+    change = {}
+    for damping in (0.0, 10.0):
+        moved = kf.split(noisy, damping, rounds=1)
+        np.testing.assert_allclose(kin.positions(moved), kin.positions(noisy), atol=1e-12)
+        change[damping] = np.linalg.norm(moved.q_s - noisy.q_s) + np.linalg.norm(moved.c - noisy.c)
+    assert 0.0 < change[10.0] < change[0.0]
+
+
 def test_known_correspondence_recovers_a_turn_the_nearest_nodes_miss():
     """Clean data at the nodes of a part turned 0.6 rad about its long axis, the filter started
     unturned (rigid + global, 600 iterations): given each point's node it recovers the turn to

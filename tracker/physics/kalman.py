@@ -115,7 +115,9 @@ class Settings:
     False freezes d and P_node (a rigid + global part).  coupling: "decoupled" (the paper's
     c | phi | q_s blocks) or "joint" (one 16 x 16 block).  prior_stiffness: K enters as a
     prior instead of as the dynamics F = -K (see the module docstring).  covariance_cap: the
-    largest eigenvalue allowed in each block of P_g.
+    largest eigenvalue allowed in each block of P_g.  split: ``filter_frame`` moves what the
+    rigid + global model can express of d into it (``split`` with ``split_damping``) at every
+    reassignment and at the end of the frame.
     """
 
     measurement_variance: float = 0.1
@@ -131,6 +133,8 @@ class Settings:
     coupling: str = "decoupled"
     prior_stiffness: bool = False
     covariance_cap: float = np.inf
+    split: bool = False
+    split_damping: float = 10.0
 
     def __post_init__(self):
         if self.coupling not in BLOCKS:
@@ -217,6 +221,30 @@ def global_jacobians(part: kin.Part) -> np.ndarray:
     """L_g,i = [ I3 | -[y_i]x | R J_i ] (y_i = R p_i, J_i without its a0 column): the rigid +
     global columns of L_i (section 2), shape (n, 3, 16)."""
     return kin.rigid_global_jacobians(part)[:, :, GLOBAL]
+
+
+def split(part: kin.Part, damping: float = 0.0, rounds: int = 3) -> kin.Part:
+    """The same node positions with d moved out of the span of the rigid + global model: what
+    (c, phi, q_s without a0) can express of the shell displacement goes to them, d keeps the rest.
+
+    Each round solves the damped least squares (stacked over nodes, L_g = ``global_jacobians``)
+
+        delta = (L_g^T L_g + damping I)^-1 L_g^T (R d)
+
+    and sets c <- c + delta_c, R <- Exp(delta_phi) R, q_s <- clamp(q_s + delta_s), then
+    d <- R^T (x - c) - s(q_s) with the old positions x, so x is kept exactly.  Undamped rounds
+    converge to L_g^T R d = 0: local deformation is what the global model cannot fit.  A damping
+    leaves directions L_g barely sees (the (c_x, b1) mode, singular values^2 below it) mostly
+    to the filter, whose data and priors settle them.
+    """
+    x = kin.positions(part)
+    for _ in range(rounds):
+        jac = global_jacobians(part).reshape(-1, N_GLOBAL)
+        delta = np.linalg.solve(jac.T @ jac + damping * np.eye(N_GLOBAL), jac.T @ (part.d @ part.rotation.T).ravel())
+        moved = kin.retract(part, np.concatenate([delta[:kin.RIGID], [0.0], delta[kin.RIGID:], np.zeros(part.d.size)]))
+        moved = replace(moved, q_s=sq.clamp(moved.q_s))
+        part = replace(moved, d=(x - moved.c) @ moved.rotation - sq.shape(moved.q_s, moved.u, moved.v))
+    return part
 
 
 def information(part: kin.Part, assignment: np.ndarray, variance: float) -> Information:
@@ -416,13 +444,21 @@ def filter_frame(
     recomputed and the stopping rule is checked: stop when the largest entry of the
     ``newton_step`` to the fixed point is below ``settings.tol``.  ``nodes`` (m,), if given,
     is the known node of every point (one-to-one correspondence), used instead of the
-    nearest nodes.  Returns the state to carry to the next frame (q and P) and the number of
-    iterations run."""
-    for done in range(settings.max_iterations):
+    nearest nodes.  With ``settings.split`` (and d free) d is split off before every
+    reassignment and once more at the end.  Returns the state to carry to the next frame (q and
+    P) and the number of iterations run."""
+    splitting = settings.split and settings.local
+    done = 0
+    while done < settings.max_iterations:
         if done % settings.reassign_every == 0:
+            if splitting:
+                state = replace(state, part=split(state.part, settings.split_damping))
             assignment = fit.nearest_nodes(points, kin.positions(state.part)) if nodes is None else nodes
             k_node = fit.stiffness(state.part, triangles, settings.w0, settings.w1)
             if np.max(np.abs(newton_step(state, points, assignment, k_node, settings))) < settings.tol:
-                return state, done
+                break
         state, _ = iteration(state, points, assignment, k_node, settings)
-    return state, settings.max_iterations
+        done += 1
+    if splitting:
+        state = replace(state, part=split(state.part, settings.split_damping))
+    return state, done
