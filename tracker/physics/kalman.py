@@ -3,7 +3,8 @@ metaxas-terzopoulos-math.md, section 5; the paper's eqs 37-38).
 
 The model is the first-order one of section 3 with D = I: the state u is the part's q =
 (c, phi, q_s, q_d), its dynamics qdot = g - K q, and the measurement of a point z_j attached
-to its nearest node k(j) is z_j = x_k(j)(q) + noise with Jacobian H_j = L_k(j) (section 2).
+to its nearest node k(j) (or to a known node, ``filter_frame``'s ``nodes``) is
+z_j = x_k(j)(q) + noise with Jacobian H_j = L_k(j) (section 2).
 With V = v I (v = sigma_v^2) and Q = q I the filter integrates, in pseudo-time over the inner
 iterations on one frame of data,
 
@@ -115,9 +116,9 @@ class Settings:
     False freezes d and P_node (a rigid + global part).  coupling: "decoupled" (the paper's
     c | phi | q_s blocks) or "joint" (one 16 x 16 block).  prior_stiffness: K enters as a
     prior instead of as the dynamics F = -K (see the module docstring).  covariance_cap: the
-    largest eigenvalue allowed in each block of P_g.  split: ``filter_frame`` moves what the
-    rigid + global model can express of d into it (``split`` with ``split_damping``) at every
-    reassignment and at the end of the frame.
+    largest eigenvalue allowed in each block of P_g.  absorb: ``filter_frame`` moves what the
+    rigid + global model can express of d into it (``absorb_global`` with ``absorb_damping``,
+    three rounds) at every reassignment and at the end of a frame that hits the iteration cap.
     """
 
     measurement_variance: float = 0.1
@@ -133,8 +134,8 @@ class Settings:
     coupling: str = "decoupled"
     prior_stiffness: bool = False
     covariance_cap: float = np.inf
-    split: bool = False
-    split_damping: float = 10.0
+    absorb: bool = False
+    absorb_damping: float = 10.0
 
     def __post_init__(self):
         if self.coupling not in BLOCKS:
@@ -223,26 +224,30 @@ def global_jacobians(part: kin.Part) -> np.ndarray:
     return kin.rigid_global_jacobians(part)[:, :, GLOBAL]
 
 
-def split(part: kin.Part, damping: float = 0.0, rounds: int = 3) -> kin.Part:
-    """The same node positions with d moved out of the span of the rigid + global model: what
-    (c, phi, q_s without a0) can express of the shell displacement goes to them, d keeps the rest.
+def absorb_global(part: kin.Part, damping: float = 0.0, rounds: int = 3) -> kin.Part:
+    """The same node positions with what the rigid + global model can express of the shell
+    displacement d moved into (c, phi, q_s without a0); d keeps the rest.
 
-    Each round solves the damped least squares (stacked over nodes, L_g = ``global_jacobians``)
+    Each round solves the damped least squares (stacked over nodes, L_g = ``global_jacobians``,
+    minimum norm where L_g is rank-deficient, e.g. b2 and b3 at b1 = 0)
 
-        delta = (L_g^T L_g + damping I)^-1 L_g^T (R d)
+        delta = argmin |L_g delta - (R d)|^2 + damping |delta|^2
 
-    and sets c <- c + delta_c, R <- Exp(delta_phi) R, q_s <- clamp(q_s + delta_s), then
-    d <- R^T (x - c) - s(q_s) with the old positions x, so x is kept exactly.  Undamped rounds
-    converge to L_g^T R d = 0: local deformation is what the global model cannot fit.  A damping
-    leaves directions L_g barely sees (the (c_x, b1) mode, singular values^2 below it) mostly
-    to the filter, whose data and priors settle them.
+    and moves c, R, q_s by ``update_part`` (R <- Exp(delta_phi) R, q_s clamped), then sets
+    d <- R^T (x - c) - s(q_s) with the old positions x, so x is kept exactly.  Repeated rounds
+    are a Levenberg-Marquardt iteration and converge to L_g^T R d = 0 (local deformation is
+    what the global model cannot fit) unless a clamp bound stops them.  The damping makes the
+    move gradual along directions L_g barely sees: with eigenvalue lambda of L_g^T L_g a round
+    moves the fraction lambda / (lambda + damping) of what is left.
     """
     x = kin.positions(part)
     for _ in range(rounds):
         jac = global_jacobians(part).reshape(-1, N_GLOBAL)
-        delta = np.linalg.solve(jac.T @ jac + damping * np.eye(N_GLOBAL), jac.T @ (part.d @ part.rotation.T).ravel())
-        moved = kin.retract(part, np.concatenate([delta[:kin.RIGID], [0.0], delta[kin.RIGID:], np.zeros(part.d.size)]))
-        moved = replace(moved, q_s=sq.clamp(moved.q_s))
+        system = np.vstack([jac, np.sqrt(damping) * np.eye(N_GLOBAL)])
+        target = np.concatenate([(part.d @ part.rotation.T).ravel(), np.zeros(N_GLOBAL)])
+        step = np.zeros(kin.SHAPE.stop + part.d.size)
+        step[GLOBAL] = np.linalg.lstsq(system, target, rcond=None)[0]
+        moved = update_part(part, step, 1.0)
         part = replace(moved, d=(x - moved.c) @ moved.rotation - sq.shape(moved.q_s, moved.u, moved.v))
     return part
 
@@ -444,21 +449,20 @@ def filter_frame(
     recomputed and the stopping rule is checked: stop when the largest entry of the
     ``newton_step`` to the fixed point is below ``settings.tol``.  ``nodes`` (m,), if given,
     is the known node of every point (one-to-one correspondence), used instead of the
-    nearest nodes.  With ``settings.split`` (and d free) d is split off before every
-    reassignment and once more at the end.  Returns the state to carry to the next frame (q and
-    P) and the number of iterations run."""
-    splitting = settings.split and settings.local
-    done = 0
-    while done < settings.max_iterations:
+    nearest nodes.  With ``settings.absorb`` (and d free) the global coordinates absorb what
+    they can of d before every reassignment, so also before every check of the stopping rule,
+    and once more at the end of a frame that hits the cap.  Returns the state to carry to the
+    next frame (q and P) and the number of iterations run."""
+    absorbing = settings.absorb and settings.local
+    for done in range(settings.max_iterations):
         if done % settings.reassign_every == 0:
-            if splitting:
-                state = replace(state, part=split(state.part, settings.split_damping))
+            if absorbing:
+                state = replace(state, part=absorb_global(state.part, settings.absorb_damping))
             assignment = fit.nearest_nodes(points, kin.positions(state.part)) if nodes is None else nodes
             k_node = fit.stiffness(state.part, triangles, settings.w0, settings.w1)
             if np.max(np.abs(newton_step(state, points, assignment, k_node, settings))) < settings.tol:
-                break
+                return state, done
         state, _ = iteration(state, points, assignment, k_node, settings)
-        done += 1
-    if splitting:
-        state = replace(state, part=split(state.part, settings.split_damping))
-    return state, done
+    if absorbing:
+        state = replace(state, part=absorb_global(state.part, settings.absorb_damping))
+    return state, settings.max_iterations
