@@ -56,9 +56,9 @@ split called for by the note's findings on its decoupled filter:
   between: along the weakest (c_x, b1, b2, b3) direction at frame 8 (eigenvalue 0.15 of
   L_g^T L_g) one call leaves 96 % in d, a frame's 31 calls 26 %.  Undamped (and K_g = 1),
   the noise in d at variance 10 went into that direction at once (translation error 113 at
-  100 %/var 10).  The truth is expressed in the converged split (``truth``, undamped), which the filter's calls
-  approach; local error is then the deformation the global model cannot fit: 0.155 at
-  100 %/var 0, the membrane's shrinking of the bump.
+  100 %/var 10).  The truth is expressed in the converged split (``truth``, undamped), which
+  the filter's calls approach; local error is then the deformation the global model cannot
+  fit: 0.155 at 100 %/var 0, the membrane's shrinking of the bump.
 
 Errors (eq 40): err_a = (1/20) sum_f |a_est - a_true| for a = c (translation), the rotation
 (as the geodesic angle of R_est^T R_true), q_s (after mapping the estimate into the truth's a0
@@ -85,9 +85,9 @@ falls (12/12); rotation is the smallest (16/16 rows) and local and position the 
 (16/16); from var 0 to var 10 at 100 % translation grows 1.09x, local 4.06x, position 4.59x.
 Seed 1: the same, with 1.03x, 4.04x and 4.57x.  Seed 3: all five (0.83x, 4.07x, 4.54x).
 Seed 2: four; local and position are the largest in 15/16 rows (at 25 %/var 0 local is 0.259
-against global 0.264).  Before the split (K_g = 1, w1 = 5)
-three claims held on each seed: noise sensitivity failed (translation 2.24x, local 2.28x).
-Every frame stops at the 300-iteration cap.
+against global 0.264).  Before the split (K_g = 1, w1 = 5) three claims held on each seed:
+noise sensitivity failed (translation 2.24x, local 2.28x).  Every frame stops at the
+300-iteration cap.
 """
 
 from __future__ import annotations
@@ -247,8 +247,8 @@ def frame_errors(estimate: kin.Part, true: kin.Part) -> np.ndarray:
 def track(world: Truth, observed: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, int, int]:
     """Run the filter over every frame on the nodes ``observed`` (indices) of the truth plus
     ``noise`` (frames, len(observed), 3), each point pulled by the node it was sampled at (the
-    tables' one-to-one correspondence, module docstring).  Returns the per-frame errors (frames, 6) of
-    ``frame_errors``, the total number of inner iterations and the number of frames that
+    tables' one-to-one correspondence, module docstring).  Returns the per-frame errors
+    (frames, 6) of ``frame_errors``, the total number of inner iterations and the number of frames that
     stopped at ``SETTINGS.max_iterations`` rather than by the stopping rule."""
     first = kin.positions(world.parts[0])[observed] + noise[0]
     start = world.parts[0]

@@ -245,7 +245,7 @@ def absorb_global(part: kin.Part, damping: float = 0.0, rounds: int = 3) -> kin.
         jac = global_jacobians(part).reshape(-1, N_GLOBAL)
         system = np.vstack([jac, np.sqrt(damping) * np.eye(N_GLOBAL)])
         target = np.concatenate([(part.d @ part.rotation.T).ravel(), np.zeros(N_GLOBAL)])
-        step = np.zeros(kin.SHAPE.stop + part.d.size)
+        step = np.zeros(part.n_coordinates)
         step[GLOBAL] = np.linalg.lstsq(system, target, rcond=None)[0]
         moved = update_part(part, step, 1.0)
         part = replace(moved, d=(x - moved.c) @ moved.rotation - sq.shape(moved.q_s, moved.u, moved.v))
