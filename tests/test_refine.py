@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 from tracker.bench import HUMAN
 from tracker.calibrate.refine import camera_rows, refine_rig
@@ -19,7 +17,6 @@ from tracker.io.readers import FrameSeeker
 from tracker.model import joint_centres, load_model
 from tracker.track import Settings, Tracker
 
-from test_foreground import cap_centres, triangulate
 
 
 def test_camera_rows_move_the_body_as_the_camera_moves():
@@ -110,62 +107,3 @@ def test_refine_command_errors(tiny_recording, tmp_path, capsys):
     assert not (tmp_path / "r.toml").exists()
     message = error("--poses", truth, "--out", str(tiny_recording / "calibration.toml"))
     assert "is the calibration being refined" in message
-
-
-BALANCING = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim-balancing"
-MAN = Path(__file__).resolve().parents[1] / "models" / "pose2sim_man.toml"
-
-
-def _leave_one_out(cameras, caps: np.ndarray) -> np.ndarray:
-    """Per camera the median distance (px) between its cap centroids and the cap triangulated from the others."""
-    out = []
-    for k in range(len(cameras)):
-        others = [j for j in range(len(cameras)) if j != k]
-        points = np.array([triangulate([cameras[j] for j in others], caps[others, i]) for i in range(caps.shape[1])])
-        out.append(np.median(np.linalg.norm(cameras[k].project(points) - caps[k], axis=1)))
-    return np.array(out)
-
-
-@pytest.mark.skipif(not BALANCING.is_dir(), reason="shared pose2sim-balancing data not present")
-def test_real_man_tracked_through_all_100_frames_after_refining_rig_and_scene(tmp_path):
-    """The README's recipe for the Pose2Sim balancing trial, all 4 HD views: track with the median background,
-    clear the background of the tracked body and refine the rig to it, track again (--max-turn 0.1), repeat
-    once, track.  The cap (hue blob, never seen by the tracker) then agrees across the views (each camera's
-    centroid against the cap triangulated from the other three: cam03 28.4 px -> 6.8 px measured), and the
-    crown of the tracked head stays within 12 cm of it in all 100 frames (measured: median 25 mm, max 105 mm
-    at frame 0, the hand-made first pose), none lost.  6 of 8 neighbouring settings of the last run also
-    hold all 100 frames; each step is sensitive to the ones before it."""
-    common = ["--model", str(MAN), "--quiet"]
-    tracking = ["--init", str(MAN.with_suffix(".init.toml")), "--dynamics", "kalman", "--search-range", "40",
-                "--iterations", "16"]
-    rig = None
-    background = "median"
-    for round_, frames_used in enumerate((70, 80)):
-        run = tmp_path / f"pass{round_}"
-        calib = ["--calib", str(rig)] if rig else []
-        limit = ["--max-turn", "0.1"] if rig else []
-        assert main(["track", str(BALANCING), *common, *tracking, *calib, *limit, "--background", background,
-                     "--out", str(run)]) == 0
-        background = str(run / "cleared")
-        assert main(["background", str(BALANCING), *common, *calib, "--poses", str(run / "poses.npz"),
-                     "--out", background]) == 0
-        rig_out = tmp_path / f"refined{round_}.toml"
-        assert main(["refine", str(BALANCING), *common, *calib, "--poses", str(run / "poses.npz"), "--frames",
-                     str(frames_used), "--background", background, "--search-range", "40", "--rounds", "24",
-                     "--out", str(rig_out)]) == 0
-        rig = rig_out
-    final = tmp_path / "final"
-    assert main(["track", str(BALANCING), *common, *tracking, "--calib", str(rig), "--max-turn", "0.1",
-                 "--background", background, "--out", str(final)]) == 0
-    recording = open_recording(BALANCING, calibration=rig)
-    caps = cap_centres(recording, recording.frame_count)
-    before = _leave_one_out(open_recording(BALANCING).cameras, caps)
-    after = _leave_one_out(recording.cameras, caps)
-    assert before[2] > 20.0 and after.max() < 10.0, (before, after)
-    result = load_poses(final / "poses.npz")
-    assert len(result["frame"]) == 100 and not (result["status"] == 2).any()
-    head = load_model(MAN).names.index("head")
-    crowns = (result["poses"][:, head] @ np.array([0.0, -0.01, 0.2, 1.0]))[:, :3]
-    caps_3d = np.array([triangulate(recording.cameras, caps[:, i]) for i in range(100)])
-    distances = np.linalg.norm(crowns - caps_3d, axis=1)
-    assert distances.max() < 0.12 and np.median(distances) < 0.04, (distances.argmax(), distances.max())
