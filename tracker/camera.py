@@ -17,7 +17,7 @@ x' = x theta_d / r with theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^
 The pixel centre of the top-left pixel is (0, 0).
 
 The calibration file is the multi-camera TOML of anipose/aniposelib and Pose2Sim
-(docs: shared/design/formats.md): one table per camera, rotations as Rodrigues vectors.
+(docs/formats.md): one table per camera, rotations as Rodrigues vectors.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Joint constraints, the O(N) kinematic-tree solve and coercion (design note, sections 4-5).
+"""Joint constraints, the O(N) kinematic-tree solve and coercion (docs/method-tracking.md, sections 4-5).
 
 Components form a tree numbered so that ``parent[i] < i`` (the root has
 ``parent = -1``).  Component i has pose ``E_i`` (world from component) and moves

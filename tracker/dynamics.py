@@ -1,6 +1,6 @@
 """A second-order motion prior per component: a continuous-discrete Kalman filter (``motion = "kalman"``).
 
-Design note ``../shared/design/metaxas-terzopoulos-math.md``: section 3 (second-order dynamics
+docs/method-physics.md: section 3 (second-order dynamics
 ``M qddot + D qdot = f`` with ``D = gamma M``) and section 5 (the continuous EKF as code: the state
 decoupled into blocks, Q and V scalar multiples of identity, the covariance by the Riccati equation).
 

@@ -1,4 +1,4 @@
-"""Edge measurement and per-component information (design note, section 3).
+"""Edge measurement and per-component information (docs/method-tracking.md, section 3).
 
 Each visible sample searches the (smoothed) grey image along its normal,
 ``p + s n`` for ``s`` in ``[-r, r]`` (or a per-sample sub-interval ``[lo, hi]``

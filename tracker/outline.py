@@ -1,4 +1,4 @@
-"""Visible outline samples of every quadric in every camera (design note, section 2).
+"""Visible outline samples of every quadric in every camera (docs/method-tracking.md, section 2).
 
 For camera k and quadric j with camera-from-component pose ``E = P_k E_world``,
 the quadric in the camera frame is ``Q' = E^-T Q E^-1 = [[A, b], [b^T, c]]``

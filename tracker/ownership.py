@@ -1,6 +1,6 @@
 """Which predicted edge may claim an image edge: search limits along each sample's line.
 
-D&C's 1-D search (design note, section 3) takes the nearest image edge within
+D&C's 1-D search (docs/method-tracking.md, section 3) takes the nearest image edge within
 ``[-r, r]`` of each sample, whatever produced it.  With thin limbs, limbs in
 front of the torso, legs crossing and a forearm lying along its upper arm, the
 nearest edge is often the outline of *another* component, and taking it drags

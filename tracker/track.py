@@ -1,4 +1,4 @@
-"""The frame loop (design note, section 6): render, measure, solve, update, coerce.
+"""The frame loop (docs/method-tracking.md, section 6): render, measure, solve, update, coerce.
 
 Per frame the poses are predicted from the motion model (``Settings.motion``: none, constant
 velocity, or the second-order Kalman filter of :mod:`tracker.dynamics`), then each IRLS
@@ -57,13 +57,13 @@ class Settings:
     # blocks apart; it predicts the poses, and the information s' P^-1 of its predicted covariance is the prior about
     # them (prior_translation/prior_rotation become its floor).  The defaults below were tuned on 11 rendered
     # recordings tracked at 60, 30 and 20 fps and checked on the real Pose2Sim trial; treat them as gains rather
-    # than physical truths (design note, section 5).
+    # than physical truths (docs/method-physics.md, section 5).
     frame_rate: float = 60.0  # frames per second of the recording: the filter's time step is 1 / frame_rate
     kalman_q_translation: float = 3.0  # spectral density of the white-noise acceleration, m^2/s^3
     kalman_q_rotation: float = 100.0  # ... of the angular acceleration, rad^2/s^3
     kalman_noise_scale: float = 1.0  # s: measurement noise V = s' C_i^-1 (C_i the component's edge information)
     kalman_residual_variance: bool = True  # s' = s sigma0_i^2 (sum w m^2 / (n_i - 6) of its fit); False: s' = s
-    kalman_decay: float = 3.0  # velocity decay rate gamma, 1/s (damping D = gamma M, design note section 3)
+    kalman_decay: float = 3.0  # velocity decay rate gamma, 1/s (damping D = gamma M, docs/method-physics.md, section 3)
     uncertain_share: float = 0.6  # share of samples with an edge below which a frame is uncertain
     lost_share: float = 0.3  # ... and lost
     uncertain_residual: float = 3.0  # robust mean offset (px) above which a frame is uncertain

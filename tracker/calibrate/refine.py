@@ -3,7 +3,7 @@
 A camera moved by a small twist xi, camera_from_world ``P_k <- exp(xi) P_k``, images component i
 as the body moved by ``alpha_i = Ad((P_k E_i)^-1) xi`` would, since
 ``exp(xi) P_k E_i = P_k E_i exp(Ad((P_k E_i)^-1) xi)``.  So an outline sample's Jacobian row L_s
-with respect to its component's motion (design note, section 3) gives the row
+with respect to its component's motion (docs/method-tracking.md, section 3) gives the row
 ``J_s = L_s Ad((P_k E_i)^-1)`` with respect to its camera's, and holding the tracked body fixed,
 the edge distances m_s of many frames with the IRLS weights w_s = 1/(c + |m_s|) give each camera's
 motion as the tracker gives a component's, with a weak prior P = diag(lt I3, lr I3) (the tracker's)

@@ -1,4 +1,4 @@
-"""Clipped quadrics in a component's frame (design note, section 2).
+"""Clipped quadrics in a component's frame (docs/method-tracking.md, section 2).
 
 A surface is ``X~^T Q X~ = 0`` with ``X~ = (X; 1)``, negative inside.  Each
 rendered quadric has a clipping quadric ``Q2``: a surface point is kept when

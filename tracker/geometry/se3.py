@@ -1,4 +1,4 @@
-"""SE(3) for poses and body twists (design note, section 1).
+"""SE(3) for poses and body twists (docs/method-tracking.md, section 1).
 
 A pose ``E`` is a 4x4 matrix ``[[R, t], [0, 1]]`` mapping a component's frame to
 another frame (``X_a = E_a_from_b X_b``).  A motion is a twist

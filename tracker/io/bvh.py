@@ -1,6 +1,6 @@
 """BVH motion-capture clips: parsing and forward kinematics.
 
-Conventions (the CMU clips in ``shared/data/cmu-mocap``): a joint's local
+Conventions (the CMU motion capture database's clips): a joint's local
 transform is ``T(offset + position) R`` with ``R`` the product of its rotation
 channels in the listed order (intrinsic, degrees), e.g. ``Zrotation Yrotation
 Xrotation`` gives ``Rz Ry Rx``; the world is Y up and the character faces +Z

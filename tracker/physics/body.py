@@ -1,5 +1,5 @@
 """A multi-part body: deformable superquadric parts joined by point-to-point constraints
-(design note metaxas-terzopoulos-math.md, sections 2-4).
+(docs/method-physics.md, sections 2-4).
 
 Each part is a ``kinematics.Part`` on its own ``superquadric.Mesh``.  Its rotation is kept as a
 unit quaternion theta = (s, v) (scalar first, section 2): a step dphi (a world-frame rotation

@@ -1,4 +1,4 @@
-"""Point-to-point constraints between parts (design note metaxas-terzopoulos-math.md, section 4).
+"""Point-to-point constraints between parts (docs/method-physics.md, section 4).
 
 Constraint j joins a point of part A_j to a point of part B_j:
 

@@ -1,5 +1,5 @@
 """The synthetic error experiment of Metaxas & Terzopoulos (PAMI 1993, Tables I-IV), as
-restated in design note metaxas-terzopoulos-math.md, section 6.
+restated in docs/method-physics.md, section 6.
 
 Truth: a 123-node deformable superquadric over 20 frames whose taper and bend grow while it
 moves slowly as a rigid body and a smooth local bump grows until frame 8 (``truth``).  Data:

@@ -1,5 +1,5 @@
-"""Dynamic fitting of one deformable superquadric part to 3-D points (design note
-metaxas-terzopoulos-math.md, sections 3 and 5).
+"""Dynamic fitting of one deformable superquadric part to 3-D points
+(docs/method-physics.md, sections 3 and 5).
 
 Data forces (eq 16): point z_j attaches to its nearest model node k(j); with the residual
 r_j = z_j - x_k(j) and V = sigma^2 I the generalized force is

@@ -21,7 +21,7 @@ the truth here is kinematic instead of simulated, so that the constraints hold e
 Each part is placed so that its joint point lies on the thorax's, so C = 0 in the truth.  The
 poses at frame 0 agree with the sign convention of ``fitting.initial_part`` (model z and x have
 a positive largest component), so the tracker's mesh is registered with the truth's and the
-node position error is measured node by node (eq 40, the design note's 'pos (node RMS)').
+node position error is measured node by node (eq 40, 'pos (node RMS)' of docs/method-physics.md, section 6).
 
 Tracking (``run``): frame 0 is fitted from the moment initialisation (``body.initial_body``) by
 ``body.fit_frame``'s two stages (global, then local); every later frame starts from the

@@ -1,5 +1,5 @@
-"""Continuous extended Kalman filter for one deformable-superquadric part (design note
-metaxas-terzopoulos-math.md, section 5; the paper's eqs 37-38).
+"""Continuous extended Kalman filter for one deformable-superquadric part
+(docs/method-physics.md, section 5; the paper's eqs 37-38).
 
 The model is the first-order one of section 3 with D = I: the state u is the part's q =
 (c, phi, q_s, q_d), its dynamics qdot = g - K q, and the measurement of a point z_j attached

@@ -1,4 +1,4 @@
-"""Kinematics of one deformable-superquadric part (design note metaxas-terzopoulos-math.md, section 2).
+"""Kinematics of one deformable-superquadric part (docs/method-physics.md, section 2).
 
 A part carries the generalized coordinates
 

@@ -1,5 +1,5 @@
 """3-D point data (``tracker points``): a body of deformable superquadric parts fitted to labelled
-markers and carried from frame to frame (design note metaxas-terzopoulos-math.md, sections 3-4;
+markers and carried from frame to frame (docs/method-physics.md, sections 3-4;
 the paper's human-arm experiment).
 
 A *points model* (TOML) names the parts, the markers on each part and each part's parent::

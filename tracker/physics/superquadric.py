@@ -1,4 +1,4 @@
-"""Deformable superquadric shells (design note metaxas-terzopoulos-math.md, sections 1 and 3).
+"""Deformable superquadric shells (docs/method-physics.md, sections 1 and 3).
 
 The shell (w = 1) over material coordinates u in [-pi/2, pi/2] (latitude) and v in [-pi, pi)
 (longitude) with the global parameters

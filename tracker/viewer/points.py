@@ -2,7 +2,7 @@
 frame by frame, from poses.npz and shapes.npz.
 
 Each part is drawn as its node mesh, x_i = c + R (s(q_s; u_i, v_i) + d_i) (the kinematics of
-design note metaxas-terzopoulos-math.md, section 2), shaded in its own colour; the markers are
+docs/method-physics.md, section 2), shaded in its own colour; the markers are
 dots in their part's colour, the joints black dots.
 """
 
