@@ -20,7 +20,8 @@ from tracker.io.capture import Capture, CaptureError, ReplayClock, ReplaySource
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.live import Recorder, assign_cameras, run, track_live
+from tracker.commands.live import run
+from tracker.live import Recorder, assign_cameras, track_live
 from tracker.model import load_model
 from tracker.track import Settings
 

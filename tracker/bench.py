@@ -29,8 +29,9 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import PosesWriter
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
+from tracker.io.stepwrite import step_and_write
 from tracker.geometry import se3
-from tracker.model import Model, joint_centres, load_model, model_from_dict, rest_poses
+from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
 from tracker.track import STAGES, Settings, StageTimes, Tracker
@@ -76,10 +77,9 @@ def track_run(recording: Recording, model: Model, settings: Settings, out: Path)
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
         for index, images in frames(recording, prepare=tracker.smooth):
-            result = tracker.step(images, smoothed=True)
             mark = time.perf_counter()
-            writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual)
-            output += time.perf_counter() - mark
+            _, spent = step_and_write(tracker, writer, index, images)
+            output += time.perf_counter() - mark - spent
     elapsed = time.perf_counter() - started
     count = recording.frame_count
     stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.times.seconds.items()}

@@ -1,7 +1,4 @@
-"""``tracker live``: track a body in the cameras' frames as they are captured.
-
-    tracker live --camera /dev/video0 --camera /dev/video2 --calib C --model M --init I
-                 [--size WxH] [--fps F] [--record DIR] [--out DIR] [--view]
+"""Live tracking (``tracker live``): track a body in the cameras' frames as they are captured.
 
 Cameras are matched to the calibration's cameras in order (``--camera cam1=/dev/video2`` names
 one instead) and tracked in calibration order.  A ``--camera`` that is a video file is played
@@ -35,26 +32,24 @@ same frames, and exits with 130; a second Ctrl-C interrupts at once (the files a
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import signal
 import sys
 import time
-from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from tracker.camera import Camera, load_calibration
+from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.io.atomic import ensure_writable_folder
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
-from tracker.io.posefile import load_pose_file
 from tracker.io.poses import PosesWriter
 from tracker.io.recording import VIDEO_SUFFIXES
-from tracker.model import Model, joint_centres, load_model
+from tracker.io.stepwrite import step_and_write
+from tracker.model import Model
 from tracker.track import Settings, Tracker
 
 DEFAULT_OUT = Path("out") / "live"
@@ -204,11 +199,12 @@ class _Status:
         rates = ", ".join(f"{name} {(now_count - then) / seconds:.1f}"
                           for name, now_count, then in zip(counts.names, counts.captured, self.counts.captured))
         print(f"live {now - self.capture.started:.0f} s: tracking {(frames - self.frames) / seconds:.1f} fps | "
-              f"capture {rates} fps | {_drops(counts)}", file=sys.stderr, flush=True)
+              f"capture {rates} fps | {drops(counts)}", file=sys.stderr, flush=True)
         self.time, self.counts, self.frames = now, counts, frames
 
 
-def _drops(counts: Counts) -> str:
+def drops(counts: Counts) -> str:
+    """The drop counters as the status line and the summary give them: stale sets, unpaired frames per camera."""
     unpaired = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.unpaired))
     return f"dropped {counts.stale} stale sets, unpaired frames {unpaired}"
 
@@ -256,77 +252,21 @@ def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.n
                                   "folder needs every camera in every frame", file=sys.stderr)
                             recording = False
                     at = float(f"{frame_set.frames[0].time - capture.started:.6f}")  # as timestamps.csv has it
-                    begun = time.perf_counter()
-                    result = tracker.step([frame.image for frame in frame_set.frames], smoothed=True,
-                                          dt=None if last is None else at - last)
-                    spent = time.perf_counter() - begun
+                    images = [frame.image for frame in frame_set.frames]
+                    result, spent = step_and_write(tracker, writer, frames, images, at=at, previous=last)
                     last = at
                     if recording and not recorder.write(frame_set, capture.started):
                         print(f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
                               "the 1 GiB an AVI file can hold; tracking goes on", file=sys.stderr)
                         recording = False
-                    writer.append(frames, result.poses, joint_centres(result.poses), result.status,
-                                  result.residual, spent, at)
                     if view is not None:
-                        images = list(blanks)
+                        shown = list(blanks)
                         for camera, frame in zip(frame_set.cameras, frame_set.frames):
-                            images[camera] = frame.image
-                        view.offer(frames, images, result, spent)
+                            shown[camera] = frame.image
+                        view.offer(frames, shown, result, spent)
                     frames += 1
             seconds = time.monotonic() - capture.started
     finally:
         capture.close()  # also settles the counters
     return Summary(frames, recorder.frames if recorder is not None else 0, capture.counts(), seconds,
                    stop.requested)
-
-
-def run(args: argparse.Namespace) -> int:
-    """``tracker live``: 0 when the sources ended, 130 after Ctrl-C; TrackerInputError for bad input and
-    when every camera stopped delivering (after the output is written)."""
-    calibration_path = Path(args.calib)
-    rig = assign_cameras(args.camera, load_calibration(calibration_path), calibration_path)
-    cameras = [camera for camera, _ in rig]
-    model = load_model(args.model)
-    init = load_pose_file(args.init, model)
-    from tracker.cli import settings_from
-
-    out = Path(args.out) if args.out else DEFAULT_OUT
-    with ExitStack() as stack:
-        sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
-        capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
-        settings = settings_from(args, capture.fps)
-        print("live: " + ", ".join(f"{camera.name} = {source.name} ({source.size[0]}x{source.size[1]}, "
-                                   f"{source.fps:g} fps)" for camera, source in zip(cameras, sources)),
-              file=sys.stderr)
-        recorder = None
-        if args.record:
-            copies = {"calibration.toml": calibration_path, "model.toml": Path(args.model),
-                      "init.toml": Path(args.init)}
-            recorder = stack.enter_context(Recorder(Path(args.record), cameras, capture.fps, copies))
-        view = None
-        if args.view:
-            from tracker.viewer.live import LiveView
-            from tracker.viewer.scene import Scene, start_server
-
-            server = start_server(args.host, args.port)
-            stack.callback(server.stop)
-            view = LiveView(Scene(server, model, cameras, settings.robust_c), model, cameras, init, settings,
-                            rate=args.view_rate)
-            stack.callback(view.close)
-        summary = track_live(capture, cameras, model, init, settings, out, recorder, view)
-    counts = summary.counts
-    print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
-    if recorder is not None:
-        print(f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record}` with the "
-              "same settings replays them)")
-    rate = summary.frames / summary.seconds if summary.seconds > 0 else 0.0
-    captured = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.captured))
-    print(f"frames per second: {rate:.1f} tracked; frames captured: {captured}")
-    print(f"sets: {counts.sets} paired, {counts.taken} tracked; {_drops(counts)}")
-    if summary.interrupted:
-        print("interrupted: the frames done so far are saved", file=sys.stderr)
-        return 130
-    if not counts.live:
-        raise TrackerInputError(f"every camera stopped delivering (see above); the {summary.frames} frames "
-                                f"tracked are in {out / 'poses.npz'}; check the cameras and their connections")
-    return 0

@@ -4,5 +4,5 @@ board.py       the --board spec, the board's corners, detection (chessboard orie
 sources.py     the cameras of a calibration folder, the board search over their frames
 intrinsics.py  K and distortion per camera (Zhang / cv2.calibrateCamera)
 extrinsics.py  board poses, robust pairwise poses, spanning tree, bundle adjustment
-command.py     add_arguments(parser) and run(args) for the command line
+pipeline.py    the steps from a folder of board views to a rig, and the per-camera report
 """

@@ -1,4 +1,4 @@
-"""``tracker export POSES --to trc|c3d|bvh|csv``: tracking results in the files other tools read.
+"""Tracking results in the files other tools read: TRC, C3D, BVH, CSV (``tracker export``).
 
 Every format gets one row per frame index from the first to the last frame of
 the poses file, at a constant rate: ``--fps`` if given, else the rate of the
@@ -17,7 +17,6 @@ y up, as BVH readers expect (see :mod:`tracker.io.export.bvh`).
 
 from __future__ import annotations
 
-import argparse
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -180,10 +179,3 @@ def _bvh_poses(rows: Rows, path: Path, names: tuple[str, ...], model_path: Path)
     if not usable(poses, rows.status).any():
         raise TrackerInputError(f"{path}: every frame is lost, so there is no pose for a BVH; export a run that tracked")
     return poses
-
-
-def run(args: argparse.Namespace) -> int:
-    """Body of ``tracker export``: write the file and print ``wrote FILE``."""
-    target = export(args.poses, args.to, args.out, args.model, args.fps)
-    print(f"wrote {target}")
-    return 0

@@ -1,11 +1,11 @@
-"""``tracker calibrate DIR --board SPEC --out calibration.toml``: a camera rig from board videos.
+"""The calibration pipeline of ``tracker calibrate``: a camera rig from a folder of board videos.
 
 Steps: find the board in every camera's frames (tracker/calibrate/board.py, sources.py);
 calibrate each camera's intrinsics from its own views (intrinsics.py) unless ``--fix-intrinsics``
 gives them; unless ``--intrinsics-only``, find the cameras' poses from the views they share
 (extrinsics.py: board poses, robust pairwise poses, a spanning tree, bundle adjustment); put the
-world frame at the first camera or at the board; write calibration.toml atomically and print the
-reprojection RMS per camera.
+world frame at the first camera or at the board; report the reprojection RMS per camera (the
+command writes calibration.toml and prints the report).
 
 ``--world board``: the world is the board in the first frame it is seen in, taken as lying
 face up on the floor: world x along the board's rows, y = -(board y), z = -(board z), so z points
@@ -18,14 +18,12 @@ translation): only its intrinsics mean anything.
 
 from __future__ import annotations
 
-import argparse
-import sys
 import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tracker.calibrate.board import MIN_CORNERS, Board, parse_board
+from tracker.calibrate.board import MIN_CORNERS, Board
 from tracker.calibrate.extrinsics import (
     FLOOR_FROM_BOARD,
     RigResult,
@@ -35,24 +33,8 @@ from tracker.calibrate.extrinsics import (
 )
 from tracker.calibrate.intrinsics import MIN_VIEWS, Intrinsics, calibrate_intrinsics
 from tracker.calibrate.sources import CameraViews, detect_all, find_sources
-from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
-
-
-def run(args: argparse.Namespace) -> int:
-    """Run ``tracker calibrate``; prints the per-camera RMS; returns 0 (errors raise TrackerInputError)."""
-    if args.fix_intrinsics and args.intrinsics_only:
-        raise TrackerInputError("--fix-intrinsics with --intrinsics-only leaves nothing to calibrate; drop one of them")
-    if args.refine_intrinsics and args.fix_intrinsics:
-        raise TrackerInputError("--refine-intrinsics contradicts --fix-intrinsics; drop one of them")
-    board = parse_board(args.board, inverted=args.inverted)
-    result = calibrate(args.folder, board, intrinsics_only=args.intrinsics_only, fixed=args.fix_intrinsics,
-                       world=args.world, refine_intrinsics=args.refine_intrinsics, max_frames=args.max_frames,
-                       progress=sys.stderr.isatty())
-    save_calibration(result.cameras, args.out)
-    print(result.report())
-    print(f"wrote {args.out}")
-    return 0
 
 
 @dataclass

@@ -1,0 +1,38 @@
+"""``tracker bench``: per-stage timings, frames per second and the decode-only floor."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tracker.commands import options
+
+HELP = "per-stage timings, frames per second and the decode-only floor"
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker bench``."""
+    parser.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    parser.add_argument("--scaling", action="store_true",
+                        help="time one iteration against the number of components (7-120) and of cameras (1-8)")
+    parser.add_argument("--repeats", type=options.positive_int, default=3, help="passes per figure (default 3)")
+    options.add_tuning_options(parser, ("iterations", "spacing", "resample_every"))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the benchmark's tables (or one JSON object with ``--json``)."""
+    import json
+
+    from tracker import bench
+
+    settings = options.settings_from(args)
+    print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)
+    if args.scaling:
+        result = bench.scaling()
+        print(json.dumps(result, indent=2) if args.json else bench.format_scaling(result))
+        return 0
+    result = bench.run(Path(args.recording) if args.recording else bench.DEMO, settings, args.repeats)
+    print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
+    return 0

@@ -1,0 +1,177 @@
+"""Options that several commands share, and what they resolve to: argument types, the recording and
+model of a run, a tracked poses.npz, tracking Settings and the progress bar (formats.md).
+
+Only the command modules import this one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+from pathlib import Path
+
+from tracker.errors import TrackerInputError
+
+TUNING = ("iterations", "spacing", "resample_every", "search_range", "motion", "damping", "max_turn")
+
+
+def positive_int(text: str) -> int:
+    """Argument type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """Argument type: a finite number > 0."""
+    value = float(text)
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def share(text: str) -> float:
+    """Argument type: a number between 0 and 1."""
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 1, got {text}")
+    return value
+
+
+def port(text: str) -> int:
+    """Argument type: a TCP port number 0-65535."""
+    value = int(text)
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a port number 0-65535, got {text}")
+    return value
+
+
+def camera_names(text: str | None) -> list[str] | None:
+    """The names in a comma-separated list of cameras (``--cameras``, ``--fix``); None when not given."""
+    return [c.strip() for c in text.split(",") if c.strip()] if text else None
+
+
+def choose(given: str | None, found: Path | None, what: str, option: str, rec: Path) -> Path:
+    """The file an option names, else the one found in the recording folder ``rec``."""
+    if given:
+        return Path(given)
+    if found is None:
+        raise TrackerInputError(f"{rec}: no {what} in the recording folder; pass {option}")
+    return found
+
+
+def add_recording_options(parser: argparse.ArgumentParser) -> None:
+    """``--cameras`` and ``--calib``: which cameras of a recording folder, and their calibration."""
+    parser.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    parser.add_argument("--calib", metavar="TOML",
+                        help="calibration to use instead of the recording's calibration.toml (e.g. from tracker refine)")
+
+
+def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] = TUNING) -> None:
+    """The tracker's tuning options (Settings fields) that a command offers."""
+    options = {
+        "iterations": (["--iterations"], dict(type=positive_int, help="IRLS iterations per frame (default 6)")),
+        "spacing": (["--spacing"], dict(type=positive_float, help="pixels between outline samples (default 4)")),
+        "resample_every": (["--resample-every"], dict(
+            type=positive_int, help="sample the outlines afresh every N-th iteration, moving them to first order "
+                                    "between (default 3; 1 = every iteration)")),
+        "search_range": (["--search-range"], dict(
+            type=positive_int, help="edge search in the first iteration, pixels either side (default 20; the "
+                                    "last uses 6)")),
+        "motion": (["--dynamics", "--motion"], dict(
+            dest="motion", choices=("none", "constant-velocity", "kalman"),
+            help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
+                 "(a second-order Kalman filter per component whose prediction and covariance set the prior)")),
+        "max_turn": (["--max-turn"], dict(
+            type=positive_float, metavar="RAD",
+            help="largest rotation of any component in one iteration; a larger step is scaled down whole, which "
+                 "keeps a body from flipping on clutter but slows it in fast motion (default: no limit)")),
+        "damping": (["--damping"], dict(type=share, help="share of the last frame's motion carried into the "
+                                                         "prediction (default 1; 0.5 steadies a single camera)")),
+    }
+    for key in which:
+        flags, kwargs = options[key]
+        parser.add_argument(*flags, **kwargs)
+
+
+def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
+    """Settings with the tuning options the user gave (the others at their defaults) and the frame rate
+    of the images (the Kalman filter's time step)."""
+    from tracker.track import Settings
+
+    given = {key: getattr(args, key, None) for key in TUNING}
+    given["frame_rate"] = frame_rate
+    return Settings(**{key: value for key, value in given.items() if value is not None})
+
+
+def add_live_view_options(parser: argparse.ArgumentParser, after: str) -> None:
+    """``--view`` and ``--view-rate``: the browser viewer following a run, and ``after`` it what it shows."""
+    parser.add_argument("--view", action="store_true",
+                        help=f"show the run in the browser viewer (about 30 updates a second), {after}")
+    parser.add_argument("--view-rate", type=positive_float, default=30.0,
+                        help="viewer updates per second while tracking (default 30)")
+
+
+def add_viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> None:
+    """``--host`` and ``--port`` of the browser viewer, and ``--record`` of its session when ``record``."""
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)")
+    parser.add_argument("--port", type=port, default=8080,
+                        help="viewer port (default 8080, or the next free one; 0 picks any free port)")
+    if record:
+        parser.add_argument("--record", metavar="FILE.viser",
+                            help="also write the viewer session as a .viser file for viser's static client")
+
+
+def opened(args: argparse.Namespace):
+    """The recording (``--cameras``, ``--calib``) and the body model (``--model``, else the recording's) a
+    command works on."""
+    from tracker.io.recording import open_recording
+    from tracker.model import load_model
+
+    rec = open_recording(args.recording, camera_names(args.cameras), args.calib)
+    return rec, load_model(choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+
+
+def truth(rec):
+    """The recording's truth.npz arrays, or None when it has none."""
+    from tracker.io.poses import load_poses
+
+    return load_poses(rec.truth_path) if rec.truth_path is not None else None
+
+
+def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
+    """The poses.npz a run of ``model`` on ``rec`` wrote (``given``, else out/<recording name>/poses.npz),
+    loaded and checked against both; ``usable`` marks its frames with a finite pose that is not lost."""
+    import numpy as np
+
+    from tracker.io.poses import load_poses
+    from tracker.track import LOST
+
+    path = Path(given) if given else Path("out") / rec.path.resolve().name / "poses.npz"
+    if not given and not path.is_file():
+        raise TrackerInputError(f"{path}: no poses to review or refine; run `tracker track {rec.path}` first "
+                                "or pass --poses")
+    results = load_poses(path)
+    if len(results["joints"]) == 0:
+        raise TrackerInputError(f"{path}: holds no frames; track some first")
+    if "poses" not in results or list(results["component_names"]) != list(model.names):
+        raise TrackerInputError(f"{path}: its components do not match the model {model.name!r}; "
+                                "pass the --model it was tracked with")
+    if results["frame"].max(initial=0) >= rec.frame_count:
+        raise TrackerInputError(f"{path}: frames beyond the recording's {rec.frame_count}; "
+                                "pass the recording it was tracked from")
+    results["usable"] = np.isfinite(results["poses"]).all(axis=(1, 2, 3))
+    if "status" in results:
+        results["usable"] &= results["status"] != LOST
+    return path, results
+
+
+def bar(args: argparse.Namespace, desc: str | None, unit: str, *, leave: bool = False):
+    """A progress bar on stderr (off with --quiet) to wrap an iterable in; it stays on the screen when
+    done only with ``leave``."""
+    from tqdm import tqdm
+
+    return functools.partial(tqdm, desc=desc, unit=unit, disable=args.quiet, file=sys.stderr, leave=leave)

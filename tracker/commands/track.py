@@ -1,0 +1,156 @@
+"""``tracker track``: track a recording folder, write DIR/poses.npz and print a summary."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from tracker.commands import options
+from tracker.commands.viewing import scene, serve
+from tracker.errors import TrackerInputError
+
+HELP = "track a recording folder, write DIR/poses.npz and print a summary"
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker track``."""
+    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
+    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    parser.add_argument("--init", help="pose at the first frame (default: the recording's init.toml)")
+    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
+    options.add_recording_options(parser)
+    parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    parser.add_argument("--frames", type=options.positive_int, help="number of frames to track (default: all)")
+    options.add_tuning_options(parser)
+    parser.add_argument("--background", default="none", metavar="none|median|DIR",
+                        help="search edges in the difference from the empty scene instead of the grey image: "
+                             "'median' estimates it from the recording (the person must move about), DIR holds "
+                             "<camera>.png images of it (default none)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--overlay", metavar="VIDEO",
+                        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge "
+                             "searches")
+    options.add_live_view_options(parser, "then review the result")
+    options.add_viewer_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
+    130 after Ctrl-C with the frames done written."""
+    import numpy as np
+
+    from tracker.evaluate import evaluate, format_report
+    from tracker.io.posefile import load_pose_file
+    from tracker.io.poses import PosesWriter, load_poses
+    from tracker.io.recording import capture_times, frames
+    from tracker.io.stepwrite import step_and_write
+    from tracker.track import LOST, TRACKED, UNCERTAIN, Tracker
+
+    if args.record and not args.view:
+        raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
+    rec, model = options.opened(args)
+    if not 0 <= args.start < rec.frame_count:
+        raise TrackerInputError(f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; "
+                                "pick a frame inside them")
+    init = load_pose_file(options.choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
+    settings = options.settings_from(args, rec.fps)
+    out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
+    stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
+    background = _background(args, rec, out)
+    print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
+          f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
+          file=sys.stderr)
+    print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
+    tracker = Tracker(model, rec.cameras, init, settings)
+    tracker.warm_up()
+    truth = options.truth(rec)
+    live = _live_view(args, rec, model, init, settings, truth) if args.view else None
+    overlay = None
+    if args.overlay:
+        from tracker.viewer.overlay import OverlayVideo
+
+        overlay = OverlayVideo(Path(args.overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
+    if background is None:
+        prepare = tracker.smooth
+    else:
+        from tracker.foreground import preparers
+
+        prepare = preparers(background, tracker.smooth, keep_grey=overlay is not None)
+    counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
+    residuals = []
+    interrupted = False
+    times, last = capture_times(rec), None  # a live recording's capture times: its frames' time and time steps
+    progress = options.bar(args, None, "frame", leave=True)
+    started = time.perf_counter()
+    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
+        try:
+            for index, images in progress(frames(rec, args.start, stop, prepare=prepare,
+                                                 colour=background is not None), total=stop - args.start):
+                shown = images
+                if background is not None and overlay is not None:
+                    shown, images = zip(*images)
+                at = None if times is None else float(times[index])
+                result, spent = step_and_write(tracker, writer, index, images, at=at, previous=last)
+                last = at
+                if live is not None:
+                    live.offer(index, images, result, spent)
+                if overlay is not None:
+                    overlay.write(shown, tracker.inspect())
+                counts[result.status] += 1
+                residuals.append(result.residual)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            if overlay is not None:
+                overlay.close()
+    elapsed = time.perf_counter() - started
+    if live is not None:
+        live.close()
+    done = len(residuals)
+    print(f"wrote {out / 'poses.npz'} ({done} frames)")
+    if interrupted:
+        print("interrupted: the frames done so far are saved", file=sys.stderr)
+        return 130
+    fps = done / elapsed if elapsed > 0 else float("inf")
+    print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
+    print(f"mean residual: {np.nanmean(residuals) if np.isfinite(residuals).any() else float('nan'):.2f} px")
+    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost")
+    results = load_poses(out / "poses.npz") if truth is not None or live is not None else None
+    if truth is not None:
+        print(format_report(evaluate(results, truth)))
+    if live is not None and done > 0:
+        from tracker.viewer.review import Review
+
+        review = Review(live.scene, rec, model, results, truth, settings)
+        review.show(done - 1)
+        return serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
+    return 0
+
+
+def _background(args: argparse.Namespace, rec, out: Path):
+    """The --background of the run: None, the median of the recording (also saved under ``out``), or a folder."""
+    if args.background == "none":
+        return None
+    from tracker.foreground import SAMPLES, load_background, median_background, sample_indices, save_background
+
+    if args.background != "median":
+        return load_background(args.background, rec)
+    background = median_background(rec, SAMPLES, options.bar(args, "background", "frame"))
+    folder = save_background(background, rec, out / "background")
+    print(f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, saved in {folder} "
+          f"(reuse with --background {folder})", file=sys.stderr)
+    return background
+
+
+def _live_view(args: argparse.Namespace, rec, model, init, settings, truth):
+    """The viewer following the run (``--view``, ``--view-rate``, ``--record``), with the truth's joints."""
+    import numpy as np
+
+    from tracker.viewer.live import LiveView
+    from tracker.viewer.review import truth_rows
+
+    record = Path(args.record) if args.record else None
+    return LiveView(scene(args, rec, model, settings, truth), model, rec.cameras, init, settings,
+                    rate=args.view_rate, truth=truth_rows(truth, np.arange(rec.frame_count)), record=record)

@@ -1,0 +1,48 @@
+"""``tracker view``: review a poses.npz over its recording in the browser viewer."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tracker.commands import options
+from tracker.commands.viewing import scene, serve
+
+HELP = "review poses.npz over its recording in the browser viewer"
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker view``."""
+    parser.add_argument("recording", help="recording folder")
+    parser.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
+    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    options.add_recording_options(parser)
+    parser.add_argument("--background", metavar="DIR",
+                        help="the empty scene a run was tracked against (tracker track --background; a median one "
+                             "is saved in OUT/background): the panels then show and search the difference images")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar while recording")
+    options.add_viewer_options(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve the review until Ctrl-C, or with ``--record`` write the session and return."""
+    from tracker.track import Settings
+    from tracker.viewer.review import Review
+
+    rec, model = options.opened(args)
+    poses_path, results = options.tracked(args.poses, rec, model)
+    settings = Settings()
+    background = None
+    if args.background:
+        from tracker.foreground import load_background
+
+        background = load_background(args.background, rec)
+    truth = options.truth(rec)
+    review = Review(scene(args, rec, model, settings, truth), rec, model, results, truth, settings, background)
+    review.show(0)
+    if args.record:
+        review.record(Path(args.record), progress=not args.quiet)
+        review.close()
+        print(f"wrote {args.record}")
+        return 0
+    return serve(f"reviewing {poses_path} ({len(results['frame'])} frames)", review)

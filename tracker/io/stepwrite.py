@@ -1,0 +1,25 @@
+"""Step and write: track one frame and append its row to poses.npz, as every tracking command does."""
+
+from __future__ import annotations
+
+import time
+
+from tracker.io.poses import PosesWriter
+from tracker.model import joint_centres
+from tracker.track import FrameResult, Tracker
+
+
+def step_and_write(tracker: Tracker, writer: PosesWriter, index: int, images, *, at: float | None = None,
+                   previous: float | None = None) -> tuple[FrameResult, float]:
+    """Track frame ``index`` from its smoothed grey images (one per camera, rig order) and append its row
+    (poses, joint centres, status, residual, seconds spent, capture time ``at``) to ``writer``.
+
+    ``at`` and ``previous`` are the capture times of this frame and of the one tracked before it, in
+    seconds (None for a recording without them); their difference is the step's ``dt``.  Returns the
+    tracker's result and the seconds it spent on the frame.
+    """
+    begun = time.perf_counter()
+    result = tracker.step(images, smoothed=True, dt=None if at is None or previous is None else at - previous)
+    spent = time.perf_counter() - begun
+    writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual, spent, at)
+    return result, spent
