@@ -123,7 +123,7 @@ def test_disk_full_mid_run_keeps_the_frames_already_saved(tmp_path, capsys, monk
     import errno
     import os
 
-    from tracker.io import atomic
+    from tracker import atomic
     from tracker.io.poses import load_poses
 
     demo = Path(__file__).resolve().parents[1] / "recordings" / "demo"

@@ -14,7 +14,8 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
-from tracker.track import LOST, Settings, Tracker
+from tracker.status import LOST
+from tracker.track import Settings, Tracker
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "recordings" / "demo"

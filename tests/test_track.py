@@ -15,7 +15,8 @@ from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
 from tracker.synth import synthesize
-from tracker.track import LOST, Settings, Tracker, motion_since
+from tracker.status import LOST
+from tracker.track import Settings, Tracker, motion_since
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "recordings" / "demo"

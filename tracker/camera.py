@@ -33,8 +33,8 @@ import numpy as np
 import tomli_w
 
 from tracker.errors import TrackerInputError
-from tracker.io.tomlfile import read_toml
-from tracker.io.atomic import atomic_write
+from tracker.tomlfile import read_toml
+from tracker.atomic import atomic_write
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
 _PINHOLE_DISTORTION_LENGTHS = (4, 5, 8, 12, 14)

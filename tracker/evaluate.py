@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.errors import TrackerInputError
+from tracker.status import LOST
 
-_LOST = 2
 
 
 @dataclass
@@ -59,7 +59,7 @@ def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_thr
     tracked[found] = poses["joints"][rows[found]][:, pose_columns]
     lost = ~found | np.isnan(tracked).any(axis=(1, 2))
     if "status" in poses:
-        lost[found] |= poses["status"][rows[found]] == _LOST
+        lost[found] |= poses["status"][rows[found]] == LOST
 
     known = np.isfinite(true).all(axis=2)  # (F, J): truth joints to score
     scored = known & ~lost[:, None]

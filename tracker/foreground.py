@@ -34,7 +34,7 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import atomic_path, ensure_writable_folder
+from tracker.atomic import atomic_path, ensure_writable_folder
 from tracker.io.readers import FrameSeeker, grey, read_image
 from tracker.io.recording import Recording
 from tracker.model import Model

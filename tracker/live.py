@@ -43,7 +43,7 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import ensure_writable_folder
+from tracker.atomic import ensure_writable_folder
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.poses import PosesWriter

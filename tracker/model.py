@@ -18,7 +18,7 @@ import numpy as np
 from tracker.chain import JOINT_TYPES, coerce_kernel, constraint_rows, pack_constraints, row_projectors
 from tracker.errors import TrackerInputError
 from tracker.geometry import quadric, se3
-from tracker.io.tomlfile import read_toml
+from tracker.tomlfile import read_toml
 
 SHAPES = ("sphere", "ellipsoid", "cylinder", "cone")
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import atomic_write, ensure_writable_folder
+from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file

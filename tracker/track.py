@@ -33,8 +33,8 @@ from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
 from tracker.outline import Placed, Rig, Samples, outline_kernel
 from tracker.ownership import Ownership
+from tracker.status import LOST, TRACKED, UNCERTAIN
 
-TRACKED, UNCERTAIN, LOST = 0, 1, 2
 MOTION_MODELS = ("none", "constant-velocity", "kalman")
 
 

@@ -148,7 +148,7 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     import numpy as np
 
     from tracker.io.poses import load_poses
-    from tracker.track import LOST
+    from tracker.status import LOST
 
     path = Path(given) if given else Path("out") / rec.path.resolve().name / "poses.npz"
     if not given and not path.is_file():

@@ -47,9 +47,9 @@ def run(args: argparse.Namespace) -> int:
 
     from tracker.io.markers import read_markers
     from tracker.io.poses import PosesWriter
-    from tracker.io.shapes import ShapesWriter
+    from tracker.physics.shapes import ShapesWriter
     from tracker.physics.points import PointsSettings, load_points_model, start_frame, track
-    from tracker.track import LOST, TRACKED, UNCERTAIN
+    from tracker.status import LOST, TRACKED, UNCERTAIN
 
     markers = read_markers(args.markers)
     model = load_points_model(args.model)

@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
     from tracker.foreground import camera_stacks, sample_indices
-    from tracker.io.atomic import ensure_writable_folder
+    from tracker.atomic import ensure_writable_folder
     from tracker.io.readers import grey
     from tracker.track import Tracker
 

@@ -46,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
     from tracker.io.poses import PosesWriter, load_poses
     from tracker.io.recording import capture_times, frames
     from tracker.io.stepwrite import step_and_write
-    from tracker.track import LOST, TRACKED, UNCERTAIN, Tracker
+    from tracker.status import LOST, TRACKED, UNCERTAIN
+    from tracker.track import Tracker
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.tomlfile import read_text
+from tracker.tomlfile import read_text
 
 
 @dataclass

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import ensure_writable_folder, replace_with, temporary_beside
+from tracker.atomic import ensure_writable_folder, replace_with, temporary_beside
 
 CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG"}
 

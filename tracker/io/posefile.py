@@ -18,8 +18,8 @@ import tomli_w
 
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.io.atomic import atomic_write
-from tracker.io.tomlfile import read_toml
+from tracker.atomic import atomic_write
+from tracker.tomlfile import read_toml
 from tracker.model import Model
 
 _JOINT_TOLERANCE = 1e-3

@@ -30,9 +30,9 @@ from types import TracebackType
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import atomic_write, ensure_writable_folder
+from tracker.atomic import atomic_write, ensure_writable_folder
+from tracker.status import LOST, TRACKED, UNCERTAIN
 
-STATUS_TRACKED, STATUS_UNCERTAIN, STATUS_LOST = 0, 1, 2
 _INITIAL_CAPACITY = 64
 
 
@@ -100,7 +100,7 @@ class PosesWriter:
         for key, value in row.items():
             if np.shape(value) != self._columns[key].shape[1:]:
                 raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._columns[key].shape[1:]}")
-        if status not in (STATUS_TRACKED, STATUS_UNCERTAIN, STATUS_LOST):
+        if status not in (TRACKED, UNCERTAIN, LOST):
             raise ValueError(f"status must be 0, 1 or 2, got {status}")
         if self._count == len(self._columns["frame"]):
             self._columns = {key: np.concatenate([column, np.empty_like(column)]) for key, column in self._columns.items()}
@@ -212,7 +212,7 @@ def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarra
     out.setdefault("frame", np.arange(frames, dtype=np.int64))
     if len(np.unique(out["frame"])) != frames:
         raise fail("'frame' repeats a frame index")
-    if "status" in out and not np.isin(out["status"], (STATUS_TRACKED, STATUS_UNCERTAIN, STATUS_LOST)).all():
+    if "status" in out and not np.isin(out["status"], (TRACKED, UNCERTAIN, LOST)).all():
         raise fail("'status' holds values other than 0, 1, 2")
     if "component_names" in arrays:
         out["component_names"] = names("component_names")

@@ -61,8 +61,8 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.poses import STATUS_LOST, STATUS_TRACKED, STATUS_UNCERTAIN
-from tracker.io.tomlfile import read_toml
+from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.tomlfile import read_toml
 from tracker.physics import body as bd
 from tracker.physics import kinematics as kin
 from tracker.physics import superquadric as sq
@@ -277,8 +277,8 @@ class FrameFit:
         """The frame's poses.npz status: lost when a pose or joint is not finite, uncertain when a part
         had no marker seen, else tracked."""
         if not (np.isfinite(self.poses).all() and np.isfinite(self.joints).all()):
-            return STATUS_LOST
-        return STATUS_UNCERTAIN if np.isnan(self.residual).any() else STATUS_TRACKED
+            return LOST
+        return UNCERTAIN if np.isnan(self.residual).any() else TRACKED
 
     @functools.cached_property
     def poses(self) -> np.ndarray:

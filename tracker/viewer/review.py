@@ -22,10 +22,10 @@ from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.track import Settings, Tracker
+from tracker.status import NAMES
 from tracker.viewer.scene import Frame, Scene, add_run_plots, write_viser
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
-STATUS_NAMES = ("tracked", "uncertain", "lost")
 
 
 def truth_rows(truth: dict | None, frames: np.ndarray) -> np.ndarray | None:
@@ -97,7 +97,7 @@ class Review:
                 images = [self.background.difference(k, image) for k, image in enumerate(images)]
             poses = self.results["poses"][row]
             inspection = self.inspector.inspect(images, poses=poses)
-            status = STATUS_NAMES[int(self.results["status"][row])]
+            status = NAMES[int(self.results["status"][row])]
             label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
             truth = None if self.truth is None else self.truth[row]
             self.scene.show(Frame(poses, images, inspection, truth, label))

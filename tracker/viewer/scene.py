@@ -19,7 +19,7 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from tracker.io.atomic import atomic_write
+from tracker.atomic import atomic_write
 from tracker.model import Model, joint_centres
 from tracker.track import Inspection
 from tracker.viewer.mesh import component_meshes

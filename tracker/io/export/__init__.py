@@ -24,17 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.poses import STATUS_LOST, STATUS_TRACKED, load_poses
+from tracker.io.export.units import seconds
+from tracker.io.poses import load_poses
+from tracker.status import LOST, TRACKED
 
 FORMATS = ("trc", "c3d", "bvh", "csv")
-MM_PER_M = 1000.0  # TRC and C3D write millimetres
-
-
-def seconds(frame: np.ndarray, rate: float) -> np.ndarray:
-    """Seconds from the first of the frame indices ``frame`` (F,) at ``rate`` frames per second."""
-    return (frame - frame[0]) / rate
-
-
 @dataclass(frozen=True)
 class Rows:
     """A poses file on a regular grid of frame indices.
@@ -102,9 +96,9 @@ def regular_rows(data: dict[str, np.ndarray], path: Path, fps: float | None = No
         out[row] = values[order]
         return out
 
-    status = spread(data.get("status", np.full(count, STATUS_TRACKED, np.int8)), STATUS_LOST)
+    status = spread(data.get("status", np.full(count, TRACKED, np.int8)), LOST)
     joints = spread(data["joints"], np.nan)
-    joints[status == STATUS_LOST] = np.nan
+    joints[status == LOST] = np.nan
     joints[~np.isfinite(joints).all(axis=2)] = np.nan
     has_poses = "poses" in data
     return Rows(

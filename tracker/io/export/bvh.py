@@ -37,8 +37,8 @@ import os
 import numpy as np
 
 from tracker.chain import JOINT_TYPES
-from tracker.io.atomic import atomic_write
-from tracker.io.poses import STATUS_LOST
+from tracker.atomic import atomic_write
+from tracker.status import LOST
 from tracker.model import Model, rest_poses
 
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -65,7 +65,7 @@ def euler_zxy(rotation: np.ndarray) -> np.ndarray:
 
 def usable(poses: np.ndarray, status: np.ndarray) -> np.ndarray:
     """(F,) bool: frames that are not lost (status 2) and whose poses (F, N, 4, 4) are all finite."""
-    return (status != STATUS_LOST) & np.isfinite(poses).all(axis=(1, 2, 3))
+    return (status != LOST) & np.isfinite(poses).all(axis=(1, 2, 3))
 
 
 def hold_lost(poses: np.ndarray, status: np.ndarray) -> np.ndarray:

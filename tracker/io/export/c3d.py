@@ -19,8 +19,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import atomic_path
-from tracker.io.export import MM_PER_M
+from tracker.atomic import atomic_path
+from tracker.io.export.units import MM_PER_M
 
 _C3D_MAX_FRAMES = 65535  # the header's first and last frame are 16-bit
 

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tracker.io.atomic import atomic_write
+from tracker.atomic import atomic_write
 
 
 def csv_lines(names: Sequence[str], frame: np.ndarray, time: np.ndarray, status: np.ndarray,

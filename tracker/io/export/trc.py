@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.atomic import atomic_write
-from tracker.io.export import MM_PER_M, seconds
-from tracker.io.tomlfile import read_text
+from tracker.atomic import atomic_write
+from tracker.io.export.units import MM_PER_M, seconds
+from tracker.tomlfile import read_text
 
 HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units", "OrigDataRate",
                "OrigDataStartFrame", "OrigNumFrames")

@@ -23,7 +23,7 @@ import os
 
 import numpy as np
 
-from tracker.io.atomic import atomic_write
+from tracker.atomic import atomic_write
 from tracker.io.poses import flush_due
 from tracker.physics.points import FrameFit, PointsModel
 
