@@ -38,8 +38,9 @@ multiplicative (error-state) EKF, exact for a constant body angular velocity.
 is the tracker's per-component information ``C_i`` (``sum w L^T L`` over its edge samples, in body
 twist coordinates).  We take the covariance of a weighted least-squares estimate, ``V = s' C_i^-1``
 with ``s' = s sigma0_i^2`` and ``sigma0_i^2 = sum w m^2 / (n_i - 6)`` the a-posteriori variance of
-unit weight of the component's fit (:func:`variance_factor`: about 0.06 on the clean demo, 4 on the
-real Pose2Sim footage, so one ``s`` trusts clean images and distrusts cluttered ones), used in
+unit weight of the component's fit (:func:`variance_factor`: small on clean renderings, large on
+cluttered real footage, so one ``s`` trusts clean images and distrusts cluttered ones; values in
+docs/motion-models.md), used in
 information form ``V^-1 = C_i / s'`` so that a component without edges (``C_i = 0``, ``V`` infinite)
 needs no inverse.  Why not the note's ``V = sigma^2 I`` on the pose?  In the note ``V = sigma_v^2 I``
 is the noise of the *data points*; their information about the parameters is ``H^T V^-1 H``

@@ -36,7 +36,8 @@ Speed (two numba calls per IRLS iteration, no allocation per sample):
   once, :func:`undistort_grid`; Newton outside it); the rays in between are
   taken on the straight segment between the two, ``x(t) = x_m + t d`` (the
   lens is smooth over a few tens of pixels: the labels differ from per-pixel
-  exact rays on ~0.03% of the points, all within a pixel of a boundary);
+  exact rays only on rare points within a pixel of a boundary; measured in
+  docs/method-tracking.md, section 3);
 * a quadric takes part only if its bounding sphere meets the fan of rays over
   the segment (exact test: a quadratic in ``t``);
 * with ``x`` linear in ``t``, ``x^T A x`` is a quadratic and ``b^T x`` a line
@@ -154,8 +155,9 @@ def _fill_grid(cam_matrix, cam_dist, step, margin, grid):
 
 @njit(cache=True, inline='always')
 def _undistort_fast(grid, cam_matrix, cam_dist, k, px, py):
-    """:func:`undistort` for camera k by bilinear interpolation in its grid (the map is smooth: the error is
-    ~0.01 pixels for ordinary lenses), or exactly outside the grid."""
+    """:func:`undistort` for camera k by bilinear interpolation in its grid (the map is smooth, so the error
+    is a small fraction of a pixel for ordinary lenses: docs/method-tracking.md, section 3), or exactly
+    outside the grid."""
     gx = (px + GRID_MARGIN) * (1.0 / GRID_STEP)
     gy = (py + GRID_MARGIN) * (1.0 / GRID_STEP)
     if gx >= 0.0 and gy >= 0.0:

@@ -55,9 +55,9 @@ class Settings:
     damping: float = 1.0  # share of the last frame's motion carried into the prediction (constant-velocity)
     # motion = "kalman" (tracker.dynamics): a second-order Kalman filter per component, translation and rotation
     # blocks apart; it predicts the poses, and the information s' P^-1 of its predicted covariance is the prior about
-    # them (prior_translation/prior_rotation become its floor).  The defaults below were tuned on 11 rendered
-    # recordings tracked at 60, 30 and 20 fps and checked on the real Pose2Sim trial; treat them as gains rather
-    # than physical truths (docs/method-physics.md, section 5).
+    # them (prior_translation/prior_rotation become its floor).  The defaults below were tuned on rendered
+    # recordings at several frame rates and checked on real footage (docs/motion-models.md); treat them as gains
+    # rather than physical truths (docs/method-physics.md, section 5).
     frame_rate: float = 60.0  # frames per second of the recording: the filter's time step is 1 / frame_rate
     kalman_q_translation: float = 3.0  # spectral density of the white-noise acceleration, m^2/s^3
     kalman_q_rotation: float = 100.0  # ... of the angular acceleration, rad^2/s^3

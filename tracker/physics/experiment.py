@@ -1,5 +1,7 @@
 """The synthetic error experiment of Metaxas & Terzopoulos (PAMI 1993, Tables I-IV), as
-restated in docs/method-physics.md, section 6.
+restated in docs/method-physics.md, section 6.  Results, run time, the claims per seed and
+the measurements behind each choice below are in docs/physics.md; what was tried and not kept
+is in docs/history.md.
 
 Truth: a 123-node deformable superquadric over 20 frames whose taper and bend grow while it
 moves slowly as a rigid body and a smooth local bump grows until frame 8 (``truth``).  Data:
@@ -9,56 +11,50 @@ size 2-3 its variance 10 (sigma 3.2) is ruled out by its own errors, so absolute
 be reproduced and the noise is scaled to the object, sigma = 0.027 sqrt(variance) (section 6,
 "Units").  Each point is pulled by the node it was sampled at: the paper introduces its next
 experiment (Fig. 8) as one "without one-to-one correspondence between model nodes and data
-points", so Tables I-IV had that correspondence.  With the nearest-node assignment of its
-footnote 5 (what ``tracker points`` does on real markers) the part slid about its long axis at
-25 %/var 10 (0.4 rad from frame 10 on, seed 0) and the frame-0 fit of seed 1 settled in wrong
-basins (node RMS 0.52 at 25 %/var 0).  Estimator: the continuous EKF of ``kalman`` with
-P(0) = I (the paper's is indefinite, see ``kalman``), the paper's Q = V = 0.1 I and w0 = 0.1
-(w1 below), started from the paper's ellipsoid q_s = (2.7, .1, .2, .7, 1, 1, 0, 0, 0, 0, .2)
-with R = I and the centre offset from the data centroid, q and P carried from frame to
-frame, and six departures from the paper (``SETTINGS``), all but the stiffer membrane and the
-split called for by the note's findings on its decoupled filter:
+points", so Tables I-IV had that correspondence.  (With the nearest-node assignment of its
+footnote 5, what ``tracker points`` does on real markers, the part slid about its long axis at
+low density and high noise, and frame-0 fits settled in wrong basins.)  Estimator: the
+continuous EKF of ``kalman`` with P(0) = I (the paper's is indefinite, see ``kalman``), the
+paper's Q = V = 0.1 I and w0 = 0.1 (w1 below), started from the paper's ellipsoid
+q_s = (2.7, .1, .2, .7, 1, 1, 0, 0, 0, 0, .2) with R = I and the centre offset from the data
+centroid, q and P carried from frame to frame, and six departures from the paper
+(``SETTINGS``), all but the stiffer membrane and the split called for by the note's findings
+on its decoupled filter:
 
 * joint rigid + global block (section 5, "Joint rigid+global block"): the paper's c | phi |
-  q_s decoupling leaves the (c_x, b1, b3) mode to 1e4-1e5 iterations; one 16 x 16 block with
-  its eigenvalues capped at P(0) = 1 (``kalman.cap_eigenvalues``) settles it;
+  q_s decoupling leaves the (c_x, b1, b3) mode to converge over a great many iterations; one
+  16 x 16 block with its eigenvalues capped at P(0) = 1 (``kalman.cap_eigenvalues``) settles it;
 * the membrane as a prior (``kalman.Settings.prior_stiffness``): the paper's F = -K puts the
-  local block's fixed point at P_node g_d = K_node d, a membrane 1 / P_node ~ 30 times
-  stiffer than in dynamic fitting (P_node settles near 0.03 I), so the var-0 local and
-  position errors were that membrane's bias; as a prior the fixed point is fitting's g = K q
-  whatever P is;
+  local block's fixed point at P_node g_d = K_node d, a membrane 1 / P_node times stiffer than
+  in dynamic fitting, and P_node settles well below I, so the var-0 local and position errors
+  were that membrane's bias; as a prior the fixed point is fitting's g = K q whatever P is;
 * the stopping rule (section 5, "Stopping rule"): each frame stops when the Gauss-Newton
   distance to its fixed point (``kalman.newton_step``) is below ``SETTINGS.tol``, or at
   ``SETTINGS.max_iterations``; ``run`` reports how many frames hit that cap;
 * a stiffer membrane, w1 = 5 instead of 0.5: with the paper's w1 the nodal displacements
-  follow the per-node noise at every observed node (about 60 % of it at variance 10), so
-  observing fewer nodes meant fitting less noise, and "node-position error grows as density
-  falls" held in only 9 of 12 comparisons on seed 0 (12/12 at w1 = 5 and at w1 = 20).  The
-  note (section 3): the paper's w0, w1 "depend on an unstated normalisation; tune them";
+  follow much of the per-node noise at every observed node, so observing fewer nodes meant
+  fitting less noise and "node-position error grows as density falls" did not always hold; a
+  stiffer membrane restores the density trend.  The note (section 3): the paper's w0, w1
+  "depend on an unstated normalisation; tune them";
 * the b1 stiffness of section 5 ("regularise b1"), K_g = 10 on b1
-  (``kalman.Settings.bend_stiffness``): with b1 free, the frame-0 fit at variance 5 and 10
-  settles in the (c_x, b1) valley (b1 0.37 and c_x off by 0.34 at 100 %/variance 10, truth
-  b1 0.05; a fit started at the truth goes there too, with a lower misfit) and carries it
-  through all 20 frames, so translation error was 0.30 at variance 10 against 0.011 at 0.
-  The prior pulls b1 towards 0 (the truth's grows from 0.05 to 0.38) and c_x follows along
-  that mode, so translation error is mostly this bias: 0.042 at 100 %/var 0, 0.046 at var 10
-  (the paper's, 0.025 and 0.06, is mostly not noise either).  With the split below, K_g = 1
-  left it at 0.014 at var 0 and 0.058 at var 10 (4.2x, as much as local's), and K_g = 3 at
-  0.026 and 0.044 (1.7x against local's 4.1x), so "far more noise-sensitive" failed; K_g = 30
-  pulls global error at var 0 above local (seed 0, 100 %: 0.187 against 0.159);
+  (``kalman.Settings.bend_stiffness``): with b1 free, the noisy frame-0 fits settle in the
+  (c_x, b1) valley (a fit started at the truth goes there too, with a lower misfit) and carry
+  it through every frame, so translation error was dominated by it.  The prior pulls b1
+  towards 0 (the truth's grows) and c_x follows along that mode, so translation error is
+  mostly this bias, as the paper's is mostly not noise either.  A softer K_g makes
+  translation as noise-sensitive as local (so "far more noise-sensitive" fails); a stiffer one
+  pulls global error at var 0 above local;
 * the local/global split (``kalman.absorb_global``, ``kalman.Settings.absorb``): the same node
   positions have many splits between d and (c, R, q_s), and the filter settles the split only
-  along its slowest mode, so at var 0 the local error was 0.25-0.30 in every variant tried (the
-  split the earlier frames had left, not noise) and could not grow "far more" with noise.  At
-  every reassignment the global coordinates absorb what they can express of d (three damped
-  least-squares rounds, ``SETTINGS.absorb_damping`` = 10).  The damping makes the move gradual
-  along the directions the model barely sees, so the data and the b1 prior act on them in
-  between: along the weakest (c_x, b1, b2, b3) direction at frame 8 (eigenvalue 0.15 of
-  L_g^T L_g) one call leaves 96 % in d, a frame's 31 calls 26 %.  Undamped (and K_g = 1),
-  the noise in d at variance 10 went into that direction at once (translation error 113 at
-  100 %/var 10).  The truth is expressed in the converged split (``truth``, undamped), which
-  the filter's calls approach; local error is then the deformation the global model cannot
-  fit: 0.155 at 100 %/var 0, the membrane's shrinking of the bump.
+  along its slowest mode, so without it the local error at var 0 was the split the earlier
+  frames had left, not noise, and could not grow "far more" with noise.  At every reassignment
+  the global coordinates absorb what they can express of d (three damped least-squares rounds,
+  ``SETTINGS.absorb_damping`` = 10).  The damping makes the move gradual along the directions
+  the model barely sees, so the data and the b1 prior act on them in between; undamped, the
+  noise in d went into the weakest direction at once.  The truth is expressed in the converged
+  split (``truth``, undamped), which the filter's calls approach; local error is then the
+  deformation the global model cannot fit (at var 0 mostly the membrane's shrinking of the
+  bump).
 
 Errors (eq 40): err_a = (1/20) sum_f |a_est - a_true| for a = c (translation), the rotation
 (as the geodesic angle of R_est^T R_true), q_s (after mapping the estimate into the truth's a0
@@ -75,19 +71,7 @@ each variance's sigma, node by node) serve every cell of the grid, so that cells
 in density and variance.
 
 Run it with OPENBLAS_NUM_THREADS=1 (as ``make test`` does): the filter multiplies many small
-matrices, and on a busy machine a threaded BLAS slowed an inner iteration from 1.2 to 11.7 ms.
-Single-threaded, the full 4 x 4 grid (2000 rigid + global and 20 x 300 filter iterations per
-cell) took about 150 s on this project's 2-core machine (2026-11-23, seed 0).
-
-Status of the claims with these settings (``check_claims``, 2026-11-23): all five hold on
-seeds 0 and 1 (full grids).  Seed 0: position error grows with noise (12/12) and as density
-falls (12/12); rotation is the smallest (16/16 rows) and local and position the largest
-(16/16); from var 0 to var 10 at 100 % translation grows 1.09x, local 4.06x, position 4.59x.
-Seed 1: the same, with 1.03x, 4.04x and 4.57x.  Seed 3: all five (0.83x, 4.07x, 4.54x).
-Seed 2: four; local and position are the largest in 15/16 rows (at 25 %/var 0 local is 0.259
-against global 0.264).  Before the split (K_g = 1, w1 = 5) three claims held on each seed:
-noise sensitivity failed (translation 2.24x, local 2.28x).  Every frame stops at the
-300-iteration cap.
+matrices, and on a busy machine a threaded BLAS slows them down (run time: docs/physics.md).
 """
 
 from __future__ import annotations
@@ -117,24 +101,22 @@ INITIAL_SHAPE = np.array([2.7, 0.1, 0.2, 0.7, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.2]
 
 INITIAL_OFFSET = np.array([0.1, -0.05, 0.1])
 """Initial centre minus the centroid of the first frame's data (the paper did not start at
-the centre of gravity).  With nearest-node assignment a larger one, (0.15, -0.1, 0.2), locked
-the clean 100 % data into a wrong fit (node RMS error 0.21 after 2000 iterations)."""
+the centre of gravity).  Kept small: with nearest-node assignment a larger offset locked clean
+data into a wrong fit (docs/history.md)."""
 
 ERRORS = ("translation", "rotation", "global", "local", "position")
 """The error columns of Tables I-IV (eq 40)."""
 
 BEND_B3 = 0.7
-"""b3 of the truth's bend b1 cos(r), r = pi b3 (Su + b2 / A).  The first choice, 0.25, kept
-cos r in [0.71, 1]: the bend was 97 % a shift along the model x axis, and the single-frame
-Cramer-Rao bound of c_x (rigid + global, 100 % of the nodes, variance 10) was 5.6, with
-smallest eigenvalue of H^T V^-1 H 2.6e-4 against a largest of 2.4e3: no estimator could
-separate c_x from b1, and the errors measured how far the filter had drifted along that mode.
-At 0.7 (cos r in [-0.59, 1], the ends bend back) the bound is 0.07 (0.18 at 25 %) and the
-condition number falls from 9e6 to 1.7e4 at b1 = 0.05 and to 650 at b1 = 0.35."""
+"""b3 of the truth's bend b1 cos(r), r = pi b3 (Su + b2 / A).  At 0.7 cos r spans [-0.59, 1]:
+the ends bend back, so the bend is not mostly a shift along the model x axis and c_x can be
+told apart from b1.  With a small b3 (cos r near 1) no estimator could separate them, and the
+errors would measure how far the filter drifted along that mode (Cramer-Rao bounds and
+condition numbers: docs/physics.md)."""
 
 TRUTH_ABSORB_ROUNDS = 8
-"""Undamped ``kalman.absorb_global`` rounds for the truth: the largest entry of L_g^T R d over
-the frames falls to 1.3e-11 (8e-5 after 3)."""
+"""Undamped ``kalman.absorb_global`` rounds for the truth, enough for L_g^T R d to vanish to
+round-off on every frame (docs/physics.md)."""
 
 SETTINGS = kf.Settings(
     measurement_variance=0.1, process_noise=0.1, kappa=0.5, max_iterations=300, tol=1e-3,
@@ -151,8 +133,7 @@ w1 = 5, the b1 stiffness 10 and the local/global split with damping 10 (module d
 
 FIRST_FRAME_ITERATIONS = 2000
 """Iteration cap of the rigid + global stage on the first frame, which fits the initial
-ellipsoid to the data (on clean 100 % data the Gauss-Newton distance falls by e every ~350
-iterations, from 0.5 to 7e-3 in 1900)."""
+ellipsoid to the data; the Gauss-Newton distance falls slowly there (docs/physics.md)."""
 
 PAPER_TABLES = {
     (100, 10): (0.06, 0.02, 0.19, 0.65, 0.71),
@@ -201,9 +182,8 @@ def truth(frames: int = 20) -> Truth:
     unit sphere and that of (u, v) = (0.35, 0.6), h = 0.25 min(f / 8, 1).  Each frame is then
     expressed in the converged local/global split (``kalman.absorb_global``, undamped): the
     same node positions, with what the rigid + global model can express of the bump moved into
-    c, R and q_s (a1 up by 0.035, t1 by 0.06, b2 down by 0.14 at frame 8, b1 0.38 at the last
-    frame; |d| from 0.54 to 0.39), so that local error measures the deformation the global
-    model cannot fit.
+    c, R and q_s (how much: docs/physics.md), so that local error measures the deformation the
+    global model cannot fit.
     """
     m = sq.mesh()
     direction = np.column_stack([np.cos(m.u) * np.cos(m.v), np.cos(m.u) * np.sin(m.v), np.sin(m.u)])

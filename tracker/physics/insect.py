@@ -28,19 +28,11 @@ Tracking (``run``): frame 0 is fitted from the moment initialisation (``body.ini
 previous frame's fit and takes local steps only.  The data are labelled by part (segmented, as
 in the paper's arm experiment).
 
-Measured with ``run``'s defaults (36 frames, sigma = 0.1, 200 + 400 steps on frame 0, 60 per
-later frame, w0 = 0.1, w1 = 0.5), max |C| and node position error over the frames:
-
-    data            max |C| mean / max     error mean / max     error frame 0 / 35
-    dense           4.4e-8 / 1.3e-7        0.0013 / 0.0023      0.0001 / 0.0023
-    sparse          1.6e-8 / 3.8e-8        0.101 / 0.139        0.068 / 0.079
-    dense, 0.01     6.7e-8 / 2.6e-7        0.018 / 0.027        0.017 / 0.017
-    sparse, 0.01    3.7e-8 / 1.0e-7        0.143 / 0.211        0.072 / 0.126
-
-(0.01: Gaussian noise per coordinate; the dense error then sits at the noise's RMS 3-D length
-0.017, the nodes following the points as in ``fitting``'s noisy test.)  The insect spans 4.1
-(head to tail) by 4.4 (wing tip to wing tip).  Sparse data leave the local displacements and
-the wings' taper and bend underdetermined, which the paper also notes for its Fig. 10.
+``run``'s defaults: 36 frames, sigma = 0.1, 200 + 400 steps on frame 0, 60 per later frame,
+w0 = 0.1, w1 = 0.5.  It reports the joint violation max |C| and the node position error over
+the frames (results, also with noisy data: docs/physics.md).  The insect spans 4.1 (head to
+tail) by 4.4 (wing tip to wing tip).  Sparse data leave the local displacements and the
+wings' taper and bend underdetermined, which the paper also notes for its Fig. 10.
 """
 
 from __future__ import annotations

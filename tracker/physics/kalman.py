@@ -45,25 +45,25 @@ Findings of the note handled here:
 
 * Gauge (section 1, degeneracy 4): a0 is frozen; P_g leaves it out and its step is zero.
 * Initial covariance: the paper's P(0) (1 on the diagonal, 0.4 on the stiffness pattern) is
-  indefinite at node level on the 123-node mesh (minimum eigenvalue -0.17).  The default is
-  P(0) = I; ``initial_state`` validates any given P_node(0) with a Cholesky factorisation, and
-  ``mesh_covariance`` builds the paper's pattern for a chosen off-diagonal value (positive
-  definite on that mesh up to about 0.2).
+  indefinite at node level on the 123-node mesh (its eigenvalues: docs/physics.md).  The
+  default is P(0) = I; ``initial_state`` validates any given P_node(0) with a Cholesky
+  factorisation, and ``mesh_covariance`` builds the paper's pattern for a chosen off-diagonal
+  value (positive definite on that mesh only for small ones).
 * The slow mode: with the blocks decoupled, c_x and b1 (with b3 small, cos r is nearly
   constant and b1 moves the shell along the model x axis like c does) form the weakest
-  direction of H^T H, which the block-diagonal P cannot precondition: 1e4-1e5 iterations.
-  The joint block's Riccati equation does (its steady state sqrt(q) A^-1/2 turns the rate
+  direction of H^T H, which the block-diagonal P cannot precondition: it takes a great many
+  iterations (docs/physics.md).  The joint block's Riccati equation does (its steady state sqrt(q) A^-1/2 turns the rate
   matrix P A into sqrt(q) A^1/2, whose condition number is the square root of A's), but
   along nearly unobservable directions (information lambda < q) that steady state exceeds
   P(0); ``Settings.covariance_cap`` bounds the eigenvalues of each block of P_g, and the
   optional b1 stiffness damps the mode at the price of a bias in b1.
 * Fixed point and the membrane: the fixed point of the dynamics form is P_b g_b = K_b q_b.
   For c, phi and q_s (K = 0) that is dynamic fitting's H^T V^-1 r = 0, but for d the
-  membrane acts as P_node^-1 K_node: as P_node settles (about 0.03 I with Q = V = 0.1 I on
-  the 123-node mesh) the filter smooths the local deformation some 30 times more than dynamic
-  fitting does (the paper's remark that the filter "does not force the local deformations to
-  interpolate").  The prior form's fixed point is g = K q, dynamic fitting's, for any P; P
-  then only sets the path and speed.
+  membrane acts as P_node^-1 K_node: as P_node settles well below I the filter smooths the
+  local deformation many times more than dynamic fitting does (the paper's remark that the
+  filter "does not force the local deformations to interpolate"; measured: docs/physics.md).
+  The prior form's fixed point is g = K q, dynamic fitting's, for any P; P then only sets the
+  path and speed.
 * Stopping rule: the paper's "change below 1e-4 per step" bounds a rate, not convergence.
   ``filter_frame`` stops when the Gauss-Newton estimate of the distance to the frame's fixed
   point (``newton_step``) is below ``Settings.tol``, or at ``Settings.max_iterations``.

@@ -41,9 +41,9 @@ The fit (:func:`first_fit`, :func:`track`) is the first-order constrained dynami
      part with alpha_p = 2 sqrt(n_p / (sigma^2 m)), n_p its markers seen in the frame: critical
      damping of its translation under their pull (stiffness n_p / sigma^2, mass m), so it follows
      them without ringing, and no damping, so pure coasting, for a part with no marker seen.
-     It is about 3-5 times faster on the real marker files, but lags fast limbs (walking feet at
-     200 Hz) and carries the fit's noisy velocities through gaps, so its residuals are larger
-     (README).
+     It is faster on the real marker files, but lags fast limbs (walking feet at 200 Hz) and
+     carries the fit's noisy velocities through gaps, so its residuals are larger
+     (measurements: docs/physics.md).
 
 A marker that is not seen in a frame (NaN) exerts no force; a part with no marker seen is
 carried by its joints (and its momentum) and reported as uncertain; in a frame with no marker
