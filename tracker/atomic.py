@@ -54,7 +54,8 @@ def replace_with(temp: Path, path: Path) -> None:
 
 def _cannot_write(path: Path, error: OSError) -> TrackerInputError:
     return TrackerInputError(
-        f"{path}: cannot write ({error.strerror or error}); free disk space or choose a writable output folder")
+        f"{path}: cannot write ({error.strerror or error}); free disk space or choose a writable output folder"
+    )
 
 
 @contextmanager

@@ -25,12 +25,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import PosesWriter
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.io.stepwrite import step_and_write
-from tracker.geometry import se3
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
@@ -158,7 +158,6 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-
 def _copies(data: dict, copies: int, keep=None) -> dict:
     """A model TOML document with ``copies`` bodies side by side: copy k's names get ``_k``, and
     every copy's root hangs on the first root by a free joint (independent bodies, one tree).
@@ -215,8 +214,15 @@ def scaling(repeats: int = 50) -> dict:
         tracker.load_images(images)
         tracker.warm_up()
         ms, samples = _core_ms(tracker, repeats, tracker.poses)
-        rows_components.append({"components": model.size, "views": len(demo.cameras), "samples": samples,
-                                "ms_per_iteration": ms, "ms_per_component": ms / model.size})
+        rows_components.append(
+            {
+                "components": model.size,
+                "views": len(demo.cameras),
+                "samples": samples,
+                "ms_per_iteration": ms,
+                "ms_per_component": ms / model.size,
+            }
+        )
     human = model_from_dict(data)
     body = rest_poses(human, se3.from_rotvec([0.0, 0.0, 0.0], [0.0, 0.0, 0.95]))
     ring = [
@@ -231,19 +237,39 @@ def scaling(repeats: int = 50) -> dict:
         tracker.load_images(views[:count])
         tracker.warm_up()
         ms, samples = _core_ms(tracker, repeats, tracker.poses)
-        rows_cameras.append({"views": count, "components": human.size, "samples": samples,
-                             "ms_per_iteration": ms, "ms_per_view": ms / count})
+        rows_cameras.append(
+            {
+                "views": count,
+                "components": human.size,
+                "samples": samples,
+                "ms_per_iteration": ms,
+                "ms_per_view": ms / count,
+            }
+        )
     return {"components": rows_components, "cameras": rows_cameras, "repeats": repeats}
 
 
 def format_scaling(result: dict) -> str:
     """Markdown tables of :func:`scaling`."""
-    lines = ["Core of one IRLS iteration (outline, ownership, measurement, solve), median of "
-             f"{result['repeats']} at fixed poses.", "",
-             "| components | views | samples | ms per iteration | ms per component |", "| --- | --- | --- | --- | --- |"]
-    lines += [f"| {r['components']} | {r['views']} | {r['samples']} | {r['ms_per_iteration']:.3f} | "
-              f"{r['ms_per_component']:.4f} |" for r in result["components"]]
-    lines += ["", "| views | components | samples | ms per iteration | ms per view |", "| --- | --- | --- | --- | --- |"]
-    lines += [f"| {r['views']} | {r['components']} | {r['samples']} | {r['ms_per_iteration']:.3f} | "
-              f"{r['ms_per_view']:.3f} |" for r in result["cameras"]]
+    lines = [
+        "Core of one IRLS iteration (outline, ownership, measurement, solve), median of "
+        f"{result['repeats']} at fixed poses.",
+        "",
+        "| components | views | samples | ms per iteration | ms per component |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    lines += [
+        f"| {r['components']} | {r['views']} | {r['samples']} | {r['ms_per_iteration']:.3f} | "
+        f"{r['ms_per_component']:.4f} |"
+        for r in result["components"]
+    ]
+    lines += [
+        "",
+        "| views | components | samples | ms per iteration | ms per view |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    lines += [
+        f"| {r['views']} | {r['components']} | {r['samples']} | {r['ms_per_iteration']:.3f} | {r['ms_per_view']:.3f} |"
+        for r in result["cameras"]
+    ]
     return "\n".join(lines)

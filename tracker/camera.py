@@ -32,9 +32,9 @@ import cv2
 import numpy as np
 import tomli_w
 
+from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
 from tracker.tomlfile import read_toml
-from tracker.atomic import atomic_write
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
 _PINHOLE_DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
@@ -210,26 +210,33 @@ def _parse_camera(path: Path, table: str, values: dict[str, Any]) -> Camera:
 
     missing = [key for key in _REQUIRED_KEYS if key not in values]
     if missing:
-        raise fail(f"missing key {', '.join(map(repr, missing))}", f"every camera table needs {', '.join(_REQUIRED_KEYS)}")
+        raise fail(
+            f"missing key {', '.join(map(repr, missing))}", f"every camera table needs {', '.join(_REQUIRED_KEYS)}"
+        )
     name = values["name"]
     if not isinstance(name, str) or not name.strip():
         raise fail(f"'name' = {name!r} is not a non-empty string", 'write name = "cam0"')
 
     size = array("size", ((2,),), "write size = [width, height] in pixels")
     if np.any(size <= 0) or np.any(size != np.round(size)):
-        raise fail(f"'size' = {size.tolist()} is not two positive whole numbers", "write size = [width, height] in pixels")
+        raise fail(
+            f"'size' = {size.tolist()} is not two positive whole numbers", "write size = [width, height] in pixels"
+        )
 
     matrix = array("matrix", ((3, 3),), "write matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]")
     if not np.allclose(matrix[2], [0.0, 0.0, 1.0]) or np.linalg.cond(matrix) > 1e12:
-        raise fail("'matrix' is not an invertible camera matrix with last row [0, 0, 1]",
-                   "write matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+        raise fail(
+            "'matrix' is not an invertible camera matrix with last row [0, 0, 1]",
+            "write matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
+        )
 
     fisheye = values.get("fisheye", False)
     if not isinstance(fisheye, bool):
         raise fail(f"'fisheye' = {fisheye!r} is not a boolean", "write fisheye = true or false")
     lengths = (4,) if fisheye else _PINHOLE_DISTORTION_LENGTHS
     distortions = array(
-        "distortions", tuple((n,) for n in lengths),
+        "distortions",
+        tuple((n,) for n in lengths),
         f"write {'fisheye ' if fisheye else ''}distortions as {' or '.join(map(str, lengths))} numbers "
         f"({'k1 k2 k3 k4' if fisheye else 'k1 k2 p1 p2 [k3 ...]'}, OpenCV order)",
     )

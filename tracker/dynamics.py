@@ -112,8 +112,9 @@ class MotionState:
     covariance: np.ndarray
 
 
-def initial_state(poses: np.ndarray, position_variance=(1e-3, 0.1),
-                  velocity_variance=(INITIAL_SPEED ** 2, INITIAL_SPIN ** 2)) -> MotionState:
+def initial_state(
+    poses: np.ndarray, position_variance=(1e-3, 0.1), velocity_variance=(INITIAL_SPEED**2, INITIAL_SPIN**2)
+) -> MotionState:
     """At rest at ``poses`` with isotropic covariances per block: position ``(m^2, rad^2)`` and velocity
     ``((m/s)^2, (rad/s)^2)``."""
     n = poses.shape[0]
@@ -151,7 +152,7 @@ def noise_integral(dt: float, decay: float = 0.0) -> np.ndarray:
     if x < 1e-3:  # series, exact to O(x^3) relative
         bb = dt * (1.0 - x + 2.0 * x * x / 3.0)
         cb = dt * dt * (0.5 - x / 2.0 + 7.0 * x * x / 24.0)
-        cc = dt ** 3 * (1.0 / 3.0 - x / 4.0 + 7.0 * x * x / 60.0)
+        cc = dt**3 * (1.0 / 3.0 - x / 4.0 + 7.0 * x * x / 60.0)
     else:
         e1 = -np.expm1(-x)
         e2 = -np.expm1(-2.0 * x)
@@ -267,8 +268,14 @@ def block_information(information: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return _floored(out, (0.0, 0.0))
 
 
-def variance_factor(component: np.ndarray, offset: np.ndarray, weight: np.ndarray, n_components: int,
-                    pooled_weight: float = 12.0, fallback=1.0) -> np.ndarray:
+def variance_factor(
+    component: np.ndarray,
+    offset: np.ndarray,
+    weight: np.ndarray,
+    n_components: int,
+    pooled_weight: float = 12.0,
+    fallback=1.0,
+) -> np.ndarray:
     """Per component the a-posteriori variance of unit weight of its IRLS fit (weighted least squares:
     ``Cov = sigma0^2 C^-1``), ``sigma0_i^2 = sum w m^2 / (n_i - 6)`` over its samples that found an edge,
     shrunk towards the value pooled over all components with the weight of ``pooled_weight`` samples (so

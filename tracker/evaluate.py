@@ -24,7 +24,6 @@ from tracker.errors import TrackerInputError
 from tracker.status import LOST
 
 
-
 @dataclass
 class Report:
     """Overall and per-joint accuracy; lengths in millimetres, PCK as a share in [0, 1]."""
@@ -67,9 +66,7 @@ def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_thr
     hit = scored & (np.nan_to_num(error, nan=np.inf) < pck_threshold)
     aligned_error = np.where(scored, np.linalg.norm(_umeyama_align(tracked, true, scored) - true, axis=2), np.nan)
 
-    per_joint = {
-        name: (1000.0 * _mean(error[:, j]), _share(hit[:, j], known[:, j])) for j, name in enumerate(names)
-    }
+    per_joint = {name: (1000.0 * _mean(error[:, j]), _share(hit[:, j], known[:, j])) for j, name in enumerate(names)}
     return Report(
         mpjpe_mm=1000.0 * _mean(error),
         pa_mpjpe_mm=1000.0 * _mean(aligned_error),
@@ -138,7 +135,5 @@ def format_report(report: Report) -> str:
         "",
         f"{'joint':<{width}}  {'MPJPE mm':>9}  {threshold:>11}",
     ]
-    lines += [
-        f"{name:<{width}}  {mpjpe:>9.1f}  {100 * pck:>10.1f}%" for name, (mpjpe, pck) in report.per_joint.items()
-    ]
+    lines += [f"{name:<{width}}  {mpjpe:>9.1f}  {100 * pck:>10.1f}%" for name, (mpjpe, pck) in report.per_joint.items()]
     return "\n".join(lines)

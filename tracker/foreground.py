@@ -32,9 +32,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.atomic import atomic_path, ensure_writable_folder
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.atomic import atomic_path, ensure_writable_folder
 from tracker.io.readers import FrameSeeker, grey, read_image
 from tracker.io.recording import Recording
 from tracker.model import Model
@@ -67,8 +67,9 @@ def sample_indices(frame_count: int, samples: int = SAMPLES) -> np.ndarray:
     return np.unique(np.linspace(0, frame_count - 1, min(frame_count, samples)).round().astype(int))
 
 
-def camera_stacks(recording: Recording, indices: Iterable[int],
-                  progress: Callable[[Iterable], Iterable] = iter) -> Iterator[np.ndarray]:
+def camera_stacks(
+    recording: Recording, indices: Iterable[int], progress: Callable[[Iterable], Iterable] = iter
+) -> Iterator[np.ndarray]:
     """Per camera (rig order) the BGR frames ``indices`` stacked (len(indices), H, W, 3), one camera's
     frames held at a time; ``progress`` wraps the list of (camera, frame) reads (e.g. a tqdm bar)."""
     indices = [int(index) for index in indices]
@@ -79,8 +80,9 @@ def camera_stacks(recording: Recording, indices: Iterable[int],
             yield np.stack([seeker.read(index) for _, index in itertools.islice(reading, len(indices))])
 
 
-def median_background(recording: Recording, samples: int = SAMPLES,
-                      progress: Callable[[Iterable], Iterable] = iter) -> Background:
+def median_background(
+    recording: Recording, samples: int = SAMPLES, progress: Callable[[Iterable], Iterable] = iter
+) -> Background:
     """Per camera, the per-pixel median of ``samples`` frames spread over the recording; ``progress``
     wraps the list of (camera, frame) reads (e.g. a tqdm bar).  One camera's frames are held at a time."""
     stacks = camera_stacks(recording, sample_indices(recording.frame_count, samples), progress)
@@ -95,19 +97,25 @@ def load_background(folder: str | os.PathLike, recording: Recording) -> Backgrou
     """``<camera>.png`` of each camera of the recording from ``folder``, checked against its image size."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise TrackerInputError(f"{folder}: background folder not found; give a folder of <camera>.png images of "
-                                "the empty scene, or --background median")
+        raise TrackerInputError(
+            f"{folder}: background folder not found; give a folder of <camera>.png images of "
+            "the empty scene, or --background median"
+        )
     images = []
     for camera in recording.cameras:
         file = background_file(folder, camera.name)
         if not file.is_file():
-            raise TrackerInputError(f"{file}: no background image for camera {camera.name}; add it (an image of "
-                                    "the empty scene from that camera), or use --background median")
+            raise TrackerInputError(
+                f"{file}: no background image for camera {camera.name}; add it (an image of "
+                "the empty scene from that camera), or use --background median"
+            )
         image = read_image(file, 0)
         if image.shape[1::-1] != tuple(camera.size):
-            raise TrackerInputError(f"{file}: background is {image.shape[1]}x{image.shape[0]} but camera "
-                                    f"{camera.name} gives {camera.size[0]}x{camera.size[1]} frames; "
-                                    "take it with the same camera and size")
+            raise TrackerInputError(
+                f"{file}: background is {image.shape[1]}x{image.shape[0]} but camera "
+                f"{camera.name} gives {camera.size[0]}x{camera.size[1]} frames; "
+                "take it with the same camera and size"
+            )
         images.append(image)
     return Background(tuple(images))
 
@@ -122,8 +130,9 @@ def save_background(background: Background, recording: Recording, folder: str | 
     return folder
 
 
-def preparers(background: Background, smooth: Callable[[np.ndarray], np.ndarray],
-              keep_grey: bool = False) -> list[Callable[[np.ndarray], object]]:
+def preparers(
+    background: Background, smooth: Callable[[np.ndarray], np.ndarray], keep_grey: bool = False
+) -> list[Callable[[np.ndarray], object]]:
     """Per camera, what its reader thread makes of a BGR frame: ``smooth(F_k)`` for the edge search, or,
     with ``keep_grey``, the pair (grey frame, smooth(F_k)) so the frame itself can still be shown."""
 
@@ -157,8 +166,9 @@ def reduced_camera(camera: Camera, factor: float) -> Camera:
     return dataclasses.replace(camera, matrix=matrix, size=size)
 
 
-def silhouettes(renderer: Renderer, size: tuple[int, int], factor: float,
-                margin: int) -> Callable[[np.ndarray], np.ndarray]:
+def silhouettes(
+    renderer: Renderer, size: tuple[int, int], factor: float, margin: int
+) -> Callable[[np.ndarray], np.ndarray]:
     """The function from poses to the pixels (H, W) bool of a ``size`` = (W, H) image that the body
     covers, widened by a disc of radius ``margin`` pixels: ray cast by a renderer of the camera reduced
     by ``factor`` (:func:`reduced_camera`), each pixel u taking the reduced pixel nearest
@@ -175,9 +185,15 @@ def silhouettes(renderer: Renderer, size: tuple[int, int], factor: float,
     return silhouette
 
 
-def cleared_background(recording: Recording, model: Model, frames: np.ndarray, poses: np.ndarray,
-                       samples: int = CLEARED_SAMPLES, margin: float = MARGIN,
-                       progress: Callable[[Iterable], Iterable] = iter) -> Cleared:
+def cleared_background(
+    recording: Recording,
+    model: Model,
+    frames: np.ndarray,
+    poses: np.ndarray,
+    samples: int = CLEARED_SAMPLES,
+    margin: float = MARGIN,
+    progress: Callable[[Iterable], Iterable] = iter,
+) -> Cleared:
     """The empty scene from a recording and a track of the person in it.
 
     ``frames`` (F,) are recording frame indices and ``poses`` (F, N, 4, 4) the model's tracked poses
@@ -198,8 +214,12 @@ def cleared_background(recording: Recording, model: Model, frames: np.ndarray, p
     for camera, stack in zip(recording.cameras, camera_stacks(recording, sampled, progress)):
         short = min(camera.size)
         factor = max(1.0, short / MASK_SIDE)
-        silhouette = silhouettes(Renderer(model, reduced_camera(camera, factor)), camera.size, factor,
-                                 round(margin * max(1.0, short / Settings.reference_size)))
+        silhouette = silhouettes(
+            Renderer(model, reduced_camera(camera, factor)),
+            camera.size,
+            factor,
+            round(margin * max(1.0, short / Settings.reference_size)),
+        )
         masks = np.stack([silhouette(poses[i]) for i in chosen])
         covered = masks.sum(axis=0)
         free = len(chosen) - covered
@@ -207,7 +227,7 @@ def cleared_background(recording: Recording, model: Model, frames: np.ndarray, p
         swap = (covered >= COVERAGE * len(chosen)) & (free >= MINIMUM_FREE)
         rows, cols = np.nonzero(swap)
         for part in range(0, len(rows), CHUNK):
-            r, c = rows[part:part + CHUNK], cols[part:part + CHUNK]
+            r, c = rows[part : part + CHUNK], cols[part : part + CHUNK]
             values = stack[:, r, c].astype(np.float32)
             values[masks[:, r, c]] = np.nan
             image[r, c] = np.nanmedian(values, axis=0)

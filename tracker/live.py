@@ -41,9 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
+from tracker.atomic import ensure_writable_folder
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.atomic import ensure_writable_folder
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.poses import PosesWriter
@@ -62,8 +62,10 @@ def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> l
     names = [camera.name for camera in calibration]
     named = [spec for spec in specs if "=" in spec]
     if named and len(named) != len(specs):
-        raise TrackerInputError("--camera: name every camera (cam0=/dev/video0) or none (then they are matched "
-                                f"to {path}'s cameras in order)")
+        raise TrackerInputError(
+            "--camera: name every camera (cam0=/dev/video0) or none (then they are matched "
+            f"to {path}'s cameras in order)"
+        )
     if named:
         pairs = [tuple(spec.split("=", 1)) for spec in specs]
         for name, device in pairs:
@@ -73,8 +75,10 @@ def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> l
                 raise TrackerInputError(f"--camera {name}=: give the device, e.g. {name}=/dev/video0")
     else:
         if len(specs) > len(names):
-            raise TrackerInputError(f"{path}: has {len(names)} camera(s) ({', '.join(names)}) but {len(specs)} "
-                                    "--camera were given; use a calibration of every camera")
+            raise TrackerInputError(
+                f"{path}: has {len(names)} camera(s) ({', '.join(names)}) but {len(specs)} "
+                "--camera were given; use a calibration of every camera"
+            )
         pairs = list(zip(names, specs))
     for kind, values in (("camera", [name for name, _ in pairs]), ("device", [device for _, device in pairs])):
         repeated = sorted({value for value in values if values.count(value) > 1})
@@ -84,8 +88,9 @@ def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> l
     return [(camera, by_name[camera.name]) for camera in calibration if camera.name in by_name]
 
 
-def open_sources(devices: list[str], cameras: list[Camera], size: tuple[int, int] | None, fps: float | None,
-                 calibration: Path) -> list[Source]:
+def open_sources(
+    devices: list[str], cameras: list[Camera], size: tuple[int, int] | None, fps: float | None, calibration: Path
+) -> list[Source]:
     """One source per camera: a video file is replayed (all files on one clock), anything else is opened as
     a V4L2 device asked for ``size`` (default: the camera's) and ``fps``.  Each must give its camera's
     calibrated size."""
@@ -105,7 +110,8 @@ def open_sources(devices: list[str], cameras: list[Camera], size: tuple[int, int
                 raise TrackerInputError(
                     f"{device}: gives {width}x{height} images but camera {camera.name!r} in {calibration} is "
                     f"calibrated at {camera.size[0]}x{camera.size[1]}; ask for that size (--size) or use a "
-                    f"calibration made at {width}x{height}")
+                    f"calibration made at {width}x{height}"
+                )
     except BaseException:
         for source in sources:
             source.close()
@@ -136,8 +142,9 @@ class Recorder:
             return False
         for video, data in zip(self.videos, jpegs):
             video.write_jpeg(data)
-        self.times.write(",".join([str(self.frames)] + [f"{frame.time - origin:.6f}" for frame in frame_set.frames])
-                         + "\n")
+        self.times.write(
+            ",".join([str(self.frames)] + [f"{frame.time - origin:.6f}" for frame in frame_set.frames]) + "\n"
+        )
         self.frames += 1
         return True
 
@@ -196,10 +203,16 @@ class _Status:
         if seconds < STATUS_PERIOD:
             return
         counts = self.capture.counts()
-        rates = ", ".join(f"{name} {(now_count - then) / seconds:.1f}"
-                          for name, now_count, then in zip(counts.names, counts.captured, self.counts.captured))
-        print(f"live {now - self.capture.started:.0f} s: tracking {(frames - self.frames) / seconds:.1f} fps | "
-              f"capture {rates} fps | {drops(counts)}", file=sys.stderr, flush=True)
+        rates = ", ".join(
+            f"{name} {(now_count - then) / seconds:.1f}"
+            for name, now_count, then in zip(counts.names, counts.captured, self.counts.captured)
+        )
+        print(
+            f"live {now - self.capture.started:.0f} s: tracking {(frames - self.frames) / seconds:.1f} fps | "
+            f"capture {rates} fps | {drops(counts)}",
+            file=sys.stderr,
+            flush=True,
+        )
         self.time, self.counts, self.frames = now, counts, frames
 
 
@@ -214,8 +227,16 @@ def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
     return tracker.with_cameras(cameras)
 
 
-def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.ndarray, settings: Settings,
-               out: Path, recorder: Recorder | None = None, view=None) -> Summary:
+def track_live(
+    capture: Capture,
+    cameras: list[Camera],
+    model: Model,
+    init: np.ndarray,
+    settings: Settings,
+    out: Path,
+    recorder: Recorder | None = None,
+    view=None,
+) -> Summary:
     """Track the sets ``capture`` delivers until its sources end, no camera is left, or Ctrl-C.
 
     ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order; ``recorder`` and
@@ -245,19 +266,28 @@ def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.n
                     if frame_set.cameras != rig:
                         rig = frame_set.cameras
                         tracker = _rebuilt(tracker, [cameras[camera] for camera in rig])
-                        print(f"tracker: tracking goes on with {', '.join(cameras[camera].name for camera in rig)} "
-                              f"from frame {frames} (tracker rebuilt at the current poses)", file=sys.stderr)
+                        print(
+                            f"tracker: tracking goes on with {', '.join(cameras[camera].name for camera in rig)} "
+                            f"from frame {frames} (tracker rebuilt at the current poses)",
+                            file=sys.stderr,
+                        )
                         if recording:
-                            print(f"tracker: the recording ends at its {recorder.frames} frames: a recording "
-                                  "folder needs every camera in every frame", file=sys.stderr)
+                            print(
+                                f"tracker: the recording ends at its {recorder.frames} frames: a recording "
+                                "folder needs every camera in every frame",
+                                file=sys.stderr,
+                            )
                             recording = False
                     at = float(f"{frame_set.frames[0].time - capture.started:.6f}")  # as timestamps.csv has it
                     images = [frame.image for frame in frame_set.frames]
                     result, spent = step_and_write(tracker, writer, frames, images, at=at, previous=last)
                     last = at
                     if recording and not recorder.write(frame_set, capture.started):
-                        print(f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
-                              "the 1 GiB an AVI file can hold; tracking goes on", file=sys.stderr)
+                        print(
+                            f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
+                            "the 1 GiB an AVI file can hold; tracking goes on",
+                            file=sys.stderr,
+                        )
                         recording = False
                     if view is not None:
                         shown = list(blanks)
@@ -268,5 +298,4 @@ def track_live(capture: Capture, cameras: list[Camera], model: Model, init: np.n
             seconds = time.monotonic() - capture.started
     finally:
         capture.close()  # also settles the counters
-    return Summary(frames, recorder.frames if recorder is not None else 0, capture.counts(), seconds,
-                   stop.requested)
+    return Summary(frames, recorder.frames if recorder is not None else 0, capture.counts(), seconds, stop.requested)

@@ -88,8 +88,27 @@ def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, p
 
 
 @njit(cache=True, nogil=True)
-def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, twist, search_range,
-                   threshold, robust_c, n_components, o_offset, o_weight, information, eta, s_lo=None, s_hi=None):
+def measure_kernel(
+    images,
+    cam_size,
+    count,
+    s_cam,
+    s_comp,
+    s_pixel,
+    s_normal,
+    s_jac,
+    twist,
+    search_range,
+    threshold,
+    robust_c,
+    n_components,
+    o_offset,
+    o_weight,
+    information,
+    eta,
+    s_lo=None,
+    s_hi=None,
+):
     """Search every sample's edge and accumulate C_i, eta_i; returns (visible, found, sum w|m|, sum w).
 
     ``twist`` (n_components, 6) is each component's motion since the samples were taken: every search
@@ -117,8 +136,20 @@ def measure_kernel(images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_
             moved += s_jac[s, a] * twist[i, a]
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
-        m = edge_offset(images[k], cam_size[k, 0], cam_size[k, 1], s_pixel[s, 0] + moved * nx,
-                        s_pixel[s, 1] + moved * ny, nx, ny, search_range, threshold, profile, lo, hi)
+        m = edge_offset(
+            images[k],
+            cam_size[k, 0],
+            cam_size[k, 1],
+            s_pixel[s, 0] + moved * nx,
+            s_pixel[s, 1] + moved * ny,
+            nx,
+            ny,
+            search_range,
+            threshold,
+            profile,
+            lo,
+            hi,
+        )
         o_offset[s] = m
         if np.isnan(m):
             o_weight[s] = 0.0

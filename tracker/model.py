@@ -63,9 +63,17 @@ class Model:
 
     def coerce(self, poses: np.ndarray) -> np.ndarray:
         """The poses with every joint repaired exactly and within its limits (chain.coerce_kernel)."""
-        return coerce_kernel(np.ascontiguousarray(poses, dtype=np.float64), self.parent, self.rest,
-                             self.constraint_projector, self.constraint_rows, self.joint_type, self.axis,
-                             self.lower, self.upper)
+        return coerce_kernel(
+            np.ascontiguousarray(poses, dtype=np.float64),
+            self.parent,
+            self.rest,
+            self.constraint_projector,
+            self.constraint_rows,
+            self.joint_type,
+            self.axis,
+            self.lower,
+            self.upper,
+        )
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -88,7 +96,9 @@ def _vector(value, length: int, where: str) -> np.ndarray:
 
 def _positive(value, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{where} must be a positive number, got {float(value) if isinstance(value, float) else value!r}")
+        raise ValueError(
+            f"{where} must be a positive number, got {float(value) if isinstance(value, float) else value!r}"
+        )
     return float(value)
 
 
@@ -131,7 +141,7 @@ def _breadth_first(names: list[str], parents: list[str], path: Path) -> list[int
     roots = [i for i, p in enumerate(parents) if p == ""]
     if len(roots) != 1:
         raise TrackerInputError(
-            f"{path}: a model needs exactly one root component (parent = \"\"), found {len(roots)}; fix the `parent` keys"
+            f'{path}: a model needs exactly one root component (parent = ""), found {len(roots)}; fix the `parent` keys'
         )
     for name, p in zip(names, parents):
         if p and p not in names:
@@ -222,7 +232,9 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
         limits.append(limit)
         rows.append(constraint_rows(JOINT_TYPES[joint], np.zeros(3), direction))
     if not quadrics:
-        raise TrackerInputError(f"{path}: the model has no quadrics, so nothing can be seen; add [[component.quadric]] tables")
+        raise TrackerInputError(
+            f"{path}: the model has no quadrics, so nothing can be seen; add [[component.quadric]] tables"
+        )
     constraint, n_rows = pack_constraints(rows)
     return Model(
         name=str(data.get("name", path.stem)),

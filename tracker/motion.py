@@ -7,14 +7,13 @@ limits (:meth:`tracker.model.Model.coerce`).  BVH conventions are in
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from tracker.chain import HINGE
 from tracker.errors import TrackerInputError
+from tracker.geometry import se3
 from tracker.io.bvh import Bvh, bvh_global
 from tracker.model import Model, poses_from_rotations, rest_poses
-from tracker.geometry import se3
 
 CMU_UNIT = 0.0564
 """Metres per CMU BVH unit ((1/0.45) inch, http://mocap.cs.cmu.edu/faqs.php)."""
@@ -146,8 +145,15 @@ def alignments(bvh: Bvh, model: Model, path: object = "<bvh>") -> tuple[np.ndarr
     return joints, align
 
 
-def retarget(bvh: Bvh, model: Model, start: int = 0, frames: int | None = None, stride: int = 1,
-             centre: bool = True, path: object = "<bvh>") -> np.ndarray:
+def retarget(
+    bvh: Bvh,
+    model: Model,
+    start: int = 0,
+    frames: int | None = None,
+    stride: int = 1,
+    centre: bool = True,
+    path: object = "<bvh>",
+) -> np.ndarray:
     """Model poses (frames, N, 4, 4) following BVH frames start, start+stride, ...
 
     R_i = C R_bvh(joint_i) A_i (see :func:`alignments`); the root sits at the

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-
 _TANGENT_EPS = 1e-3
 _MAX_STEPS = 4096
 
@@ -50,7 +49,7 @@ class Rig:
     size: np.ndarray
 
     @classmethod
-    def from_cameras(cls, cameras) -> "Rig":
+    def from_cameras(cls, cameras) -> Rig:
         distortion = np.zeros((len(cameras), 5))
         for k, cam in enumerate(cameras):
             d = np.asarray(cam.distortions, dtype=np.float64).ravel()[:5]
@@ -83,7 +82,7 @@ class Samples:
     count: int = 0
 
     @classmethod
-    def allocate(cls, capacity: int) -> "Samples":
+    def allocate(cls, capacity: int) -> Samples:
         return cls(
             camera=np.zeros(capacity, np.int64),
             component=np.zeros(capacity, np.int64),
@@ -236,8 +235,33 @@ def _occluders(j, cone, out):
 
 
 @njit(cache=True)
-def _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, occluders, n_occluders,
-          cam_from_comp, k_mat, k_inv, dist, size, o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point, n):
+def _emit(
+    px,
+    py,
+    j,
+    k,
+    comp,
+    conic,
+    conic_scale,
+    q_cam,
+    clip_cam,
+    sphere,
+    occluders,
+    n_occluders,
+    cam_from_comp,
+    k_mat,
+    k_inv,
+    dist,
+    size,
+    o_cam,
+    o_comp,
+    o_quadric,
+    o_pixel,
+    o_normal,
+    o_jac,
+    o_point,
+    n,
+):
     """Test one ideal-pixel outline point and append it to the buffers if visible; returns the new count."""
     if n >= o_cam.shape[0]:
         return n
@@ -360,14 +384,46 @@ def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_qu
 
 
 @njit(cache=True, nogil=True)
-def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, cam_pose, cam_dist, cam_size,
-                   spacing, placed_from, placed_quadric, placed_clip, placed_sphere, placed_cone,
-                   o_cam, o_comp, o_quadric, o_pixel, o_normal, o_jac, o_point):
+def outline_kernel(
+    quadric,
+    clip,
+    bound,
+    quadric_component,
+    poses,
+    cam_matrix,
+    cam_pose,
+    cam_dist,
+    cam_size,
+    spacing,
+    placed_from,
+    placed_quadric,
+    placed_clip,
+    placed_sphere,
+    placed_cone,
+    o_cam,
+    o_comp,
+    o_quadric,
+    o_pixel,
+    o_normal,
+    o_jac,
+    o_point,
+):
     """Sample the visible outlines of all quadrics in all cameras; returns the sample count.
 
     The ``placed_*`` buffers receive :func:`place`'s camera-frame quadrics (later stages reuse them)."""
-    place(quadric, clip, bound, quadric_component, poses, cam_pose, placed_from, placed_quadric, placed_clip,
-          placed_sphere, placed_cone)
+    place(
+        quadric,
+        clip,
+        bound,
+        quadric_component,
+        poses,
+        cam_pose,
+        placed_from,
+        placed_quadric,
+        placed_clip,
+        placed_sphere,
+        placed_cone,
+    )
     n_quadrics = quadric.shape[0]
     occluders = np.empty(n_quadrics, np.int64)
     n = 0
@@ -390,9 +446,15 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
             focal = max(k_mat[0, 0], k_mat[1, 1])
             if centre[2] - radius > 1e-6:
                 disc_c = k_mat @ (centre / centre[2])
-                disc_r = focal * radius / (centre[2] - radius) * (1.0 + np.sqrt(centre[0] ** 2 + centre[1] ** 2) / centre[2])
-                if (disc_c[0] + disc_r < -0.25 * width or disc_c[0] - disc_r > 1.25 * width
-                        or disc_c[1] + disc_r < -0.25 * height or disc_c[1] - disc_r > 1.25 * height):
+                disc_r = (
+                    focal * radius / (centre[2] - radius) * (1.0 + np.sqrt(centre[0] ** 2 + centre[1] ** 2) / centre[2])
+                )
+                if (
+                    disc_c[0] + disc_r < -0.25 * width
+                    or disc_c[0] - disc_r > 1.25 * width
+                    or disc_c[1] + disc_r < -0.25 * height
+                    or disc_c[1] - disc_r > 1.25 * height
+                ):
                     continue
             else:
                 disc_c = np.array([0.5 * width, 0.5 * height, 1.0])
@@ -452,10 +514,33 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                     speed = np.sqrt(vx * vx + vy * vy)
                     outside = _outside(px, py, width, height)
                     if outside == 0.0 and (px - disc_c[0]) ** 2 + (py - disc_c[1]) ** 2 <= disc_r * disc_r:
-                        n = _emit(px, py, j, k, comp, conic, conic_scale, q_cam, clip_cam, sphere, occluders,
-                                  n_occluders, cam_from_comp[j],
-                                  k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric, o_pixel, o_normal,
-                                  o_jac, o_point, n)
+                        n = _emit(
+                            px,
+                            py,
+                            j,
+                            k,
+                            comp,
+                            conic,
+                            conic_scale,
+                            q_cam,
+                            clip_cam,
+                            sphere,
+                            occluders,
+                            n_occluders,
+                            cam_from_comp[j],
+                            k_mat,
+                            k_inv,
+                            cam_dist[k],
+                            size,
+                            o_cam,
+                            o_comp,
+                            o_quadric,
+                            o_pixel,
+                            o_normal,
+                            o_jac,
+                            o_point,
+                            n,
+                        )
                     # arc length >= distance: off the image, skip straight to where it could re-enter
                     theta += max(max(spacing, outside) / max(speed, 1e-12), min_step)
             elif n_pos + n_neg == 2 and n_pos == 1 and n_neg == 1:
@@ -481,9 +566,33 @@ def outline_kernel(quadric, clip, bound, quadric_component, poses, cam_matrix, c
                         t = -half + (s_i + 0.5) * (2.0 * half / steps)
                         if _outside(fx - t * uy, fy + t * ux, width, height) > 0.0:
                             continue
-                        n = _emit(fx - t * uy, fy + t * ux, j, k, comp, conic, conic_scale, q_cam, clip_cam,
-                                  sphere, occluders, n_occluders, cam_from_comp[j], k_mat, k_inv, cam_dist[k], size, o_cam, o_comp, o_quadric,
-                                  o_pixel, o_normal, o_jac, o_point, n)
+                        n = _emit(
+                            fx - t * uy,
+                            fy + t * ux,
+                            j,
+                            k,
+                            comp,
+                            conic,
+                            conic_scale,
+                            q_cam,
+                            clip_cam,
+                            sphere,
+                            occluders,
+                            n_occluders,
+                            cam_from_comp[j],
+                            k_mat,
+                            k_inv,
+                            cam_dist[k],
+                            size,
+                            o_cam,
+                            o_comp,
+                            o_quadric,
+                            o_pixel,
+                            o_normal,
+                            o_jac,
+                            o_point,
+                            n,
+                        )
     return n
 
 
@@ -498,22 +607,44 @@ class Placed:
     cone: np.ndarray
 
     @classmethod
-    def allocate(cls, cameras: int, quadrics: int) -> "Placed":
-        return cls(np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4, 4)),
-                   np.zeros((cameras, quadrics, 4, 4)), np.zeros((cameras, quadrics, 4)),
-                   np.zeros((cameras, quadrics, 6)))
+    def allocate(cls, cameras: int, quadrics: int) -> Placed:
+        return cls(
+            np.zeros((cameras, quadrics, 4, 4)),
+            np.zeros((cameras, quadrics, 4, 4)),
+            np.zeros((cameras, quadrics, 4, 4)),
+            np.zeros((cameras, quadrics, 4)),
+            np.zeros((cameras, quadrics, 6)),
+        )
 
 
-def sample_outlines(model, poses: np.ndarray, rig: Rig, spacing: float, samples: Samples,
-                    placed: Placed | None = None) -> Samples:
+def sample_outlines(
+    model, poses: np.ndarray, rig: Rig, spacing: float, samples: Samples, placed: Placed | None = None
+) -> Samples:
     """Fill ``samples`` with the visible outline of ``model`` at ``poses`` (N,4,4) seen by ``rig``
     (and ``placed``, if given, with the camera-frame quadrics)."""
     placed = Placed.allocate(len(rig.names), model.quadric.shape[0]) if placed is None else placed
     samples.count = outline_kernel(
-        model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses,
-        rig.matrix, rig.pose, rig.distortion, rig.size, float(spacing),
-        placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone,
-        samples.camera, samples.component, samples.quadric, samples.pixel, samples.normal,
-        samples.jacobian, samples.point,
+        model.quadric,
+        model.clip,
+        model.quadric_bound,
+        model.quadric_component,
+        poses,
+        rig.matrix,
+        rig.pose,
+        rig.distortion,
+        rig.size,
+        float(spacing),
+        placed.camera_from,
+        placed.quadric,
+        placed.clip,
+        placed.sphere,
+        placed.cone,
+        samples.camera,
+        samples.component,
+        samples.quadric,
+        samples.pixel,
+        samples.normal,
+        samples.jacobian,
+        samples.point,
     )
     return samples

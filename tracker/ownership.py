@@ -153,7 +153,7 @@ def _fill_grid(cam_matrix, cam_dist, step, margin, grid):
                 grid[k, iy, ix, 1] = y
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _undistort_fast(grid, cam_matrix, cam_dist, k, px, py):
     """:func:`undistort` for camera k by bilinear interpolation in its grid (the map is smooth, so the error
     is a small fraction of a pixel for ordinary lenses: docs/method-tracking.md, section 3), or exactly
@@ -174,7 +174,7 @@ def _undistort_fast(grid, cam_matrix, cam_dist, k, px, py):
     return undistort(cam_matrix[k], cam_dist[k], px, py)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _coefficients(q, k, l, x0, x1, d0, d1, coef, c, at):
     """Along x = (x0, x1, 1) + t (d0, d1, 0), for the matrix q[k, l]: x^T A x = coef[c, at] + coef[c, at+1] t +
     coef[c, at+2] t^2, 2 b^T x = coef[c, at+3] + coef[c, at+4] t, and coef[c, at+5] = c."""
@@ -191,7 +191,7 @@ def _coefficients(q, k, l, x0, x1, d0, d1, coef, c, at):
     coef[c, at + 5] = q[k, l, 3, 3]
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _label_at(t, n_cand, cand_comp, coef):
     """Front-most component hit by the ray x(t) among the candidates (coefficients in ``coef``); -1 if none."""
     nearest = np.inf
@@ -222,15 +222,16 @@ def _label_at(t, n_cand, cand_comp, coef):
     return label
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _cuts(a, b, own, outside):
     """A label change a -> b that is not the sample's own boundary pair {own, outside}."""
     return a != b and not ((a == own and b == outside) or (a == outside and b == own))
 
 
-@njit(cache=True, inline='always')
-def _candidates(q_cam, clip_cam, sphere, near, near_count, quadric_component, k, j, m0, m1, d0, d1, steps,
-                cand_comp, coef):
+@njit(cache=True, inline="always")
+def _candidates(
+    q_cam, clip_cam, sphere, near, near_count, quadric_component, k, j, m0, m1, d0, d1, steps, cand_comp, coef
+):
     """Of the quadrics ``near[k, j, :near_count[k, j]]`` of camera k, those whose bounding sphere meets a ray
     x(t) = (m0, m1, 1) + t (d0, d1, 0), |t| <= steps: their components into ``cand_comp`` and their
     coefficients along the line into ``coef``; returns their count.
@@ -281,7 +282,7 @@ def _candidates(q_cam, clip_cam, sphere, near, near_count, quadric_component, k,
     return n_cand
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _segment(grid, cam_matrix, cam_dist, k, px, py, nx, ny, steps):
     """The rays of p -+ steps n (undistorted, z = 1) as the line x(t) = m + t d: (m0, m1, d0, d1)."""
     ax, ay = _undistort_fast(grid, cam_matrix, cam_dist, k, px - steps * nx, py - steps * ny)
@@ -289,7 +290,7 @@ def _segment(grid, cam_matrix, cam_dist, k, px, py, nx, ny, steps):
     return 0.5 * (ax + bx), 0.5 * (ay + by), (bx - ax) / (2.0 * steps), (by - ay) / (2.0 * steps)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _mark(t_lo, t_hi, r, covered):
     """covered[t + r + 1] = True for the integers t in [t_lo, t_hi] (widened by _WIDEN) within [-r - 1, r + 1]."""
     first = max(-r - 1, int(np.ceil(max(t_lo - _WIDEN, -r - 2.0))))
@@ -298,7 +299,7 @@ def _mark(t_lo, t_hi, r, covered):
         covered[t + r + 1] = True
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _roots(c0, c1, c2):
     """Real roots t1 <= t2 of c0 + c1 t + c2 t^2 (c2 != 0) and whether there are any."""
     delta = c1 * c1 - 4.0 * c2 * c0
@@ -313,7 +314,7 @@ def _roots(c0, c1, c2):
     return t1, t2, True
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _coverage(n_cand, cand_comp, coef, own, outside, r, covered):
     """Mark the points t (``covered[t + r + 1]``) where a candidate that matters may be hit: its discriminant
     is >= 0 there and the ray meets its bounding sphere (analytic roots of both quadratics, slightly widened).
@@ -359,7 +360,7 @@ def _coverage(n_cand, cand_comp, coef, own, outside, r, covered):
             _mark(max(s_lo, t1), min(s_hi, t2), r, covered)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _side(sign, r, n_cand, cand_comp, coef, own, outside, first, covered):
     """Walk t = sign, 2 sign, ... (r + 1) sign; at the first cutting change between |t| and |t| + 1 return
     floor((|t| + 1/2) / 2), or r when there is none.  ``first`` is the exact label at t = sign, or _UNKNOWN.
@@ -380,8 +381,29 @@ def _side(sign, r, n_cand, cand_comp, coef, own, outside, first, covered):
 
 
 @njit(cache=True, nogil=True)
-def search_limits(q_cam, clip_cam, sphere, near, near_count, quadric_component, cam_matrix, cam_dist, grid, count,
-                  s_cam, s_comp, s_quadric, s_pixel, s_normal, r, cand_comp, coef, covered, o_lo, o_hi):
+def search_limits(
+    q_cam,
+    clip_cam,
+    sphere,
+    near,
+    near_count,
+    quadric_component,
+    cam_matrix,
+    cam_dist,
+    grid,
+    count,
+    s_cam,
+    s_comp,
+    s_quadric,
+    s_pixel,
+    s_normal,
+    r,
+    cand_comp,
+    coef,
+    covered,
+    o_lo,
+    o_hi,
+):
     """Per sample, the search interval ``[lo, hi]`` (within ``[-r, r]``) that ends half way to the next
     predicted edge along its line that is not the sample's own boundary pair.
 
@@ -395,10 +417,26 @@ def search_limits(q_cam, clip_cam, sphere, near, near_count, quadric_component, 
     for smp in range(count):
         k = s_cam[smp]
         own = s_comp[smp]
-        m0, m1, d0, d1 = _segment(grid, cam_matrix, cam_dist, k, s_pixel[smp, 0], s_pixel[smp, 1],
-                                  s_normal[smp, 0], s_normal[smp, 1], steps)
-        n_cand = _candidates(q_cam, clip_cam, sphere, near, near_count, quadric_component, k, s_quadric[smp],
-                             m0, m1, d0, d1, steps, cand_comp, coef)
+        m0, m1, d0, d1 = _segment(
+            grid, cam_matrix, cam_dist, k, s_pixel[smp, 0], s_pixel[smp, 1], s_normal[smp, 0], s_normal[smp, 1], steps
+        )
+        n_cand = _candidates(
+            q_cam,
+            clip_cam,
+            sphere,
+            near,
+            near_count,
+            quadric_component,
+            k,
+            s_quadric[smp],
+            m0,
+            m1,
+            d0,
+            d1,
+            steps,
+            cand_comp,
+            coef,
+        )
         outside = _label_at(1.0, n_cand, cand_comp, coef)
         _coverage(n_cand, cand_comp, coef, own, outside, r, covered)
         o_hi[smp] = _side(1, r, n_cand, cand_comp, coef, own, outside, outside, covered)
@@ -406,8 +444,9 @@ def search_limits(q_cam, clip_cam, sphere, near, near_count, quadric_component, 
 
 
 @njit(cache=True)
-def line_labels(q_cam, clip_cam, sphere, quadric_component, cam_matrix, cam_dist, grid, k, px, py, nx, ny, r,
-                cand_comp, coef, out):
+def line_labels(
+    q_cam, clip_cam, sphere, quadric_component, cam_matrix, cam_dist, grid, k, px, py, nx, ny, r, cand_comp, coef, out
+):
     """The labels :func:`search_limits` walks, for one sample in camera k (every quadric a candidate when its
     sphere meets the segment): ``out[t + r + 1]`` for the pixels ``p + t n``, ``t`` in ``[-r - 1, r + 1]``."""
     n_quadrics = q_cam.shape[1]
@@ -417,8 +456,9 @@ def line_labels(q_cam, clip_cam, sphere, quadric_component, cam_matrix, cam_dist
         near[k, 0, l] = l
     steps = float(r + 1)
     m0, m1, d0, d1 = _segment(grid, cam_matrix, cam_dist, k, px, py, nx, ny, steps)
-    n_cand = _candidates(q_cam, clip_cam, sphere, near, near_count, quadric_component, k, 0, m0, m1, d0, d1, steps,
-                         cand_comp, coef)
+    n_cand = _candidates(
+        q_cam, clip_cam, sphere, near, near_count, quadric_component, k, 0, m0, m1, d0, d1, steps, cand_comp, coef
+    )
     for t in range(-r - 1, r + 2):
         out[t + r + 1] = _label_at(float(t), n_cand, cand_comp, coef)
 
@@ -446,8 +486,27 @@ class Ownership:
     def limits(self, placed, samples, r: int) -> tuple[np.ndarray, np.ndarray]:
         m, rig = self.model, self.rig
         prepare(placed.cone, self.scale, r, self.near, self.near_count)
-        search_limits(placed.quadric, placed.clip, placed.sphere, self.near, self.near_count, m.quadric_component,
-                      rig.matrix, rig.distortion, self.grid, samples.count, samples.camera, samples.component,
-                      samples.quadric, samples.pixel, samples.normal, r, self.candidates, self.coefficients,
-                      self.covered, self.lo, self.hi)
-        return self.lo[:samples.count], self.hi[:samples.count]
+        search_limits(
+            placed.quadric,
+            placed.clip,
+            placed.sphere,
+            self.near,
+            self.near_count,
+            m.quadric_component,
+            rig.matrix,
+            rig.distortion,
+            self.grid,
+            samples.count,
+            samples.camera,
+            samples.component,
+            samples.quadric,
+            samples.pixel,
+            samples.normal,
+            r,
+            self.candidates,
+            self.coefficients,
+            self.covered,
+            self.lo,
+            self.hi,
+        )
+        return self.lo[: samples.count], self.hi[: samples.count]

@@ -27,7 +27,6 @@ DEFAULT_BACKGROUNDS = ("basketball1.png", "basketball2.png")
 its fine detail makes Motion-JPEG videos about three times larger; pass it explicitly if wanted)."""
 
 
-
 def pixel_rays(camera: Camera) -> np.ndarray:
     """Normalised undistorted coordinates (H, W, 2) of every pixel centre: the ray (x, y, 1) in the camera frame.
 
@@ -47,8 +46,10 @@ def view_quadrics(model: Model, poses: np.ndarray, camera: Camera) -> tuple[np.n
     inverse_t = np.transpose(inverse, (0, 2, 1))
     surfaces = inverse_t @ model.quadric @ inverse
     clips = inverse_t @ model.clip @ inverse
-    return (np.ascontiguousarray(0.5 * (surfaces + np.transpose(surfaces, (0, 2, 1)))),
-            np.ascontiguousarray(0.5 * (clips + np.transpose(clips, (0, 2, 1)))))
+    return (
+        np.ascontiguousarray(0.5 * (surfaces + np.transpose(surfaces, (0, 2, 1)))),
+        np.ascontiguousarray(0.5 * (clips + np.transpose(clips, (0, 2, 1)))),
+    )
 
 
 def view_boxes(model: Model, poses: np.ndarray, camera: Camera) -> np.ndarray:
@@ -67,17 +68,26 @@ def view_boxes(model: Model, poses: np.ndarray, camera: Camera) -> np.ndarray:
             boxes[k] = (-np.inf, -np.inf, np.inf, np.inf) if s[2] + r > 0 else (1.0, 1.0, -1.0, -1.0)
             continue
         near, far = s[2] - r, s[2] + r
-        boxes[k] = (min((s[0] - r) / near, (s[0] - r) / far), min((s[1] - r) / near, (s[1] - r) / far),
-                    max((s[0] + r) / near, (s[0] + r) / far), max((s[1] + r) / near, (s[1] + r) / far))
+        boxes[k] = (
+            min((s[0] - r) / near, (s[0] - r) / far),
+            min((s[1] - r) / near, (s[1] - r) / far),
+            max((s[0] + r) / near, (s[0] + r) / far),
+            max((s[1] + r) / near, (s[1] + r) / far),
+        )
     return boxes
 
 
 @njit(cache=True, inline="always")
 def _form(m, x, y, z, w):
     """X~^T M X~ for X~ = (x, y, z, w) and symmetric M."""
-    return (m[0, 0] * x * x + m[1, 1] * y * y + m[2, 2] * z * z + m[3, 3] * w * w
-            + 2.0 * (m[0, 1] * x * y + m[0, 2] * x * z + m[0, 3] * x * w
-                     + m[1, 2] * y * z + m[1, 3] * y * w + m[2, 3] * z * w))
+    return (
+        m[0, 0] * x * x
+        + m[1, 1] * y * y
+        + m[2, 2] * z * z
+        + m[3, 3] * w * w
+        + 2.0
+        * (m[0, 1] * x * y + m[0, 2] * x * z + m[0, 3] * x * w + m[1, 2] * y * z + m[1, 3] * y * w + m[2, 3] * z * w)
+    )
 
 
 @njit(cache=True)
@@ -163,9 +173,14 @@ def render_kernel(rays, surfaces, clips, boxes, owner, light, ambient, key, fill
 
 def _forms(m, x, y, z, w):
     """Vectorised X~^T M X~ over arrays x, y, z, w."""
-    return (m[0, 0] * x * x + m[1, 1] * y * y + m[2, 2] * z * z + m[3, 3] * w * w
-            + 2.0 * (m[0, 1] * x * y + m[0, 2] * x * z + m[0, 3] * x * w
-                     + m[1, 2] * y * z + m[1, 3] * y * w + m[2, 3] * z * w))
+    return (
+        m[0, 0] * x * x
+        + m[1, 1] * y * y
+        + m[2, 2] * z * z
+        + m[3, 3] * w * w
+        + 2.0
+        * (m[0, 1] * x * y + m[0, 2] * x * z + m[0, 3] * x * w + m[1, 2] * y * z + m[1, 3] * y * w + m[2, 3] * z * w)
+    )
 
 
 def render(rays, surfaces, clips, owner, light, ambient=0.35, key=0.45, fill=0.3):
@@ -220,19 +235,19 @@ DEFAULT_LIGHT = np.array([0.35, -0.45, 0.82])
 
 ALBEDO = {
     # BGR reflectances: limbs differ from each other, left from right, and from typical backgrounds
-    "pelvis": (0.42, 0.22, 0.16),      # dark blue shorts
-    "torso": (0.80, 0.88, 0.92),       # light shirt
-    "head": (0.50, 0.62, 0.82),        # skin
+    "pelvis": (0.42, 0.22, 0.16),  # dark blue shorts
+    "torso": (0.80, 0.88, 0.92),  # light shirt
+    "head": (0.50, 0.62, 0.82),  # skin
     "upperarm_l": (0.25, 0.55, 0.90),  # orange sleeve
     "upperarm_r": (0.20, 0.22, 0.48),  # dark red sleeve
-    "forearm_l": (0.70, 0.80, 0.86),   # light
-    "forearm_r": (0.20, 0.24, 0.30),   # dark
+    "forearm_l": (0.70, 0.80, 0.86),  # light
+    "forearm_r": (0.20, 0.24, 0.30),  # dark
     "hand_l": (0.45, 0.56, 0.78),
     "hand_r": (0.38, 0.48, 0.70),
-    "thigh_l": (0.62, 0.38, 0.22),     # blue
-    "thigh_r": (0.26, 0.42, 0.28),     # dark green
-    "shin_l": (0.92, 0.90, 0.86),      # white
-    "shin_r": (0.14, 0.14, 0.16),      # black
+    "thigh_l": (0.62, 0.38, 0.22),  # blue
+    "thigh_r": (0.26, 0.42, 0.28),  # dark green
+    "shin_l": (0.92, 0.90, 0.86),  # white
+    "shin_r": (0.14, 0.14, 0.16),  # black
     "foot_l": (0.10, 0.10, 0.12),
     "foot_r": (0.90, 0.92, 0.95),
 }
@@ -289,15 +304,26 @@ def load_backgrounds(cameras: list[Camera], paths=None, seed: int = 0) -> tuple[
 class Renderer:
     """Renders one camera: pixel rays precomputed once, then :meth:`render` per frame."""
 
-    def __init__(self, model: Model, camera: Camera, background: np.ndarray | None = None,
-                 light=DEFAULT_LIGHT, ambient: float = 0.35, key: float = 0.45, fill: float = 0.3,
-                 blur: float = 0.7, noise: float = 3.0):
+    def __init__(
+        self,
+        model: Model,
+        camera: Camera,
+        background: np.ndarray | None = None,
+        light=DEFAULT_LIGHT,
+        ambient: float = 0.35,
+        key: float = 0.45,
+        fill: float = 0.3,
+        blur: float = 0.7,
+        noise: float = 3.0,
+    ):
         self.model, self.camera = model, camera
         self.rays = pixel_rays(camera)
         w, h = camera.size
         self.background = np.full((h, w, 3), 128, np.uint8) if background is None else background
         if self.background.shape != (h, w, 3):
-            raise ValueError(f"background shape {self.background.shape} does not match camera {camera.name} ({h}, {w}, 3)")
+            raise ValueError(
+                f"background shape {self.background.shape} does not match camera {camera.name} ({h}, {w}, 3)"
+            )
         self._background_f32 = self.background.astype(np.float32)
         light = np.asarray(light, dtype=np.float64)
         self.light_world = light / np.linalg.norm(light)
@@ -313,8 +339,20 @@ class Renderer:
         surfaces, clips = view_quadrics(self.model, poses, self.camera)
         boxes = view_boxes(self.model, poses, self.camera)
         light = self.camera.rotation @ self.light_world
-        render_kernel(self.rays, surfaces, clips, boxes, self.model.quadric_component, light,
-                      self.ambient, self.key, self.fill, self.comp, self.shade, self.depth)
+        render_kernel(
+            self.rays,
+            surfaces,
+            clips,
+            boxes,
+            self.model.quadric_component,
+            light,
+            self.ambient,
+            self.key,
+            self.fill,
+            self.comp,
+            self.shade,
+            self.depth,
+        )
         return self.comp, self.shade, self.depth
 
     def render(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:

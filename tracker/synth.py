@@ -18,14 +18,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
-from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file
 from tracker.model import Model, joint_centres, load_model
-
 from tracker.motion import procedural_motion, retarget, surface_samples
 from tracker.render import Renderer, load_backgrounds
 
@@ -33,8 +32,15 @@ from tracker.render import Renderer, load_backgrounds
 # Cameras
 
 
-def look_at_camera(name: str, eye, target=(0.0, 0.0, 1.0), size=(640, 480), focal: float = 560.0,
-                   distortions=(0.0, 0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0)) -> Camera:
+def look_at_camera(
+    name: str,
+    eye,
+    target=(0.0, 0.0, 1.0),
+    size=(640, 480),
+    focal: float = 560.0,
+    distortions=(0.0, 0.0, 0.0, 0.0),
+    up=(0.0, 0.0, 1.0),
+) -> Camera:
     """A camera at ``eye`` looking at ``target`` with ``up`` pointing up in the image.
 
     OpenCV axes (x right, y down, z forward); fx = fy = ``focal``; principal point
@@ -95,8 +101,9 @@ DEFAULT_QUALITY = 70
 """MJPG quality (cv2.VIDEOWRITER_PROP_QUALITY, 0..100) of :func:`synthesize`."""
 
 
-def motion_poses(model: Model, motion: str, frames: int, start: int = 0, stride: int = 2, fps: float = 60.0,
-                 seed: int = 0) -> tuple[np.ndarray, float, Path | None]:
+def motion_poses(
+    model: Model, motion: str, frames: int, start: int = 0, stride: int = 2, fps: float = 60.0, seed: int = 0
+) -> tuple[np.ndarray, float, Path | None]:
     """Poses (F, N, 4, 4), frame rate and the BVH path (or None) for a motion spec.
 
     ``motion`` is ``"bvh:PATH"`` (retargeted frames start, start + stride, ...;
@@ -126,8 +133,18 @@ def write_truth(path: str | os.PathLike, model: Model, poses: np.ndarray, frame:
     atomic_write(path, lambda file: np.savez(file, **arrays))
 
 
-def _readme(name: str, motion: str, bvh: Path | None, backgrounds: list[Path], frames: int, fps: float,
-            cameras: list[Camera], model_path: Path, start: int, stride: int) -> str:
+def _readme(
+    name: str,
+    motion: str,
+    bvh: Path | None,
+    backgrounds: list[Path],
+    frames: int,
+    fps: float,
+    cameras: list[Camera],
+    model_path: Path,
+    start: int,
+    stride: int,
+) -> str:
     lines = [
         f"# Synthetic recording `{name}`",
         "",
@@ -137,8 +154,9 @@ def _readme(name: str, motion: str, bvh: Path | None, backgrounds: list[Path], f
         f"- model: `{model_path.name}` (copied as `model.toml`)",
         f"- cameras: {', '.join(c.name for c in cameras)} (`calibration.toml`)",
         f"- frames: {frames} at {fps:g} fps",
-        f"- motion: `{motion}`" if bvh is None else
-        f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} (every {stride}),"
+        f"- motion: `{motion}`"
+        if bvh is None
+        else f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} (every {stride}),"
         " retargeted onto the model",
         "",
         "## Credits and licences",
@@ -147,8 +165,8 @@ def _readme(name: str, motion: str, bvh: Path | None, backgrounds: list[Path], f
     if bvh is not None:
         lines += [
             f"- Motion `{bvh.name}`: CMU Graphics Lab Motion Capture Database, http://mocap.cs.cmu.edu/ .",
-            "  \"The data used in this project was obtained from mocap.cs.cmu.edu. The database was created",
-            "  with funding from NSF EIA-0196217.\" Free for research and commercial use.",
+            '  "The data used in this project was obtained from mocap.cs.cmu.edu. The database was created',
+            '  with funding from NSF EIA-0196217." Free for research and commercial use.',
         ]
     if backgrounds:
         lines += [
@@ -161,10 +179,23 @@ def _readme(name: str, motion: str, bvh: Path | None, backgrounds: list[Path], f
     return "\n".join(lines)
 
 
-def synthesize(model_path: str | os.PathLike, calib_path: str | os.PathLike, out_dir: str | os.PathLike,
-               motion: str = "procedural", frames: int = 160, start: int = 0, stride: int = 2, seed: int = 0,
-               codec: str = "MJPG", quality: int = DEFAULT_QUALITY, fps: float = 60.0, backgrounds=None,
-               noise: float = 3.0, blur: float = 0.7, progress: bool = True) -> dict:
+def synthesize(
+    model_path: str | os.PathLike,
+    calib_path: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    motion: str = "procedural",
+    frames: int = 160,
+    start: int = 0,
+    stride: int = 2,
+    seed: int = 0,
+    codec: str = "MJPG",
+    quality: int = DEFAULT_QUALITY,
+    fps: float = 60.0,
+    backgrounds=None,
+    noise: float = 3.0,
+    blur: float = 0.7,
+    progress: bool = True,
+) -> dict:
     """Render a recording folder with ground truth (formats.md, "Recording folder").
 
     Writes ``calibration.toml``, one video per camera ``<cam>.avi`` (``codec``
@@ -265,14 +296,20 @@ def synthesize(model_path: str | os.PathLike, calib_path: str | os.PathLike, out
 def visibility(model: Model, poses: np.ndarray, cameras: list[Camera], margin: float = 2.0) -> np.ndarray:
     """(F, C) bool: every sampled surface point of the body projects inside camera c's image (with ``margin`` px)."""
     out = np.zeros((len(poses), len(cameras)), dtype=bool)
-    pieces = [(model.quadric_component[k], surface_samples(model.quadric_shape[k], p))
-              for k, p in enumerate(model.quadric_params)]
+    pieces = [
+        (model.quadric_component[k], surface_samples(model.quadric_shape[k], p))
+        for k, p in enumerate(model.quadric_params)
+    ]
     for f, pose in enumerate(poses):
         points = np.concatenate([pts @ pose[c, 0:3, 0:3].T + pose[c, 0:3, 3] for c, pts in pieces])
         for j, cam in enumerate(cameras):
             depth = (points @ cam.rotation.T + cam.translation)[:, 2]
             pix = cam.project(points)
             w, h = cam.size
-            out[f, j] = bool(np.all(depth > 0) and np.all(pix >= margin - 0.5)
-                             and np.all(pix[:, 0] <= w - 0.5 - margin) and np.all(pix[:, 1] <= h - 0.5 - margin))
+            out[f, j] = bool(
+                np.all(depth > 0)
+                and np.all(pix >= margin - 0.5)
+                and np.all(pix[:, 0] <= w - 0.5 - margin)
+                and np.all(pix[:, 1] <= h - 0.5 - margin)
+            )
     return out

@@ -83,9 +83,14 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
     if k == 1.0:
         return settings
     return dataclasses.replace(
-        settings, spacing=settings.spacing * k, search_range=round(settings.search_range * k),
-        final_search_range=round(settings.final_search_range * k), blur_sigma=settings.blur_sigma * k,
-        threshold=settings.threshold / k, reference_size=short_side)
+        settings,
+        spacing=settings.spacing * k,
+        search_range=round(settings.search_range * k),
+        final_search_range=round(settings.final_search_range * k),
+        blur_sigma=settings.blur_sigma * k,
+        threshold=settings.threshold / k,
+        reference_size=short_side,
+    )
 
 
 @dataclass(frozen=True)
@@ -129,8 +134,9 @@ def add_prior(information, eta, prior, poses, anchor):
 
 
 @njit(cache=True, nogil=True)
-def update_kernel(information, eta, prior, poses, anchor, parent, D, projector, rows, rest, joint_type, axis, lower,
-                  upper, max_turn):
+def update_kernel(
+    information, eta, prior, poses, anchor, parent, D, projector, rows, rest, joint_type, axis, lower, upper, max_turn
+):
     """Prior, tree solve, E_i <- E_i exp(s alpha_i) and coercion in one call (sections 3-5).
 
     ``s = min(1, max_turn / max_i |w_i|)`` scales the whole body's step (all twists alike, so the
@@ -200,11 +206,17 @@ class Tracker:
     def __init__(self, model: Model, cameras, initial_poses: np.ndarray, settings: Settings = Settings()):
         if settings.motion not in MOTION_MODELS:
             raise ValueError(f"motion model must be one of {MOTION_MODELS}")
-        if settings.motion == "kalman" and not (settings.frame_rate > 0 and settings.kalman_noise_scale > 0
-                                                and settings.kalman_q_translation >= 0
-                                                and settings.kalman_q_rotation >= 0 and settings.kalman_decay >= 0):
-            raise ValueError("motion 'kalman' needs frame_rate > 0, kalman_noise_scale > 0 and "
-                             "kalman_q_translation, kalman_q_rotation, kalman_decay >= 0")
+        if settings.motion == "kalman" and not (
+            settings.frame_rate > 0
+            and settings.kalman_noise_scale > 0
+            and settings.kalman_q_translation >= 0
+            and settings.kalman_q_rotation >= 0
+            and settings.kalman_decay >= 0
+        ):
+            raise ValueError(
+                "motion 'kalman' needs frame_rate > 0, kalman_noise_scale > 0 and "
+                "kalman_q_translation, kalman_q_rotation, kalman_decay >= 0"
+            )
         self.model = model
         self.rig = Rig.from_cameras(cameras)
         settings = scaled_to(settings, int(self.rig.size.min(axis=1).max()))
@@ -213,13 +225,17 @@ class Tracker:
         self.offset = np.zeros(settings.capacity)
         self.weight = np.zeros(settings.capacity)
         self.placed = Placed.allocate(len(cameras), model.quadric.shape[0])
-        self.ownership = Ownership(model, self.rig, settings.capacity,
-                                   max(settings.search_range, settings.final_search_range))
+        self.ownership = Ownership(
+            model, self.rig, settings.capacity, max(settings.search_range, settings.final_search_range)
+        )
         n = model.size
         self.information = np.zeros((n, 6, 6))
         self.eta = np.zeros((n, 6))
-        self.prior = np.ascontiguousarray(np.broadcast_to(
-            np.diag(np.array([settings.prior_translation] * 3 + [settings.prior_rotation] * 3, float)), (n, 6, 6)))
+        self.prior = np.ascontiguousarray(
+            np.broadcast_to(
+                np.diag(np.array([settings.prior_translation] * 3 + [settings.prior_rotation] * 3, float)), (n, 6, 6)
+            )
+        )
         height = int(self.rig.size[:, 1].max())
         width = int(self.rig.size[:, 0].max())
         self.images = np.zeros((len(cameras), height, width), np.uint8)
@@ -231,7 +247,8 @@ class Tracker:
         if settings.motion == "kalman":
             s = settings.kalman_noise_scale
             self.dynamics = dynamics.initial_state(
-                self.poses, position_variance=(s / settings.prior_translation, s / settings.prior_rotation))
+                self.poses, position_variance=(s / settings.prior_translation, s / settings.prior_rotation)
+            )
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
         self.lo = self.hi = None
@@ -295,9 +312,23 @@ class Tracker:
         started = time.perf_counter()
         visible, found, sum_wm, sum_w = self.measure(search_range, twist)
         started = self.times.add("measure", started)
-        self.poses = update_kernel(self.information, self.eta, self.prior, self.poses, self.anchor, m.parent,
-                                   m.constraint, m.constraint_projector, m.constraint_rows, m.rest, m.joint_type,
-                                   m.axis, m.lower, m.upper, st.max_turn)
+        self.poses = update_kernel(
+            self.information,
+            self.eta,
+            self.prior,
+            self.poses,
+            self.anchor,
+            m.parent,
+            m.constraint,
+            m.constraint_projector,
+            m.constraint_rows,
+            m.rest,
+            m.joint_type,
+            m.axis,
+            m.lower,
+            m.upper,
+            st.max_turn,
+        )
         self.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(visible, found, residual)
@@ -306,17 +337,36 @@ class Tracker:
         """Sample the visible outlines at the current poses and limit each one's search (ownership)."""
         s, m, st = self.samples, self.model, self.settings
         started = time.perf_counter()
-        s.count = outline_kernel(m.quadric, m.clip, m.quadric_bound, m.quadric_component, self.poses,
-                                 self.rig.matrix, self.rig.pose, self.rig.distortion, self.rig.size, st.spacing,
-                                 self.placed.camera_from, self.placed.quadric, self.placed.clip, self.placed.sphere,
-                                 self.placed.cone, s.camera, s.component, s.quadric, s.pixel, s.normal, s.jacobian,
-                                 s.point)
+        s.count = outline_kernel(
+            m.quadric,
+            m.clip,
+            m.quadric_bound,
+            m.quadric_component,
+            self.poses,
+            self.rig.matrix,
+            self.rig.pose,
+            self.rig.distortion,
+            self.rig.size,
+            st.spacing,
+            self.placed.camera_from,
+            self.placed.quadric,
+            self.placed.clip,
+            self.placed.sphere,
+            self.placed.cone,
+            s.camera,
+            s.component,
+            s.quadric,
+            s.pixel,
+            s.normal,
+            s.jacobian,
+            s.point,
+        )
         started = self.times.add("outline", started)
         if st.ownership:
             self.lo, self.hi = self.ownership.limits(self.placed, s, search_range)
         else:
-            self.lo = self.ownership.lo[:s.count]
-            self.hi = self.ownership.hi[:s.count]
+            self.lo = self.ownership.lo[: s.count]
+            self.hi = self.ownership.hi[: s.count]
             self.lo[:] = -search_range
             self.hi[:] = search_range
         self.times.add("ownership", started)
@@ -324,12 +374,31 @@ class Tracker:
     def measure(self, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
         """Search every sample's edge (moved by ``twist`` since sampling) and fill C_i, eta_i (measure_kernel)."""
         s, st = self.samples, self.settings
-        return measure_kernel(self.images, self.rig.size, s.count, s.camera, s.component, s.pixel, s.normal,
-                              s.jacobian, twist, search_range, st.threshold, st.robust_c, self.model.size,
-                              self.offset, self.weight, self.information, self.eta, self.lo, self.hi)
+        return measure_kernel(
+            self.images,
+            self.rig.size,
+            s.count,
+            s.camera,
+            s.component,
+            s.pixel,
+            s.normal,
+            s.jacobian,
+            twist,
+            search_range,
+            st.threshold,
+            st.robust_c,
+            self.model.size,
+            self.offset,
+            self.weight,
+            self.information,
+            self.eta,
+            self.lo,
+            self.hi,
+        )
 
-    def inspect(self, images=None, smoothed: bool = False, poses: np.ndarray | None = None,
-                search_range: int | None = None) -> Inspection:
+    def inspect(
+        self, images=None, smoothed: bool = False, poses: np.ndarray | None = None, search_range: int | None = None
+    ) -> Inspection:
         """Sample and measure every outline, as the last iteration would (or with ``search_range``), without
         moving the poses: at ``poses`` if given (else the current ones), in ``images`` if given (else the
         frame just tracked)."""
@@ -343,9 +412,16 @@ class Tracker:
         self.sample(search_range)
         self.measure(search_range, self.still)
         n = s.count
-        return Inspection(s.camera[:n].copy(), s.component[:n].copy(), s.pixel[:n].copy(), s.normal[:n].copy(),
-                          self.lo.copy(), self.hi.copy(),
-                          self.offset[:n].copy(), self.weight[:n].copy())
+        return Inspection(
+            s.camera[:n].copy(),
+            s.component[:n].copy(),
+            s.pixel[:n].copy(),
+            s.normal[:n].copy(),
+            self.lo.copy(),
+            self.hi.copy(),
+            self.offset[:n].copy(),
+            self.weight[:n].copy(),
+        )
 
     def step(self, images, smoothed: bool = False, dt: float | None = None) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not.
@@ -375,13 +451,15 @@ class Tracker:
         previous frame).  Returns the predicted state's ``dynamics.position_inverse``, which the
         correction reuses."""
         st = self.settings
-        predicted = dynamics.predict(self.dynamics, dt, (st.kalman_q_translation, st.kalman_q_rotation),
-                                     st.kalman_decay)
+        predicted = dynamics.predict(
+            self.dynamics, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
+        )
         self.poses = self.model.coerce(predicted.poses)
         self.dynamics = dynamics.rereference(predicted, self.poses)
         inverse = dynamics.position_inverse(self.dynamics)
-        self.prior = dynamics.prior_information(self.dynamics, self.noise_scale,
-                                                (st.prior_translation, st.prior_rotation), inverse)
+        self.prior = dynamics.prior_information(
+            self.dynamics, self.noise_scale, (st.prior_translation, st.prior_rotation), inverse
+        )
         return inverse
 
     def correct_kalman(self, inverse: np.ndarray) -> None:
@@ -393,9 +471,13 @@ class Tracker:
         s = float(st.kalman_noise_scale)
         if st.kalman_residual_variance:  # without any edge the last frame's values stay
             n = self.samples.count
-            self.noise_scale = s * dynamics.variance_factor(self.samples.component[:n], self.offset[:n],
-                                                            self.weight[:n], self.model.size,
-                                                            fallback=self.noise_scale / s)
+            self.noise_scale = s * dynamics.variance_factor(
+                self.samples.component[:n],
+                self.offset[:n],
+                self.weight[:n],
+                self.model.size,
+                fallback=self.noise_scale / s,
+            )
         data = self.information - self.prior
         information = dynamics.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
         self.dynamics = dynamics.correct(self.dynamics, self.poses, information, inverse)

@@ -57,9 +57,11 @@ DETECT_SIDE = 1280  # chessboards are searched in a copy at most this many pixel
 _CHESSBOARD_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 40, 0.001)
 
-_SPEC_HELP = ("write chessboard:COLSxROWS:SQUARE_M (inner corners, e.g. chessboard:9x6:0.025) or "
-              "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares, e.g. charuco:4x5:0.054:0.040:DICT_4X4_1000), "
-              "optionally ending in :inverted")
+_SPEC_HELP = (
+    "write chessboard:COLSxROWS:SQUARE_M (inner corners, e.g. chessboard:9x6:0.025) or "
+    "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares, e.g. charuco:4x5:0.054:0.040:DICT_4X4_1000), "
+    "optionally ending in :inverted"
+)
 
 
 @dataclass(frozen=True)
@@ -98,8 +100,9 @@ class Board:
         cols, rows = self.grid
         c, r = np.meshgrid(np.arange(cols), np.arange(rows))
         offset = 0.0 if self.kind == "chessboard" else 1.0
-        points = np.stack([(c.ravel() + offset) * self.square, (r.ravel() + offset) * self.square,
-                           np.zeros(c.size)], axis=1)
+        points = np.stack(
+            [(c.ravel() + offset) * self.square, (r.ravel() + offset) * self.square, np.zeros(c.size)], axis=1
+        )
         points.setflags(write=False)  # shared by every caller
         return points
 
@@ -139,7 +142,7 @@ def parse_board(spec: str, inverted: bool = False) -> Board:
     if cols < least or rows < least:
         raise fail(f"size {cols}x{rows} is too small (at least {least}x{least})")
     try:
-        lengths = [float(value) for value in parts[2:4 if kind == "charuco" else 3]]
+        lengths = [float(value) for value in parts[2 : 4 if kind == "charuco" else 3]]
     except ValueError:
         raise fail("square and marker sizes must be numbers (metres)") from None
     if any(not np.isfinite(value) or value <= 0 for value in lengths):
@@ -204,8 +207,11 @@ class BoardDetector:
         cols, rows = self.board.grid
         height, width = grey.shape
         scale = min(1.0, DETECT_SIDE / max(height, width))
-        small = grey if scale == 1.0 else cv2.resize(
-            grey, (round(width * scale), round(height * scale)), interpolation=cv2.INTER_AREA)
+        small = (
+            grey
+            if scale == 1.0
+            else cv2.resize(grey, (round(width * scale), round(height * scale)), interpolation=cv2.INTER_AREA)
+        )
         found, corners = cv2.findChessboardCorners(small, (cols, rows), _CHESSBOARD_FLAGS)
         if not found:
             return None
@@ -213,11 +219,13 @@ class BoardDetector:
         if scale != 1.0:  # pixel centres: x_full + 0.5 = (x_small + 0.5) / scale
             corners = (corners + 0.5) / scale - 0.5
         grid = corners.reshape(rows, cols, 2)
-        spacing = min(np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
-                      np.linalg.norm(np.diff(grid, axis=0), axis=2).min())
+        spacing = min(
+            np.linalg.norm(np.diff(grid, axis=1), axis=2).min(), np.linalg.norm(np.diff(grid, axis=0), axis=2).min()
+        )
         half = int(np.clip(0.35 * spacing, 2, 15))  # the window must not reach the neighbouring corners
-        refined = cv2.cornerSubPix(grey, corners.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1),
-                                   _SUBPIX_CRITERIA)
+        refined = cv2.cornerSubPix(
+            grey, corners.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), _SUBPIX_CRITERIA
+        )
         grid = canonical_chessboard(grey, refined.reshape(rows, cols, 2).astype(np.float64), self.board.symmetric)
         return Detection(np.arange(cols * rows), grid.reshape(-1, 2))
 

@@ -144,8 +144,7 @@ def board_pose(board: Board, detection: Detection, camera: Camera) -> Pose | Non
     objects = board.object_points[detection.ids]
     normalised = camera.undistort_pixels(detection.pixels).reshape(-1, 1, 2)
     try:
-        count, rvecs, tvecs, _ = cv2.solvePnPGeneric(objects, normalised, np.eye(3), None,
-                                                     flags=cv2.SOLVEPNP_IPPE)
+        count, rvecs, tvecs, _ = cv2.solvePnPGeneric(objects, normalised, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)
     except cv2.error:
         return None
     if not count:
@@ -215,7 +214,7 @@ def _intrinsic_vector(camera: Camera) -> np.ndarray:
     K = camera.matrix
     distortions = np.zeros(5)
     if _exact_model(camera):
-        distortions[:len(camera.distortions)] = camera.distortions
+        distortions[: len(camera.distortions)] = camera.distortions
     return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *distortions])
 
 
@@ -235,8 +234,15 @@ def project(intrinsics: np.ndarray, points_camera: np.ndarray) -> np.ndarray:
 class _Problem:
     """The bundle adjustment's observations, parameter layout and residual function."""
 
-    def __init__(self, board: Board, cameras: list[Camera], views: list[dict[int, Detection]],
-                 frames: list[int], refine_intrinsics: bool, root: int):
+    def __init__(
+        self,
+        board: Board,
+        cameras: list[Camera],
+        views: list[dict[int, Detection]],
+        frames: list[int],
+        refine_intrinsics: bool,
+        root: int,
+    ):
         self.count = len(cameras)
         self.root = root
         self.frames = frames
@@ -274,20 +280,24 @@ class _Problem:
                 self.held[c, 5] = reach < K2_REACH  # k2
 
     def pack(self, camera_poses: dict[int, Pose], board_poses: dict[int, Pose]) -> np.ndarray:
-        cams = [np.concatenate([log_so3(np.ascontiguousarray(camera_poses[c].R, dtype=np.float64)), camera_poses[c].t])
-                for c in self.free]
-        boards = [np.concatenate([log_so3(np.ascontiguousarray(board_poses[f].R, dtype=np.float64)), board_poses[f].t])
-                  for f in self.frames]
+        cams = [
+            np.concatenate([log_so3(np.ascontiguousarray(camera_poses[c].R, dtype=np.float64)), camera_poses[c].t])
+            for c in self.free
+        ]
+        boards = [
+            np.concatenate([log_so3(np.ascontiguousarray(board_poses[f].R, dtype=np.float64)), board_poses[f].t])
+            for f in self.frames
+        ]
         parts = cams + boards + ([self.intrinsics.ravel()] if self.refine else [])
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def unpack(self, x: np.ndarray):
         cam_r = np.zeros((self.count, 3))
         cam_t = np.zeros((self.count, 3))
-        free = x[:self.n_cam].reshape(-1, 6)
+        free = x[: self.n_cam].reshape(-1, 6)
         cam_r[self.free], cam_t[self.free] = free[:, :3], free[:, 3:]
-        boards = x[self.n_cam:self.n_cam + self.n_frame].reshape(-1, 6)
-        intrinsics = x[self.n_cam + self.n_frame:].reshape(-1, 9) if self.refine else self.intrinsics
+        boards = x[self.n_cam : self.n_cam + self.n_frame].reshape(-1, 6)
+        intrinsics = x[self.n_cam + self.n_frame :].reshape(-1, 9) if self.refine else self.intrinsics
         board_r = np.ascontiguousarray(boards[:, :3], dtype=np.float64)  # for se3's njit functions
         return cam_r, cam_t, board_r, boards[:, 3:], intrinsics
 
@@ -331,13 +341,17 @@ class _Problem:
 
 def per_camera_rms(errors: np.ndarray, cam: np.ndarray, count: int) -> list[float]:
     """RMS of the point errors |e| per camera (NaN for a camera without observations)."""
-    return [float(np.sqrt(np.mean(errors[cam == c] ** 2))) if np.any(cam == c) else float("nan")
-            for c in range(count)]
+    return [float(np.sqrt(np.mean(errors[cam == c] ** 2))) if np.any(cam == c) else float("nan") for c in range(count)]
 
 
-def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Detection]],
-                  refine_intrinsics: bool = False, keep_frames: tuple[int, ...] = (),
-                  max_frames: int = 300) -> RigResult:
+def calibrate_rig(
+    board: Board,
+    cameras: list[Camera],
+    views: list[dict[int, Detection]],
+    refine_intrinsics: bool = False,
+    keep_frames: tuple[int, ...] = (),
+    max_frames: int = 300,
+) -> RigResult:
     """Extrinsics of cameras (their intrinsics given) from board detections per camera, steps 1-4.
 
     ``views[c]`` maps frame index -> Detection for camera c. Frames seen by two or more cameras
@@ -377,18 +391,33 @@ def calibrate_rig(board: Board, cameras: list[Camera], views: list[dict[int, Det
         estimates = [camera_poses[c].inverse() @ poses[c][f] for c in seen[f]]
         board_poses[f], _ = robust_mean_pose(np.array([e.R for e in estimates]), np.array([e.t for e in estimates]))
 
-    problem = _Problem(board, cameras, [{f: d for f, d in v.items() if f in poses[c]} for c, v in enumerate(views)],
-                       frames, refine_intrinsics, root=0)
+    problem = _Problem(
+        board,
+        cameras,
+        [{f: d for f, d in v.items() if f in poses[c]} for c, v in enumerate(views)],
+        frames,
+        refine_intrinsics,
+        root=0,
+    )
     x = problem.pack(camera_poses, board_poses)
     select = np.ones(len(problem.cam), dtype=bool)
     initial = np.linalg.norm(problem.residuals(x), axis=1)
     for round_ in range(3):
         # Huber first (robust to misread corners), plain least squares once the outliers are out
-        result = least_squares(lambda v, s=select: problem.residuals(v, s).ravel(), x,
-                               jac_sparsity=problem.sparsity(select), method="trf",
-                               loss="huber" if round_ == 0 else "linear", f_scale=_HUBER_SCALE, x_scale="jac",
-                               ftol=1e-9, xtol=1e-9, gtol=1e-9, max_nfev=100,
-                               tr_options={"atol": 1e-12, "btol": 1e-12})
+        result = least_squares(
+            lambda v, s=select: problem.residuals(v, s).ravel(),
+            x,
+            jac_sparsity=problem.sparsity(select),
+            method="trf",
+            loss="huber" if round_ == 0 else "linear",
+            f_scale=_HUBER_SCALE,
+            x_scale="jac",
+            ftol=1e-9,
+            xtol=1e-9,
+            gtol=1e-9,
+            max_nfev=100,
+            tr_options={"atol": 1e-12, "btol": 1e-12},
+        )
         x = result.x
         errors = np.linalg.norm(problem.residuals(x), axis=1)
         inliers = errors <= max(_OUTLIER_FLOOR, 4.0 * float(np.median(errors[select])))

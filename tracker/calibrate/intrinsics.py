@@ -59,8 +59,15 @@ def view_descriptor(pixels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     extent = np.sqrt(eigenvalues.sum())
     elongation = 1.0 - np.sqrt(eigenvalues[0] / eigenvalues[1])
     angle = 2.0 * np.arctan2(eigenvectors[1, 1], eigenvectors[0, 1])
-    return np.array([centre[0] / scale, centre[1] / scale, 2.0 * extent,
-                     0.5 * elongation * np.cos(angle), 0.5 * elongation * np.sin(angle)])
+    return np.array(
+        [
+            centre[0] / scale,
+            centre[1] / scale,
+            2.0 * extent,
+            0.5 * elongation * np.cos(angle),
+            0.5 * elongation * np.sin(angle),
+        ]
+    )
 
 
 def select_views(detections: dict[int, Detection], size: tuple[int, int], limit: int) -> list[int]:
@@ -79,8 +86,9 @@ def select_views(detections: dict[int, Detection], size: tuple[int, int], limit:
     return sorted(frames[i] for i in chosen)
 
 
-def calibrate_intrinsics(board: Board, detections: dict[int, Detection], size: tuple[int, int],
-                         max_views: int = 40) -> Intrinsics:
+def calibrate_intrinsics(
+    board: Board, detections: dict[int, Detection], size: tuple[int, int], max_views: int = 40
+) -> Intrinsics:
     """K and distortion of one camera from its board detections (at least MIN_VIEWS; the caller checks)."""
     frames = select_views(detections, size, max_views)
     for attempt in range(2):
@@ -102,9 +110,12 @@ def _check_tilt(matrix: np.ndarray, tilt: float, size: tuple[int, int]) -> None:
     between a board's normal and the optical axis, ``tilt`` degrees, under MIN_TILT_DEG) fit any focal
     length at a matching distance, so the reprojection RMS looks perfect while fx is arbitrary."""
     if tilt < MIN_TILT_DEG:
-        warnings.warn(f"camera of {size[0]}x{size[1]} pixels: the board views leave the focal length uncertain "
-                      f"(fx = {matrix[0, 0]:.1f} px, boards tilted {tilt:.1f} degrees at most); show the board "
-                      "tilted by 20-45 degrees in several directions", stacklevel=3)
+        warnings.warn(
+            f"camera of {size[0]}x{size[1]} pixels: the board views leave the focal length uncertain "
+            f"(fx = {matrix[0, 0]:.1f} px, boards tilted {tilt:.1f} degrees at most); show the board "
+            "tilted by 20-45 degrees in several directions",
+            stacklevel=3,
+        )
 
 
 def corner_reach(views: list[Detection], size: tuple[int, int]) -> float:
@@ -122,7 +133,8 @@ def _fit(board: Board, views: list[Detection], size: tuple[int, int]):
     if reach < K2_REACH:
         flags |= cv2.CALIB_FIX_K2
     rms, matrix, distortions, rvecs, tvecs = cv2.calibrateCamera(
-        objects, images, tuple(size), None, None, flags=flags, criteria=_CRITERIA)
+        objects, images, tuple(size), None, None, flags=flags, criteria=_CRITERIA
+    )
     tilt = max(float(np.degrees(np.arccos(min(1.0, abs(cv2.Rodrigues(rvec)[0][2, 2]))))) for rvec in rvecs)
     per_view = []
     for obj, img, rvec, tvec in zip(objects, images, rvecs, tvecs):

@@ -49,29 +49,42 @@ class Calibration:
         lines = []
         width = max(len(camera.name) for camera in self.cameras)
         for c, (camera, views) in enumerate(zip(self.cameras, self.views)):
-            line = (f"{camera.name:<{width}}  {camera.size[0]}x{camera.size[1]}  "
-                    f"board in {len(views.detections)}/{views.searched} frames")
+            line = (
+                f"{camera.name:<{width}}  {camera.size[0]}x{camera.size[1]}  "
+                f"board in {len(views.detections)}/{views.searched} frames"
+            )
             intrinsics = self.intrinsics[c]
             if intrinsics is not None:
                 line += f"  intrinsics RMS {intrinsics.rms:.3f} px ({intrinsics.views} views)"
             if self.rig is not None:
-                line += (f"  rig RMS {self.rig.rms[c]:.3f} px over {self.rig.frames[c]} views"
-                         f" (before adjustment {self.rig.initial_rms[c]:.3f} px)")
+                line += (
+                    f"  rig RMS {self.rig.rms[c]:.3f} px over {self.rig.frames[c]} views"
+                    f" (before adjustment {self.rig.initial_rms[c]:.3f} px)"
+                )
             lines.append(line)
         if self.rig is not None and self.rig.dropped:
             lines.append(f"{self.rig.dropped} corner observations rejected as outliers")
         return "\n".join(lines)
 
 
-def calibrate(folder, board: Board, intrinsics_only: bool = False, fixed=None, world: str = "first-camera",
-              refine_intrinsics: bool = False, max_frames: int = 300, progress: bool = False) -> Calibration:
+def calibrate(
+    folder,
+    board: Board,
+    intrinsics_only: bool = False,
+    fixed=None,
+    world: str = "first-camera",
+    refine_intrinsics: bool = False,
+    max_frames: int = 300,
+    progress: bool = False,
+) -> Calibration:
     """The whole calibration of a folder (see the module docstring); raises TrackerInputError."""
     views = find_sources(folder)
     if board.symmetric and len(views) > 1 and not intrinsics_only:
         raise TrackerInputError(
             f"--board: a {board.cols}x{board.rows} chessboard looks the same turned by 180 degrees, so the cameras "
             "cannot agree on its orientation; use a chessboard with one odd and one even count of inner corners "
-            "(e.g. 9x6) or a ChArUco board (or calibrate --intrinsics-only)")
+            "(e.g. 9x6) or a ChArUco board (or calibrate --intrinsics-only)"
+        )
     fixed_cameras = _fixed_intrinsics(fixed, views) if fixed else None
     detect_all(board, views, max_frames=max_frames, progress=progress)
 
@@ -80,18 +93,21 @@ def calibrate(folder, board: Board, intrinsics_only: bool = False, fixed=None, w
             raise TrackerInputError(
                 f"{camera.source}: no {board.describe()} found in any of the {camera.searched} frames searched; "
                 "check --board (chessboard sizes count inner corners, ChArUco sizes count squares"
-                f"{'' if board.inverted else ', add :inverted for a light-on-dark board'}) and that the board is in view")
+                f"{'' if board.inverted else ', add :inverted for a light-on-dark board'}) and that the board is in view"
+            )
         if fixed_cameras is None and len(camera.detections) < MIN_VIEWS:
             raise TrackerInputError(
                 f"{camera.source}: too few board views for intrinsics: found the {board.describe()} in "
                 f"{len(camera.detections)} of {camera.searched} frames, need at least {MIN_VIEWS} "
                 f"(each with {MIN_CORNERS}+ corners); record more views of the board, tilted and in different "
-                "parts of the image")
+                "parts of the image"
+            )
         if fixed_cameras is not None and fixed_cameras[camera.name].size != camera.size:
             size = fixed_cameras[camera.name].size
             raise TrackerInputError(
                 f"{fixed}: camera {camera.name!r} is {size[0]}x{size[1]} there but {camera.source} is "
-                f"{camera.size[0]}x{camera.size[1]}; give the intrinsics of this camera at this resolution")
+                f"{camera.size[0]}x{camera.size[1]}; give the intrinsics of this camera at this resolution"
+            )
 
     intrinsics: list[Intrinsics | None] = []
     cameras = []
@@ -109,8 +125,13 @@ def calibrate(folder, board: Board, intrinsics_only: bool = False, fixed=None, w
 
     first = min(f for camera in views for f in camera.detections)
     try:
-        rig = calibrate_rig(board, cameras, [camera.detections for camera in views],
-                            refine_intrinsics=refine_intrinsics, keep_frames=(first,))
+        rig = calibrate_rig(
+            board,
+            cameras,
+            [camera.detections for camera in views],
+            refine_intrinsics=refine_intrinsics,
+            keep_frames=(first,),
+        )
     except SplitRigError as error:
         raise _split_rig_error(folder, views, error.unreached) from None
     cameras = rig.cameras
@@ -121,9 +142,11 @@ def calibrate(folder, board: Board, intrinsics_only: bool = False, fixed=None, w
         cameras = to_world(cameras, FLOOR_FROM_BOARD @ root_from_board.inverse())
         heights = [camera.center[2] for camera in cameras]
         if np.median(heights) < 0:
-            warnings.warn(f"{folder}: most cameras are below the board's plane in the world frame (--world board "
-                          "takes the board as lying face up on the floor in the first frame it is seen)",
-                          stacklevel=2)
+            warnings.warn(
+                f"{folder}: most cameras are below the board's plane in the world frame (--world board "
+                "takes the board as lying face up on the floor in the first frame it is seen)",
+                stacklevel=2,
+            )
     return Calibration(cameras, views, intrinsics, rig)
 
 
@@ -133,7 +156,8 @@ def _fixed_intrinsics(path, views: list[CameraViews]) -> dict[str, Camera]:
     if missing:
         raise TrackerInputError(
             f"{path}: no camera named {', '.join(map(repr, missing))} (it has {', '.join(map(repr, known))}); "
-            "name the cameras there like the videos")
+            "name the cameras there like the videos"
+        )
     return known
 
 
@@ -146,8 +170,10 @@ def _split_rig_error(folder, views: list[CameraViews], unreached: list[int]) -> 
         return TrackerInputError(
             f"{views[c].source}: camera {views[c].name!r} shares no board view with the other cameras (it sees the "
             f"board in {len(frames[c])} frames, none of them seen by another camera); record frames in which it "
-            "and at least one other camera see the board at the same time")
+            "and at least one other camera see the board at the same time"
+        )
     names = ", ".join(views[c].name for c in unreached)
     return TrackerInputError(
         f"{folder}: cameras {names} share no board view with {views[0].name} or the cameras linked to it; record "
-        "frames in which a camera of each group sees the board at the same time as one of the other")
+        "frames in which a camera of each group sees the board at the same time as one of the other"
+    )

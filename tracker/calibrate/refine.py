@@ -46,8 +46,9 @@ class Refined:
     residual_after: np.ndarray
 
 
-def camera_rows(jacobian: np.ndarray, camera: np.ndarray, component: np.ndarray, rig_pose: np.ndarray,
-                poses: np.ndarray) -> np.ndarray:
+def camera_rows(
+    jacobian: np.ndarray, camera: np.ndarray, component: np.ndarray, rig_pose: np.ndarray, poses: np.ndarray
+) -> np.ndarray:
     """Rows J_s = L_s Ad((P_k E_i)^-1) (S, 6) of samples with rows L_s (S, 6) seen by cameras ``camera`` (S,)
     of components ``component`` (S,), with camera-from-world ``rig_pose`` (K, 4, 4) and world-from-component
     ``poses`` (N, 4, 4); one adjoint per (camera, component) pair."""
@@ -61,12 +62,13 @@ def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], 
     seen = tracker.inspect(images, smoothed=True, poses=poses, search_range=search_range)
     found = seen.weight > 0
     camera, component = seen.camera[found], seen.component[found]
-    rows = camera_rows(tracker.samples.jacobian[:len(found)][found], camera, component, tracker.rig.pose, poses)
+    rows = camera_rows(tracker.samples.jacobian[: len(found)][found], camera, component, tracker.rig.pose, poses)
     return camera, rows, seen.offset[found], seen.weight[found]
 
 
-def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]], cameras: int,
-               search_range: int) -> np.ndarray:
+def _residuals(
+    tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]], cameras: int, search_range: int
+) -> np.ndarray:
     """Per camera the robust mean edge distance sum w|m| / sum w over all frames (NaN: no edge found)."""
     sum_wm, sum_w = np.zeros(cameras), np.zeros(cameras)
     for frame_poses, images in zip(poses, frames):
@@ -78,9 +80,17 @@ def _residuals(tracker: Tracker, poses: np.ndarray, frames: Sequence[Sequence[np
         return sum_wm / sum_w
 
 
-def refine_rig(model: Model, cameras: Sequence[Camera], poses: np.ndarray, frames: Sequence[Sequence[np.ndarray]],
-               settings: Settings = Settings(), rounds: int = ROUNDS, fixed: Iterable[int] = (),
-               refit: bool = True, progress: Callable[[Iterable], Iterable] = iter) -> Refined:
+def refine_rig(
+    model: Model,
+    cameras: Sequence[Camera],
+    poses: np.ndarray,
+    frames: Sequence[Sequence[np.ndarray]],
+    settings: Settings = Settings(),
+    rounds: int = ROUNDS,
+    fixed: Iterable[int] = (),
+    refit: bool = True,
+    progress: Callable[[Iterable], Iterable] = iter,
+) -> Refined:
     """Move each camera not in ``fixed`` to fit the outlines of the body at ``poses`` (F, N, 4, 4) in
     ``frames`` (F lists of one smoothed edge-search image per camera, as the tracker takes them), and
     with ``refit`` fit the bodies again after each round.  ``progress`` wraps the rounds (e.g. tqdm)."""

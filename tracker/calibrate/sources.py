@@ -50,11 +50,13 @@ def find_sources(folder: str | Path) -> list[CameraViews]:
     if not found:
         raise TrackerInputError(
             f"{folder}: no camera videos (.mp4, .avi, .mkv) or image folders; put one per camera there, "
-            "named after the camera")
+            "named after the camera"
+        )
     for name, paths in found.items():
         if len(paths) > 1:
             raise TrackerInputError(
-                f"{folder}: camera {name!r} has several sources ({', '.join(p.name for p in paths)}); keep one")
+                f"{folder}: camera {name!r} has several sources ({', '.join(p.name for p in paths)}); keep one"
+            )
     return [CameraViews(name, paths[0]) for name, paths in sorted(found.items())]
 
 
@@ -94,15 +96,21 @@ def _frames(source: Path, stride: int):
         capture.release()
 
 
-def detect_all(board: Board, cameras: list[CameraViews], max_frames: int = 300, workers: int = 2,
-               progress: bool = True) -> None:
+def detect_all(
+    board: Board, cameras: list[CameraViews], max_frames: int = 300, workers: int = 2, progress: bool = True
+) -> None:
     """Search every camera's frames for the board (subsampled to about ``max_frames`` per camera),
     filling in each CameraViews; cameras run in parallel threads (OpenCV releases the GIL).  An error in
     one camera or Ctrl-C stops the others after their current frame."""
     counts = [frame_count(camera.source) for camera in cameras]
     stride = max(1, math.ceil(max(counts) / max_frames)) if counts else 1
-    bar = tqdm(total=sum(math.ceil(count / stride) for count in counts), unit="frame", desc="board search",
-               disable=not progress, leave=False)
+    bar = tqdm(
+        total=sum(math.ceil(count / stride) for count in counts),
+        unit="frame",
+        desc="board search",
+        disable=not progress,
+        leave=False,
+    )
     lock = threading.Lock()
     stop = threading.Event()
 
@@ -116,7 +124,8 @@ def detect_all(board: Board, cameras: list[CameraViews], max_frames: int = 300, 
             elif (image.shape[1], image.shape[0]) != camera.size:
                 raise TrackerInputError(
                     f"{camera.source}: frame {index} is {image.shape[1]}x{image.shape[0]} but frame 0 is "
-                    f"{camera.size[0]}x{camera.size[1]}; give every frame of a camera the same size")
+                    f"{camera.size[0]}x{camera.size[1]}; give every frame of a camera the same size"
+                )
             camera.searched += 1
             detection = detector.detect(image)
             if detection is not None:

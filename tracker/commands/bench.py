@@ -15,8 +15,11 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker bench``."""
     parser.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    parser.add_argument("--scaling", action="store_true",
-                        help="time one iteration against the number of components (7-120) and of cameras (1-8)")
+    parser.add_argument(
+        "--scaling",
+        action="store_true",
+        help="time one iteration against the number of components (7-120) and of cameras (1-8)",
+    )
     parser.add_argument("--repeats", type=options.positive_int, default=3, help="passes per figure (default 3)")
     options.add_tuning_options(parser, ("iterations", "spacing", "resample_every"))
 

@@ -13,27 +13,49 @@ HELP = "calibrate a camera rig from videos or photos of a board"
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker calibrate``."""
-    parser.add_argument("folder", metavar="DIR",
-                        help="folder with one board video (<cam>.mp4|.avi|.mkv) or image folder (<cam>/) per "
-                             "camera, frame-synchronous")
-    parser.add_argument("--board", required=True, metavar="SPEC",
-                        help="chessboard:COLSxROWS:SQUARE_M (inner corners) or "
-                             "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares); add :inverted for "
-                             "light-on-dark boards")
+    parser.add_argument(
+        "folder",
+        metavar="DIR",
+        help="folder with one board video (<cam>.mp4|.avi|.mkv) or image folder (<cam>/) per camera, frame-synchronous",
+    )
+    parser.add_argument(
+        "--board",
+        required=True,
+        metavar="SPEC",
+        help="chessboard:COLSxROWS:SQUARE_M (inner corners) or "
+        "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares); add :inverted for "
+        "light-on-dark boards",
+    )
     parser.add_argument("--out", required=True, metavar="calibration.toml", help="the calibration file to write")
-    parser.add_argument("--fix-intrinsics", metavar="calibration.toml",
-                        help="take each camera's K and distortion from this file (by camera name) and keep "
-                             "them fixed")
-    parser.add_argument("--intrinsics-only", action="store_true",
-                        help="calibrate each camera's intrinsics only (cameras need not share views)")
-    parser.add_argument("--world", choices=("first-camera", "board"), default="first-camera",
-                        help="world frame: the first camera (default), or the board where first seen, "
-                             "on the floor with z up")
+    parser.add_argument(
+        "--fix-intrinsics",
+        metavar="calibration.toml",
+        help="take each camera's K and distortion from this file (by camera name) and keep them fixed",
+    )
+    parser.add_argument(
+        "--intrinsics-only",
+        action="store_true",
+        help="calibrate each camera's intrinsics only (cameras need not share views)",
+    )
+    parser.add_argument(
+        "--world",
+        choices=("first-camera", "board"),
+        default="first-camera",
+        help="world frame: the first camera (default), or the board where first seen, on the floor with z up",
+    )
     parser.add_argument("--inverted", action="store_true", help="the board is printed light on dark")
-    parser.add_argument("--refine-intrinsics", action="store_true",
-                        help="let the bundle adjustment refine the intrinsics as well as the poses")
-    parser.add_argument("--max-frames", type=positive_int, default=300, metavar="N",
-                        help="search about N frames per camera, evenly spread (default 300)")
+    parser.add_argument(
+        "--refine-intrinsics",
+        action="store_true",
+        help="let the bundle adjustment refine the intrinsics as well as the poses",
+    )
+    parser.add_argument(
+        "--max-frames",
+        type=positive_int,
+        default=300,
+        metavar="N",
+        help="search about N frames per camera, evenly spread (default 300)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,9 +69,16 @@ def run(args: argparse.Namespace) -> int:
     if args.refine_intrinsics and args.fix_intrinsics:
         raise TrackerInputError("--refine-intrinsics contradicts --fix-intrinsics; drop one of them")
     board = parse_board(args.board, inverted=args.inverted)
-    result = calibrate(args.folder, board, intrinsics_only=args.intrinsics_only, fixed=args.fix_intrinsics,
-                       world=args.world, refine_intrinsics=args.refine_intrinsics, max_frames=args.max_frames,
-                       progress=sys.stderr.isatty())
+    result = calibrate(
+        args.folder,
+        board,
+        intrinsics_only=args.intrinsics_only,
+        fixed=args.fix_intrinsics,
+        world=args.world,
+        refine_intrinsics=args.refine_intrinsics,
+        max_frames=args.max_frames,
+        progress=sys.stderr.isatty(),
+    )
     save_calibration(result.cameras, args.out)
     print(result.report())
     print(f"wrote {args.out}")

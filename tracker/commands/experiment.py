@@ -34,17 +34,29 @@ def variance_list(text: str) -> tuple[float, ...]:
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker experiment``."""
-    parser.add_argument("name", choices=("superquadric", "insect"),
-                        help="superquadric: the error analysis of Tables I-IV (4 densities x 4 noise levels, "
-                             "beside the paper's values); insect: five parts and four joints tracked from dense "
-                             "and sparse points")
-    parser.add_argument("--frames", type=options.positive_int,
-                        help="frames per run (default: 20 for superquadric, 36 for insect)")
+    parser.add_argument(
+        "name",
+        choices=("superquadric", "insect"),
+        help="superquadric: the error analysis of Tables I-IV (4 densities x 4 noise levels, "
+        "beside the paper's values); insect: five parts and four joints tracked from dense "
+        "and sparse points",
+    )
+    parser.add_argument(
+        "--frames", type=options.positive_int, help="frames per run (default: 20 for superquadric, 36 for insect)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed of the data and noise (default 0)")
-    parser.add_argument("--densities", type=percentage_list, metavar="LIST",
-                        help="superquadric: comma-separated data densities in percent (default 100,75,50,25)")
-    parser.add_argument("--variances", type=variance_list, metavar="LIST",
-                        help="superquadric: comma-separated noise variances (default 10,5,1,0)")
+    parser.add_argument(
+        "--densities",
+        type=percentage_list,
+        metavar="LIST",
+        help="superquadric: comma-separated data densities in percent (default 100,75,50,25)",
+    )
+    parser.add_argument(
+        "--variances",
+        type=variance_list,
+        metavar="LIST",
+        help="superquadric: comma-separated noise variances (default 10,5,1,0)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -68,10 +80,17 @@ def run(args: argparse.Namespace) -> int:
             rows = experiment.run(densities, variances, seed=args.seed, progress=lambda row: bar.update(), **frames)
         claims = experiment.check_claims(rows)
         if args.json:
-            print(json.dumps({"rows": rows, "paper": {f"{d}/{v}": list(e) for (d, v), e in
-                                                       experiment.PAPER_TABLES.items()},
-                              "errors": list(experiment.ERRORS),
-                              "claims": [{"claim": c, "held": h, "detail": d} for c, h, d in claims]}, indent=1))
+            print(
+                json.dumps(
+                    {
+                        "rows": rows,
+                        "paper": {f"{d}/{v}": list(e) for (d, v), e in experiment.PAPER_TABLES.items()},
+                        "errors": list(experiment.ERRORS),
+                        "claims": [{"claim": c, "held": h, "detail": d} for c, h, d in claims],
+                    },
+                    indent=1,
+                )
+            )
         else:
             print("\n".join(tables.superquadric_table(rows) + ["", "claims:"] + tables.claims_lines(claims)))
         return 0
@@ -81,12 +100,17 @@ def run(args: argparse.Namespace) -> int:
     results = {}
     for name, sparse in (("dense", False), ("sparse (7 points per part)", True)):
         with options.bar(args, name.split()[0], "frame", leave=True)(total=frames) as bar:
-            results[name] = insect.run(sparse, frames=frames, seed=args.seed,
-                                       progress=lambda *_: bar.update())
+            results[name] = insect.run(sparse, frames=frames, seed=args.seed, progress=lambda *_: bar.update())
     if args.json:
-        print(json.dumps({name: {**r.summary, "violation": r.violation.tolist(),
-                                 "position_error": r.position_error.tolist()} for name, r in results.items()},
-                         indent=1))
+        print(
+            json.dumps(
+                {
+                    name: {**r.summary, "violation": r.violation.tolist(), "position_error": r.position_error.tolist()}
+                    for name, r in results.items()
+                },
+                indent=1,
+            )
+        )
     else:
         print("\n".join(tables.insect_table(results)))
     return 0

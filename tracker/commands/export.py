@@ -12,13 +12,19 @@ HELP = "write poses.npz as TRC, C3D, BVH or CSV for other tools"
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker export``."""
     parser.add_argument("poses", metavar="POSES", help="poses.npz written by tracker track (or a truth.npz)")
-    parser.add_argument("--to", required=True, metavar="FORMAT", type=str.lower,
-                        help="trc (OpenSim/Pose2Sim markers, mm, z up), c3d (POINT data, mm, z up), "
-                             "bvh (the model's skeleton for Blender, metres, y up) or csv (metres, z up)")
+    parser.add_argument(
+        "--to",
+        required=True,
+        metavar="FORMAT",
+        type=str.lower,
+        help="trc (OpenSim/Pose2Sim markers, mm, z up), c3d (POINT data, mm, z up), "
+        "bvh (the model's skeleton for Blender, metres, y up) or csv (metres, z up)",
+    )
     parser.add_argument("--out", help="output file (default: POSES with the format's suffix, e.g. poses.trc)")
     parser.add_argument("--model", help="body model TOML the poses were tracked with (bvh only, where it is needed)")
-    parser.add_argument("--fps", type=positive_float,
-                        help="frames per second (default: from the poses file's frame and time arrays)")
+    parser.add_argument(
+        "--fps", type=positive_float, help="frames per second (default: from the poses file's frame and time arrays)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -29,22 +29,33 @@ def size(text: str) -> tuple[int, int]:
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker live``."""
-    parser.add_argument("--camera", action="append", required=True, metavar="[NAME=]DEVICE",
-                        help="a camera: a V4L2 device such as /dev/video0, or a video file played at its frame "
-                             "rate; repeat for each camera; matched to the calibration's cameras in order, or "
-                             "to the one called NAME")
+    parser.add_argument(
+        "--camera",
+        action="append",
+        required=True,
+        metavar="[NAME=]DEVICE",
+        help="a camera: a V4L2 device such as /dev/video0, or a video file played at its frame "
+        "rate; repeat for each camera; matched to the calibration's cameras in order, or "
+        "to the one called NAME",
+    )
     parser.add_argument("--calib", required=True, help="calibration.toml of the cameras")
     parser.add_argument("--model", required=True, help="body model TOML")
     parser.add_argument("--init", required=True, help="pose at the first frame (init.toml)")
-    parser.add_argument("--size", type=size, metavar="WxH",
-                        help="image size to ask the cameras for (default: each camera's calibrated size, "
-                             "which the camera must give)")
-    parser.add_argument("--fps", type=options.positive_float,
-                        help="frame rate to ask the cameras for (default: the driver's)")
+    parser.add_argument(
+        "--size",
+        type=size,
+        metavar="WxH",
+        help="image size to ask the cameras for (default: each camera's calibrated size, which the camera must give)",
+    )
+    parser.add_argument(
+        "--fps", type=options.positive_float, help="frame rate to ask the cameras for (default: the driver's)"
+    )
     parser.add_argument("--out", help="output folder for poses.npz (default out/live)")
-    parser.add_argument("--record", metavar="DIR",
-                        help="also write the tracked frames as a recording folder that `tracker track DIR` "
-                             "replays to the same poses")
+    parser.add_argument(
+        "--record",
+        metavar="DIR",
+        help="also write the tracked frames as a recording folder that `tracker track DIR` replays to the same poses",
+    )
     options.add_tuning_options(parser)
     options.add_live_view_options(parser, "while it tracks")
     options.add_viewer_options(parser, record=False)
@@ -69,13 +80,21 @@ def run(args: argparse.Namespace) -> int:
         sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
         settings = options.settings_from(args, capture.fps)
-        print("live: " + ", ".join(f"{camera.name} = {source.name} ({source.size[0]}x{source.size[1]}, "
-                                   f"{source.fps:g} fps)" for camera, source in zip(cameras, sources)),
-              file=sys.stderr)
+        print(
+            "live: "
+            + ", ".join(
+                f"{camera.name} = {source.name} ({source.size[0]}x{source.size[1]}, {source.fps:g} fps)"
+                for camera, source in zip(cameras, sources)
+            ),
+            file=sys.stderr,
+        )
         recorder = None
         if args.record:
-            copies = {"calibration.toml": calibration_path, "model.toml": Path(args.model),
-                      "init.toml": Path(args.init)}
+            copies = {
+                "calibration.toml": calibration_path,
+                "model.toml": Path(args.model),
+                "init.toml": Path(args.init),
+            }
             recorder = stack.enter_context(Recorder(Path(args.record), cameras, capture.fps, copies))
         view = None
         if args.view:
@@ -84,15 +103,18 @@ def run(args: argparse.Namespace) -> int:
 
             server = start_server(args.host, args.port)
             stack.callback(server.stop)
-            view = LiveView(Scene(server, model, cameras, settings.robust_c), model, cameras, init, settings,
-                            rate=args.view_rate)
+            view = LiveView(
+                Scene(server, model, cameras, settings.robust_c), model, cameras, init, settings, rate=args.view_rate
+            )
             stack.callback(view.close)
         summary = track_live(capture, cameras, model, init, settings, out, recorder, view)
     counts = summary.counts
     print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
     if recorder is not None:
-        print(f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record}` with the "
-              "same settings replays them)")
+        print(
+            f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record}` with the "
+            "same settings replays them)"
+        )
     rate = summary.frames / summary.seconds if summary.seconds > 0 else 0.0
     captured = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.captured))
     print(f"frames per second: {rate:.1f} tracked; frames captured: {captured}")
@@ -101,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
         print("interrupted: the frames done so far are saved", file=sys.stderr)
         return 130
     if not counts.live:
-        raise TrackerInputError(f"every camera stopped delivering (see above); the {summary.frames} frames "
-                                f"tracked are in {out / 'poses.npz'}; check the cameras and their connections")
+        raise TrackerInputError(
+            f"every camera stopped delivering (see above); the {summary.frames} frames "
+            f"tracked are in {out / 'poses.npz'}; check the cameras and their connections"
+        )
     return 0

@@ -65,8 +65,11 @@ def choose(given: str | None, found: Path | None, what: str, option: str, rec: P
 def add_recording_options(parser: argparse.ArgumentParser) -> None:
     """``--cameras`` and ``--calib``: which cameras of a recording folder, and their calibration."""
     parser.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
-    parser.add_argument("--calib", metavar="TOML",
-                        help="calibration to use instead of the recording's calibration.toml (e.g. from tracker refine)")
+    parser.add_argument(
+        "--calib",
+        metavar="TOML",
+        help="calibration to use instead of the recording's calibration.toml (e.g. from tracker refine)",
+    )
 
 
 def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] = TUNING) -> None:
@@ -74,22 +77,47 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
     options = {
         "iterations": (["--iterations"], dict(type=positive_int, help="IRLS iterations per frame (default 6)")),
         "spacing": (["--spacing"], dict(type=positive_float, help="pixels between outline samples (default 4)")),
-        "resample_every": (["--resample-every"], dict(
-            type=positive_int, help="sample the outlines afresh every N-th iteration, moving them to first order "
-                                    "between (default 3; 1 = every iteration)")),
-        "search_range": (["--search-range"], dict(
-            type=positive_int, help="edge search in the first iteration, pixels either side (default 20; the "
-                                    "last uses 6)")),
-        "motion": (["--dynamics", "--motion"], dict(
-            dest="motion", choices=("none", "constant-velocity", "kalman"),
-            help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
-                 "(a second-order Kalman filter per component whose prediction and covariance set the prior)")),
-        "max_turn": (["--max-turn"], dict(
-            type=positive_float, metavar="RAD",
-            help="largest rotation of any component in one iteration; a larger step is scaled down whole, which "
-                 "keeps a body from flipping on clutter but slows it in fast motion (default: no limit)")),
-        "damping": (["--damping"], dict(type=share, help="share of the last frame's motion carried into the "
-                                                         "prediction (default 1; 0.5 steadies a single camera)")),
+        "resample_every": (
+            ["--resample-every"],
+            dict(
+                type=positive_int,
+                help="sample the outlines afresh every N-th iteration, moving them to first order "
+                "between (default 3; 1 = every iteration)",
+            ),
+        ),
+        "search_range": (
+            ["--search-range"],
+            dict(
+                type=positive_int,
+                help="edge search in the first iteration, pixels either side (default 20; the last uses 6)",
+            ),
+        ),
+        "motion": (
+            ["--dynamics", "--motion"],
+            dict(
+                dest="motion",
+                choices=("none", "constant-velocity", "kalman"),
+                help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
+                "(a second-order Kalman filter per component whose prediction and covariance set the prior)",
+            ),
+        ),
+        "max_turn": (
+            ["--max-turn"],
+            dict(
+                type=positive_float,
+                metavar="RAD",
+                help="largest rotation of any component in one iteration; a larger step is scaled down whole, which "
+                "keeps a body from flipping on clutter but slows it in fast motion (default: no limit)",
+            ),
+        ),
+        "damping": (
+            ["--damping"],
+            dict(
+                type=share,
+                help="share of the last frame's motion carried into the "
+                "prediction (default 1; 0.5 steadies a single camera)",
+            ),
+        ),
     }
     for key in which:
         flags, kwargs = options[key]
@@ -108,21 +136,33 @@ def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
 
 def add_live_view_options(parser: argparse.ArgumentParser, after: str) -> None:
     """``--view`` and ``--view-rate``: the browser viewer following a run, and ``after`` it what it shows."""
-    parser.add_argument("--view", action="store_true",
-                        help=f"show the run in the browser viewer (about 30 updates a second), {after}")
-    parser.add_argument("--view-rate", type=positive_float, default=30.0,
-                        help="viewer updates per second while tracking (default 30)")
+    parser.add_argument(
+        "--view", action="store_true", help=f"show the run in the browser viewer (about 30 updates a second), {after}"
+    )
+    parser.add_argument(
+        "--view-rate", type=positive_float, default=30.0, help="viewer updates per second while tracking (default 30)"
+    )
 
 
 def add_viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> None:
     """``--host`` and ``--port`` of the browser viewer, and ``--record`` of its session when ``record``."""
-    parser.add_argument("--host", default="127.0.0.1",
-                        help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)")
-    parser.add_argument("--port", type=port, default=8080,
-                        help="viewer port (default 8080, or the next free one; 0 picks any free port)")
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)",
+    )
+    parser.add_argument(
+        "--port",
+        type=port,
+        default=8080,
+        help="viewer port (default 8080, or the next free one; 0 picks any free port)",
+    )
     if record:
-        parser.add_argument("--record", metavar="FILE.viser",
-                            help="also write the viewer session as a .viser file for viser's static client")
+        parser.add_argument(
+            "--record",
+            metavar="FILE.viser",
+            help="also write the viewer session as a .viser file for viser's static client",
+        )
 
 
 def opened(args: argparse.Namespace):
@@ -152,17 +192,20 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
 
     path = Path(given) if given else Path("out") / rec.path.resolve().name / "poses.npz"
     if not given and not path.is_file():
-        raise TrackerInputError(f"{path}: no poses to review or refine; run `tracker track {rec.path}` first "
-                                "or pass --poses")
+        raise TrackerInputError(
+            f"{path}: no poses to review or refine; run `tracker track {rec.path}` first or pass --poses"
+        )
     results = load_poses(path)
     if len(results["joints"]) == 0:
         raise TrackerInputError(f"{path}: holds no frames; track some first")
     if "poses" not in results or list(results["component_names"]) != list(model.names):
-        raise TrackerInputError(f"{path}: its components do not match the model {model.name!r}; "
-                                "pass the --model it was tracked with")
+        raise TrackerInputError(
+            f"{path}: its components do not match the model {model.name!r}; pass the --model it was tracked with"
+        )
     if results["frame"].max(initial=0) >= rec.frame_count:
-        raise TrackerInputError(f"{path}: frames beyond the recording's {rec.frame_count}; "
-                                "pass the recording it was tracked from")
+        raise TrackerInputError(
+            f"{path}: frames beyond the recording's {rec.frame_count}; pass the recording it was tracked from"
+        )
     results["usable"] = np.isfinite(results["poses"]).all(axis=(1, 2, 3))
     if "status" in results:
         results["usable"] &= results["status"] != LOST

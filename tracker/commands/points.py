@@ -18,25 +18,44 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("markers", metavar="FILE", help="marker file: .c3d or .trc")
     parser.add_argument("--model", required=True, help="points model TOML: parts, their markers and parents")
     parser.add_argument("--out", help="output folder for poses.npz and shapes.npz (default: out/<file name>)")
-    parser.add_argument("--start", type=int,
-                        help="first frame, counted from 0 in the file (default: the first with 3 markers seen on "
-                             "every part)")
+    parser.add_argument(
+        "--start",
+        type=int,
+        help="first frame, counted from 0 in the file (default: the first with 3 markers seen on every part)",
+    )
     parser.add_argument("--frames", type=options.positive_int, help="number of frames to span (default: all)")
     parser.add_argument("--every", type=options.positive_int, default=1, help="fit every N-th frame (default 1)")
-    parser.add_argument("--level", choices=("rigid", "global", "local"), default="rigid",
-                        help="what moves after the first frame: rigid (pose only, the shapes fitted on the first "
-                             "frame; default), global (also the superquadric shape) or local (also the nodes)")
-    parser.add_argument("--dynamics", choices=("first-order", "second-order"), default="first-order",
-                        help="first-order (default): --steps fitting steps per frame, no momentum; second-order: "
-                             "parts with mass and momentum follow the markers in time (about 3-5x faster, looser), "
-                             "and a part whose markers vanish keeps moving")
-    parser.add_argument("--steps", type=options.positive_int, default=40,
-                        help="fitting steps per frame with --dynamics first-order (default 40)")
-    parser.add_argument("--sigma", type=options.positive_float, default=0.01,
-                        help="marker noise, metres: how much the data weigh against the membrane (default 0.01)")
+    parser.add_argument(
+        "--level",
+        choices=("rigid", "global", "local"),
+        default="rigid",
+        help="what moves after the first frame: rigid (pose only, the shapes fitted on the first "
+        "frame; default), global (also the superquadric shape) or local (also the nodes)",
+    )
+    parser.add_argument(
+        "--dynamics",
+        choices=("first-order", "second-order"),
+        default="first-order",
+        help="first-order (default): --steps fitting steps per frame, no momentum; second-order: "
+        "parts with mass and momentum follow the markers in time (about 3-5x faster, looser), "
+        "and a part whose markers vanish keeps moving",
+    )
+    parser.add_argument(
+        "--steps",
+        type=options.positive_int,
+        default=40,
+        help="fitting steps per frame with --dynamics first-order (default 40)",
+    )
+    parser.add_argument(
+        "--sigma",
+        type=options.positive_float,
+        default=0.01,
+        help="marker noise, metres: how much the data weigh against the membrane (default 0.01)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument("--view", action="store_true",
-                        help="then show the fitted parts, markers and joints in the browser viewer")
+    parser.add_argument(
+        "--view", action="store_true", help="then show the fitted parts, markers and joints in the browser viewer"
+    )
     options.add_viewer_options(parser)
 
 
@@ -47,22 +66,24 @@ def run(args: argparse.Namespace) -> int:
 
     from tracker.io.markers import read_markers
     from tracker.io.poses import PosesWriter
-    from tracker.physics.shapes import ShapesWriter
     from tracker.physics.points import PointsSettings, load_points_model, start_frame, track
+    from tracker.physics.shapes import ShapesWriter
     from tracker.status import LOST, TRACKED, UNCERTAIN
 
     markers = read_markers(args.markers)
     model = load_points_model(args.model)
     points = markers.select(model.marker_names)
     first = start_frame(points, model, args.start)
-    frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames),
-                   args.every)
+    frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames), args.every)
     settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level, dynamics=args.dynamics)
     out = Path(args.out) if args.out else Path("out") / markers.path.stem
-    print(f"fitting {markers.path} frames {markers.first_frame + frames.start}..{markers.first_frame + frames[-1]} "
-          f"(every {args.every}, "
-          f"{markers.rate:g} Hz) with model {model.name!r}: {len(model.parts)} parts, "
-          f"{len(model.joint_names)} joints, {len(model.marker_names)} markers", file=sys.stderr)
+    print(
+        f"fitting {markers.path} frames {markers.first_frame + frames.start}..{markers.first_frame + frames[-1]} "
+        f"(every {args.every}, "
+        f"{markers.rate:g} Hz) with model {model.name!r}: {len(model.parts)} parts, "
+        f"{len(model.joint_names)} joints, {len(model.marker_names)} markers",
+        file=sys.stderr,
+    )
     shapes = ShapesWriter(out / "shapes.npz", model)
     interrupted = False
     progress = options.bar(args, None, "frame", leave=True)
@@ -72,8 +93,9 @@ def run(args: argparse.Namespace) -> int:
             fits = track((points[f] for f in frames), model, settings, args.every / markers.rate)
             for index, fitted in progress(zip(frames, fits), total=len(frames)):
                 shapes.append(markers.first_frame + index, fitted)  # before poses: see shapes.write below
-                writer.append(markers.first_frame + index, fitted.poses, fitted.joints, fitted.status,
-                              fitted.rms * 1000.0)
+                writer.append(
+                    markers.first_frame + index, fitted.poses, fitted.joints, fitted.status, fitted.rms * 1000.0
+                )
         except KeyboardInterrupt:
             interrupted = True
         finally:
@@ -82,17 +104,21 @@ def run(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - started
     results = writer.arrays()
     counts = np.bincount(results["status"], minlength=3)
-    print(f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "
-          f"({done / elapsed if elapsed else 0:.1f} frames/s): {counts[TRACKED]} with every part seen, "
-          f"{counts[UNCERTAIN]} with a part unseen, {counts[LOST]} lost")
+    print(
+        f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "
+        f"({done / elapsed if elapsed else 0:.1f} frames/s): {counts[TRACKED]} with every part seen, "
+        f"{counts[UNCERTAIN]} with a part unseen, {counts[LOST]} lost"
+    )
     if done:
         table = final["residual"] * 1000.0
         print("RMS marker-to-node distance per part, mm (median / 95th percentile / max over frames):")
         for p, name in enumerate(model.parts):
             column = table[:, p][np.isfinite(table[:, p])]
             if len(column):
-                print(f"  {name:<14} {len(model.markers[p]):>2} markers  {np.median(column):6.1f} "
-                      f"{np.percentile(column, 95):6.1f} {column.max():6.1f}")
+                print(
+                    f"  {name:<14} {len(model.markers[p]):>2} markers  {np.median(column):6.1f} "
+                    f"{np.percentile(column, 95):6.1f} {column.max():6.1f}"
+                )
         print(f"joint violation: max {final['violation'].max() * 1000.0:.3g} mm")
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
     if interrupted or not done or not (args.view or args.record):
@@ -100,8 +126,13 @@ def run(args: argparse.Namespace) -> int:
     from tracker.viewer.points import PointsView
     from tracker.viewer.scene import start_server
 
-    view = PointsView(start_server(args.host, args.port, quiet=not args.view), results, final,
-                      points[results["frame"] - markers.first_frame], markers.rate / args.every)
+    view = PointsView(
+        start_server(args.host, args.port, quiet=not args.view),
+        results,
+        final,
+        points[results["frame"] - markers.first_frame],
+        markers.rate / args.every,
+    )
     view.show(0)
     if args.record:
         view.record(Path(args.record), progress=not args.quiet)

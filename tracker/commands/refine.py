@@ -21,18 +21,30 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     options.add_recording_options(parser)
     parser.add_argument("--fix", metavar="CAMERAS", help="comma-separated cameras to hold as calibrated")
     parser.add_argument("--start", type=int, default=0, help="first frame to use (default 0)")
-    parser.add_argument("--frames", type=options.positive_int,
-                        help="number of frames to use from there (default: all)")
-    parser.add_argument("--samples", type=options.positive_int, default=30,
-                        help="tracked frames the outlines are measured in, spread evenly (default 30)")
-    parser.add_argument("--rounds", type=options.positive_int,
-                        help="rounds of measuring and moving the cameras, searches narrowing (default 8)")
-    parser.add_argument("--background", metavar="DIR",
-                        help="an empty scene (<camera>.png, e.g. from tracker background): search the differences "
-                             "from it instead of the grey images")
-    parser.add_argument("--hold-poses", action="store_true",
-                        help="take the poses as right (e.g. ground truth, motion capture) and move only the "
-                             "cameras; by default each frame's body is fitted again after every round")
+    parser.add_argument("--frames", type=options.positive_int, help="number of frames to use from there (default: all)")
+    parser.add_argument(
+        "--samples",
+        type=options.positive_int,
+        default=30,
+        help="tracked frames the outlines are measured in, spread evenly (default 30)",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=options.positive_int,
+        help="rounds of measuring and moving the cameras, searches narrowing (default 8)",
+    )
+    parser.add_argument(
+        "--background",
+        metavar="DIR",
+        help="an empty scene (<camera>.png, e.g. from tracker background): search the differences "
+        "from it instead of the grey images",
+    )
+    parser.add_argument(
+        "--hold-poses",
+        action="store_true",
+        help="take the poses as right (e.g. ground truth, motion capture) and move only the "
+        "cameras; by default each frame's body is fitted again after every round",
+    )
     options.add_tuning_options(parser, ("spacing", "search_range", "iterations", "max_turn"))
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -41,10 +53,10 @@ def run(args: argparse.Namespace) -> int:
     """Write the refined calibration and print each camera's move and edge distance before and after."""
     import numpy as np
 
+    from tracker.atomic import ensure_writable_folder
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
     from tracker.foreground import camera_stacks, sample_indices
-    from tracker.atomic import ensure_writable_folder
     from tracker.io.readers import grey
     from tracker.track import Tracker
 
@@ -54,8 +66,10 @@ def run(args: argparse.Namespace) -> int:
     fixed = options.camera_names(args.fix) or []
     unknown = [name for name in fixed if name not in names]
     if unknown:
-        raise TrackerInputError(f"{rec.calibration_path}: --fix names {', '.join(unknown)}, not among the cameras "
-                                f"tracked ({', '.join(names)})")
+        raise TrackerInputError(
+            f"{rec.calibration_path}: --fix names {', '.join(unknown)}, not among the cameras "
+            f"tracked ({', '.join(names)})"
+        )
     out = Path(args.out)
     if out.resolve() == rec.calibration_path.resolve():
         raise TrackerInputError(f"{out}: is the calibration being refined; write the refined rig to another file")
@@ -63,8 +77,10 @@ def run(args: argparse.Namespace) -> int:
     stop = rec.frame_count if args.frames is None else args.start + args.frames
     usable = results["usable"] & (results["frame"] >= args.start) & (results["frame"] < stop)
     if usable.sum() == 0:
-        raise TrackerInputError(f"{poses_path}: no frame in {args.start}..{stop - 1} has a pose that is not lost; "
-                                "pick frames the run tracked (--start, --frames)")
+        raise TrackerInputError(
+            f"{poses_path}: no frame in {args.start}..{stop - 1} has a pose that is not lost; "
+            "pick frames the run tracked (--start, --frames)"
+        )
     picked = np.flatnonzero(usable)[sample_indices(int(usable.sum()), args.samples)]
     settings = options.settings_from(args, rec.fps)
     smooth = Tracker(model, rec.cameras, results["poses"][picked[0]], settings).smooth
@@ -76,18 +92,33 @@ def run(args: argparse.Namespace) -> int:
         prepare = [lambda frame: smooth(grey(frame))] * len(rec.cameras)
     stacks = camera_stacks(rec, results["frame"][picked], options.bar(args, "reading", "frame"))
     frames = list(zip(*([prepare[k](image) for image in stack] for k, stack in enumerate(stacks))))
-    refined = refine_rig(model, rec.cameras, results["poses"][picked], frames, settings, args.rounds or ROUNDS,
-                         [names.index(name) for name in fixed], not args.hold_poses,
-                         options.bar(args, "refining", "round"))
+    refined = refine_rig(
+        model,
+        rec.cameras,
+        results["poses"][picked],
+        frames,
+        settings,
+        args.rounds or ROUNDS,
+        [names.index(name) for name in fixed],
+        not args.hold_poses,
+        options.bar(args, "refining", "round"),
+    )
     moved = {camera.name: camera for camera in refined.cameras}
-    rig = [dataclasses.replace(camera, rotation=moved[camera.name].rotation,
-                               translation=moved[camera.name].translation) if camera.name in moved else camera
-           for camera in load_calibration(rec.calibration_path)]
+    rig = [
+        dataclasses.replace(camera, rotation=moved[camera.name].rotation, translation=moved[camera.name].translation)
+        if camera.name in moved
+        else camera
+        for camera in load_calibration(rec.calibration_path)
+    ]
     save_calibration(rig, out)
-    print(f"refined {rec.calibration_path} to the body of {poses_path} in {len(picked)} frames "
-          f"({results['frame'][picked[0]]}..{results['frame'][picked[-1]]}); wrote {out} (use with --calib {out})")
+    print(
+        f"refined {rec.calibration_path} to the body of {poses_path} in {len(picked)} frames "
+        f"({results['frame'][picked[0]]}..{results['frame'][picked[-1]]}); wrote {out} (use with --calib {out})"
+    )
     for k, name in enumerate(names):
-        print(f"  {name}: turned {refined.rotation_deg[k]:.2f} deg, moved {1000 * refined.shift_m[k]:.0f} mm; "
-              f"edge distance {refined.residual_before[k]:.2f} -> {refined.residual_after[k]:.2f} px"
-              + (" (fixed)" if name in fixed else ""))
+        print(
+            f"  {name}: turned {refined.rotation_deg[k]:.2f} deg, moved {1000 * refined.shift_m[k]:.0f} mm; "
+            f"edge distance {refined.residual_before[k]:.2f} -> {refined.residual_after[k]:.2f} px"
+            + (" (fixed)" if name in fixed else "")
+        )
     return 0

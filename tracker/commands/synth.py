@@ -25,7 +25,15 @@ def run(args: argparse.Namespace) -> int:
     """Render the recording folder and say where it is."""
     from tracker.synth import synthesize
 
-    synthesize(args.model, args.calib, args.out, motion=args.motion, frames=args.frames, start=args.start,
-               stride=args.stride, seed=args.seed)
+    synthesize(
+        args.model,
+        args.calib,
+        args.out,
+        motion=args.motion,
+        frames=args.frames,
+        start=args.start,
+        stride=args.stride,
+        seed=args.seed,
+    )
     print(f"wrote recording {args.out}")
     return 0

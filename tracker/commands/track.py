@@ -24,14 +24,20 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     parser.add_argument("--frames", type=options.positive_int, help="number of frames to track (default: all)")
     options.add_tuning_options(parser)
-    parser.add_argument("--background", default="none", metavar="none|median|DIR",
-                        help="search edges in the difference from the empty scene instead of the grey image: "
-                             "'median' estimates it from the recording (the person must move about), DIR holds "
-                             "<camera>.png images of it (default none)")
+    parser.add_argument(
+        "--background",
+        default="none",
+        metavar="none|median|DIR",
+        help="search edges in the difference from the empty scene instead of the grey image: "
+        "'median' estimates it from the recording (the person must move about), DIR holds "
+        "<camera>.png images of it (default none)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument("--overlay", metavar="VIDEO",
-                        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge "
-                             "searches")
+    parser.add_argument(
+        "--overlay",
+        metavar="VIDEO",
+        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches",
+    )
     options.add_live_view_options(parser, "then review the result")
     options.add_viewer_options(parser)
 
@@ -53,16 +59,19 @@ def run(args: argparse.Namespace) -> int:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec, model = options.opened(args)
     if not 0 <= args.start < rec.frame_count:
-        raise TrackerInputError(f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; "
-                                "pick a frame inside them")
+        raise TrackerInputError(
+            f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
+        )
     init = load_pose_file(options.choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
     settings = options.settings_from(args, rec.fps)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     background = _background(args, rec, out)
-    print(f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
-          f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
-          file=sys.stderr)
+    print(
+        f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
+        f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
+        file=sys.stderr,
+    )
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
@@ -87,8 +96,9 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
-            for index, images in progress(frames(rec, args.start, stop, prepare=prepare,
-                                                 colour=background is not None), total=stop - args.start):
+            for index, images in progress(
+                frames(rec, args.start, stop, prepare=prepare, colour=background is not None), total=stop - args.start
+            ):
                 shown = images
                 if background is not None and overlay is not None:
                     shown, images = zip(*images)
@@ -140,8 +150,11 @@ def _background(args: argparse.Namespace, rec, out: Path):
         return load_background(args.background, rec)
     background = median_background(rec, SAMPLES, options.bar(args, "background", "frame"))
     folder = save_background(background, rec, out / "background")
-    print(f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, saved in {folder} "
-          f"(reuse with --background {folder})", file=sys.stderr)
+    print(
+        f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, saved in {folder} "
+        f"(reuse with --background {folder})",
+        file=sys.stderr,
+    )
     return background
 
 
@@ -153,5 +166,13 @@ def _live_view(args: argparse.Namespace, rec, model, init, settings, truth):
     from tracker.viewer.review import truth_rows
 
     record = Path(args.record) if args.record else None
-    return LiveView(scene(args, rec, model, settings, truth), model, rec.cameras, init, settings,
-                    rate=args.view_rate, truth=truth_rows(truth, np.arange(rec.frame_count)), record=record)
+    return LiveView(
+        scene(args, rec, model, settings, truth),
+        model,
+        rec.cameras,
+        init,
+        settings,
+        rate=args.view_rate,
+        truth=truth_rows(truth, np.arange(rec.frame_count)),
+        record=record,
+    )

@@ -17,9 +17,12 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
     parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     options.add_recording_options(parser)
-    parser.add_argument("--background", metavar="DIR",
-                        help="the empty scene a run was tracked against (tracker track --background; a median one "
-                             "is saved in OUT/background): the panels then show and search the difference images")
+    parser.add_argument(
+        "--background",
+        metavar="DIR",
+        help="the empty scene a run was tracked against (tracker track --background; a median one "
+        "is saved in OUT/background): the panels then show and search the difference images",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar while recording")
     options.add_viewer_options(parser)
 

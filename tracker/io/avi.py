@@ -28,8 +28,14 @@ class MjpegAviWriter:
         self.path = Path(path)
         self.width, self.height = int(size[0]), int(size[1])
         self.rate, self.scale = (round(fps), 1) if abs(fps - round(fps)) < 1e-3 else (round(fps * 1000), 1000)
-        self.params = [cv2.IMWRITE_JPEG_QUALITY, int(quality), cv2.IMWRITE_JPEG_OPTIMIZE, 1,
-                       cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420]
+        self.params = [
+            cv2.IMWRITE_JPEG_QUALITY,
+            int(quality),
+            cv2.IMWRITE_JPEG_OPTIMIZE,
+            1,
+            cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
+            cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420,
+        ]
         self.index: list[tuple[int, int]] = []  # (offset from 'movi', size) per frame
         self.max_frame = 0
         self.file = open(self.path, "wb")
@@ -38,8 +44,26 @@ class MjpegAviWriter:
     def _write_headers(self) -> None:
         w, h = self.width, self.height
         avih = struct.pack("<14I", round(1e6 * self.scale / self.rate), 0, 0, 0x10, 0, 0, 1, 0, w, h, 0, 0, 0, 0)
-        strh = struct.pack("<4s4sIHHIIIIIIIIhhhh", b"vids", b"MJPG", 0, 0, 0, 0, self.scale, self.rate, 0, 0, 0,
-                           0xFFFFFFFF, 0, 0, 0, w, h)
+        strh = struct.pack(
+            "<4s4sIHHIIIIIIIIhhhh",
+            b"vids",
+            b"MJPG",
+            0,
+            0,
+            0,
+            0,
+            self.scale,
+            self.rate,
+            0,
+            0,
+            0,
+            0xFFFFFFFF,
+            0,
+            0,
+            0,
+            w,
+            h,
+        )
         strf = struct.pack("<IiiHH4sIiiII", 40, w, h, 1, 24, b"MJPG", w * h * 3, 0, 0, 0, 0)
         strl = b"strl" + _chunk(b"strh", strh) + _chunk(b"strf", strf)
         hdrl = b"hdrl" + _chunk(b"avih", avih) + _chunk(b"LIST", strl)
@@ -100,7 +124,7 @@ class MjpegAviWriter:
         f.write(struct.pack("<II", frames, self.max_frame + 8))
         f.close()
 
-    def __enter__(self) -> "MjpegAviWriter":
+    def __enter__(self) -> MjpegAviWriter:
         return self
 
     def __exit__(self, *exc) -> None:

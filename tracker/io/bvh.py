@@ -56,7 +56,9 @@ def load_bvh(path: str | os.PathLike) -> Bvh:
     try:
         return _parse_bvh(text)
     except (ValueError, IndexError) as exc:
-        raise TrackerInputError(f"{path}: not a valid BVH file ({exc}); give a BVH file with HIERARCHY and MOTION") from None
+        raise TrackerInputError(
+            f"{path}: not a valid BVH file ({exc}); give a BVH file with HIERARCHY and MOTION"
+        ) from None
 
 
 def _parse_bvh(text: str) -> Bvh:

@@ -64,6 +64,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.readers import MJPG, open_video
 from tracker.io.recording import DEFAULT_FPS
+
 STALL_TIMEOUT = 2.0  # seconds without a frame after which a camera is dropped
 MAX_PENDING = 30  # frames per camera waiting for their partners
 JOIN_WAIT = 1.0  # seconds close() waits for the capture threads (one stuck in a driver call is left behind)
@@ -111,12 +112,16 @@ class V4L2Source:
     def __init__(self, device: str, size: tuple[int, int] | None = None, fps: float | None = None):
         self.name = device
         if not Path(device).exists():
-            raise TrackerInputError(f"{device}: no such video device; plug the camera in or pick another "
-                                    "(`v4l2-ctl --list-devices` lists them)")
+            raise TrackerInputError(
+                f"{device}: no such video device; plug the camera in or pick another "
+                "(`v4l2-ctl --list-devices` lists them)"
+            )
         capture = cv2.VideoCapture(device, cv2.CAP_V4L2)
         if not capture.isOpened():
-            raise TrackerInputError(f"{device}: cannot be opened as a V4L2 camera (not a capture device, busy "
-                                    f"or not permitted); check it with `v4l2-ctl -d {device} --all`")
+            raise TrackerInputError(
+                f"{device}: cannot be opened as a V4L2 camera (not a capture device, busy "
+                f"or not permitted); check it with `v4l2-ctl -d {device} --all`"
+            )
         capture.set(cv2.CAP_PROP_FOURCC, MJPG)
         if size is not None:
             capture.set(cv2.CAP_PROP_FRAME_WIDTH, size[0])
@@ -128,8 +133,11 @@ class V4L2Source:
         fourcc = int(capture.get(cv2.CAP_PROP_FOURCC))
         self.mjpeg = fourcc == MJPG and capture.set(cv2.CAP_PROP_CONVERT_RGB, 0)  # raw: retrieve() gives the JPEG
         if not self.mjpeg:
-            warnings.warn(f"{device} gives {_fourcc_text(fourcc)}, not Motion-JPEG; its frames are JPEG-encoded "
-                          "in the capture thread (more CPU per frame)", stacklevel=2)
+            warnings.warn(
+                f"{device} gives {_fourcc_text(fourcc)}, not Motion-JPEG; its frames are JPEG-encoded "
+                "in the capture thread (more CPU per frame)",
+                stacklevel=2,
+            )
         self.size = (int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         granted = capture.get(cv2.CAP_PROP_FPS)
         if fps is not None and granted > 0 and abs(granted - fps) > 0.01 * fps:
@@ -262,8 +270,11 @@ class Pairing:
                 while queue and queue[0].time < anchor - self.tolerance:  # too old for this or any later anchor
                     queue.popleft()
                     self.unpaired[camera] += 1
-                near = [(abs(frame.time - anchor), k) for k, frame in enumerate(queue)
-                        if frame.time <= anchor + self.tolerance]
+                near = [
+                    (abs(frame.time - anchor), k)
+                    for k, frame in enumerate(queue)
+                    if frame.time <= anchor + self.tolerance
+                ]
                 if near:
                     chosen[camera] = min(near)[1]
                 elif queue:
@@ -328,8 +339,12 @@ class Capture:
         """Start one thread per camera; ``prepare`` (grey image -> image) runs in them on every frame."""
         self.started = time.monotonic()
         self.last = [self.started] * len(self.sources)
-        self.threads = [threading.Thread(target=self._run, args=(camera, prepare), daemon=True,
-                                         name=f"capture {self.names[camera]}") for camera in range(len(self.sources))]
+        self.threads = [
+            threading.Thread(
+                target=self._run, args=(camera, prepare), daemon=True, name=f"capture {self.names[camera]}"
+            )
+            for camera in range(len(self.sources))
+        ]
         for thread in self.threads:
             thread.start()
 
@@ -346,8 +361,9 @@ class Capture:
                 if image is None:
                     raise CaptureError("delivered a frame that is not a decodable JPEG")
                 if (image.shape[1], image.shape[0]) != source.size:
-                    raise CaptureError(f"delivered a {image.shape[1]}x{image.shape[0]} frame, not "
-                                       f"{source.size[0]}x{source.size[1]}")
+                    raise CaptureError(
+                        f"delivered a {image.shape[1]}x{image.shape[0]} frame, not {source.size[0]}x{source.size[1]}"
+                    )
                 self._arrive(camera, Frame(stamp, jpeg, image if prepare is None else prepare(image)))
         except Exception as error:  # a failing camera is dropped; the others go on
             self.drop(camera, str(error) if isinstance(error, CaptureError) else f"failed: {error!r}")
@@ -384,13 +400,19 @@ class Capture:
             self._offer(self.pairing.remove(camera))
             left = [self.names[c] for c in self.pairing.active]
         going_on = f"going on with {', '.join(left)}" if left else "no camera is left"
-        print(f"tracker: camera {self.names[camera]} ({self.sources[camera].name}) {reason}; {going_on}",
-              file=sys.stderr, flush=True)
+        print(
+            f"tracker: camera {self.names[camera]} ({self.sources[camera].name}) {reason}; {going_on}",
+            file=sys.stderr,
+            flush=True,
+        )
 
     def _stalled(self, now: float) -> list[int]:
         with self.lock:
-            return [camera for camera in self.pairing.active
-                    if camera not in self.ended and now - self.last[camera] > self.stall_timeout]
+            return [
+                camera
+                for camera in self.pairing.active
+                if camera not in self.ended and now - self.last[camera] > self.stall_timeout
+            ]
 
     def _finished(self) -> bool:
         """No set is in the slot and none can come any more (lock held)."""
@@ -421,9 +443,16 @@ class Capture:
 
     def counts(self) -> Counts:
         with self.lock:
-            return Counts(tuple(self.names), tuple(self.captured), tuple(self.pairing.paired),
-                          tuple(self.pairing.unpaired), self.sets, self.taken, self.stale,
-                          tuple(self.names[camera] for camera in self.pairing.active))
+            return Counts(
+                tuple(self.names),
+                tuple(self.captured),
+                tuple(self.pairing.paired),
+                tuple(self.pairing.unpaired),
+                self.sets,
+                self.taken,
+                self.stale,
+                tuple(self.names[camera] for camera in self.pairing.active),
+            )
 
     def close(self) -> None:
         """Stop the threads (waiting up to JOIN_WAIT seconds in all) and settle the counters; idempotent."""

@@ -45,8 +45,10 @@ class Markers:
         if not found:
             shown = ", ".join(self.labels[:12]) + (", ..." if len(self.labels) > 12 else "")
             raise TrackerInputError(f"{self.path}: no marker {name!r} (it has {shown}); fix the name in the model")
-        raise TrackerInputError(f"{self.path}: marker name {name!r} matches {len(found)} labels "
-                                f"({', '.join(self.labels[i] for i in found)}); use the full label in the model")
+        raise TrackerInputError(
+            f"{self.path}: marker name {name!r} matches {len(found)} labels "
+            f"({', '.join(self.labels[i] for i in found)}); use the full label in the model"
+        )
 
     def select(self, names: Sequence[str]) -> np.ndarray:
         """Positions (F, len(names), 3) of the named markers, in that order."""
@@ -102,6 +104,8 @@ def _read_trc(path: Path) -> Markers:
     try:
         rate = trc.rate
     except ValueError:
-        raise TrackerInputError(f"{path}: DataRate {trc.header['DataRate']!r} is not a number; fix the header") from None
+        raise TrackerInputError(
+            f"{path}: DataRate {trc.header['DataRate']!r} is not a number; fix the header"
+        ) from None
     first = int(trc.frame[0]) if len(trc.frame) else 1
     return Markers(path, trc.names, trc.markers * _scale(path, trc.units), rate, first)

@@ -15,8 +15,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker.errors import TrackerInputError
 from tracker.atomic import ensure_writable_folder, replace_with, temporary_beside
+from tracker.errors import TrackerInputError
 
 CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG"}
 
@@ -36,16 +36,18 @@ class MosaicWriter:
         self.height = max(2, int(height * scale) // 2 * 2)
         self.widths = [max(2, int(w * scale) // 2 * 2) for w in widths]
         self.temp = temporary_beside(self.path)
-        self.writer = cv2.VideoWriter(str(self.temp), cv2.VideoWriter_fourcc(*codec), fps,
-                                      (sum(self.widths), self.height))
+        self.writer = cv2.VideoWriter(
+            str(self.temp), cv2.VideoWriter_fourcc(*codec), fps, (sum(self.widths), self.height)
+        )
         if not self.writer.isOpened():
             raise TrackerInputError(f"{self.path}: OpenCV cannot write this video type here; try .avi")
         self.frames = 0
 
     def write(self, images: list[np.ndarray]) -> None:
         """One frame: RGB uint8 images in camera order."""
-        row = np.hstack([cv2.resize(image, (w, self.height), interpolation=cv2.INTER_AREA)
-                         for image, w in zip(images, self.widths)])
+        row = np.hstack(
+            [cv2.resize(image, (w, self.height), interpolation=cv2.INTER_AREA) for image, w in zip(images, self.widths)]
+        )
         self.writer.write(cv2.cvtColor(row, cv2.COLOR_RGB2BGR))
         self.frames += 1
 

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
+from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.atomic import atomic_write
-from tracker.tomlfile import read_toml
 from tracker.model import Model
+from tracker.tomlfile import read_toml
 
 _JOINT_TOLERANCE = 1e-3
 

@@ -29,8 +29,8 @@ from types import TracebackType
 
 import numpy as np
 
-from tracker.errors import TrackerInputError
 from tracker.atomic import atomic_write, ensure_writable_folder
+from tracker.errors import TrackerInputError
 from tracker.status import LOST, TRACKED, UNCERTAIN
 
 _INITIAL_CAPACITY = 64
@@ -84,8 +84,16 @@ class PosesWriter:
     def __len__(self) -> int:
         return self._count
 
-    def append(self, frame_index: int, poses: np.ndarray, joints: np.ndarray, status: int, residual: float,
-               elapsed: float = np.nan, time: float | None = None) -> None:
+    def append(
+        self,
+        frame_index: int,
+        poses: np.ndarray,
+        joints: np.ndarray,
+        status: int,
+        residual: float,
+        elapsed: float = np.nan,
+        time: float | None = None,
+    ) -> None:
         """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0/1/2, residual px,
         the seconds the tracker spent on it (NaN if unknown) and, for frames taken at measured times (live
         capture), its time in seconds; without times, time = (frame - first frame) / fps."""
@@ -95,15 +103,24 @@ class PosesWriter:
             self._timed = time is not None
         elif self._timed != (time is not None):
             raise ValueError(f"{self.path}: give every frame a time or none")
-        row = {"frame": frame_index, "poses": poses, "joints": joints, "status": status, "residual": residual,
-               "elapsed": elapsed, "time": np.nan if time is None else time}
+        row = {
+            "frame": frame_index,
+            "poses": poses,
+            "joints": joints,
+            "status": status,
+            "residual": residual,
+            "elapsed": elapsed,
+            "time": np.nan if time is None else time,
+        }
         for key, value in row.items():
             if np.shape(value) != self._columns[key].shape[1:]:
                 raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._columns[key].shape[1:]}")
         if status not in (TRACKED, UNCERTAIN, LOST):
             raise ValueError(f"status must be 0, 1 or 2, got {status}")
         if self._count == len(self._columns["frame"]):
-            self._columns = {key: np.concatenate([column, np.empty_like(column)]) for key, column in self._columns.items()}
+            self._columns = {
+                key: np.concatenate([column, np.empty_like(column)]) for key, column in self._columns.items()
+            }
         for key, value in row.items():
             self._columns[key][self._count] = value
         self._count += 1
@@ -204,9 +221,13 @@ def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarra
         raise fail(f"'joints' must have shape (frames, joints, 3), got {arrays['joints'].shape}")
     frames = arrays["joints"].shape[0]
     out["joints"] = numbers("joints", (frames, len(out["joint_names"]), 3), np.float64)
-    for key, dtype, integer in (("frame", np.int64, True), ("status", np.int8, True),
-                                ("time", np.float64, False), ("residual", np.float64, False),
-                                ("elapsed", np.float64, False)):
+    for key, dtype, integer in (
+        ("frame", np.int64, True),
+        ("status", np.int8, True),
+        ("time", np.float64, False),
+        ("residual", np.float64, False),
+        ("elapsed", np.float64, False),
+    ):
         if key in arrays:
             out[key] = numbers(key, (frames,), dtype, integer)
     out.setdefault("frame", np.arange(frames, dtype=np.int64))

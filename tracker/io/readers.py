@@ -50,7 +50,9 @@ def read_image(file: Path, index: int, flags: int = cv2.IMREAD_COLOR) -> np.ndar
 
 
 def _decode_error(video: Path, index: int) -> TrackerInputError:
-    return TrackerInputError(f"{video}: frame {index} failed to decode; the video is truncated or corrupt, re-encode it")
+    return TrackerInputError(
+        f"{video}: frame {index} failed to decode; the video is truncated or corrupt, re-encode it"
+    )
 
 
 def grey(image: np.ndarray) -> np.ndarray:
@@ -76,7 +78,9 @@ def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Iterator[
         flags = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
         for index, file in enumerate(image_files(source)[start:], start):
             yield read_image(file, index, flags)
-        raise TrackerInputError(f"{source}: image folder ended before the recording's last frame; add the missing images")
+        raise TrackerInputError(
+            f"{source}: image folder ended before the recording's last frame; add the missing images"
+        )
     capture, raw = open_video(source)
     try:
         for index in range(start):
@@ -154,14 +158,16 @@ class _Reader:
         self.thread.join()
 
 
-def read_frames(sources: list[Path], start: int, stop: int, queue_size: int = 4, prepare=None,
-                colour: bool = False) -> Iterator[tuple[int, list]]:
+def read_frames(
+    sources: list[Path], start: int, stop: int, queue_size: int = 4, prepare=None, colour: bool = False
+) -> Iterator[tuple[int, list]]:
     """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread
     (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that thread too (e.g. the
     tracker's smoothing); a list of them gives each source its own."""
     preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
-    readers = [_Reader(source, start, stop - start, queue_size, each, colour)
-               for source, each in zip(sources, preparers)]
+    readers = [
+        _Reader(source, start, stop - start, queue_size, each, colour) for source, each in zip(sources, preparers)
+    ]
     try:
         for index in range(start, stop):
             yield index, [reader.get() for reader in readers]

@@ -47,8 +47,9 @@ class Recording:
     calibration_path: Path | None = None
 
 
-def open_recording(path: str | os.PathLike, cameras: list[str] | None = None,
-                   calibration: str | os.PathLike | None = None) -> Recording:
+def open_recording(
+    path: str | os.PathLike, cameras: list[str] | None = None, calibration: str | os.PathLike | None = None
+) -> Recording:
     """Open a recording folder, checking that its videos decode and agree with the calibration.
 
     ``cameras`` picks cameras by name (in that order); by default every camera
@@ -65,7 +66,9 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None,
     if calibration is None:
         calibration = folder / "calibration.toml"
         if not calibration.is_file():
-            raise TrackerInputError(f"{calibration}: not found; a recording folder needs the calibration of its cameras")
+            raise TrackerInputError(
+                f"{calibration}: not found; a recording folder needs the calibration of its cameras"
+            )
     calibration = Path(calibration)
     rig = {camera.name: camera for camera in load_calibration(calibration)}
     sources = {name: _find_source(folder, name) for name in rig}
@@ -121,8 +124,9 @@ def open_recording(path: str | os.PathLike, cameras: list[str] | None = None,
     )
 
 
-def frames(recording: Recording, start: int = 0, stop: int | None = None,
-           prepare=None, colour: bool = False) -> Iterator[tuple[int, list]]:
+def frames(
+    recording: Recording, start: int = 0, stop: int | None = None, prepare=None, colour: bool = False
+) -> Iterator[tuple[int, list]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
 
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
@@ -147,11 +151,13 @@ def capture_times(recording: Recording) -> np.ndarray | None:
     try:
         table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     except (OSError, ValueError) as error:
-        raise TrackerInputError(f"{path}: not a readable table of frame,time,... rows ({error}); "
-                                "fix it or remove it") from None
+        raise TrackerInputError(
+            f"{path}: not a readable table of frame,time,... rows ({error}); fix it or remove it"
+        ) from None
     if table.shape[1] < 2 or len(table) != recording.frame_count or not np.isfinite(table[:, 1]).all():
-        raise TrackerInputError(f"{path}: needs one row of finite times per frame ({recording.frame_count}); "
-                                "fix it or remove it")
+        raise TrackerInputError(
+            f"{path}: needs one row of finite times per frame ({recording.frame_count}); fix it or remove it"
+        )
     return table[:, 1]
 
 
@@ -207,9 +213,12 @@ def _fit_size(file: Path, image: np.ndarray, camera: Camera) -> Camera:
         return camera
     cut_w, cut_h = camera.size[0] - width, camera.size[1] - height
     if 0 <= cut_w < 16 and 0 <= cut_h < 16:
-        warnings.warn(f"{file}: decodes as {width}x{height} but camera {camera.name!r} is calibrated at "
-                      f"{camera.size[0]}x{camera.size[1]}; taking the difference for codec padding cropped at the "
-                      "right and bottom (intrinsics unchanged)", stacklevel=2)
+        warnings.warn(
+            f"{file}: decodes as {width}x{height} but camera {camera.name!r} is calibrated at "
+            f"{camera.size[0]}x{camera.size[1]}; taking the difference for codec padding cropped at the "
+            "right and bottom (intrinsics unchanged)",
+            stacklevel=2,
+        )
         return dataclasses.replace(camera, size=(width, height))
     raise TrackerInputError(
         f"{file}: image size {width}x{height} differs from size {camera.size[0]}x{camera.size[1]} of camera "

@@ -9,8 +9,9 @@ from tracker.model import joint_centres
 from tracker.track import FrameResult, Tracker
 
 
-def step_and_write(tracker: Tracker, writer: PosesWriter, index: int, images, *, at: float | None = None,
-                   previous: float | None = None) -> tuple[FrameResult, float]:
+def step_and_write(
+    tracker: Tracker, writer: PosesWriter, index: int, images, *, at: float | None = None, previous: float | None = None
+) -> tuple[FrameResult, float]:
     """Track frame ``index`` from its smoothed grey images (one per camera, rig order) and append its row
     (poses, joint centres, status, residual, seconds spent, capture time ``at``) to ``writer``.
 

@@ -38,8 +38,8 @@ node of the part it is labelled with, or to the nearest node over all parts.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Sequence
 
 import numpy as np
 import scipy.linalg as sla
@@ -146,7 +146,9 @@ def _anchors(mesh: sq.Mesh, points: list[tuple[float, float]]) -> Anchors:
 
 
 def assemble(
-    parts: Sequence[kin.Part], meshes: Sequence[sq.Mesh], joints: Sequence[Joint],
+    parts: Sequence[kin.Part],
+    meshes: Sequence[sq.Mesh],
+    joints: Sequence[Joint],
     levels: int | Sequence[int] = LOCAL,
 ) -> Body:
     """A body from parts (whose u, v are their mesh's nodes), joints and levels (one or per part).
@@ -245,9 +247,7 @@ def violation(body: Body) -> np.ndarray:
 
 def constraint_jacobian(body: Body, index: Sequence[np.ndarray]) -> np.ndarray:
     """G (3k x sum of active sizes): +L_A and -L_B restricted to the active coordinates."""
-    jacobians = [
-        anchor_jacobians(p, a)[:, :, idx] for p, a, idx in zip(body.parts, body.anchors, index)
-    ]
+    jacobians = [anchor_jacobians(p, a)[:, :, idx] for p, a, idx in zip(body.parts, body.anchors, index)]
     jac_a = [jacobians[j.a][row] for j, row in zip(body.joints, body.rows[:, 0])]
     jac_b = [jacobians[j.b][row] for j, row in zip(body.joints, body.rows[:, 1])]
     return con.stack_jacobian(
@@ -258,9 +258,7 @@ def constraint_jacobian(body: Body, index: Sequence[np.ndarray]) -> np.ndarray:
 def constraint_velocity_products(body: Body, full_qdots: Sequence[np.ndarray]) -> np.ndarray:
     """Gdot qdot = (Ldot_A qdot_A - Ldot_B qdot_B) stacked, shape (3k,); full_qdots over all
     coordinates of each part."""
-    products = [
-        _anchor_velocity_products(p, a, q) for p, a, q in zip(body.parts, body.anchors, full_qdots)
-    ]
+    products = [_anchor_velocity_products(p, a, q) for p, a, q in zip(body.parts, body.anchors, full_qdots)]
     return con.stack_differences(*_joint_values(body, products))
 
 
@@ -316,8 +314,11 @@ def stiffnesses(body: Body, w0: float, w1: float) -> list[sp.csr_matrix | None]:
 
 
 def free_forces(
-    body: Body, attachments: Sequence[Attachment | None], sigma: float,
-    k_nodes: Sequence[sp.spmatrix | None], index: Sequence[np.ndarray],
+    body: Body,
+    attachments: Sequence[Attachment | None],
+    sigma: float,
+    k_nodes: Sequence[sp.spmatrix | None],
+    index: Sequence[np.ndarray],
 ) -> list[np.ndarray]:
     """f_q - K q per part on its active coordinates: the data force of ``fitting.data_force``
     (zero without points) and K_dd q_d = (K_node d).ravel() when d is active."""
@@ -338,8 +339,13 @@ def _constraint_forces(n: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def first_order_step(
-    body: Body, attachments: Sequence[Attachment | None], sigma: float,
-    k_nodes: Sequence[sp.spmatrix | None], dt: float, a: float, cap: int = LOCAL,
+    body: Body,
+    attachments: Sequence[Attachment | None],
+    sigma: float,
+    k_nodes: Sequence[sp.spmatrix | None],
+    dt: float,
+    a: float,
+    cap: int = LOCAL,
 ) -> Body:
     """One explicit Euler step of D qdot = F + G^T f_c, D = I (section 4, first order):
 
@@ -356,8 +362,11 @@ def first_order_step(
 
 
 def first_order_limit(
-    body: Body, attachments: Sequence[Attachment | None], sigma: float,
-    k_nodes: Sequence[sp.spmatrix | None], cap: int = LOCAL,
+    body: Body,
+    attachments: Sequence[Attachment | None],
+    sigma: float,
+    k_nodes: Sequence[sp.spmatrix | None],
+    cap: int = LOCAL,
 ) -> float:
     """min over parts of ``fitting.stability_limit`` = 2 / lambda_max(H^T H / s^2 + K) on each
     part's active coordinates at min(level, cap) (section 3, Euler).  It bounds the constrained
@@ -374,9 +383,17 @@ def first_order_limit(
 
 
 def fit_frame(
-    body: Body, points: np.ndarray, sigma: float, n_global: int, n_local: int,
-    labels: np.ndarray | None = None, reassign_every: int = 10, w0: float = 0.1, w1: float = 0.5,
-    step_fraction: float = 0.5, decay: float = 0.2,
+    body: Body,
+    points: np.ndarray,
+    sigma: float,
+    n_global: int,
+    n_local: int,
+    labels: np.ndarray | None = None,
+    reassign_every: int = 10,
+    w0: float = 0.1,
+    w1: float = 0.5,
+    step_fraction: float = 0.5,
+    decay: float = 0.2,
 ) -> tuple[Body, np.ndarray]:
     """Constrained dynamic fitting to one frame of points: ``n_global`` first-order steps with d
     frozen (levels capped at GLOBAL), then ``n_local`` with every part at its level (the
@@ -403,15 +420,20 @@ def fit_frame(
 
 
 def _progress(body: Body, attachments: Sequence[Attachment]) -> tuple[float, float]:
-    distances = np.concatenate([
-        np.linalg.norm(att.points - kin.positions(part)[att.nodes], axis=1)
-        for part, att in zip(body.parts, attachments)
-    ])
+    distances = np.concatenate(
+        [
+            np.linalg.norm(att.points - kin.positions(part)[att.nodes], axis=1)
+            for part, att in zip(body.parts, attachments)
+        ]
+    )
     return float(np.mean(distances)), float(np.abs(violation(body)).max(initial=0.0))
 
 
 def initial_body(
-    points: np.ndarray, labels: np.ndarray, meshes: Sequence[sq.Mesh], joints: Sequence[Joint],
+    points: np.ndarray,
+    labels: np.ndarray,
+    meshes: Sequence[sq.Mesh],
+    joints: Sequence[Joint],
     levels: int | Sequence[int] = LOCAL,
 ) -> Body:
     """Each part from the centroid and central moments of its labelled points
@@ -433,9 +455,7 @@ def node_jacobians(body: Body, index: Sequence[np.ndarray]) -> list[np.ndarray]:
     return [kin.active_jacobians(p, idx) for p, idx in zip(body.parts, index)]
 
 
-def lumped_masses(
-    body: Body, jacobians: Sequence[np.ndarray], mass: float, regularizer: float
-) -> list[np.ndarray]:
+def lumped_masses(body: Body, jacobians: Sequence[np.ndarray], mass: float, regularizer: float) -> list[np.ndarray]:
     """M per part on its active coordinates: sum_i m_i L_i^T L_i with m_i = mass / n (each part
     weighs ``mass``), plus regularizer * mass * I for non-rigid parts (``kinematics.lumped_mass``;
     section 3).  Their M alone is singular: q_s and d can move the nodes alike (rank <= 3 n),
@@ -462,9 +482,16 @@ class Damping:
 
 
 def second_order_step(
-    body: Body, qdots: Sequence[np.ndarray], attachments: Sequence[Attachment | None],
-    sigma: float, k_nodes: Sequence[sp.spmatrix | None], dt: float, a: float,
-    damping: Damping = Damping(), mass: float = 1.0, regularizer: float = 0.1,
+    body: Body,
+    qdots: Sequence[np.ndarray],
+    attachments: Sequence[Attachment | None],
+    sigma: float,
+    k_nodes: Sequence[sp.spmatrix | None],
+    dt: float,
+    a: float,
+    damping: Damping = Damping(),
+    mass: float = 1.0,
+    regularizer: float = 0.1,
 ) -> tuple[Body, list[np.ndarray]]:
     """One semi-implicit Euler step of M qddot + D qdot + K q = g_q + f_q + G^T f_c
     (section 3, eq 11; section 4, second order), velocities qdots on the active coordinates:
@@ -486,17 +513,19 @@ def second_order_step(
     force = np.concatenate(forces)
     qdot = np.concatenate(qdots)
     g = constraint_jacobian(body, index)
-    n, r = con.second_order_system(
-        g, masses, force, qdot, constraint_velocity_products(body, full), violation(body), a
-    )
+    n, r = con.second_order_system(g, masses, force, qdot, constraint_velocity_products(body, full), violation(body), a)
     new = _split(qdot + dt * con.block_solve(masses, force + g.T @ _constraint_forces(n, r)), index)
     return advance(body, [dt * q for q in new], index), new
 
 
 def second_order_limit(
-    body: Body, attachments: Sequence[Attachment | None], sigma: float,
-    k_nodes: Sequence[sp.spmatrix | None], damping: Damping = Damping(),
-    mass: float = 1.0, regularizer: float = 0.1,
+    body: Body,
+    attachments: Sequence[Attachment | None],
+    sigma: float,
+    k_nodes: Sequence[sp.spmatrix | None],
+    damping: Damping = Damping(),
+    mass: float = 1.0,
+    regularizer: float = 0.1,
 ) -> float:
     """Largest stable semi-implicit Euler step: per mode of frequency w and damping rate c the
     step matrix [[1 - dt^2 w^2, dt (1 - c dt)], [-dt w^2, 1 - c dt]] has |eigenvalues| < 1 iff
@@ -508,9 +537,9 @@ def second_order_limit(
     index = active(body)
     jacobians = node_jacobians(body, index)
     limits = []
-    for p, (part, att, k_node, idx, l, m) in enumerate(zip(
-        body.parts, attachments, k_nodes, index, jacobians, lumped_masses(body, jacobians, mass, regularizer)
-    )):
+    for p, (part, att, k_node, idx, l, m) in enumerate(
+        zip(body.parts, attachments, k_nodes, index, jacobians, lumped_masses(body, jacobians, mass, regularizer))
+    ):
         stiff = np.zeros((len(idx),) * 2)
         if att is not None and len(att.points):
             counts = np.bincount(att.nodes, minlength=len(part.u)).astype(np.float64)

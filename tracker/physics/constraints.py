@@ -28,8 +28,8 @@ def stack_jacobian(
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     g = np.zeros((3 * len(parts_a), offsets[-1]))
     for j, (l_a, l_b, a, b) in enumerate(zip(jacobians_a, jacobians_b, parts_a, parts_b)):
-        g[3 * j:3 * j + 3, offsets[a]:offsets[a + 1]] += l_a
-        g[3 * j:3 * j + 3, offsets[b]:offsets[b + 1]] -= l_b
+        g[3 * j : 3 * j + 3, offsets[a] : offsets[a + 1]] += l_a
+        g[3 * j : 3 * j + 3, offsets[b] : offsets[b + 1]] -= l_b
     return g
 
 

@@ -119,9 +119,19 @@ TRUTH_ABSORB_ROUNDS = 8
 round-off on every frame (docs/physics.md)."""
 
 SETTINGS = kf.Settings(
-    measurement_variance=0.1, process_noise=0.1, kappa=0.5, max_iterations=300, tol=1e-3,
-    w0=0.1, w1=5.0, reassign_every=10, coupling="joint", prior_stiffness=True, covariance_cap=1.0,
-    bend_stiffness=10.0, absorb=True,
+    measurement_variance=0.1,
+    process_noise=0.1,
+    kappa=0.5,
+    max_iterations=300,
+    tol=1e-3,
+    w0=0.1,
+    w1=5.0,
+    reassign_every=10,
+    coupling="joint",
+    prior_stiffness=True,
+    covariance_cap=1.0,
+    bend_stiffness=10.0,
+    absorb=True,
 )
 """The paper's Q = V = 0.1 I and w0 = 0.1 with the joint rigid + global block (P_g
 capped at P(0) = 1: along a direction of information lambda the Riccati steady state is
@@ -188,7 +198,7 @@ def truth(frames: int = 20) -> Truth:
     m = sq.mesh()
     direction = np.column_stack([np.cos(m.u) * np.cos(m.v), np.cos(m.u) * np.sin(m.v), np.sin(m.u)])
     centre = np.array([np.cos(0.35) * np.cos(0.6), np.cos(0.35) * np.sin(0.6), np.sin(0.35)])
-    profile = np.exp(-np.arccos(np.clip(direction @ centre, -1.0, 1.0)) ** 2 / (2.0 * 0.45**2))
+    profile = np.exp(-(np.arccos(np.clip(direction @ centre, -1.0, 1.0)) ** 2) / (2.0 * 0.45**2))
     r0 = exp_so3(np.array([0.05, -0.04, 0.08]))
     parts = []
     for f in range(frames):
@@ -214,14 +224,16 @@ def frame_errors(estimate: kin.Part, true: kin.Part) -> np.ndarray:
     """Translation, rotation (geodesic angle), global (a0 gauge fixed), local and position
     (3N-vector) errors of one frame, and the per-node position RMS, shape (6,)."""
     position = np.linalg.norm(kin.positions(estimate) - kin.positions(true))
-    return np.array([
-        np.linalg.norm(estimate.c - true.c),
-        np.linalg.norm(log_so3(estimate.rotation.T @ true.rotation)),
-        np.linalg.norm(in_gauge(estimate.q_s, true.q_s[0]) - true.q_s),
-        np.linalg.norm(estimate.d - true.d),
-        position,
-        position / np.sqrt(len(true.u)),
-    ])
+    return np.array(
+        [
+            np.linalg.norm(estimate.c - true.c),
+            np.linalg.norm(log_so3(estimate.rotation.T @ true.rotation)),
+            np.linalg.norm(in_gauge(estimate.q_s, true.q_s[0]) - true.q_s),
+            np.linalg.norm(estimate.d - true.d),
+            position,
+            position / np.sqrt(len(true.u)),
+        ]
+    )
 
 
 def track(world: Truth, observed: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, int, int]:
@@ -233,12 +245,19 @@ def track(world: Truth, observed: np.ndarray, noise: np.ndarray) -> tuple[np.nda
     first = kin.positions(world.parts[0])[observed] + noise[0]
     start = world.parts[0]
     part = kin.Part(
-        first.mean(axis=0) + INITIAL_OFFSET, np.eye(3), INITIAL_SHAPE.copy(),
-        np.zeros_like(start.d), start.u, start.v,
+        first.mean(axis=0) + INITIAL_OFFSET,
+        np.eye(3),
+        INITIAL_SHAPE.copy(),
+        np.zeros_like(start.d),
+        start.u,
+        start.v,
     )
     state, iterations = kf.filter_frame(
-        kf.initial_state(part), first, world.triangles,
-        replace(SETTINGS, max_iterations=FIRST_FRAME_ITERATIONS, local=False), observed,
+        kf.initial_state(part),
+        first,
+        world.triangles,
+        replace(SETTINGS, max_iterations=FIRST_FRAME_ITERATIONS, local=False),
+        observed,
     )
     errors, capped = [], 0
     for f, true in enumerate(world.parts):
@@ -251,8 +270,11 @@ def track(world: Truth, observed: np.ndarray, noise: np.ndarray) -> tuple[np.nda
 
 
 def run(
-    densities: Sequence[int] = DENSITIES, variances: Sequence[float] = VARIANCES, frames: int = 20,
-    seed: int = 0, progress: Callable[[dict], None] | None = None,
+    densities: Sequence[int] = DENSITIES,
+    variances: Sequence[float] = VARIANCES,
+    frames: int = 20,
+    seed: int = 0,
+    progress: Callable[[dict], None] | None = None,
 ) -> list[dict]:
     """The grid of Tables I-IV: one row per (density, variance) with the mean errors over the
     frames (keys ``ERRORS`` and ``position_rms``), the inner iterations, the frames that hit
@@ -310,29 +332,41 @@ def check_claims(rows: list[dict]) -> list[tuple[str, bool, str]]:
         out.append((f"node-position error {text}", not failures, detail))
 
     smallest = [r for r in rows if min(ERRORS, key=lambda k: r[k]) != "rotation"]
-    out.append((
-        "rotation error is the smallest in every row",
-        not smallest,
-        f"{len(rows) - len(smallest)}/{len(rows)} rows"
-        + "".join(f"; {r['density']}%/var {r['variance']}: smallest is {min(ERRORS, key=lambda k: r[k])}" for r in smallest),
-    ))
+    out.append(
+        (
+            "rotation error is the smallest in every row",
+            not smallest,
+            f"{len(rows) - len(smallest)}/{len(rows)} rows"
+            + "".join(
+                f"; {r['density']}%/var {r['variance']}: smallest is {min(ERRORS, key=lambda k: r[k])}"
+                for r in smallest
+            ),
+        )
+    )
 
     largest = [r for r in rows if min(r["local"], r["position"]) <= max(r["translation"], r["rotation"], r["global"])]
-    out.append((
-        "local and position errors are the largest in every row",
-        not largest,
-        f"{len(rows) - len(largest)}/{len(rows)} rows"
-        + "".join(f"; {r['density']}%/var {r['variance']}: local {r['local']:.3g}, position {r['position']:.3g}, "
-                  f"global {r['global']:.3g}" for r in largest),
-    ))
+    out.append(
+        (
+            "local and position errors are the largest in every row",
+            not largest,
+            f"{len(rows) - len(largest)}/{len(rows)} rows"
+            + "".join(
+                f"; {r['density']}%/var {r['variance']}: local {r['local']:.3g}, position {r['position']:.3g}, "
+                f"global {r['global']:.3g}"
+                for r in largest
+            ),
+        )
+    )
 
     ends = {r["variance"]: r for r in rows if r["density"] == 100 and r["variance"] in (0, 10)}
     if len(ends) == 2:
         ratio = {k: ends[10][k] / ends[0][k] for k in ("translation", "local", "position")}
         held = min(ratio["local"], ratio["position"]) >= FAR_MORE * ratio["translation"]
-        out.append((
-            "local and position errors far more noise-sensitive than translation (100 %, var 10 / var 0)",
-            held,
-            ", ".join(f"{k} {v:.3g}x" for k, v in ratio.items()),
-        ))
+        out.append(
+            (
+                "local and position errors far more noise-sensitive than translation (100 %, var 10 / var 0)",
+                held,
+                ", ".join(f"{k} {v:.3g}x" for k, v in ratio.items()),
+            )
+        )
     return out

@@ -73,7 +73,10 @@ def stiffness(part: kin.Part, triangles: np.ndarray, w0: float, w1: float) -> sp
 
 
 def stability_limit(
-    part: kin.Part, assignment: np.ndarray, sigma: float, k_node: sp.spmatrix,
+    part: kin.Part,
+    assignment: np.ndarray,
+    sigma: float,
+    k_node: sp.spmatrix,
     coordinates: np.ndarray | None = None,
 ) -> float:
     """2 / lambda_max(H^T H / sigma^2 + K) over the coordinates that move (section 3, Euler).
@@ -98,8 +101,13 @@ def stability_limit(
 
 
 def euler_step(
-    part: kin.Part, points: np.ndarray, assignment: np.ndarray, sigma: float,
-    k_node: sp.spmatrix, dt: float, local: bool = True,
+    part: kin.Part,
+    points: np.ndarray,
+    assignment: np.ndarray,
+    sigma: float,
+    k_node: sp.spmatrix,
+    dt: float,
+    local: bool = True,
 ) -> kin.Part:
     """q <- q (+) dt (f_q - K q) (section 3, first order, D = I), a0 frozen, q_s clamped.
 
@@ -108,9 +116,9 @@ def euler_step(
     """
     qdot = data_force(part, points, assignment, sigma)
     if local:
-        qdot[kin.SHAPE.stop:] -= (k_node @ part.d).ravel()
+        qdot[kin.SHAPE.stop :] -= (k_node @ part.d).ravel()
     else:
-        qdot[kin.SHAPE.stop:] = 0.0
+        qdot[kin.SHAPE.stop :] = 0.0
     qdot[FROZEN] = 0.0
     moved = kin.retract(part, dt * qdot)
     return replace(moved, q_s=sq.clamp(moved.q_s))
@@ -122,8 +130,15 @@ def mean_residual(part: kin.Part, points: np.ndarray) -> float:
 
 
 def fit(
-    part: kin.Part, points: np.ndarray, triangles: np.ndarray, sigma: float, n_steps: int,
-    reassign_every: int = 10, w0: float = 0.1, w1: float = 0.5, step_fraction: float = 0.5,
+    part: kin.Part,
+    points: np.ndarray,
+    triangles: np.ndarray,
+    sigma: float,
+    n_steps: int,
+    reassign_every: int = 10,
+    w0: float = 0.1,
+    w1: float = 0.5,
+    step_fraction: float = 0.5,
     local: bool = True,
 ) -> tuple[kin.Part, np.ndarray]:
     """Dynamic fitting (section 3, first order; section 5 with P = I) by ``n_steps`` Euler steps.

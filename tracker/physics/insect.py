@@ -37,8 +37,8 @@ wings' taper and bend underdetermined, which the paper also notes for its Fig. 1
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 
@@ -105,29 +105,48 @@ def truth(frame: int) -> list[kin.Part]:
     thorax = kin.Part(
         np.array([0.03 * frame, 0.0, 0.15 * np.sin(phase / 2)]),
         exp_so3(np.array([0.0, 0.1 * np.sin(phase), 0.0])) @ _FORWARD,
-        THORAX, zeros, MESH.u, MESH.v,
+        THORAX,
+        zeros,
+        MESH.u,
+        MESH.v,
     )
     head = kin.Part(
-        np.zeros(3), exp_so3(np.array([0.0, 0.25 * np.sin(phase), 0.0])) @ thorax.rotation,
-        HEAD, zeros, MESH.u, MESH.v,
+        np.zeros(3),
+        exp_so3(np.array([0.0, 0.25 * np.sin(phase), 0.0])) @ thorax.rotation,
+        HEAD,
+        zeros,
+        MESH.u,
+        MESH.v,
     )
     abdomen_shape = ABDOMEN.copy()
     abdomen_shape[8] = 0.1 * np.sin(phase)
     abdomen = kin.Part(
-        np.zeros(3), exp_so3(np.array([0.0, 0.0, 0.2 * np.sin(phase)])) @ thorax.rotation,
-        abdomen_shape, zeros, MESH.u, MESH.v,
+        np.zeros(3),
+        exp_so3(np.array([0.0, 0.0, 0.2 * np.sin(phase)])) @ thorax.rotation,
+        abdomen_shape,
+        zeros,
+        MESH.u,
+        MESH.v,
     )
     flap = 0.5 * np.sin(phase)
     wing_shape = WING.copy()
     wing_shape[8] = 0.15 * np.sin(phase)
     lag = 0.15 * np.cos(phase)
     left = kin.Part(
-        np.zeros(3), exp_so3(np.array([flap, 0.0, 0.0])) @ _OUTWARD,
-        wing_shape, _flex(wing_shape, -1.0, -lag), MESH.u, MESH.v,
+        np.zeros(3),
+        exp_so3(np.array([flap, 0.0, 0.0])) @ _OUTWARD,
+        wing_shape,
+        _flex(wing_shape, -1.0, -lag),
+        MESH.u,
+        MESH.v,
     )
     right = kin.Part(
-        np.zeros(3), exp_so3(np.array([-flap, 0.0, 0.0])) @ _OUTWARD,
-        wing_shape, _flex(wing_shape, 1.0, lag), MESH.u, MESH.v,
+        np.zeros(3),
+        exp_so3(np.array([-flap, 0.0, 0.0])) @ _OUTWARD,
+        wing_shape,
+        _flex(wing_shape, 1.0, lag),
+        MESH.u,
+        MESH.v,
     )
     parts = [thorax]
     for joint, part in zip(JOINTS, (head, abdomen, left, right)):
@@ -191,8 +210,14 @@ def position_error(fitted: bd.Body, true: bd.Body) -> float:
 
 
 def run(
-    sparse: bool, frames: int = PERIOD, seed: int = 0, progress: Callable[[int, float, float], None] | None = None,
-    noise: float = 0.0, sigma: float = 0.1, first_steps: tuple[int, int] = (200, 400), steps: int = 60,
+    sparse: bool,
+    frames: int = PERIOD,
+    seed: int = 0,
+    progress: Callable[[int, float, float], None] | None = None,
+    noise: float = 0.0,
+    sigma: float = 0.1,
+    first_steps: tuple[int, int] = (200, 400),
+    steps: int = 60,
 ) -> Result:
     """Track the insect over ``frames`` frames from dense or sparse data (module docstring).
 

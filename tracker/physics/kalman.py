@@ -89,7 +89,7 @@ N_SHAPE = sq.N_PARAMETERS - 1
 N_GLOBAL = kin.RIGID + N_SHAPE
 """Length of the rigid + global vector (c, phi, q_s without a0) that P_g covers."""
 
-GLOBAL = np.r_[0:kin.RIGID, kin.SHAPE.start + 1:kin.SHAPE.stop]
+GLOBAL = np.r_[0 : kin.RIGID, kin.SHAPE.start + 1 : kin.SHAPE.stop]
 """Where the rigid + global vector sits in q (a0 left out)."""
 
 B1 = kin.RIGID + 7
@@ -157,11 +157,11 @@ class State:
 
     @property
     def p_phi(self) -> np.ndarray:
-        return self.p_global[3:kin.RIGID, 3:kin.RIGID]
+        return self.p_global[3 : kin.RIGID, 3 : kin.RIGID]
 
     @property
     def p_s(self) -> np.ndarray:
-        return self.p_global[kin.RIGID:, kin.RIGID:]
+        return self.p_global[kin.RIGID :, kin.RIGID :]
 
 
 @dataclass(frozen=True)
@@ -339,7 +339,12 @@ def update_part(part: kin.Part, rate: np.ndarray, dt: float) -> kin.Part:
 
 
 def riccati_block(
-    p: np.ndarray, a: np.ndarray, k: np.ndarray | sp.spmatrix | None, q: float, dt: float, prior: bool = False,
+    p: np.ndarray,
+    a: np.ndarray,
+    k: np.ndarray | sp.spmatrix | None,
+    q: float,
+    dt: float,
+    prior: bool = False,
 ) -> np.ndarray:
     """One Euler step of the Riccati equation (eq 38) for one block, symmetrised.
 
@@ -416,7 +421,7 @@ def newton_step(
     n = len(part.u)
     coupling = np.einsum("ba,ibk->iak", part.rotation, weighted)  # rows of A_dg
     factor = sla.lu_factor(np.diag(counts / v) + k_node)
-    z = sla.lu_solve(factor, force[kin.SHAPE.stop:].reshape(n, 3) - k_node @ part.d)
+    z = sla.lu_solve(factor, force[kin.SHAPE.stop :].reshape(n, 3) - k_node @ part.d)
     zz = sla.lu_solve(factor, coupling.reshape(n, -1)).reshape(coupling.shape)
     schur -= np.einsum("iak,ial->kl", coupling, zz)
     rhs -= np.einsum("iak,ia->k", coupling, z)
@@ -440,7 +445,10 @@ def iteration(
 
 
 def filter_frame(
-    state: State, points: np.ndarray, triangles: np.ndarray, settings: Settings,
+    state: State,
+    points: np.ndarray,
+    triangles: np.ndarray,
+    settings: Settings,
     nodes: np.ndarray | None = None,
 ) -> tuple[State, int]:
     """Inner iterations on one frame of points (m, 3) until converged or

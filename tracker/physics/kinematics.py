@@ -90,7 +90,7 @@ def jacobians(part: Part) -> np.ndarray:
     n = len(part.u)
     r = part.rotation
     out = np.zeros((n, 3, part.n_coordinates))
-    out[:, :, :SHAPE.stop] = rigid_global_jacobians(part)
+    out[:, :, : SHAPE.stop] = rigid_global_jacobians(part)
     first = SHAPE.stop + 3 * np.arange(n)
     for k in range(3):
         out[np.arange(n), :, first + k] = r[:, k]
@@ -105,7 +105,7 @@ def retract(part: Part, dq: np.ndarray) -> Part:
         c=part.c + dq[0:3],
         rotation=exp_so3(np.ascontiguousarray(dq[3:6])) @ part.rotation,
         q_s=part.q_s + dq[SHAPE],
-        d=part.d + dq[SHAPE.stop:].reshape(part.d.shape),
+        d=part.d + dq[SHAPE.stop :].reshape(part.d.shape),
     )
 
 
@@ -121,7 +121,7 @@ def velocity_products(part: Part, qdot: np.ndarray, step: float = 1e-5) -> np.nd
     r = part.rotation
     w = qdot[3:6]
     qdot_s = qdot[SHAPE]
-    pdot = qdot[SHAPE.stop:].reshape(part.d.shape)
+    pdot = qdot[SHAPE.stop :].reshape(part.d.shape)
     shape_term = np.zeros_like(pdot)
     speed = np.linalg.norm(qdot_s)
     if speed > 0.0:

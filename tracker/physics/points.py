@@ -61,11 +61,11 @@ from pathlib import Path
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.status import LOST, TRACKED, UNCERTAIN
-from tracker.tomlfile import read_toml
 from tracker.physics import body as bd
 from tracker.physics import kinematics as kin
 from tracker.physics import superquadric as sq
+from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.tomlfile import read_toml
 
 MIN_MARKERS = 3
 """Markers a part needs in the start frame: its moments need three non-collinear points."""
@@ -136,7 +136,7 @@ def _points_model(path: Path, data: dict) -> PointsModel:
     for entry, name in zip(entries, names):
         listed = entry.get("markers")
         if not isinstance(listed, list) or not all(isinstance(m, str) and m for m in listed):
-            raise ValueError(f"part {name!r} needs markers = [\"label\", ...]")
+            raise ValueError(f'part {name!r} needs markers = ["label", ...]')
         if len(listed) < MIN_MARKERS:
             raise ValueError(f"part {name!r} has {len(listed)} markers; a part needs at least {MIN_MARKERS}")
         for marker in listed:
@@ -157,12 +157,24 @@ def _points_model(path: Path, data: dict) -> PointsModel:
     if repeated:
         raise ValueError(f"joint {repeated[0]!r} is named twice; give every joint its own name")
     mesh = data.get("mesh", [11, 11])
-    if not (isinstance(mesh, list) and len(mesh) == 2 and all(isinstance(n, int) for n in mesh)
-            and mesh[0] >= 1 and mesh[1] >= 3):
+    if not (
+        isinstance(mesh, list)
+        and len(mesh) == 2
+        and all(isinstance(n, int) for n in mesh)
+        and mesh[0] >= 1
+        and mesh[1] >= 3
+    ):
         raise ValueError(f"mesh = {mesh} must be [rings, longitudes] with rings >= 1 and longitudes >= 3")
     rings, longitudes = mesh
-    return PointsModel(path, str(data.get("name", path.stem)), tuple(names), tuple(markers), tuple(parents),
-                       tuple(joint_names), sq.mesh(rings, longitudes))
+    return PointsModel(
+        path,
+        str(data.get("name", path.stem)),
+        tuple(names),
+        tuple(markers),
+        tuple(parents),
+        tuple(joint_names),
+        sq.mesh(rings, longitudes),
+    )
 
 
 def _check_acyclic(names: Sequence[str], parents: Sequence[int]) -> None:
@@ -210,20 +222,24 @@ def start_frame(points: np.ndarray, model: PointsModel, start: int | None = None
     counts = seen_per_part(points, model)
     if start is not None:
         if not 0 <= start < len(points):
-            raise TrackerInputError(f"{model.path}: --start {start} is outside the marker file's frames "
-                                    f"0..{len(points) - 1}; pick a frame inside them")
+            raise TrackerInputError(
+                f"{model.path}: --start {start} is outside the marker file's frames "
+                f"0..{len(points) - 1}; pick a frame inside them"
+            )
         short = np.nonzero(counts[start] < MIN_MARKERS)[0]
         if len(short):
             raise TrackerInputError(
                 f"{model.path}: part {model.parts[short[0]]!r} has {counts[start, short[0]]} markers seen in frame "
-                f"{start}, fewer than {MIN_MARKERS}; start from another frame (without --start: the first that has them)")
+                f"{start}, fewer than {MIN_MARKERS}; start from another frame (without --start: the first that has them)"
+            )
         return start
     ready = np.nonzero((counts >= MIN_MARKERS).all(axis=1))[0]
     if not len(ready):
         worst = int(np.argmin(counts.max(axis=0)))
         raise TrackerInputError(
             f"{model.path}: part {model.parts[worst]!r} never has {MIN_MARKERS} of its markers seen in one frame "
-            f"(at most {counts[:, worst].max()}); give it markers the file records")
+            f"(at most {counts[:, worst].max()}); give it markers the file records"
+        )
     return int(ready[0])
 
 
@@ -248,8 +264,9 @@ def first_fit(points: np.ndarray, model: PointsModel, settings: PointsSettings) 
     start = bd.initial_body(points, model.labels, meshes, [], bd.GLOBAL)
     joints = [joint_to_parent(start, child, model.parents[child]) for child in model.jointed]
     body = bd.assemble(start.parts, meshes, joints, bd.GLOBAL)
-    body, _ = bd.fit_frame(body, points, settings.sigma, settings.first_steps, 0, labels=model.labels,
-                           w0=settings.w0, w1=settings.w1)
+    body, _ = bd.fit_frame(
+        body, points, settings.sigma, settings.first_steps, 0, labels=model.labels, w0=settings.w0, w1=settings.w1
+    )
     return body
 
 
@@ -308,20 +325,28 @@ class FrameFit:
 
 def measure(body: bd.Body, points: np.ndarray, model: PointsModel) -> FrameFit:
     """The residual and joint violation of ``body`` on one frame of points (M, 3)."""
-    return FrameFit(body, bd.residuals(body, points, model.labels), seen_per_part(points, model),
-                    float(np.abs(bd.violation(body)).max(initial=0.0)))
+    return FrameFit(
+        body,
+        bd.residuals(body, points, model.labels),
+        seen_per_part(points, model),
+        float(np.abs(bd.violation(body)).max(initial=0.0)),
+    )
 
 
 def damping(seen: np.ndarray, settings: PointsSettings) -> bd.Damping:
     """D = alpha_p M with alpha_p = 2 sqrt(n_p / (sigma^2 m)) for ``seen`` = n_p markers seen per part:
     critical damping of each part's translation under its markers' pull, none without markers
     (module docstring)."""
-    return bd.Damping(alpha=2.0 * np.sqrt(np.asarray(seen, dtype=np.float64) / (settings.sigma ** 2 * MASS)))
+    return bd.Damping(alpha=2.0 * np.sqrt(np.asarray(seen, dtype=np.float64) / (settings.sigma**2 * MASS)))
 
 
 def second_order_frame(
-    body: bd.Body, velocities: list[np.ndarray], points: np.ndarray, model: PointsModel,
-    settings: PointsSettings, seconds: float,
+    body: bd.Body,
+    velocities: list[np.ndarray],
+    points: np.ndarray,
+    model: PointsModel,
+    settings: PointsSettings,
+    seconds: float,
 ) -> tuple[bd.Body, list[np.ndarray]]:
     """Move the body and its velocities (on each part's active coordinates) ``seconds`` ahead
     under the pull of one frame of points (M, 3), attached to their parts' nearest nodes at the
@@ -333,13 +358,15 @@ def second_order_frame(
     substeps = max(1, int(np.ceil(seconds / (STEP_FRACTION * limit))))
     dt = seconds / substeps
     for _ in range(substeps):
-        body, velocities = bd.second_order_step(body, velocities, attachments, settings.sigma, k_nodes, dt,
-                                                DECAY / dt, d, MASS)
+        body, velocities = bd.second_order_step(
+            body, velocities, attachments, settings.sigma, k_nodes, dt, DECAY / dt, d, MASS
+        )
     return body, velocities
 
 
-def track(frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSettings,
-          interval: float) -> Iterator[FrameFit]:
+def track(
+    frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSettings, interval: float
+) -> Iterator[FrameFit]:
     """Fit ``frames`` (each (M, 3), the first the start frame, ``interval`` seconds apart) one after
     another (module docstring)."""
     level = LEVELS[settings.level]
@@ -352,6 +379,7 @@ def track(frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSett
         elif settings.dynamics == "second-order":
             body, velocities = second_order_frame(body, velocities, points, model, settings, interval)
         elif np.isfinite(points).all(axis=1).any():  # first order: without any marker nothing moves
-            body, _ = bd.fit_frame(body, points, settings.sigma, 0, settings.steps, labels=model.labels,
-                                   w0=settings.w0, w1=settings.w1)  # every part at its own level
+            body, _ = bd.fit_frame(
+                body, points, settings.sigma, 0, settings.steps, labels=model.labels, w0=settings.w0, w1=settings.w1
+            )  # every part at its own level
         yield measure(body, points, model)

@@ -41,8 +41,13 @@ class ShapesWriter:
         self._unflushed = 0
 
     def append(self, frame: int, fitted: FrameFit) -> None:
-        row = {"frame": frame, "q_s": fitted.shapes, "d": fitted.displacements, "residual": fitted.residual,
-               "violation": fitted.violation}
+        row = {
+            "frame": frame,
+            "q_s": fitted.shapes,
+            "d": fitted.displacements,
+            "residual": fitted.residual,
+            "violation": fitted.violation,
+        }
         for key, value in row.items():
             self.columns[key].append(value)
         self._unflushed += 1

@@ -102,9 +102,14 @@ def _terms(q_s: np.ndarray, u: np.ndarray, v: np.ndarray) -> _Terms:
     cu, su = _trig(u)
     cv, sv = _trig(v)
     return _Terms(
-        cu, su, cv, sv,
-        _signed_power(cu, eps1), _signed_power(su, eps1),
-        _signed_power(cv, eps2), _signed_power(sv, eps2),
+        cu,
+        su,
+        cv,
+        sv,
+        _signed_power(cu, eps1),
+        _signed_power(su, eps1),
+        _signed_power(cv, eps2),
+        _signed_power(sv, eps2),
     )
 
 
@@ -310,15 +315,13 @@ def interpolation_matrix(m: Mesh, u: np.ndarray, v: np.ndarray) -> sp.csr_matrix
     )
     south = band == 0
     cols[south] = np.column_stack([np.zeros_like(j), 1 + j, 1 + j1, np.zeros_like(j)])[south]
-    weights[south] = np.column_stack(
-        [1.0 - beta, beta * (1.0 - alpha), beta * alpha, np.zeros_like(beta)]
-    )[south]
+    weights[south] = np.column_stack([1.0 - beta, beta * (1.0 - alpha), beta * alpha, np.zeros_like(beta)])[south]
     north = band == rings
     top = 1 + (rings - 1) * lons
     cols[north] = np.column_stack([top + j, top + j1, np.full_like(j, n_nodes - 1), top + j])[north]
-    weights[north] = np.column_stack(
-        [(1.0 - beta) * (1.0 - alpha), (1.0 - beta) * alpha, beta, np.zeros_like(beta)]
-    )[north]
+    weights[north] = np.column_stack([(1.0 - beta) * (1.0 - alpha), (1.0 - beta) * alpha, beta, np.zeros_like(beta)])[
+        north
+    ]
 
     rows = np.repeat(np.arange(len(u)), 4)
     out = sp.csr_matrix((weights.ravel(), (rows, cols.ravel())), shape=(len(u), n_nodes))

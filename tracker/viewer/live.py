@@ -35,9 +35,18 @@ class LiveView:
     (:func:`~tracker.viewer.review.truth_rows`).
     """
 
-    def __init__(self, scene: Scene, model: Model, cameras, initial_poses: np.ndarray,
-                 settings: Settings = Settings(), rate: float = 30.0, truth: np.ndarray | None = None,
-                 record: Path | None = None, history: int = 600):
+    def __init__(
+        self,
+        scene: Scene,
+        model: Model,
+        cameras,
+        initial_poses: np.ndarray,
+        settings: Settings = Settings(),
+        rate: float = 30.0,
+        truth: np.ndarray | None = None,
+        record: Path | None = None,
+        history: int = 600,
+    ):
         self.scene, self.rate, self.truth_joints, self.record_path = scene, rate, truth, record
         self.inspector = Tracker(model, cameras, initial_poses, settings)
         self.serializer = scene.server.get_scene_serializer() if record is not None else None

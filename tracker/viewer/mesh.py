@@ -29,7 +29,9 @@ def _cap(ring: np.ndarray, centre: np.ndarray, offset: int, outward: bool) -> tu
     facing along the ring's axis when ``outward``, against it otherwise."""
     n = len(ring)
     i = np.arange(n)
-    faces = np.stack([np.full(n, offset + n), offset + i, offset + (i + 1) % n], -1)  # normal +z for a ring counter-clockwise about +z
+    faces = np.stack(
+        [np.full(n, offset + n), offset + i, offset + (i + 1) % n], -1
+    )  # normal +z for a ring counter-clockwise about +z
     return np.vstack([ring, centre]), faces if outward else faces[:, ::-1]
 
 
@@ -46,7 +48,7 @@ def ellipsoid_mesh(centre, radii, clip=None, segments: int = 24) -> tuple[np.nda
     count = len(vertices)
     for row, z, outward in ((0, zmax, True), (len(polar) - 1, zmin, False)):
         if abs(abs(z) - c) > 1e-9 * c:  # a cut, not a pole: close it
-            ring = vertices[row * segments:(row + 1) * segments]
+            ring = vertices[row * segments : (row + 1) * segments]
             v, f = _cap(ring, np.array([0.0, 0.0, z]), count, outward)
             parts_v.append(v)
             parts_f.append(f)
@@ -59,8 +61,10 @@ def cone_mesh(start, end, radius_start, radius_end, segments: int = 24) -> tuple
     frame = axis_frame(start, end)
     length = float(np.linalg.norm(np.asarray(end, float) - np.asarray(start, float)))
     t = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
-    rings = [np.stack([r * np.cos(t), r * np.sin(t), np.full(segments, z)], -1)
-             for r, z in ((radius_start, 0.0), (radius_end, length))]
+    rings = [
+        np.stack([r * np.cos(t), r * np.sin(t), np.full(segments, z)], -1)
+        for r, z in ((radius_start, 0.0), (radius_end, length))
+    ]
     vertices = np.vstack(rings)
     faces = _grid_faces(2, segments)
     bottom_v, bottom_f = _cap(rings[0], np.zeros(3), len(vertices), False)

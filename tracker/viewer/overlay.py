@@ -39,8 +39,7 @@ def _fixed(points: np.ndarray) -> np.ndarray:
     return np.round(points * (1 << _SHIFT)).astype(np.int32)
 
 
-def draw(image: np.ndarray, inspection: Inspection, camera: int, robust_c: float,
-         colours: np.ndarray) -> np.ndarray:
+def draw(image: np.ndarray, inspection: Inspection, camera: int, robust_c: float, colours: np.ndarray) -> np.ndarray:
     """RGB uint8 copy of a grey (or RGB) ``image`` with camera ``camera``'s search lines, outline and edges."""
     out = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) if image.ndim == 2 else image.copy()
     mine = inspection.camera == camera

@@ -54,8 +54,9 @@ def in_view(cameras, height: float = 1.0) -> np.ndarray:
 class Placement:
     """Gizmos, snap and save for the first frame of a recording."""
 
-    def __init__(self, scene: Scene, recording: Recording, model: Model, poses: np.ndarray, out: Path,
-                 snap_iterations: int = 10):
+    def __init__(
+        self, scene: Scene, recording: Recording, model: Model, poses: np.ndarray, out: Path, snap_iterations: int = 10
+    ):
         self.scene, self.recording, self.model, self.out = scene, recording, model, Path(out)
         seekers = [FrameSeeker(source) for source in recording.sources]
         self.images = [seeker.read(0) for seeker in seekers]
@@ -73,8 +74,12 @@ class Placement:
         for i, name in enumerate(model.names):
             root = model.parent[i] < 0
             gizmo = server.scene.add_transform_controls(
-                f"/gizmos/{name}", scale=0.3 if root else 0.12, disable_axes=not root, disable_sliders=not root,
-                depth_test=False)
+                f"/gizmos/{name}",
+                scale=0.3 if root else 0.12,
+                disable_axes=not root,
+                disable_sliders=not root,
+                depth_test=False,
+            )
             gizmo.on_update(lambda _, i=i: self.moved(i))
             self.gizmos.append(gizmo)
         with server.gui.add_folder("Initial pose", order=0):
@@ -108,8 +113,9 @@ class Placement:
             for _ in range(rounds):
                 result = tracker.step(self.smoothed, smoothed=True)
             self.poses = result.poses
-            self.message.content = (f"Snapped: residual {result.residual:.2f} px, "
-                                    f"{100 * result.share:.0f} % of the samples found an edge.")
+            self.message.content = (
+                f"Snapped: residual {result.residual:.2f} px, {100 * result.share:.0f} % of the samples found an edge."
+            )
             self.refresh()
 
     def save(self) -> None:

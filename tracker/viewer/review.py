@@ -21,8 +21,8 @@ from tracker.foreground import Background
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.model import Model
-from tracker.track import Settings, Tracker
 from tracker.status import NAMES
+from tracker.track import Settings, Tracker
 from tracker.viewer.scene import Frame, Scene, add_run_plots, write_viser
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
@@ -44,8 +44,16 @@ def truth_rows(truth: dict | None, frames: np.ndarray) -> np.ndarray | None:
 class Review:
     """Timeline controls and plots for one poses file over its recording."""
 
-    def __init__(self, scene: Scene, recording: Recording, model: Model, results: dict, truth: dict | None = None,
-                 settings: Settings = Settings(), background: Background | None = None):
+    def __init__(
+        self,
+        scene: Scene,
+        recording: Recording,
+        model: Model,
+        results: dict,
+        truth: dict | None = None,
+        settings: Settings = Settings(),
+        background: Background | None = None,
+    ):
         """``background``: the run's empty scene (``tracker track --background``), so the panels show and
         search the same difference images the tracker did; None: grey images."""
         self.scene, self.recording, self.results = scene, recording, results
@@ -78,8 +86,13 @@ class Review:
         unknown = np.full(len(self.frames), np.nan)
         results = self.results
         with gui.add_folder("Plots", order=20, expand_by_default=False):
-            add_run_plots(gui, self.frames, results.get("status", np.zeros(len(self.frames))),
-                          results.get("residual", unknown), results.get("elapsed", unknown))
+            add_run_plots(
+                gui,
+                self.frames,
+                results.get("status", np.zeros(len(self.frames))),
+                results.get("residual", unknown),
+                results.get("elapsed", unknown),
+            )
 
     def step(self, delta: int) -> None:
         self.play.value = False

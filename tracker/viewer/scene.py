@@ -37,8 +37,10 @@ def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False)
     Any address other than loopback opens the viewer to the network, so it warns.
     """
     if host not in ("127.0.0.1", "localhost", "::1") and not quiet:
-        print(f"tracker: warning: the viewer listens on {host}: anyone who can reach this machine can see it",
-              file=sys.stderr)
+        print(
+            f"tracker: warning: the viewer listens on {host}: anyone who can reach this machine can see it",
+            file=sys.stderr,
+        )
     server = viser.ViserServer(host=host, port=port, verbose=False)
     server.scene.set_up_direction("+z")
     server.scene.configure_default_lights(cast_shadow=False)  # shadow maps double the cost of every redraw
@@ -48,36 +50,46 @@ def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False)
     return server
 
 
-def add_plot(gui, title: str, label: str, colour: str, x: np.ndarray, y: np.ndarray,
-             y_range: tuple[float, float] | None = None):
+def add_plot(
+    gui, title: str, label: str, colour: str, x: np.ndarray, y: np.ndarray, y_range: tuple[float, float] | None = None
+):
     """A uPlot line chart of ``y`` against frame numbers ``x`` in the GUI panel (``y_range`` fixes its axis)."""
     scales = {"x": {"time": False}}
     if y_range is not None:
         scales["y"] = {"auto": False, "range": list(y_range)}
-    return gui.add_uplot((np.asarray(x, np.float64), np.asarray(y, np.float64)),
-                         ({"label": "frame"}, {"label": label, "stroke": colour, "width": 1.5}),
-                         title=title, scales=scales, aspect=2.5)
+    return gui.add_uplot(
+        (np.asarray(x, np.float64), np.asarray(y, np.float64)),
+        ({"label": "frame"}, {"label": label, "stroke": colour, "width": 1.5}),
+        title=title,
+        scales=scales,
+        aspect=2.5,
+    )
 
 
-PLOTS = (("status", "0 tracked, 1 uncertain, 2 lost", "#d04020", (-0.1, 2.1)),
-         ("residual", "residual (px)", "#2060d0", None),
-         ("fps", "tracker fps", "#20a040", None))
+PLOTS = (
+    ("status", "0 tracked, 1 uncertain, 2 lost", "#d04020", (-0.1, 2.1)),
+    ("residual", "residual (px)", "#2060d0", None),
+    ("fps", "tracker fps", "#20a040", None),
+)
 
 
 def run_plot_values(status: np.ndarray, residual: np.ndarray, elapsed: np.ndarray) -> dict[str, np.ndarray]:
     """Per-frame status, residual (-1 where no edge was found) and tracker speed (0 where unknown)."""
     elapsed = np.asarray(elapsed, np.float64)
     known = elapsed > 0
-    return {"status": np.asarray(status, np.float64),
-            "residual": np.nan_to_num(np.asarray(residual, np.float64), nan=-1.0),
-            "fps": np.where(known, 1.0 / np.where(known, elapsed, 1.0), 0.0)}
+    return {
+        "status": np.asarray(status, np.float64),
+        "residual": np.nan_to_num(np.asarray(residual, np.float64), nan=-1.0),
+        "fps": np.where(known, 1.0 / np.where(known, elapsed, 1.0), 0.0),
+    }
 
 
 def add_run_plots(gui, frames, status, residual, elapsed) -> dict:
     """The status, residual and speed plots of a run, keyed as :data:`PLOTS`."""
     values = run_plot_values(status, residual, elapsed)
-    return {key: add_plot(gui, key, label, colour, frames, values[key], y_range)
-            for key, label, colour, y_range in PLOTS}
+    return {
+        key: add_plot(gui, key, label, colour, frames, values[key], y_range) for key, label, colour, y_range in PLOTS
+    }
 
 
 def write_viser(serializer, path) -> None:
@@ -110,24 +122,35 @@ class Frame:
 class Scene:
     """Builds the scene on a server and redraws it for each :class:`Frame`."""
 
-    def __init__(self, server: viser.ViserServer, model: Model, cameras, robust_c: float = 2.0,
-                 truth_names: list[str] | None = None):
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        model: Model,
+        cameras,
+        robust_c: float = 2.0,
+        truth_names: list[str] | None = None,
+    ):
         self.server, self.model, self.cameras, self.robust_c = server, model, cameras, robust_c
         self.colours = component_colours(model.size)
         scene = server.scene
         scene.add_grid("/ground", width=8.0, height=8.0, plane="xy", cell_size=0.5)
-        self.meshes = [scene.add_mesh_simple(f"/body/{name}", vertices, faces, color=BODY, flat_shading=False)
-                       for name, (vertices, faces) in zip(model.names, component_meshes(model))]
-        self.joints = scene.add_point_cloud("/joints", np.zeros((model.size, 3), np.float32), colors=(30, 30, 30),
-                                            point_size=0.03, point_shape="circle")
-        self.bones = scene.add_line_segments("/bones", np.zeros((model.size - 1, 2, 3), np.float32), BODY,
-                                             thickness=0.012)
+        self.meshes = [
+            scene.add_mesh_simple(f"/body/{name}", vertices, faces, color=BODY, flat_shading=False)
+            for name, (vertices, faces) in zip(model.names, component_meshes(model))
+        ]
+        self.joints = scene.add_point_cloud(
+            "/joints", np.zeros((model.size, 3), np.float32), colors=(30, 30, 30), point_size=0.03, point_shape="circle"
+        )
+        self.bones = scene.add_line_segments(
+            "/bones", np.zeros((model.size - 1, 2, 3), np.float32), BODY, thickness=0.012
+        )
         self.truth_index = None
         if truth_names is not None:
             index = {name: k for k, name in enumerate(truth_names)}
             self.truth_index = np.array([index.get(name, -1) for name in model.joint_names])
-            self.truth = scene.add_line_segments("/truth", np.zeros((model.size - 1, 2, 3), np.float32), TRUTH,
-                                                 thickness=0.008)
+            self.truth = scene.add_line_segments(
+                "/truth", np.zeros((model.size - 1, 2, 3), np.float32), TRUTH, thickness=0.008
+            )
         self.trajectory = None
         self.frustums = []
         self.panels = []
@@ -135,13 +158,25 @@ class Scene:
         for camera in cameras:
             width, height = camera.size
             fov = 2.0 * np.arctan(0.5 * height / camera.matrix[1, 1])
-            self.frustums.append(scene.add_camera_frustum(
-                f"/cameras/{camera.name}", fov=fov, aspect=width / height, scale=0.25, color=(60, 60, 60),
-                wxyz=_wxyz(camera.rotation.T), position=camera.center,
-                image=np.zeros((FRUSTUM_WIDTH * height // width, FRUSTUM_WIDTH, 3), np.uint8), format="jpeg"))
+            self.frustums.append(
+                scene.add_camera_frustum(
+                    f"/cameras/{camera.name}",
+                    fov=fov,
+                    aspect=width / height,
+                    scale=0.25,
+                    color=(60, 60, 60),
+                    wxyz=_wxyz(camera.rotation.T),
+                    position=camera.center,
+                    image=np.zeros((FRUSTUM_WIDTH * height // width, FRUSTUM_WIDTH, 3), np.uint8),
+                    format="jpeg",
+                )
+            )
             with folder:
-                self.panels.append(server.gui.add_image(np.zeros((height, width, 3), np.uint8), label=camera.name,
-                                                        format="jpeg", jpeg_quality=70))
+                self.panels.append(
+                    server.gui.add_image(
+                        np.zeros((height, width, 3), np.uint8), label=camera.name, format="jpeg", jpeg_quality=70
+                    )
+                )
         self.status = server.gui.add_markdown("", order=10)
 
     def look_at_body(self, poses: np.ndarray, distance: float = 4.0) -> None:
@@ -164,8 +199,7 @@ class Scene:
             return
         segments = np.stack([points[:-1], points[1:]], 1)
         if self.trajectory is None:
-            self.trajectory = self.server.scene.add_line_segments("/trajectory", segments, TRAJECTORY,
-                                                                  thickness=0.006)
+            self.trajectory = self.server.scene.add_line_segments("/trajectory", segments, TRAJECTORY, thickness=0.006)
         else:
             self.trajectory.points = segments
 
@@ -174,8 +208,12 @@ class Scene:
         joints = joint_centres(frame.poses)
         images = None
         if frame.images is not None:
-            images = [draw(image, frame.inspection, k, self.robust_c, self.colours) if frame.inspection is not None
-                      else cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) for k, image in enumerate(frame.images)]
+            images = [
+                draw(image, frame.inspection, k, self.robust_c, self.colours)
+                if frame.inspection is not None
+                else cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
+                for k, image in enumerate(frame.images)
+            ]
         with self.server.atomic():
             for mesh, pose in zip(self.meshes, frame.poses):
                 mesh.wxyz = _wxyz(pose[0:3, 0:3])
@@ -189,7 +227,8 @@ class Scene:
             if images is not None:
                 for frustum, panel, image in zip(self.frustums, self.panels, images):
                     height, width = image.shape[:2]
-                    frustum.image = cv2.resize(image, (FRUSTUM_WIDTH, FRUSTUM_WIDTH * height // width),
-                                               interpolation=cv2.INTER_AREA)
+                    frustum.image = cv2.resize(
+                        image, (FRUSTUM_WIDTH, FRUSTUM_WIDTH * height // width), interpolation=cv2.INTER_AREA
+                    )
                     panel.image = image
             self.status.content = frame.label

@@ -29,6 +29,8 @@ from tracker.io.poses import load_poses
 from tracker.status import LOST, TRACKED
 
 FORMATS = ("trc", "c3d", "bvh", "csv")
+
+
 @dataclass(frozen=True)
 class Rows:
     """A poses file on a regular grid of frame indices.
@@ -62,7 +64,9 @@ def frame_rate(data: dict[str, np.ndarray], path: Path, fps: float | None = None
         return float(fps)
     frame = data["frame"]
     if "time" not in data or len(frame) < 2 or not data["time"][-1] > data["time"][0]:
-        raise TrackerInputError(f"{path}: no 'time' array of two or more frames to take the frame rate from; pass --fps")
+        raise TrackerInputError(
+            f"{path}: no 'time' array of two or more frames to take the frame rate from; pass --fps"
+        )
     rate = float((frame[-1] - frame[0]) / (data["time"][-1] - data["time"][0]))
     if not np.isfinite(rate) or rate <= 0:
         raise TrackerInputError(f"{path}: 'frame' and 'time' give no positive frame rate; pass --fps")
@@ -86,8 +90,10 @@ def regular_rows(data: dict[str, np.ndarray], path: Path, fps: float | None = No
     given = given[order]
     span = int(given[-1] - given[0]) + 1
     if span > MAX_GAP_FACTOR * count + 1000:
-        raise TrackerInputError(f"{path}: its {count} frames are spread over frame numbers {given[0]}..{given[-1]}; "
-                                "exports write every frame in between, so split the file or renumber its frames")
+        raise TrackerInputError(
+            f"{path}: its {count} frames are spread over frame numbers {given[0]}..{given[-1]}; "
+            "exports write every frame in between, so split the file or renumber its frames"
+        )
     frame = np.arange(given[0], given[-1] + 1)
     row = given - given[0]
 
@@ -118,8 +124,13 @@ def default_out(poses: Path, fmt: str) -> Path:
     return poses.with_suffix(f".{fmt}")
 
 
-def export(poses: str | os.PathLike, fmt: str, out: str | os.PathLike | None = None,
-           model: str | os.PathLike | None = None, fps: float | None = None) -> Path:
+def export(
+    poses: str | os.PathLike,
+    fmt: str,
+    out: str | os.PathLike | None = None,
+    model: str | os.PathLike | None = None,
+    fps: float | None = None,
+) -> Path:
     """Write the poses file ``poses`` as ``fmt`` (one of :data:`FORMATS`) to ``out``; return the path written.
 
     BVH needs ``model``, the body model the poses were tracked with.
@@ -129,7 +140,8 @@ def export(poses: str | os.PathLike, fmt: str, out: str | os.PathLike | None = N
         raise TrackerInputError(f"{poses}: cannot export to {fmt!r}; choose --to {', '.join(FORMATS)}")
     if fmt == "bvh" and model is None:
         raise TrackerInputError(
-            f"{poses}: BVH export needs the body model the poses were tracked with; pass --model (e.g. models/human.toml)")
+            f"{poses}: BVH export needs the body model the poses were tracked with; pass --model (e.g. models/human.toml)"
+        )
     rows = regular_rows(load_poses(poses), poses, fps)
     target = Path(out) if out is not None else default_out(poses, fmt)
     if fmt == "trc":
@@ -160,16 +172,21 @@ def _bvh_poses(rows: Rows, path: Path, names: tuple[str, ...], model_path: Path)
     if rows.poses is None:
         raise TrackerInputError(
             f"{path}: holds joint centres but no 'poses' array, which BVH needs; "
-            "export it --to trc, c3d or csv, or export a poses.npz written by tracker track")
+            "export it --to trc, c3d or csv, or export a poses.npz written by tracker track"
+        )
     if set(rows.component_names) != set(names):
         raise TrackerInputError(
             f"{path}: its components ({', '.join(rows.component_names)}) are not those of {model_path} "
-            f"({', '.join(names)}); pass the --model the poses were tracked with")
+            f"({', '.join(names)}); pass the --model the poses were tracked with"
+        )
     spaced = [name for name in names if len(name.split()) != 1]
     if spaced:
         raise TrackerInputError(
-            f"{model_path}: BVH joint names are single words; rename the components {', '.join(map(repr, spaced))}")
+            f"{model_path}: BVH joint names are single words; rename the components {', '.join(map(repr, spaced))}"
+        )
     poses = rows.poses[:, [rows.component_names.index(name) for name in names]]
     if not usable(poses, rows.status).any():
-        raise TrackerInputError(f"{path}: every frame is lost, so there is no pose for a BVH; export a run that tracked")
+        raise TrackerInputError(
+            f"{path}: every frame is lost, so there is no pose for a BVH; export a run that tracked"
+        )
     return poses

@@ -36,10 +36,10 @@ import os
 
 import numpy as np
 
-from tracker.chain import JOINT_TYPES
 from tracker.atomic import atomic_write
-from tracker.status import LOST
+from tracker.chain import JOINT_TYPES
 from tracker.model import Model, rest_poses
+from tracker.status import LOST
 
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 ROTATION_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
@@ -160,8 +160,12 @@ def hierarchy_lines(model: Model, rest: np.ndarray) -> list[str]:
     def joint(i: int, depth: int) -> list[str]:
         pad = "\t" * depth
         channels = (POSITION_CHANNELS if positional[i] else ()) + ROTATION_CHANNELS
-        lines = [f"{pad}{'ROOT' if i == 0 else 'JOINT'} {model.names[i]}", f"{pad}{{",
-                 f"{pad}\tOFFSET {vector(offset[i])}", f"{pad}\tCHANNELS {len(channels)} {' '.join(channels)}"]
+        lines = [
+            f"{pad}{'ROOT' if i == 0 else 'JOINT'} {model.names[i]}",
+            f"{pad}{{",
+            f"{pad}\tOFFSET {vector(offset[i])}",
+            f"{pad}\tCHANNELS {len(channels)} {' '.join(channels)}",
+        ]
         children = np.flatnonzero(model.parent == i)
         for child in children:
             lines += joint(int(child), depth + 1)
@@ -177,11 +181,14 @@ def bvh_lines(model: Model, poses: np.ndarray, status: np.ndarray, rate: float) 
     rest = rest_poses(model, np.eye(4))
     values = motion(model, hold_lost(poses, status), rest)
     positional = has_position(model)
-    columns = [values[:, i, 0 if positional[i] else 3:] for i in depth_first(model)]
+    columns = [values[:, i, 0 if positional[i] else 3 :] for i in depth_first(model)]
     table = np.concatenate(columns, axis=1)
     row_format = " ".join(["%.8f"] * table.shape[1])
-    return (hierarchy_lines(model, rest) + ["MOTION", f"Frames: {len(table)}", f"Frame Time: {1.0 / rate:.10f}"]
-            + [row_format % tuple(row) for row in table])
+    return (
+        hierarchy_lines(model, rest)
+        + ["MOTION", f"Frames: {len(table)}", f"Frame Time: {1.0 / rate:.10f}"]
+        + [row_format % tuple(row) for row in table]
+    )
 
 
 def write_bvh(path: str | os.PathLike, model: Model, poses: np.ndarray, status: np.ndarray, rate: float) -> None:

@@ -18,22 +18,23 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tracker.errors import TrackerInputError
 from tracker.atomic import atomic_path
+from tracker.errors import TrackerInputError
 from tracker.io.export.units import MM_PER_M
 
 _C3D_MAX_FRAMES = 65535  # the header's first and last frame are 16-bit
 
 
-def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, rate: float,
-              joints: np.ndarray) -> None:
+def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, rate: float, joints: np.ndarray) -> None:
     """Write ``joints`` (F, M, 3) metres, NaN for gaps, as the C3D file ``path`` (mm, atomically)."""
     import ezc3d
 
     count = len(joints)
     if count > _C3D_MAX_FRAMES or not 0 <= first_frame <= _C3D_MAX_FRAMES:
-        raise TrackerInputError(f"{path}: C3D headers hold frame numbers up to {_C3D_MAX_FRAMES}, these frames run "
-                                f"{first_frame}..{first_frame + count - 1}; export to TRC or CSV instead")
+        raise TrackerInputError(
+            f"{path}: C3D headers hold frame numbers up to {_C3D_MAX_FRAMES}, these frames run "
+            f"{first_frame}..{first_frame + count - 1}; export to TRC or CSV instead"
+        )
     gap = ~np.isfinite(joints).all(axis=2)  # (F, M)
     points = np.ones((4, len(names), count))
     points[:3] = np.transpose(joints, (2, 1, 0)) * MM_PER_M

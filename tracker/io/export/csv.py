@@ -22,8 +22,14 @@ import numpy as np
 from tracker.atomic import atomic_write
 
 
-def csv_lines(names: Sequence[str], frame: np.ndarray, time: np.ndarray, status: np.ndarray,
-              residual: np.ndarray, joints: np.ndarray) -> list[str]:
+def csv_lines(
+    names: Sequence[str],
+    frame: np.ndarray,
+    time: np.ndarray,
+    status: np.ndarray,
+    residual: np.ndarray,
+    joints: np.ndarray,
+) -> list[str]:
     """The lines (without newlines) of the CSV of ``joints`` (F, J, 3) metres."""
     header = ["frame", "time", "status", "residual"] + [f"{name}_{axis}" for name in names for axis in "xyz"]
     row_format = "%d,%.9f,%d,%.6g" + ",%.9f" * (3 * len(names))
@@ -33,8 +39,15 @@ def csv_lines(names: Sequence[str], frame: np.ndarray, time: np.ndarray, status:
     return lines
 
 
-def write_csv(path: str | os.PathLike, names: Sequence[str], frame: np.ndarray, time: np.ndarray,
-              status: np.ndarray, residual: np.ndarray, joints: np.ndarray) -> None:
+def write_csv(
+    path: str | os.PathLike,
+    names: Sequence[str],
+    frame: np.ndarray,
+    time: np.ndarray,
+    status: np.ndarray,
+    residual: np.ndarray,
+    joints: np.ndarray,
+) -> None:
     """Write the CSV file ``path`` (atomically): one row per frame, joints (F, J, 3) in metres."""
     text = "\n".join(csv_lines(names, frame, time, status, residual, joints)) + "\n"
     atomic_write(path, lambda file: file.write(text.encode()))

@@ -28,13 +28,21 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.errors import TrackerInputError
 from tracker.atomic import atomic_write
+from tracker.errors import TrackerInputError
 from tracker.io.export.units import MM_PER_M, seconds
 from tracker.tomlfile import read_text
 
-HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units", "OrigDataRate",
-               "OrigDataStartFrame", "OrigNumFrames")
+HEADER_KEYS = (
+    "DataRate",
+    "CameraRate",
+    "NumFrames",
+    "NumMarkers",
+    "Units",
+    "OrigDataRate",
+    "OrigDataStartFrame",
+    "OrigNumFrames",
+)
 
 
 @dataclass(frozen=True)
@@ -83,8 +91,9 @@ def trc_lines(file_name: str, names: Sequence[str], frame: np.ndarray, rate: flo
     return lines
 
 
-def write_trc(path: str | os.PathLike, names: Sequence[str], frame: np.ndarray, rate: float,
-              joints: np.ndarray) -> None:
+def write_trc(
+    path: str | os.PathLike, names: Sequence[str], frame: np.ndarray, rate: float, joints: np.ndarray
+) -> None:
     """Write ``joints`` (F, M, 3) metres, NaN for gaps, as the TRC file ``path`` (mm, atomically)."""
     path = Path(path)
     text = "\n".join(trc_lines(path.name, names, frame, rate, joints)) + "\n"
@@ -98,7 +107,9 @@ def read_trc(path: str | os.PathLike) -> Trc:
     try:
         return _parse_trc(lines)
     except (ValueError, IndexError, KeyError) as error:
-        raise TrackerInputError(f"{path}: not a valid TRC file ({error}); give a tab-separated OpenSim .trc file") from None
+        raise TrackerInputError(
+            f"{path}: not a valid TRC file ({error}); give a tab-separated OpenSim .trc file"
+        ) from None
 
 
 def _parse_trc(lines: list[str]) -> Trc:
