@@ -1,5 +1,9 @@
 """tracker calibrate: real data against OpenCV, caliscope and Qualisys; synthetic rigs; error messages.
 
+The calibration files (caliscope's camera_array.toml and charuco.toml, the Pose2Sim rig's
+calibration.toml and Qualisys export Calib.qca.txt) are committed in tests/data; the photos and videos
+are not, and the tests that calibrate from them skip without ../shared/data.
+
 Real data (../shared/data, see its README):
 * opencv-stereo-chessboard: OpenCV's left/right 9x6 photos. Intrinsics against OpenCV's
   left_intrinsics.yml; the stereo pose against cv2.stereoCalibrate run the way OpenCV's
@@ -23,6 +27,7 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import SHARED_DATA, TEST_DATA, needs_shared
 from tracker.cli import build_parser
 from tracker.calibrate.board import Detection, parse_board
 from tracker.calibrate.extrinsics import (
@@ -35,10 +40,11 @@ from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.synth import look_at_camera
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-OPENCV = DATA / "opencv-stereo-chessboard"
-CALISCOPE = DATA / "caliscope-4cam"
-POSE2SIM = DATA / "pose2sim-intrinsics"
+OPENCV = SHARED_DATA / "opencv-stereo-chessboard"
+CALISCOPE = SHARED_DATA / "caliscope-4cam"  # its videos and corners; camera_array.toml, charuco.toml committed
+POSE2SIM = SHARED_DATA / "pose2sim-intrinsics"  # its photos; Calib.qca.txt committed
+CALISCOPE_FILES = TEST_DATA / "caliscope"
+POSE2SIM_FILES = TEST_DATA / "pose2sim"  # Calib.qca.txt and pose2sim-balancing's calibration.toml
 
 
 def run_cli(argv: list[str]) -> int:
@@ -109,6 +115,7 @@ def _opencv_reference_stereo(square: float):
     return R, T.ravel(), rms
 
 
+@needs_shared("opencv-stereo-chessboard")
 def test_opencv_stereo_against_opencv(tmp_path, capsys):
     folder = _opencv_folder(tmp_path)
     out = tmp_path / "calibration.toml"
@@ -150,17 +157,35 @@ def test_opencv_stereo_against_opencv(tmp_path, capsys):
 
 
 def _caliscope_cameras() -> list[Camera]:
-    document = tomllib.loads((CALISCOPE / "camera_array.toml").read_text())
+    document = tomllib.loads((CALISCOPE_FILES / "camera_array.toml").read_text())
     return [Camera(f"cam_{key}", table["size"], table["matrix"], table["distortions"], table["rotation"],
                    table["translation"]) for key, table in sorted(document["cameras"].items())]
 
 
+def test_caliscope_camera_array_loads_and_round_trips(tmp_path):
+    """caliscope's camera_array.toml as four 1280x720 cameras; its world is camera 1's frame (measured:
+    cam_1 3.3 mm and 0.24 degrees from the origin, the others 1.2-1.7 m out); written and read back by
+    our calibration file to round-off."""
+    cameras = _caliscope_cameras()
+    assert [c.name for c in cameras] == ["cam_0", "cam_1", "cam_2", "cam_3"]
+    assert all(c.size == (1280, 720) for c in cameras)
+    assert np.linalg.norm(cameras[1].center) < 0.004 and np.degrees(angle_between(cameras[1].rotation, np.eye(3))) < 0.3
+    assert all(1.0 < np.linalg.norm(c.center) < 2.0 for c in cameras if c.name != "cam_1")
+    save_calibration(cameras, tmp_path / "caliscope.toml")
+    for ours, theirs in zip(load_calibration(tmp_path / "caliscope.toml"), cameras):
+        assert ours.name == theirs.name and ours.size == theirs.size
+        for a, b in ((ours.matrix, theirs.matrix), (ours.distortions, theirs.distortions),
+                     (ours.rotation, theirs.rotation), (ours.translation, theirs.translation)):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+@needs_shared("caliscope-4cam", "extrinsic")
 def test_caliscope_rig_against_caliscope(tmp_path, capsys):
     reference = _caliscope_cameras()
     intrinsics = tmp_path / "caliscope_intrinsics.toml"
     save_calibration(reference, intrinsics)
     out = tmp_path / "calibration.toml"
-    board = tomllib.loads((CALISCOPE / "charuco.toml").read_text())
+    board = tomllib.loads((CALISCOPE_FILES / "charuco.toml").read_text())
     assert board["inverted"] and board["columns"] == 4 and board["rows"] == 5
     spec = f"charuco:4x5:{board['square_size_override_cm'] / 100}:{0.75 * board['square_size_override_cm'] / 100}:DICT_4X4_1000:inverted"
     assert run_cli([str(CALISCOPE / "extrinsic"), "--board", spec, "--out", str(out),
@@ -191,7 +216,7 @@ def test_caliscope_rig_against_caliscope(tmp_path, capsys):
 
 
 def _qualisys_cameras(size) -> dict[str, Camera]:
-    root = ET.parse(POSE2SIM / "Calib.qca.txt").getroot()
+    root = ET.parse(POSE2SIM_FILES / "Calib.qca.txt").getroot()
     cameras = {}
     for element in root.iter("camera"):
         i = {key: float(value) for key, value in element.find("intrinsic").attrib.items()}
@@ -202,6 +227,28 @@ def _qualisys_cameras(size) -> dict[str, Camera]:
     return cameras
 
 
+def test_pose2sim_calibration_is_the_qualisys_export_converted():
+    """pose2sim-balancing's calibration.toml against the rig's Qualisys export: focal lengths and
+    principal points are Qualisys's 1/64 px values divided by 64, the distortions too (measured
+    exactly: k1 -0.046 in Calib.qca.txt, -7.2e-4 in calibration.toml), and the camera centres are
+    Qualisys's positions in mm as metres (measured to 2e-15 m)."""
+    balancing = {c.name: c for c in load_calibration(POSE2SIM_FILES / "calibration.toml")}
+    assert list(balancing) == ["cam01", "cam02", "cam03", "cam04"]
+    qualisys = _qualisys_cameras((1088, 1920))
+    root = ET.parse(POSE2SIM_FILES / "Calib.qca.txt").getroot()
+    for element in root.iter("camera"):
+        name = element.get("serial")
+        ours, q = balancing[name], qualisys[name]
+        assert ours.size == (1088, 1920)
+        np.testing.assert_allclose(ours.matrix, q.matrix, rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(ours.distortions)[:4], np.asarray(q.distortions)[:4] / 64, rtol=1e-9,
+                                   atol=1e-15)
+        position = [float(element.find("transform").get(axis)) / 1000.0 for axis in "xyz"]
+        np.testing.assert_allclose(ours.center, position, rtol=0, atol=1e-9)
+    assert all(np.all(np.abs(c.distortions[:2]) < 0.003) for c in balancing.values())
+
+
+@needs_shared("pose2sim-intrinsics")
 def test_pose2sim_intrinsics_against_qualisys(tmp_path):
     folder = tmp_path / "p2s"
     folder.mkdir()
@@ -211,7 +258,7 @@ def test_pose2sim_intrinsics_against_qualisys(tmp_path):
     assert run_cli([str(folder), "--board", "chessboard:4x7:0.1", "--out", str(out), "--intrinsics-only"]) == 0
     ours = load_calibration(out)
     qualisys = _qualisys_cameras(ours[0].size)
-    balancing = {c.name: c for c in load_calibration(DATA / "pose2sim-balancing" / "calibration.toml")}
+    balancing = {c.name: c for c in load_calibration(POSE2SIM_FILES / "calibration.toml")}
     assert [c.name for c in ours] == ["cam01", "cam02", "cam03", "cam04"]
     k = []
     for camera in ours:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import tomli_w
 
+from conftest import TEST_DATA
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 
@@ -182,11 +183,9 @@ def test_missing_file_names_file(tmp_path: Path) -> None:
 
 
 def test_loads_the_real_pose2sim_rig() -> None:
-    """The Pose2Sim demo's calibration (floats for sizes, metres): four portrait cameras about 3-4 m out."""
-    path = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim-balancing" / "calibration.toml"
-    if not path.is_file():
-        pytest.skip("shared Pose2Sim data not present")
-    cameras = load_calibration(path)
+    """The Pose2Sim demo's calibration (floats for sizes, metres): four portrait cameras about 3-4 m out
+    (pose2sim-balancing's calibration.toml, committed in tests/data/pose2sim)."""
+    cameras = load_calibration(TEST_DATA / "pose2sim" / "calibration.toml")
     assert [c.name for c in cameras] == ["cam01", "cam02", "cam03", "cam04"]
     assert all(c.size == (1088, 1920) for c in cameras)
     distances = [np.linalg.norm(c.center[:2]) for c in cameras]

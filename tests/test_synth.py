@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import SHARED_DATA, TEST_DATA, needs_shared
 from tracker import motion, render, synth
 from tracker.io import bvh as bvh_io
 from tracker.io.avi import MjpegAviWriter
@@ -19,8 +20,8 @@ from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "models" / "human.toml"
-CMU = ROOT.parent / "shared" / "data" / "cmu-mocap" / "131_01.bvh"
-needs_cmu = pytest.mark.skipif(not CMU.is_file(), reason="shared CMU BVH data not present")
+CMU = TEST_DATA / "cmu-mocap" / "131_01_500-619.bvh"  # frames 500-619 of the clip: frame f here is 500 + f there
+FULL_CMU = SHARED_DATA / "cmu-mocap" / "131_01.bvh"
 
 
 @pytest.fixture(scope="module")
@@ -45,18 +46,33 @@ def joint_gap(model, poses) -> float:
 # --- BVH and retargeting --------------------------------------------------------------------
 
 
-@needs_cmu
-def test_bvh_parse(bvh):
+def _bvh_parse(bvh, frames: int) -> None:
     assert len(bvh.names) == 31
     assert bvh.names[0] == "Hips" and bvh.parents[0] == -1
-    assert bvh.frames == 994
+    assert bvh.frames == frames
     assert bvh.frame_time == pytest.approx(1 / 120, rel=1e-4)
     assert bvh.channels[0][:3] == ("Xposition", "Yposition", "Zposition")
     assert bvh.channels[bvh.index("LeftShoulder")] == ("Zrotation", "Xrotation", "Yrotation")
-    assert bvh.motion.shape == (994, sum(len(c) for c in bvh.channels))
+    assert bvh.motion.shape == (frames, sum(len(c) for c in bvh.channels))
 
 
-@needs_cmu
+def test_bvh_parse(bvh):
+    _bvh_parse(bvh, 120)
+
+
+@needs_shared("cmu-mocap", "131_01.bvh")
+def test_full_clip_parses_and_holds_the_committed_frames(bvh, human):
+    full = bvh_io.load_bvh(FULL_CMU)
+    _bvh_parse(full, 994)
+    assert full.names == bvh.names and full.channels == bvh.channels
+    np.testing.assert_array_equal(full.parents, bvh.parents)
+    np.testing.assert_array_equal(full.offsets, bvh.offsets)
+    np.testing.assert_array_equal(full.motion[500:620], bvh.motion)
+    # the same poses from either file (measured: 4.6e-8 apart, round-off)
+    np.testing.assert_allclose(motion.retarget(full, human, start=500, frames=40, stride=2),
+                               motion.retarget(bvh, human, start=0, frames=40, stride=2), rtol=0, atol=1e-6)
+
+
 def test_bvh_forward_kinematics_intrinsic_order(bvh):
     """A joint's world rotation is the parent's times Rz Ry Rx (channels in listed order) and offsets hang on it."""
     world = bvh_io.bvh_global(bvh, np.array([100]))[0]
@@ -69,9 +85,8 @@ def test_bvh_forward_kinematics_intrinsic_order(bvh):
     np.testing.assert_allclose(world[j, 0:3, 3], world[p, 0:3, 0:3] @ bvh.offsets[j] + world[p, 0:3, 3], atol=1e-12)
 
 
-@needs_cmu
 def test_retarget_valid_poses_and_hinge_knee(bvh, human):
-    poses = motion.retarget(bvh, human, start=500, frames=40, stride=2)
+    poses = motion.retarget(bvh, human, start=0, frames=40, stride=2)  # the clip's frames 500-578
     assert poses.shape == (40, human.size, 4, 4)
     assert joint_gap(human, poses) < 1e-9
     rot = poses[:, :, 0:3, 0:3]
@@ -90,10 +105,9 @@ def test_retarget_valid_poses_and_hinge_knee(bvh, human):
     assert abs(float(np.median(motion.lowest_points(human, poses)))) < 1e-9
 
 
-@needs_cmu
 def test_retarget_follows_bvh_bone_directions(bvh, human):
-    poses = motion.retarget(bvh, human, start=600, frames=5, stride=3, centre=False)
-    world = bvh_io.bvh_global(bvh, 600 + 3 * np.arange(5))
+    poses = motion.retarget(bvh, human, start=100, frames=5, stride=3, centre=False)  # the clip's 600-612
+    world = bvh_io.bvh_global(bvh, 100 + 3 * np.arange(5))
     for name in ("thigh_r", "shin_r", "upperarm_l", "forearm_l", "foot_r"):
         joint, tip, direction = motion.RETARGET_MAP[name]
         bone = (world[:, bvh.index(tip), 0:3, 3] - world[:, bvh.index(joint), 0:3, 3]) @ motion.BVH_TO_WORLD.T
@@ -271,12 +285,10 @@ def test_look_at_camera_centres_target():
 @pytest.mark.parametrize("motion", ["procedural", "bvh"])
 def test_synthesize_writes_recording(tmp_path, human, motion):
     if motion == "bvh":
-        if not CMU.is_file():
-            pytest.skip("shared CMU BVH data not present")
         motion = f"bvh:{CMU}"
     out = tmp_path / "rec"
-    summary = synth.synthesize(MODEL, _rig(tmp_path), out, motion=motion, frames=5, start=600, stride=2, seed=1,
-                               progress=False)
+    summary = synth.synthesize(MODEL, _rig(tmp_path), out, motion=motion, frames=5, start=100, stride=2, seed=1,
+                               progress=False)  # bvh: the clip's frames 600-608
     names = {"calibration.toml", "a.avi", "b.avi", "model.toml", "init.toml", "truth.npz", "README.md"}
     assert names <= {p.name for p in out.iterdir()}
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary files left

@@ -13,6 +13,7 @@ import pandas
 import pytest
 from scipy.spatial.transform import Rotation
 
+from conftest import SHARED_DATA, TEST_DATA, needs_shared
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.bvh import bvh_global, load_bvh
@@ -31,7 +32,8 @@ with warnings.catch_warnings():
 ROOT = Path(__file__).resolve().parents[2]
 HUMAN = ROOT / "models" / "human.toml"
 TRUTH = ROOT / "recordings" / "demo" / "truth.npz"
-MARKERS = ROOT.parent / "shared" / "data" / "markers"
+MARKERS = TEST_DATA / "markers"  # subject01_walk1.trc: its first 60 frames; arm26_elbow_flex.trc whole
+FULL_MARKERS = SHARED_DATA / "markers"
 
 FPS = 50.0
 FRAMES = 40
@@ -93,13 +95,15 @@ def test_trc_read_by_pandas(tracked: Path, truth: dict[str, np.ndarray]) -> None
     assert names == list(truth["joint_names"])
 
 
-@pytest.mark.parametrize("name, markers, frames, rate, first", [
-    ("subject01_walk1.trc", 41, 151, 60.0, ("R.ASIS", [617.247620, 1055.275020, 170.781980])),
-    ("arm26_elbow_flex.trc", 3, 121, 120.0, ("r_acromion", [-13.05452443, 839.50547557, 169.5054756])),
+@pytest.mark.parametrize("folder, name, markers, frames, rate, first", [
+    (MARKERS, "subject01_walk1.trc", 41, 60, 60.0, ("R.ASIS", [617.247620, 1055.275020, 170.781980])),
+    (MARKERS, "arm26_elbow_flex.trc", 3, 121, 120.0, ("r_acromion", [-13.05452443, 839.50547557, 169.5054756])),
+    pytest.param(FULL_MARKERS, "subject01_walk1.trc", 41, 151, 60.0,
+                 ("R.ASIS", [617.247620, 1055.275020, 170.781980]), marks=needs_shared("markers"), id="full-walk"),
 ])
-def test_trc_reader_on_real_files_and_rewrite(tmp_path: Path, name: str, markers: int, frames: int, rate: float,
-                                              first: tuple[str, list[float]]) -> None:
-    trc = read_trc(MARKERS / name)
+def test_trc_reader_on_real_files_and_rewrite(tmp_path: Path, folder: Path, name: str, markers: int, frames: int,
+                                              rate: float, first: tuple[str, list[float]]) -> None:
+    trc = read_trc(folder / name)
     assert trc.markers.shape == (frames, markers, 3) and len(trc.names) == markers
     assert int(trc.header["NumFrames"]) == frames and trc.rate == rate and trc.units == "mm"
     assert trc.names[0] == first[0]

@@ -1,4 +1,8 @@
-"""tracker.io.markers: real C3D and TRC marker files read into metres with gaps, and their errors."""
+"""tracker.io.markers: real C3D and TRC marker files read into metres with gaps, and their errors.
+
+The files are the committed cuts in tests/data/markers (the first frames of ../shared/data/markers'
+files, C3D rewritten by ezc3d without the analog channels); the full originals are read too when
+../shared/data is beside the repository."""
 
 from __future__ import annotations
 
@@ -8,36 +12,68 @@ import ezc3d
 import numpy as np
 import pytest
 
+from conftest import SHARED_DATA, TEST_DATA, needs_shared
 from tracker.io.export.c3d import write_c3d
 from tracker.io.markers import read_markers
 
-MARKERS = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "markers"
+MARKERS = TEST_DATA / "markers"
+FULL = SHARED_DATA / "markers"
 
 
-def test_vicon_c3d_in_metres_with_its_gaps() -> None:
-    markers = read_markers(MARKERS / "Vicon.c3d")
-    raw = ezc3d.c3d(str(MARKERS / "Vicon.c3d"))
+def _vicon_in_metres_with_its_gaps(path: Path, frames: int, gaps_expected: int) -> None:
+    markers = read_markers(path)
+    raw = ezc3d.c3d(str(path))
     points = raw["data"]["points"]
     residuals = raw["data"]["meta_points"]["residuals"][0]
-    assert markers.positions.shape == (580, 51, 3)
+    assert markers.positions.shape == (frames, 51, 3)
     assert markers.rate == 100.0 and markers.first_frame == 0
     assert markers.labels[8] == "Daphnee:ASISr"
     gaps = ~np.isfinite(markers.positions).all(axis=2)
-    assert gaps.sum() == (residuals < 0).sum() == 305
+    assert gaps.sum() == (residuals < 0).sum() == gaps_expected
     seen = ~gaps
     assert np.allclose(markers.positions[seen], np.transpose(points[:3], (2, 1, 0))[seen] / 1000.0)
     # an adult's sternum sits 0.3-0.6 m from the front of the pelvis: the units became metres
+    # (measured 0.446 m over the committed 160 frames, 0.454 m over all 580)
     pelvis, sternum = np.nanmedian(markers.select(["ASISr", "STER"]), axis=0)
     assert 0.3 < np.linalg.norm(sternum - pelvis) < 0.6
 
 
+def test_vicon_c3d_in_metres_with_its_gaps() -> None:
+    """The committed first 160 frames: 64 gaps, in 4 markers (LARMl, STYLu, LASTC, MEDH) from frame 118."""
+    _vicon_in_metres_with_its_gaps(MARKERS / "Vicon.c3d", 160, 64)
+    markers = read_markers(MARKERS / "Vicon.c3d")
+    gappy = ~np.isfinite(markers.positions).all(axis=2)
+    assert [markers.labels[i] for i in np.nonzero(gappy.any(axis=0))[0]] == [
+        "Daphnee:LARMl", "Daphnee:STYLu", "Daphnee:LASTC", "Daphnee:MEDH"]
+    assert not gappy[:118].any() and gappy[118].any()
+
+
+@needs_shared("markers", "Vicon.c3d")
+def test_full_vicon_c3d_in_metres_with_its_gaps() -> None:
+    _vicon_in_metres_with_its_gaps(FULL / "Vicon.c3d", 580, 305)
+
+
 def test_qualisys_c3d_and_opensim_trc() -> None:
     qualisys = read_markers(MARKERS / "Qualisys.c3d")
-    assert qualisys.positions.shape == (340, 55, 3) and qualisys.rate == 200.0
+    assert qualisys.positions.shape == (40, 55, 3) and qualisys.rate == 200.0 and qualisys.first_frame == 704
     assert np.isfinite(qualisys.positions).all()
     trc = read_markers(MARKERS / "subject01_walk1.trc")
+    assert trc.positions.shape == (60, 41, 3) and trc.rate == 60.0 and trc.first_frame == 1
+    assert trc.positions[0, trc.index("R.ASIS")] == pytest.approx([0.61724762, 1.05527502, 0.17078198])
+
+
+@needs_shared("markers")
+def test_full_qualisys_c3d_and_opensim_trc_and_the_committed_cuts_are_their_first_frames() -> None:
+    qualisys = read_markers(FULL / "Qualisys.c3d")
+    assert qualisys.positions.shape == (340, 55, 3) and qualisys.rate == 200.0
+    assert np.isfinite(qualisys.positions).all()
+    trc = read_markers(FULL / "subject01_walk1.trc")
     assert trc.positions.shape == (151, 41, 3) and trc.rate == 60.0 and trc.first_frame == 1
     assert trc.positions[0, trc.index("R.ASIS")] == pytest.approx([0.61724762, 1.05527502, 0.17078198])
+    for name in ("Vicon.c3d", "Qualisys.c3d", "subject01_walk1.trc", "arm26_elbow_flex.trc"):
+        full, cut = read_markers(FULL / name), read_markers(MARKERS / name)
+        assert cut.labels == full.labels and cut.rate == full.rate and cut.first_frame == full.first_frame
+        np.testing.assert_array_equal(cut.positions, full.positions[: len(cut.positions)])
 
 
 def test_c3d_round_trip_keeps_gaps_and_first_frame(tmp_path: Path) -> None:

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import SHARED_DATA, needs_shared
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.recording import frames, open_recording
@@ -135,9 +136,10 @@ def test_codec_crop_keeps_the_intrinsics_and_takes_the_decoded_size(tmp_path: Pa
     np.testing.assert_array_equal(rec.cameras[0].matrix, calibrated.matrix)
 
 
+@needs_shared("pose2sim-balancing")
 def test_real_videos_one_row_block_short_of_their_calibration() -> None:
     """pose2sim-balancing: cam01 and cam02 decode as 1080x1920 where the calibration says 1088x1920."""
-    folder = Path(__file__).resolve().parents[3] / "shared" / "data" / "pose2sim-balancing"
+    folder = SHARED_DATA / "pose2sim-balancing"
     with pytest.warns(UserWarning) as caught:
         rec = open_recording(folder)
     assert sorted(str(w.message).split(":")[0].rsplit("/", 1)[1] for w in caught) == ["cam01.mp4", "cam02.mp4"]

@@ -1,4 +1,5 @@
-"""tracker points: points models, a synthetic arm tracked against its truth, and the real marker files."""
+"""tracker points: points models, a synthetic arm tracked against its truth, and the real marker files
+(the committed cuts in tests/data/markers: Vicon.c3d's first 160 frames, Qualisys.c3d's first 40)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import TEST_DATA
 from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.geometry.se3 import exp_so3, log_so3
@@ -19,7 +21,7 @@ from tracker.physics import points as pts
 from tracker.physics import superquadric as sq
 
 ROOT = Path(__file__).resolve().parents[2]
-MARKERS = ROOT.parent / "shared" / "data" / "markers"
+MARKERS = TEST_DATA / "markers"
 VICON_ARM = ROOT / "models" / "vicon_arm.points.toml"
 WALKER = ROOT / "models" / "qualisys_walker.points.toml"
 
@@ -182,8 +184,8 @@ def test_bundled_models_name_markers_their_files_have() -> None:
 
 def test_points_command_on_the_vicon_arm(tmp_path: Path, capsys) -> None:
     """The real Vicon.c3d raising arm, frames 0-29: every part seen, joints held to a micrometre,
-    every part's RMS marker-to-node distance under 2.5 cm (measured over all 580 frames: medians 13-21
-    mm, see README)."""
+    every part's RMS marker-to-node distance under 2.5 cm (measured over all 580 frames of the full
+    file in ../shared/data: medians 13-21 mm, see README)."""
     code = main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--out", str(tmp_path),
                  "--frames", "30", "--quiet"])
     assert code == 0
@@ -234,6 +236,6 @@ def test_points_command_errors_are_one_line(tmp_path: Path, capsys) -> None:
     assert main(["points", str(tmp_path / "none.c3d"), "--model", str(VICON_ARM)]) == 2
     assert "marker file not found" in capsys.readouterr().err
     assert main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--start", "9999"]) == 2
-    assert "--start 9999 is outside the marker file's frames 0..579" in capsys.readouterr().err
+    assert "--start 9999 is outside the marker file's frames 0..159" in capsys.readouterr().err
     assert main(["experiment", "insect", "--densities", "50"]) == 2
     assert "the insect has neither" in capsys.readouterr().err

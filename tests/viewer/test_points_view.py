@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from conftest import TEST_DATA
 from tracker.cli import main
 from tracker.io.markers import read_markers
 from tracker.io.poses import load_poses
@@ -15,7 +16,7 @@ from tracker.physics import superquadric as sq
 from tracker.viewer.points import PointsView, node_positions
 
 ROOT = Path(__file__).resolve().parents[2]
-VICON = ROOT.parent / "shared" / "data" / "markers" / "Vicon.c3d"
+VICON = TEST_DATA / "markers" / "Vicon.c3d"  # its first 160 frames
 MODEL = ROOT / "models" / "vicon_arm.points.toml"
 
 
