@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from tracker import render
 from tracker.camera import save_calibration
 from tracker.errors import TrackerInputError
 from tracker.synth import look_at_camera, synthesize
@@ -26,17 +25,6 @@ def needs_shared(*parts: str) -> pytest.MarkDecorator:
     where = "/".join(("../shared/data", *parts))
     return pytest.mark.skipif(not SHARED_DATA.joinpath(*parts).exists(),
                               reason=f"{where} not present (data folder beside the repo)")
-
-
-@pytest.fixture(scope="session", autouse=True)
-def committed_backgrounds():
-    """Renderings composite over the committed copies of the two OpenCV photos: tracker.render looks for
-    them in ../shared/data/backgrounds and, without it, draws a procedural backdrop that some rendered
-    tests' thresholds were not measured on.  The copies are byte for byte the shared files, so beside
-    ../shared nothing changes."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(render, "BACKGROUNDS", TEST_DATA / "backgrounds")
-        yield
 
 
 @pytest.fixture

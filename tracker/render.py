@@ -19,8 +19,8 @@ from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.model import Model
 
-BACKGROUNDS = Path(__file__).resolve().parents[2] / "shared" / "data" / "backgrounds"
-"""Folder of background photos (OpenCV samples); used when present, else a procedural backdrop."""
+BACKGROUNDS = Path(__file__).resolve().parent / "data" / "backgrounds"
+"""Folder of the background photos shipped with the package (OpenCV samples, licence in its README.md)."""
 
 DEFAULT_BACKGROUNDS = ("basketball1.png", "basketball2.png")
 """The room photos used by default (``board.jpg`` is a circuit-board texture, not a room, and

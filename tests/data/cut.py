@@ -82,7 +82,7 @@ def main() -> None:
     for name in ("camera_array.toml", "charuco.toml", "LICENSE"):
         shutil.copyfile(SHARED / "caliscope-4cam" / name, caliscope / name)
 
-    backgrounds = HERE / "backgrounds"
+    backgrounds = HERE.parents[1] / "tracker" / "data" / "backgrounds"
     backgrounds.mkdir(exist_ok=True)
     for name in ("basketball1.png", "basketball2.png", "COPYRIGHT"):
         shutil.copyfile(SHARED / "backgrounds" / name, backgrounds / name)
