@@ -23,8 +23,9 @@ plain clone: tests that need it are marked with :func:`needs_shared` and skip wi
 def needs_shared(*parts: str) -> pytest.MarkDecorator:
     """Skip unless ``SHARED_DATA / parts...`` exists, naming what is missing."""
     where = "/".join(("../shared/data", *parts))
-    return pytest.mark.skipif(not SHARED_DATA.joinpath(*parts).exists(),
-                              reason=f"{where} not present (data folder beside the repo)")
+    return pytest.mark.skipif(
+        not SHARED_DATA.joinpath(*parts).exists(), reason=f"{where} not present (data folder beside the repo)"
+    )
 
 
 @pytest.fixture

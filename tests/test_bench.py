@@ -2,12 +2,19 @@
 
 import json
 
-from tracker.bench import _copies, _side_by_side, HUMAN
+from tracker.bench import HUMAN, _copies, _side_by_side
 from tracker.cli import main
 from tracker.model import model_from_dict
 
-KEYS = {"fps_one_view", "fps_all_views", "decode_only_fps_all_views", "ratio_all_views",
-        "core_ms_per_view_iteration", "views", "frames"}
+KEYS = {
+    "fps_one_view",
+    "fps_all_views",
+    "decode_only_fps_all_views",
+    "ratio_all_views",
+    "core_ms_per_view_iteration",
+    "views",
+    "frames",
+}
 
 
 def test_bench_json_has_the_documented_keys(tiny_recording, capsys):

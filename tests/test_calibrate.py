@@ -26,9 +26,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
 from conftest import SHARED_DATA, TEST_DATA, needs_shared
-from tracker.cli import build_parser
+
 from tracker.calibrate.board import Detection, parse_board
 from tracker.calibrate.extrinsics import (
     Pose,
@@ -37,6 +36,7 @@ from tracker.calibrate.extrinsics import (
     chordal_mean,
 )
 from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.cli import build_parser
 from tracker.errors import TrackerInputError
 from tracker.synth import look_at_camera
 
@@ -98,10 +98,13 @@ def _opencv_reference_stereo(square: float):
         found = []
         for path in pair:
             grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-            ok, corners = cv2.findChessboardCorners(grey, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            ok, corners = cv2.findChessboardCorners(
+                grey, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+            )
             if ok:
-                corners = cv2.cornerSubPix(grey, corners, (11, 11), (-1, -1),
-                                           (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
+                corners = cv2.cornerSubPix(
+                    grey, corners, (11, 11), (-1, -1), (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
+                )
             found.append(corners if ok else None)
         if all(c is not None for c in found):
             objects.append(board)
@@ -110,8 +113,9 @@ def _opencv_reference_stereo(square: float):
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-8)
     _, K1, d1, _, _ = cv2.calibrateCamera(objects, left, (640, 480), None, None, criteria=criteria)
     _, K2, d2, _, _ = cv2.calibrateCamera(objects, right, (640, 480), None, None, criteria=criteria)
-    rms, *_, R, T, _, _ = cv2.stereoCalibrate(objects, left, right, K1, d1, K2, d2, (640, 480),
-                                              flags=cv2.CALIB_USE_INTRINSIC_GUESS, criteria=criteria)
+    rms, *_, R, T, _, _ = cv2.stereoCalibrate(
+        objects, left, right, K1, d1, K2, d2, (640, 480), flags=cv2.CALIB_USE_INTRINSIC_GUESS, criteria=criteria
+    )
     return R, T.ravel(), rms
 
 
@@ -158,8 +162,12 @@ def test_opencv_stereo_against_opencv(tmp_path, capsys):
 
 def _caliscope_cameras() -> list[Camera]:
     document = tomllib.loads((CALISCOPE_FILES / "camera_array.toml").read_text())
-    return [Camera(f"cam_{key}", table["size"], table["matrix"], table["distortions"], table["rotation"],
-                   table["translation"]) for key, table in sorted(document["cameras"].items())]
+    return [
+        Camera(
+            f"cam_{key}", table["size"], table["matrix"], table["distortions"], table["rotation"], table["translation"]
+        )
+        for key, table in sorted(document["cameras"].items())
+    ]
 
 
 def test_caliscope_camera_array_loads_and_round_trips(tmp_path):
@@ -174,8 +182,12 @@ def test_caliscope_camera_array_loads_and_round_trips(tmp_path):
     save_calibration(cameras, tmp_path / "caliscope.toml")
     for ours, theirs in zip(load_calibration(tmp_path / "caliscope.toml"), cameras):
         assert ours.name == theirs.name and ours.size == theirs.size
-        for a, b in ((ours.matrix, theirs.matrix), (ours.distortions, theirs.distortions),
-                     (ours.rotation, theirs.rotation), (ours.translation, theirs.translation)):
+        for a, b in (
+            (ours.matrix, theirs.matrix),
+            (ours.distortions, theirs.distortions),
+            (ours.rotation, theirs.rotation),
+            (ours.translation, theirs.translation),
+        ):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
@@ -187,9 +199,12 @@ def test_caliscope_rig_against_caliscope(tmp_path, capsys):
     out = tmp_path / "calibration.toml"
     board = tomllib.loads((CALISCOPE_FILES / "charuco.toml").read_text())
     assert board["inverted"] and board["columns"] == 4 and board["rows"] == 5
-    spec = f"charuco:4x5:{board['square_size_override_cm'] / 100}:{0.75 * board['square_size_override_cm'] / 100}:DICT_4X4_1000:inverted"
-    assert run_cli([str(CALISCOPE / "extrinsic"), "--board", spec, "--out", str(out),
-                    "--fix-intrinsics", str(intrinsics)]) == 0
+    square = board["square_size_override_cm"] / 100
+    spec = f"charuco:4x5:{square}:{0.75 * square}:DICT_4X4_1000:inverted"
+    assert (
+        run_cli([str(CALISCOPE / "extrinsic"), "--board", spec, "--out", str(out), "--fix-intrinsics", str(intrinsics)])
+        == 0
+    )
     printed = capsys.readouterr().out
     ours = load_calibration(out)
     assert [c.name for c in ours] == [c.name for c in reference]
@@ -220,9 +235,17 @@ def _qualisys_cameras(size) -> dict[str, Camera]:
     cameras = {}
     for element in root.iter("camera"):
         i = {key: float(value) for key, value in element.find("intrinsic").attrib.items()}
-        K = np.array([[i["focalLengthU"], 0, i["centerPointU"]], [0, i["focalLengthV"], i["centerPointV"]], [0, 0, 64]]) / 64
-        d = [i["radialDistortion1"], i["radialDistortion2"], i["tangentalDistortion1"], i["tangentalDistortion2"],
-             i["radialDistortion3"]]
+        K = (
+            np.array([[i["focalLengthU"], 0, i["centerPointU"]], [0, i["focalLengthV"], i["centerPointV"]], [0, 0, 64]])
+            / 64
+        )
+        d = [
+            i["radialDistortion1"],
+            i["radialDistortion2"],
+            i["tangentalDistortion1"],
+            i["tangentalDistortion2"],
+            i["radialDistortion3"],
+        ]
         cameras[element.get("serial")] = Camera(element.get("serial"), size, K, d, np.eye(3), np.zeros(3))
     return cameras
 
@@ -241,8 +264,9 @@ def test_pose2sim_calibration_is_the_qualisys_export_converted():
         ours, q = balancing[name], qualisys[name]
         assert ours.size == (1088, 1920)
         np.testing.assert_allclose(ours.matrix, q.matrix, rtol=1e-12)
-        np.testing.assert_allclose(np.asarray(ours.distortions)[:4], np.asarray(q.distortions)[:4] / 64, rtol=1e-9,
-                                   atol=1e-15)
+        np.testing.assert_allclose(
+            np.asarray(ours.distortions)[:4], np.asarray(q.distortions)[:4] / 64, rtol=1e-9, atol=1e-15
+        )
         position = [float(element.find("transform").get(axis)) / 1000.0 for axis in "xyz"]
         np.testing.assert_allclose(ours.center, position, rtol=0, atol=1e-9)
     assert all(np.all(np.abs(c.distortions[:2]) < 0.003) for c in balancing.values())
@@ -412,8 +436,15 @@ def test_synthetic_corners_bundle_adjustment_improves_and_recovers():
     poses = _board_poses(20, rig, seed=5)
     board, views = _projected_views(rig, poses, noise=0.3)
     # start from intrinsics 1 % off: the adjustment with --refine-intrinsics must fix them
-    start = [replace(camera, matrix=camera.matrix * [[1.01, 1, 1], [1, 0.99, 1], [1, 1, 1]], rotation=np.eye(3),
-                     translation=np.zeros(3)) for camera in rig]
+    start = [
+        replace(
+            camera,
+            matrix=camera.matrix * [[1.01, 1, 1], [1, 0.99, 1], [1, 1, 1]],
+            rotation=np.eye(3),
+            translation=np.zeros(3),
+        )
+        for camera in rig
+    ]
     fixed = calibrate_rig(board, start, views)
     refined = calibrate_rig(board, start, views, refine_intrinsics=True)
     assert all(a < b for a, b in zip(refined.rms, fixed.rms))
@@ -438,6 +469,7 @@ def test_robust_pose_average_rejects_flipped_estimates():
     rotations += [cv2.Rodrigues(np.array([0.0, 0.5, 0.0]))[0] @ truth for _ in range(5)]  # IPPE's mirror pose
     translations = [np.array([0.5, 0, 0]) + rng.normal(0, 0.001, 3) for _ in range(20)] + [np.array([0.2, 0.1, 0])] * 5
     from tracker.calibrate.extrinsics import robust_mean_pose
+
     pose, kept = robust_mean_pose(np.array(rotations), np.array(translations))
     assert kept == 20
     assert np.degrees(angle_between(pose.R, truth)) < 0.1
@@ -464,8 +496,9 @@ def test_error_board_not_found(tmp_path):
             cv2.imwrite(str(tmp_path / name / f"{f:06d}.png"), np.full((120, 160), 128, np.uint8))
     message = _calibrate_error([str(tmp_path), "--board", "chessboard:9x6:0.03", "--out", str(tmp_path / "o.toml")])
     assert "9x6 chessboard (inner corners)" in message and "a" in message and "3 frames" in message
-    message = _calibrate_error([str(tmp_path), "--board", "charuco:4x5:0.054:0.04:DICT_4X4_1000",
-                                "--out", str(tmp_path / "o.toml")])
+    message = _calibrate_error(
+        [str(tmp_path), "--board", "charuco:4x5:0.054:0.04:DICT_4X4_1000", "--out", str(tmp_path / "o.toml")]
+    )
     assert "4x5 ChArUco board (squares, DICT_4X4_1000)" in message and ":inverted" in message
     assert not (tmp_path / "o.toml").exists()
 
@@ -475,7 +508,9 @@ def test_error_symmetric_chessboard(tmp_path):
         (tmp_path / name).mkdir()
         cv2.imwrite(str(tmp_path / name / "000000.png"), np.zeros((10, 10), np.uint8))
     for size in ("8x6", "6x6", "7x5"):
-        message = _calibrate_error([str(tmp_path), "--board", f"chessboard:{size}:0.03", "--out", str(tmp_path / "o.toml")])
+        message = _calibrate_error(
+            [str(tmp_path), "--board", f"chessboard:{size}:0.03", "--out", str(tmp_path / "o.toml")]
+        )
         assert size in message and "odd" in message and "ChArUco" in message
 
 
@@ -486,8 +521,12 @@ def test_error_camera_sharing_no_view(synthetic, tmp_path):
     message = _calibrate_error([str(folder), "--board", f"chessboard:9x6:{SQUARE}", "--out", str(tmp_path / "o.toml")])
     assert "'c' shares no board view" in message and str(folder / "c") in message
     # intrinsics alone need no shared views
-    assert run_cli([str(folder), "--board", f"chessboard:9x6:{SQUARE}", "--out", str(tmp_path / "o.toml"),
-                    "--intrinsics-only"]) == 0
+    assert (
+        run_cli(
+            [str(folder), "--board", f"chessboard:9x6:{SQUARE}", "--out", str(tmp_path / "o.toml"), "--intrinsics-only"]
+        )
+        == 0
+    )
 
 
 def test_error_too_few_views(synthetic, tmp_path):
@@ -500,11 +539,15 @@ def test_error_too_few_views(synthetic, tmp_path):
 
 
 def test_error_bad_specs_and_options(tmp_path):
-    for spec, words in [("chessboard:9x6", "3 fields"), ("square:9x6:0.03", "unknown board kind"),
-                        ("chessboard:9by6:0.03", "COLSxROWS"), ("chessboard:9x6:-1", "positive"),
-                        ("charuco:4x5:0.05:0.06:DICT_4X4_50", "smaller than the square"),
-                        ("charuco:4x5:0.05:0.04:DICT_9X9_50", "unknown ArUco dictionary"),
-                        ("charuco:12x12:0.05:0.04:DICT_4X4_50", "needs 72 markers")]:
+    for spec, words in [
+        ("chessboard:9x6", "3 fields"),
+        ("square:9x6:0.03", "unknown board kind"),
+        ("chessboard:9by6:0.03", "COLSxROWS"),
+        ("chessboard:9x6:-1", "positive"),
+        ("charuco:4x5:0.05:0.06:DICT_4X4_50", "smaller than the square"),
+        ("charuco:4x5:0.05:0.04:DICT_9X9_50", "unknown ArUco dictionary"),
+        ("charuco:12x12:0.05:0.04:DICT_4X4_50", "needs 72 markers"),
+    ]:
         with pytest.raises(TrackerInputError, match=words):
             parse_board(spec)
     assert parse_board("charuco:4x5:0.054:0.040:4X4_1000:inverted").inverted
@@ -512,8 +555,17 @@ def test_error_bad_specs_and_options(tmp_path):
     (tmp_path / "a").mkdir()
     cv2.imwrite(str(tmp_path / "a" / "000000.png"), np.zeros((10, 10), np.uint8))
     save_calibration([look_at_camera("other", (0, -3, 1))], tmp_path / "known.toml")
-    message = _calibrate_error([str(tmp_path), "--board", "chessboard:9x6:0.03", "--out", str(tmp_path / "o.toml"),
-                                "--fix-intrinsics", str(tmp_path / "known.toml")])
+    message = _calibrate_error(
+        [
+            str(tmp_path),
+            "--board",
+            "chessboard:9x6:0.03",
+            "--out",
+            str(tmp_path / "o.toml"),
+            "--fix-intrinsics",
+            str(tmp_path / "known.toml"),
+        ]
+    )
     assert "no camera named 'a'" in message
     message = _calibrate_error([str(tmp_path / "nothing"), "--board", "chessboard:9x6:0.03", "--out", "o.toml"])
     assert "not a folder" in message

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 import tomli_w
-
 from conftest import TEST_DATA
+
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 
@@ -113,12 +113,17 @@ def test_loads_pose2sim_style_file(tmp_path: Path) -> None:
 
 
 def test_mm_units_are_converted(tmp_path: Path) -> None:
-    path = write(tmp_path / "calib.toml", {"cam_0": table(translation=[100.0, 0.0, 3000.0]), "metadata": {"units": "mm"}})
+    path = write(
+        tmp_path / "calib.toml", {"cam_0": table(translation=[100.0, 0.0, 3000.0]), "metadata": {"units": "mm"}}
+    )
     np.testing.assert_allclose(load_calibration(path)[0].translation, [0.1, 0.0, 3.0])
 
 
 def test_implausible_metres_are_read_as_mm_with_a_warning(tmp_path: Path) -> None:
-    document = {"cam_0": table(translation=[0.0, 0.0, 3000.0]), "cam_1": table(name="b", translation=[0.0, 0.0, 2500.0])}
+    document = {
+        "cam_0": table(translation=[0.0, 0.0, 3000.0]),
+        "cam_1": table(name="b", translation=[0.0, 0.0, 2500.0]),
+    }
     path = write(tmp_path / "calib.toml", document)
     with pytest.warns(UserWarning, match="millimetres"):
         cameras = load_calibration(path)
@@ -143,7 +148,10 @@ BAD_TABLES = {
     "distortion length": (table(distortions=[0.0, 0.0, 0.0]), "distortions"),
     "fisheye distortion length": (table(distortions=[0.0] * 5, fisheye=True), "distortions"),
     "not numbers": (table(rotation=["a", "b", "c"]), "rotation"),
-    "rotation matrix not orthonormal": (table(rotation=[[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]]), "rotation"),
+    "rotation matrix not orthonormal": (
+        table(rotation=[[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]]),
+        "rotation",
+    ),
     "empty name": (table(name=""), "name"),
 }
 

@@ -83,8 +83,14 @@ def joint_gap(joint, child, parent, rest, point, axis):
 
 def max_gap(model, poses):
     return max(
-        joint_gap(model["joint"][i], poses[i], poses[model["parent"][i]], model["rest"][i],
-                  model["point"][i], model["axis"][i])
+        joint_gap(
+            model["joint"][i],
+            poses[i],
+            poses[model["parent"][i]],
+            model["rest"][i],
+            model["point"][i],
+            model["axis"][i],
+        )
         for i in range(1, len(poses))
     )
 
@@ -98,8 +104,8 @@ def linear_constraints(parent, D, rows, poses):
         if k == 0:
             continue
         block = np.zeros((k, 6 * n))
-        block[:, 6 * i:6 * i + 6] = D[i, :k]
-        block[:, 6 * p:6 * p + 6] = -D[i, :k] @ se3.adjoint(se3.inverse(poses[i]) @ poses[p])
+        block[:, 6 * i : 6 * i + 6] = D[i, :k]
+        block[:, 6 * p : 6 * p + 6] = -D[i, :k] @ se3.adjoint(se3.inverse(poses[i]) @ poses[p])
         blocks.append(block)
     return np.vstack(blocks) if blocks else np.zeros((0, 6 * n))
 
@@ -109,11 +115,11 @@ def kkt_solution(information, eta, A):
     n = information.shape[0]
     big_c = np.zeros((6 * n, 6 * n))
     for i in range(n):
-        big_c[6 * i:6 * i + 6, 6 * i:6 * i + 6] = information[i]
+        big_c[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = information[i]
     m = A.shape[0]
     kkt = np.block([[2 * big_c, A.T], [A, np.zeros((m, m))]])
     rhs = np.concatenate([2 * eta.ravel(), np.zeros(m)])
-    return np.linalg.solve(kkt, rhs)[:6 * n].reshape(n, 6)
+    return np.linalg.solve(kkt, rhs)[: 6 * n].reshape(n, 6)
 
 
 def random_information(rng, n):
@@ -160,14 +166,20 @@ def test_null_space_of_constraint_pair_keeps_joint_to_second_order(joint):
         d21 = -d12 @ se3.adjoint(se3.inverse(e_child) @ e_parent)
         pair = np.hstack([d12, d21])
         _, _, vt = np.linalg.svd(pair)
-        null = vt[pair.shape[0]:].T
+        null = vt[pair.shape[0] :].T
         inside = null @ rng.normal(size=null.shape[1])
         outside = rng.normal(size=12)
         outside -= null @ (null.T @ outside)
         for direction, slope in [(inside, 2.0), (outside, 1.0)]:
             gaps = [
-                joint_gap(joint, e_child @ se3.exp(e * direction[:6]), e_parent @ se3.exp(e * direction[6:]),
-                          rest, point, axis)
+                joint_gap(
+                    joint,
+                    e_child @ se3.exp(e * direction[:6]),
+                    e_parent @ se3.exp(e * direction[6:]),
+                    rest,
+                    point,
+                    axis,
+                )
                 for e in eps
             ]
             if joint == chain.FIXED and slope == 2.0:
@@ -206,8 +218,17 @@ def test_tree_solve_star_with_seven_children_and_free_child_independent():
     rng = np.random.default_rng(7)
     n = 9
     parent = np.array([-1, 0, 0, 0, 0, 0, 0, 0, 1])
-    joints = [chain.FREE, chain.BALL, chain.HINGE, chain.SLIDE, chain.FIXED, chain.FREE, chain.BALL, chain.HINGE,
-              chain.FREE]
+    joints = [
+        chain.FREE,
+        chain.BALL,
+        chain.HINGE,
+        chain.SLIDE,
+        chain.FIXED,
+        chain.FREE,
+        chain.BALL,
+        chain.HINGE,
+        chain.FREE,
+    ]
     D, rows = chain.pack_constraints([chain.constraint_rows(j, rng.normal(size=3), unit(rng)) for j in joints])
     poses = np.array([se3.from_rotvec(rng.normal(size=3), rng.normal(size=3)) for _ in range(n)])
     information = random_information(rng, n)
@@ -252,8 +273,9 @@ def test_coercion_projects_arbitrary_poses():
         n = len(model["parent"])
         poses = np.empty((n, 4, 4))
         poses[0] = se3.from_rotvec(rng.normal(size=3), rng.normal(size=3))
-        relative = np.array([se3.exp(np.concatenate([rng.normal(size=3), 2.5 * unit(rng) * rng.random()]))
-                             for _ in range(n)])
+        relative = np.array(
+            [se3.exp(np.concatenate([rng.normal(size=3), 2.5 * unit(rng) * rng.random()])) for _ in range(n)]
+        )
         for i in range(1, n):
             poses[i] = poses[model["parent"][i]] @ model["rest"][i] @ relative[i]
         fixed = chain.coerce(poses, model["parent"], model["rest"], model["D"], model["rows"])
@@ -291,8 +313,9 @@ def _single_joint(joint, axis=(1.0, 0.0, 0.0)):
 def test_coercion_clamps_a_hinge_to_its_limits(angle, expected):
     parent, rest, D, rows = _single_joint(chain.HINGE)
     poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.array([0, 0, 0, angle, 0, 0]))])
-    fixed = chain.coerce(poses, parent, rest, D, rows, [chain.FREE, chain.HINGE], [[0, 0, 0], [1, 0, 0]],
-                         [-np.inf, -0.2], [np.inf, 1.0])
+    fixed = chain.coerce(
+        poses, parent, rest, D, rows, [chain.FREE, chain.HINGE], [[0, 0, 0], [1, 0, 0]], [-np.inf, -0.2], [np.inf, 1.0]
+    )
     relative = se3.log(np.linalg.inv(rest[1]) @ fixed[1])
     np.testing.assert_allclose(relative, [0, 0, 0, expected, 0, 0], atol=1e-12)
 
@@ -300,8 +323,9 @@ def test_coercion_clamps_a_hinge_to_its_limits(angle, expected):
 def test_coercion_clamps_a_slide_to_its_limits():
     parent, rest, D, rows = _single_joint(chain.SLIDE, (0.0, 0.0, 1.0))
     poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.array([0, 0, 0.5, 0, 0, 0]))])
-    fixed = chain.coerce(poses, parent, rest, D, rows, [chain.FREE, chain.SLIDE], [[0, 0, 0], [0, 0, 1]],
-                         [-np.inf, 0.0], [np.inf, 0.1])
+    fixed = chain.coerce(
+        poses, parent, rest, D, rows, [chain.FREE, chain.SLIDE], [[0, 0, 0], [0, 0, 1]], [-np.inf, 0.0], [np.inf, 0.1]
+    )
     np.testing.assert_allclose(se3.log(np.linalg.inv(rest[1]) @ fixed[1]), [0, 0, 0.1, 0, 0, 0], atol=1e-12)
 
 
@@ -311,8 +335,9 @@ def test_coercion_limits_a_ball_joint_rotation():
     for _ in range(20):
         w = rng.normal(size=3)
         poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.concatenate([np.zeros(3), w]))])
-        fixed = chain.coerce(poses, parent, rest, D, rows, [chain.FREE, chain.BALL], np.zeros((2, 3)),
-                             [-np.inf, 0.0], [np.inf, 0.8])
+        fixed = chain.coerce(
+            poses, parent, rest, D, rows, [chain.FREE, chain.BALL], np.zeros((2, 3)), [-np.inf, 0.0], [np.inf, 0.8]
+        )
         relative = se3.log(np.linalg.inv(rest[1]) @ fixed[1])
         angle = np.linalg.norm(w)
         expected = w if angle <= 0.8 else w * 0.8 / angle

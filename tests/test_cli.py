@@ -64,7 +64,11 @@ def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
         writer.release()
         return [], "cam1.avi"
     if name == "model with a cycle":
-        text = (rec / "model.toml").read_text().replace('name = "torso"\nparent = "pelvis"', 'name = "torso"\nparent = "head"')
+        text = (
+            (rec / "model.toml")
+            .read_text()
+            .replace('name = "torso"\nparent = "pelvis"', 'name = "torso"\nparent = "head"')
+        )
         (rec / "model.toml").write_text(text)
         return [], "model.toml"
     if name == "unknown parent":
@@ -81,10 +85,18 @@ def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
     raise AssertionError(name)
 
 
-@pytest.mark.parametrize("case", [
-    "missing calibration", "missing video", "different frame counts", "model with a cycle", "unknown parent",
-    "init names an unknown component", "corrupt video",
-])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "missing calibration",
+        "missing video",
+        "different frame counts",
+        "model with a cycle",
+        "unknown parent",
+        "init names an unknown component",
+        "corrupt video",
+    ],
+)
 def test_bad_input_is_one_line_exit_2(case, tiny_recording, tmp_path, capsys):
     rec = _copy(tiny_recording, tmp_path)
     extra, named = _bad_case(case, rec)

@@ -24,8 +24,11 @@ def _is_top(name: str) -> bool:
 
 
 def test_nothing_below_the_commands_imports_them():
-    below = [path for path in PACKAGE.rglob("*.py")
-             if path != PACKAGE / "cli.py" and PACKAGE / "commands" not in path.parents]
+    below = [
+        path
+        for path in PACKAGE.rglob("*.py")
+        if path != PACKAGE / "cli.py" and PACKAGE / "commands" not in path.parents
+    ]
     offenders = {str(path.relative_to(PACKAGE)): sorted(filter(_is_top, _imported(path))) for path in below}
     assert {path: names for path, names in offenders.items() if names} == {}
     assert len(below) > 50  # the scan saw the package

@@ -33,8 +33,16 @@ def update(state: dynamics.MotionState, measured: np.ndarray, information: np.nd
     return dynamics.correct(state, poses, information)
 
 
-def fitting_step(x: np.ndarray, cov: np.ndarray, force: np.ndarray, hessian: np.ndarray, dt: float,
-                 stiffness: np.ndarray | None = None, q: float = 0.0, riccati: bool = True):
+def fitting_step(
+    x: np.ndarray,
+    cov: np.ndarray,
+    force: np.ndarray,
+    hessian: np.ndarray,
+    dt: float,
+    stiffness: np.ndarray | None = None,
+    q: float = 0.0,
+    riccati: bool = True,
+):
     """One inner iteration of the note's first-order continuous EKF for one block (section 5):
 
         x <- x + dt (P g - K x),   P <- P + dt (-K P - P K + q I - P A P),   P <- (P + P^T) / 2
@@ -69,8 +77,9 @@ def _random_poses(rng, n):
     return np.stack([se3.exp(np.concatenate([rng.normal(size=3), rng.normal(size=3)])) for _ in range(n)])
 
 
-@pytest.mark.parametrize("dt, q, decay", [(1 / 60, 2.5, 0.0), (0.05, 40.0, 0.0), (1 / 60, 3.0, 4.0),
-                                          (0.1, 1.0, 1e-5), (0.2, 0.7, 12.0)])
+@pytest.mark.parametrize(
+    "dt, q, decay", [(1 / 60, 2.5, 0.0), (0.05, 40.0, 0.0), (1 / 60, 3.0, 4.0), (0.1, 1.0, 1e-5), (0.2, 0.7, 12.0)]
+)
 def test_discrete_propagation_equals_the_continuous_riccati_solution(dt, q, decay):
     """Phi P Phi^T + q Bq (x) I3 solves dP/dt = F P + P F^T + G q G^T over dt (RK4 with 4000 small steps)."""
     rng = np.random.default_rng(1)
@@ -245,12 +254,14 @@ def test_a_component_without_measurements_keeps_moving_and_its_covariance_grows(
             traces.append(np.trace(state.covariance, axis1=-2, axis2=-1))
             info[1] = 0.0  # component 1 loses its data
         before = state
-        state = dynamics.correct(state, np.where(np.arange(2)[:, None, None] == 1, state.poses, truth[k])
-                                 if k > 100 else truth[k], info)
+        state = dynamics.correct(
+            state, np.where(np.arange(2)[:, None, None] == 1, state.poses, truth[k]) if k > 100 else truth[k], info
+        )
         if k > 100:  # no data: correct changes nothing for component 1
             np.testing.assert_allclose(state.velocity[1], before.velocity[1], rtol=1e-14, atol=1e-15)
-            np.testing.assert_allclose(state.covariance[1], before.covariance[1], rtol=1e-12,
-                                       atol=1e-13 * np.abs(before.covariance[1]).max())
+            np.testing.assert_allclose(
+                state.covariance[1], before.covariance[1], rtol=1e-12, atol=1e-13 * np.abs(before.covariance[1]).max()
+            )
     traces = np.array(traces)[1:, 1]  # component 1, both blocks, after it lost its data
     assert np.all(np.diff(traces, axis=0) > 0)
     position_info = np.array([np.linalg.eigvalsh(p[1, :3, :3]).max() for p in priors[1:]])
@@ -308,8 +319,12 @@ def _track(settings, count, blank=()):
 def test_demo_first_frames_with_the_kalman_prior_meet_the_accuracy_bar():
     model, rec, results, _, _ = _track(Settings(motion="kalman"), 40)
     poses = np.stack([r.poses for r in results])
-    tracked = {"frame": np.arange(40), "joint_names": np.array(model.joint_names), "joints": joint_centres(poses),
-               "status": np.array([r.status for r in results], np.int8)}
+    tracked = {
+        "frame": np.arange(40),
+        "joint_names": np.array(model.joint_names),
+        "joints": joint_centres(poses),
+        "status": np.array([r.status for r in results], np.int8),
+    }
     truth = load_poses(rec.truth_path)
     truth = {"joint_names": truth["joint_names"], "joints": truth["joints"][:40], "frame": np.arange(40)}
     report = evaluate(tracked, truth)
@@ -346,12 +361,13 @@ def test_variance_factor_is_the_weighted_residual_variance_per_component():
     offset[::10], weight[::10] = np.nan, 0.0
     factor = dynamics.variance_factor(component, offset, weight, 4)
     found = weight > 0
-    sums = np.array([np.sum((weight * offset ** 2)[found & (component == i)]) for i in range(4)])
+    sums = np.array([np.sum((weight * offset**2)[found & (component == i)]) for i in range(4)])
     counts = np.array([np.sum(found & (component == i)) for i in range(4)])
     pooled = sums.sum() / (counts.sum() - 6 * 3)
     np.testing.assert_allclose(factor, (sums + 12 * pooled) / (np.maximum(counts - 6, 0) + 12), rtol=1e-12)
     assert factor[1] > 5 * factor[0]  # the noisy component is trusted less
     assert factor[2] == pytest.approx(pooled)  # no samples: the pooled value
     np.testing.assert_array_equal(dynamics.variance_factor(component[:0], offset[:0], weight[:0], 2), 1.0)
-    np.testing.assert_array_equal(dynamics.variance_factor(component[:0], offset[:0], weight[:0], 2,
-                                                           fallback=[0.2, 0.3]), [0.2, 0.3])
+    np.testing.assert_array_equal(
+        dynamics.variance_factor(component[:0], offset[:0], weight[:0], 2, fallback=[0.2, 0.3]), [0.2, 0.3]
+    )

@@ -12,8 +12,16 @@ import pytest
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.cli import main
 from tracker.errors import TrackerInputError
-from tracker.foreground import (Background, cleared_background, load_background, median_background, preparers,
-                                reduced_camera, sample_indices, save_background)
+from tracker.foreground import (
+    Background,
+    cleared_background,
+    load_background,
+    median_background,
+    preparers,
+    reduced_camera,
+    sample_indices,
+    save_background,
+)
 from tracker.io.poses import PosesWriter
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model, rest_poses
@@ -44,8 +52,10 @@ def png_recording(tmp_path: Path) -> Path:
     """Two cameras as lossless PNG folders, so the background comes back exactly."""
     folder = tmp_path / "rec"
     K = np.array([[40.0, 0.0, 24.0], [0.0, 40.0, 16.0], [0.0, 0.0, 1.0]])
-    save_calibration([Camera(f"cam{i}", (WIDTH, HEIGHT), K, np.zeros(4), np.eye(3), np.array([i, 0.0, 3.0]))
-                      for i in range(2)], folder / "calibration.toml")
+    save_calibration(
+        [Camera(f"cam{i}", (WIDTH, HEIGHT), K, np.zeros(4), np.eye(3), np.array([i, 0.0, 3.0])) for i in range(2)],
+        folder / "calibration.toml",
+    )
     for camera in range(2):
         (folder / f"cam{camera}").mkdir()
         for index in range(COUNT):
@@ -112,8 +122,22 @@ def test_saved_background_loads_back_and_is_checked(png_recording, tmp_path):
 def test_track_with_a_median_background(tiny_recording, tmp_path, capsys):
     out = tmp_path / "out"
     overlay = tmp_path / "overlay.avi"
-    assert main(["track", str(tiny_recording), "--background", "median", "--out", str(out), "--quiet",
-                 "--overlay", str(overlay)]) == 0
+    assert (
+        main(
+            [
+                "track",
+                str(tiny_recording),
+                "--background",
+                "median",
+                "--out",
+                str(out),
+                "--quiet",
+                "--overlay",
+                str(overlay),
+            ]
+        )
+        == 0
+    )
     assert "background: per-pixel median of 6 frames per camera" in capsys.readouterr().err
     for camera in ("cam0", "cam1"):
         assert cv2.imread(str(out / "background" / f"{camera}.png")).shape == (240, 320, 3)
@@ -129,8 +153,20 @@ def test_track_against_the_empty_scene(tiny_recording, tmp_path, capsys):
     rig = load_calibration(tiny_recording / "calibration.toml")
     photos, _ = load_backgrounds(rig, seed=1)
     save_background(Background(tuple(photos)), open_recording(tiny_recording), tmp_path / "empty")
-    assert main(["track", str(tiny_recording), "--background", str(tmp_path / "empty"), "--out",
-                 str(tmp_path / "out"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "track",
+                str(tiny_recording),
+                "--background",
+                str(tmp_path / "empty"),
+                "--out",
+                str(tmp_path / "out"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     report = capsys.readouterr().out
     assert "0 uncertain, 0 lost" in report
     mpjpe = float(re.search(r"MPJPE ([0-9.]+) mm", report).group(1))
@@ -138,8 +174,20 @@ def test_track_against_the_empty_scene(tiny_recording, tmp_path, capsys):
 
 
 def test_missing_background_folder_is_one_line_exit_2(tiny_recording, tmp_path, capsys):
-    assert main(["track", str(tiny_recording), "--background", str(tmp_path / "nowhere"), "--out",
-                 str(tmp_path / "out"), "--quiet"]) == 2
+    assert (
+        main(
+            [
+                "track",
+                str(tiny_recording),
+                "--background",
+                str(tmp_path / "nowhere"),
+                "--out",
+                str(tmp_path / "out"),
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nowhere: background folder not found" in err[0]
 
@@ -289,8 +337,22 @@ def test_background_command_writes_the_cleared_scene(standing_recording, tmp_pat
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), 30.0) as writer:
         for index, pose in enumerate(poses):
             writer.append(index, pose, joint_centres(pose), 0, 1.0)
-    assert main(["background", str(folder), "--model", str(MODELS / "human.toml"), "--poses",
-                 str(out / "poses.npz"), "--margin", "2", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "background",
+                str(folder),
+                "--model",
+                str(MODELS / "human.toml"),
+                "--poses",
+                str(out / "poses.npz"),
+                "--margin",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     got = cv2.imread(str(out / "background-cleared" / "cam0.png"))
     np.testing.assert_array_equal(got[body], empty[body])
     printed = capsys.readouterr().out

@@ -37,8 +37,12 @@ def layer(module: str) -> int:
     """The index in LAYERS of ``module``'s layer (the package ``tracker`` itself is below them all)."""
     if module == "tracker":
         return -1
-    matches = [(len(prefix), index) for index, names in enumerate(LAYERS) for prefix in names
-               if module == prefix or module.startswith(prefix + ".")]
+    matches = [
+        (len(prefix), index)
+        for index, names in enumerate(LAYERS)
+        for prefix in names
+        if module == prefix or module.startswith(prefix + ".")
+    ]
     if not matches:
         raise AssertionError(f"{module} is in no layer: add it to LAYERS")
     return max(matches)[1]
@@ -56,7 +60,9 @@ def imports(module: str) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else []))
+                base = ".".join(
+                    package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else [])
+                )
             names = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in MODULES else base for alias in node.names]
         else:
             continue

@@ -15,12 +15,12 @@ import pytest
 
 from tracker.camera import load_calibration
 from tracker.cli import build_parser, main
+from tracker.commands.live import run
 from tracker.errors import TrackerInputError
 from tracker.io.capture import Capture, CaptureError, ReplayClock, ReplaySource
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.commands.live import run
 from tracker.live import Recorder, assign_cameras, track_live
 from tracker.model import load_model
 from tracker.track import Settings
@@ -30,9 +30,19 @@ DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
 
 def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:
     options = [item for camera in cameras for item in ("--camera", camera)]
-    return build_parser().parse_args(["live"] + options + [
-        "--calib", str(rec / "calibration.toml"), "--model", str(rec / "model.toml"),
-        "--init", str(rec / "init.toml"), *extra])
+    return build_parser().parse_args(
+        ["live"]
+        + options
+        + [
+            "--calib",
+            str(rec / "calibration.toml"),
+            "--model",
+            str(rec / "model.toml"),
+            "--init",
+            str(rec / "init.toml"),
+            *extra,
+        ]
+    )
 
 
 def _replayed(recording: Path, out: Path, *extra: str) -> dict:
@@ -169,11 +179,14 @@ def test_cameras_are_matched_to_the_calibration_by_order_or_by_name(tiny_recordi
     # by name, tracked in calibration order whatever the order given
     assert matched(["cam1=/dev/video2", "cam0=/dev/video4"]) == [("cam0", "/dev/video4"), ("cam1", "/dev/video2")]
     assert matched(["cam1=/dev/video2"]) == [("cam1", "/dev/video2")]
-    for specs, message in ((["a", "b", "c"], "has 2 camera"), (["cam9=/dev/video0"], "has no camera 'cam9'"),
-                           (["cam0=/dev/video0", "/dev/video2"], "name every camera"),
-                           (["/dev/video0", "/dev/video0"], "device '/dev/video0' is given twice"),
-                           (["cam0=/dev/video0", "cam0=/dev/video2"], "camera 'cam0' is given twice"),
-                           (["cam0="], "give the device")):
+    for specs, message in (
+        (["a", "b", "c"], "has 2 camera"),
+        (["cam9=/dev/video0"], "has no camera 'cam9'"),
+        (["cam0=/dev/video0", "/dev/video2"], "name every camera"),
+        (["/dev/video0", "/dev/video0"], "device '/dev/video0' is given twice"),
+        (["cam0=/dev/video0", "cam0=/dev/video2"], "camera 'cam0' is given twice"),
+        (["cam0="], "give the device"),
+    ):
         with pytest.raises(TrackerInputError, match=message):
             matched(specs)
 

@@ -35,8 +35,9 @@ def oblique_step(u, c, sigma=SIGMA, ss=16):
 def offset(image, p, n, search_range=RANGE, threshold=5.0):
     profile = np.empty(2 * search_range + 5)
     h, w = image.shape
-    return edge_offset(image, w, h, float(p[0]), float(p[1]), float(n[0]), float(n[1]), search_range, threshold,
-                       profile)
+    return edge_offset(
+        image, w, h, float(p[0]), float(p[1]), float(n[0]), float(n[1]), search_range, threshold, profile
+    )
 
 
 def test_vertical_edge_with_normals_both_ways():
@@ -164,7 +165,8 @@ def test_measure_kernel_information_matches_numpy():
     x0, y0 = 40.3, 30.6
     vertical = vertical_step(x0)
     horizontal = cv2.GaussianBlur(
-        np.tile((LO + (HI - LO) * np.clip(np.arange(H) + 0.5 - y0, 0.0, 1.0))[:, None], (1, W)), (0, 0), SIGMA)
+        np.tile((LO + (HI - LO) * np.clip(np.arange(H) + 0.5 - y0, 0.0, 1.0))[:, None], (1, W)), (0, 0), SIGMA
+    )
     images = np.stack([vertical, horizontal])
     cam_size = np.array([[W, H], [W, H]], dtype=np.int64)
     count, n_components, robust_c = 120, 4, 2.5
@@ -190,8 +192,24 @@ def test_measure_kernel_information_matches_numpy():
     information = rng.normal(size=(n_components, 6, 6))  # garbage: the kernel must reset it
     eta = rng.normal(size=(n_components, 6))
     visible, found, sum_wm, sum_w = measure_kernel(
-        images, cam_size, count, s_cam, s_comp, s_pixel, s_normal, s_jac, np.zeros((n_components, 6)), RANGE, 5.0,
-        robust_c, n_components, o_offset, o_weight, information, eta)
+        images,
+        cam_size,
+        count,
+        s_cam,
+        s_comp,
+        s_pixel,
+        s_normal,
+        s_jac,
+        np.zeros((n_components, 6)),
+        RANGE,
+        5.0,
+        robust_c,
+        n_components,
+        o_offset,
+        o_weight,
+        information,
+        eta,
+    )
 
     m = o_offset[:count]
     valid = ~np.isnan(m)
@@ -233,8 +251,25 @@ def test_measure_kernel_hand_made_offsets():
     o_offset, o_weight = np.empty(4), np.empty(4)
     information, eta = np.empty((2, 6, 6)), np.empty((2, 6))
     c = 1.0
-    measure_kernel(images, cam_size, 4, np.zeros(4, np.int64), s_comp, pixels, normals, s_jac, np.zeros((2, 6)),
-                   RANGE, 5.0, c, 2, o_offset, o_weight, information, eta)
+    measure_kernel(
+        images,
+        cam_size,
+        4,
+        np.zeros(4, np.int64),
+        s_comp,
+        pixels,
+        normals,
+        s_jac,
+        np.zeros((2, 6)),
+        RANGE,
+        5.0,
+        c,
+        2,
+        o_offset,
+        o_weight,
+        information,
+        eta,
+    )
     np.testing.assert_allclose(o_offset, offsets, atol=0.1)
     m = o_offset
     w = 1.0 / (c + np.abs(m))
@@ -257,8 +292,25 @@ def test_measure_kernel_searches_from_the_linearly_moved_sample():
     twist = np.array([[1.5, 7.0, 7.0, 7.0, 0.0, 2.5], [9.0, 9.0, 9.0, 9.0, 0.5, 0.0]])  # moves 5.5 and 1.5 px
     o_offset, o_weight = np.empty(2), np.empty(2)
     information, eta = np.empty((2, 6, 6)), np.empty((2, 6))
-    measure_kernel(images, cam_size, 2, np.zeros(2, np.int64), s_comp, pixels, normals, s_jac, twist, RANGE, 5.0,
-                   1.0, 2, o_offset, o_weight, information, eta)
+    measure_kernel(
+        images,
+        cam_size,
+        2,
+        np.zeros(2, np.int64),
+        s_comp,
+        pixels,
+        normals,
+        s_jac,
+        twist,
+        RANGE,
+        5.0,
+        1.0,
+        2,
+        o_offset,
+        o_weight,
+        information,
+        eta,
+    )
     np.testing.assert_allclose(o_offset, [9.0 - 5.5, 4.0 - 1.5], atol=0.1)
     for s, start in enumerate((x0 - 3.5, x0 + 2.5)):  # the same as a fresh sample at the moved position
         alone = offset(images[0], np.array([start, pixels[s, 1]]), normals[s])

@@ -51,7 +51,8 @@ def test_human_quadrics_match_the_file():
         if params["shape"] == "ellipsoid":
             radii = np.array(params["radii"])
             points = np.array(params["center"]) + radii * np.stack(
-                [np.cos(u) * np.sin(u / 2), np.sin(u) * np.sin(u / 2), np.cos(u / 2)], 1)
+                [np.cos(u) * np.sin(u / 2), np.sin(u) * np.sin(u / 2), np.cos(u / 2)], 1
+            )
             assert np.abs(evaluate(q, points)).max() < 1e-9
             assert evaluate(q, np.array(params["center"])[None])[0] < 0  # negative inside
         else:
@@ -76,8 +77,10 @@ BAD_MODELS = {
     "unknown_shape": component("root", quadric='\n  [[component.quadric]]\n  shape = "torus"\n  radius = 0.1\n'),
     "negative_radius": component("root", quadric='\n  [[component.quadric]]\n  shape = "sphere"\n  radius = -0.1\n'),
     "negative_cone_radius": component(
-        "root", quadric='\n  [[component.quadric]]\n  shape = "cone"\n  from = [0, 0, 0]\n  to = [0, 0, 1]\n'
-        "  radii = [0.1, -0.05]\n"),
+        "root",
+        quadric='\n  [[component.quadric]]\n  shape = "cone"\n  from = [0, 0, 0]\n  to = [0, 0, 1]\n'
+        "  radii = [0.1, -0.05]\n",
+    ),
     "hinge_zero_axis": component("root") + component("a", "root", 'joint = "hinge"\naxis = [0.0, 0.0, 0.0]\n'),
     "duplicate_names": component("root") + component("a", "root") + component("a", "root"),
     "bad_toml": component("root") + "[[component]\nname = ",
@@ -103,8 +106,13 @@ def test_missing_model_file(tmp_path):
 
 
 def test_good_small_model_loads_in_breadth_first_order(tmp_path):
-    text = (component("c", "b") + component("b", "root") + component("root") + component("d", "root")
-            + component("e", "c", 'joint = "hinge"\naxis = [0.0, 2.0, 0.0]\nat = [0.1, 0.2, 0.3]\n'))
+    text = (
+        component("c", "b")
+        + component("b", "root")
+        + component("root")
+        + component("d", "root")
+        + component("e", "c", 'joint = "hinge"\naxis = [0.0, 2.0, 0.0]\nat = [0.1, 0.2, 0.3]\n')
+    )
     path = tmp_path / "small.toml"
     path.write_text(text)
     model = load_model(path)
@@ -155,14 +163,18 @@ def test_poses_from_rotations_hang_children_on_their_parents_joints():
         np.testing.assert_allclose(poses[i][:3, 3], (poses[model.parent[i]] @ at)[:3], atol=1e-12)
     # with rest rotations the two agree
     rest = rest_poses(model, se3.from_rotvec(np.zeros(3), root_t))
-    np.testing.assert_allclose(poses_from_rotations(model, root_t, np.tile(np.eye(3), (model.size, 1, 1))), rest,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        poses_from_rotations(model, root_t, np.tile(np.eye(3), (model.size, 1, 1))), rest, atol=1e-15
+    )
 
 
-@pytest.mark.parametrize("text", [
-    'component = [1]\n',
-    '[[component]]\nname = "root"\nparent = ""\nquadric = [1]\n',
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "component = [1]\n",
+        '[[component]]\nname = "root"\nparent = ""\nquadric = [1]\n',
+    ],
+)
 def test_non_table_entries_give_a_tracker_input_error(tmp_path, text):
     path = tmp_path / "odd.toml"
     path.write_text(text)
@@ -171,12 +183,15 @@ def test_non_table_entries_give_a_tracker_input_error(tmp_path, text):
     assert str(path) in str(info.value)
 
 
-@pytest.mark.parametrize("extra, joint", [
-    ("limits = [0.0, 1.0]", "ball"),
-    ("limits = [1.0, 0.0]", "hinge"),
-    ("max_angle = 1.0", "hinge"),
-    ("max_angle = -1.0", "ball"),
-])
+@pytest.mark.parametrize(
+    "extra, joint",
+    [
+        ("limits = [0.0, 1.0]", "ball"),
+        ("limits = [1.0, 0.0]", "hinge"),
+        ("max_angle = 1.0", "hinge"),
+        ("max_angle = -1.0", "ball"),
+    ],
+)
 def test_bad_joint_limits_name_the_file(tmp_path, extra, joint):
     path = tmp_path / "limits.toml"
     path.write_text(

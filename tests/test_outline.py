@@ -79,8 +79,13 @@ def look_at(name, eye, target, f, distortion=(), rng=None, skew=0.0):
 
 
 def random_distortion(rng):
-    return (rng.uniform(-0.2, 0.1), rng.uniform(-0.05, 0.05), rng.uniform(-2e-3, 2e-3),
-            rng.uniform(-2e-3, 2e-3), rng.uniform(-0.01, 0.01))
+    return (
+        rng.uniform(-0.2, 0.1),
+        rng.uniform(-0.05, 0.05),
+        rng.uniform(-2e-3, 2e-3),
+        rng.uniform(-2e-3, 2e-3),
+        rng.uniform(-0.01, 0.01),
+    )
 
 
 def random_cameras(rng, n, distorted, distance=(1.6, 2.6)):
@@ -242,12 +247,19 @@ def test_normal_is_perpendicular_to_the_distorted_outline(random_views, name, di
             # on the conic: its value over its gradient is the distance in ideal pixels
             assert np.abs(values / (2 * np.linalg.norm(grad, axis=1))).max() < 1e-6
             tangent = np.stack([-grad[:, 1], grad[:, 0]], 1)
-            jd = np.stack([(ideal_to_distorted(cam, ideal + h * e) - ideal_to_distorted(cam, ideal - h * e)) / (2 * h)
-                           for e in np.eye(2)], 2)  # (M, 2, 2), columns d/dx, d/dy
+            jd = np.stack(
+                [
+                    (ideal_to_distorted(cam, ideal + h * e) - ideal_to_distorted(cam, ideal - h * e)) / (2 * h)
+                    for e in np.eye(2)
+                ],
+                2,
+            )  # (M, 2, 2), columns d/dx, d/dy
             image_tangent = np.einsum("mij,mj->mi", jd, tangent)
             cos = np.abs(np.einsum("mi,mi->m", normal, image_tangent)) / np.linalg.norm(image_tangent, axis=1)
             assert cos.max() < 1e-6
-            outward = np.einsum("mi,mi->m", np.linalg.solve(np.transpose(jd, (0, 2, 1)), grad[:, :, None])[:, :, 0], normal)
+            outward = np.einsum(
+                "mi,mi->m", np.linalg.solve(np.transpose(jd, (0, 2, 1)), grad[:, :, None])[:, :, 0], normal
+            )
             assert np.all(outward > 0)
 
 
@@ -299,8 +311,11 @@ def sphere_in_front_of_cylinder():
     spec = {
         "name": "two",
         "component": [
-            {"name": "pole", "parent": "",
-             "quadric": [{"shape": "cylinder", "from": [0.0, 0.0, -0.5], "to": [0.0, 0.0, 0.5], "radius": 0.1}]},
+            {
+                "name": "pole",
+                "parent": "",
+                "quadric": [{"shape": "cylinder", "from": [0.0, 0.0, -0.5], "to": [0.0, 0.0, 0.5], "radius": 0.1}],
+            },
             {"name": "ball", "parent": "pole", "quadric": [{"shape": "sphere", "radius": 0.15}]},
         ],
     }
@@ -317,7 +332,8 @@ def test_occlusion_matches_a_segment_sphere_test():
     for trial in range(4):
         pole = random_pose(rng, scale=0.02)
         pole[:3, :3] = se3.exp_so3(np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi)])) @ se3.exp_so3(
-            np.array([rng.uniform(-0.3, 0.3), 0.0, 0.0]))
+            np.array([rng.uniform(-0.3, 0.3), 0.0, 0.0])
+        )
         toward = np.array([1.0, rng.uniform(-0.3, 0.3), rng.uniform(-0.2, 0.2)])
         toward /= np.linalg.norm(toward)
         ball = se3.from_rotvec(rng.normal(size=3), pole[:3, 3] + 0.45 * toward + rng.normal(scale=0.03, size=3))
@@ -325,8 +341,11 @@ def test_occlusion_matches_a_segment_sphere_test():
         cams = []
         for k in range(3):
             eye = pole[:3, 3] + rng.uniform(2.0, 3.0) * (toward + rng.normal(scale=0.25, size=3))
-            cams.append(look_at(f"c{k}", eye, ball[:3, 3], rng.uniform(550, 800),
-                                random_distortion(rng) if trial % 2 else (), rng))
+            cams.append(
+                look_at(
+                    f"c{k}", eye, ball[:3, 3], rng.uniform(550, 800), random_distortion(rng) if trial % 2 else (), rng
+                )
+            )
         both = sample(model, poses, cams, spacing=1.0)
         alone = sample(pole_only, poses[:1], cams, spacing=1.0)
         n, m = both.count, alone.count
@@ -424,8 +443,14 @@ def test_bounding_disc_culling_drops_no_visible_sample(name):
     wide = dataclasses.replace(model, quadric_bound=bound)
     for trial in range(30):
         eye = rng.uniform(0.6, 1.5) * unit(rng)
-        cam = look_at("c", eye, rng.normal(scale=0.6, size=3), rng.uniform(150.0, 400.0),
-                      random_distortion(rng) if trial % 2 else (), rng)
+        cam = look_at(
+            "c",
+            eye,
+            rng.normal(scale=0.6, size=3),
+            rng.uniform(150.0, 400.0),
+            random_distortion(rng) if trial % 2 else (),
+            rng,
+        )
         poses = random_pose(rng)[None]
         a = sample(model, poses, [cam], spacing=2.0)
         b = sample(wide, poses, [cam], spacing=2.0)
@@ -572,8 +597,19 @@ def test_place_matches_the_matrix_formula():
     cams = random_cameras(rng, 2, distorted=False)
     rig = Rig.from_cameras(cams)
     placed = Placed.allocate(2, model.quadric.shape[0])
-    place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-          placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone)
+    place(
+        model.quadric,
+        model.clip,
+        model.quadric_bound,
+        model.quadric_component,
+        poses,
+        rig.pose,
+        placed.camera_from,
+        placed.quadric,
+        placed.clip,
+        placed.sphere,
+        placed.cone,
+    )
     for k in range(2):
         for j, c in enumerate(model.quadric_component):
             e = rig.pose[k] @ poses[c]
@@ -581,5 +617,6 @@ def test_place_matches_the_matrix_formula():
             np.testing.assert_allclose(placed.camera_from[k, j], e, atol=1e-12)
             np.testing.assert_allclose(placed.quadric[k, j], e_inv.T @ model.quadric[j] @ e_inv, rtol=1e-10, atol=1e-9)
             np.testing.assert_allclose(placed.clip[k, j], e_inv.T @ model.clip[j] @ e_inv, rtol=1e-10, atol=1e-9)
-            np.testing.assert_allclose(placed.sphere[k, j, :3], (e @ np.append(model.quadric_bound[j, :3], 1.0))[:3],
-                                       atol=1e-12)
+            np.testing.assert_allclose(
+                placed.sphere[k, j, :3], (e @ np.append(model.quadric_bound[j, :3], 1.0))[:3], atol=1e-12
+            )

@@ -26,8 +26,19 @@ HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
 def placed_at(model, poses, rig) -> Placed:
     """The camera-frame quadrics that the outline stage hands to the ownership stage."""
     placed = Placed.allocate(len(rig.names), model.quadric.shape[0])
-    place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-          placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone)
+    place(
+        model.quadric,
+        model.clip,
+        model.quadric_bound,
+        model.quadric_component,
+        poses,
+        rig.pose,
+        placed.camera_from,
+        placed.quadric,
+        placed.clip,
+        placed.sphere,
+        placed.cone,
+    )
     return placed
 
 
@@ -60,9 +71,15 @@ def brute_labels(model, poses, camera: Camera, pixels):
 
 def rule(labels, own, r):
     """The research rule on labels[t + r + 1], t in [-r - 1, r + 1]: (lo, hi)."""
-    at = lambda t: labels[t + r + 1]
+
+    def at(t):
+        return labels[t + r + 1]
+
     outside = at(1)
-    cuts = lambda a, b: a != b and {a, b} != {own, outside}
+
+    def cuts(a, b):
+        return a != b and {a, b} != {own, outside}
+
     hi = r
     for t in range(1, r + 1):
         if cuts(at(t), at(t + 1)):
@@ -79,10 +96,22 @@ def rule(labels, own, r):
 def test_undistortion_newton_and_grid_invert_the_lens():
     rng = np.random.default_rng(3)
     for _ in range(5):
-        k = np.array([[rng.uniform(400, 700), rng.uniform(-1, 1), rng.uniform(300, 340)],
-                      [0.0, rng.uniform(400, 700), rng.uniform(220, 260)], [0.0, 0.0, 1.0]])
-        d = np.array([rng.uniform(-0.12, 0.05), rng.uniform(-0.03, 0.03), rng.uniform(-2e-3, 2e-3),
-                      rng.uniform(-2e-3, 2e-3), rng.uniform(-0.005, 0.005)])  # ordinary lenses
+        k = np.array(
+            [
+                [rng.uniform(400, 700), rng.uniform(-1, 1), rng.uniform(300, 340)],
+                [0.0, rng.uniform(400, 700), rng.uniform(220, 260)],
+                [0.0, 0.0, 1.0],
+            ]
+        )
+        d = np.array(
+            [
+                rng.uniform(-0.12, 0.05),
+                rng.uniform(-0.03, 0.03),
+                rng.uniform(-2e-3, 2e-3),
+                rng.uniform(-2e-3, 2e-3),
+                rng.uniform(-0.005, 0.005),
+            ]
+        )  # ordinary lenses
         camera = Camera("c", (640, 480), k, d, np.eye(3), np.zeros(3))
         pixels = rng.uniform([-30, -30], [670, 510], (300, 2))
         exact = camera.undistort_pixels(pixels)
@@ -122,22 +151,50 @@ def test_fast_labels_match_brute_force(human_views, r):
     ts = np.arange(-r - 1, r + 2)
     used = ts != 0
     for poses, s in views:
-        place(model.quadric, model.clip, model.quadric_bound, model.quadric_component, poses, rig.pose,
-              placed.camera_from, placed.quadric, placed.clip, placed.sphere, placed.cone)
+        place(
+            model.quadric,
+            model.clip,
+            model.quadric_bound,
+            model.quadric_component,
+            poses,
+            rig.pose,
+            placed.camera_from,
+            placed.quadric,
+            placed.clip,
+            placed.sphere,
+            placed.cone,
+        )
         fast = np.zeros(2 * r + 3, np.int64)
         for i in range(0, s.count, 3):
             k = s.camera[i]
-            line_labels(placed.quadric, placed.clip, placed.sphere, model.quadric_component, rig.matrix, rig.distortion, grid, k,
-                        s.pixel[i, 0], s.pixel[i, 1], s.normal[i, 0], s.normal[i, 1], r, cand, coef, fast)
+            line_labels(
+                placed.quadric,
+                placed.clip,
+                placed.sphere,
+                model.quadric_component,
+                rig.matrix,
+                rig.distortion,
+                grid,
+                k,
+                s.pixel[i, 0],
+                s.pixel[i, 1],
+                s.normal[i, 0],
+                s.normal[i, 1],
+                r,
+                cand,
+                coef,
+                fast,
+            )
             pixels = s.pixel[i] + ts[:, None] * s.normal[i]
             exact = brute_labels(model, poses, cameras[k], pixels)
-            fine = brute_labels(model, poses, cameras[k], s.pixel[i] + np.arange(-r - 2, r + 2.01, 0.25)[:, None]
-                                * s.normal[i])
+            fine = brute_labels(
+                model, poses, cameras[k], s.pixel[i] + np.arange(-r - 2, r + 2.01, 0.25)[:, None] * s.normal[i]
+            )
             total += used.sum()
             agree += ((fast == exact) & used).sum()
             for t in np.flatnonzero((fast != exact) & used):
                 # a boundary within a pixel: the exact labels on a 1/4 pixel grid change within +-1 of t
-                window = fine[4 * t: 4 * t + 9]  # offsets t - 1 ... t + 1
+                window = fine[4 * t : 4 * t + 9]  # offsets t - 1 ... t + 1
                 assert len(set(window.tolist())) > 1, (i, ts[t])
                 assert fast[t] in window
     assert agree / total >= 0.99
@@ -161,19 +218,39 @@ def test_search_limits_match_the_rule_on_brute_force_labels(human_views):
 
 def two_spheres(radius_a, radius_b, gap):
     """Component a: a sphere at the origin; b (child of a): a sphere on the +x side, ``gap`` m apart."""
-    return model_from_dict({"name": "two", "component": [
-        {"name": "a", "parent": "", "quadric": [{"shape": "sphere", "center": [0.0, 0.0, 0.0], "radius": radius_a}]},
-        {"name": "b", "parent": "a", "quadric": [
-            {"shape": "sphere", "center": [radius_a + gap + radius_b, 0.0, 0.0], "radius": radius_b}]},
-    ]})
+    return model_from_dict(
+        {
+            "name": "two",
+            "component": [
+                {
+                    "name": "a",
+                    "parent": "",
+                    "quadric": [{"shape": "sphere", "center": [0.0, 0.0, 0.0], "radius": radius_a}],
+                },
+                {
+                    "name": "b",
+                    "parent": "a",
+                    "quadric": [
+                        {"shape": "sphere", "center": [radius_a + gap + radius_b, 0.0, 0.0], "radius": radius_b}
+                    ],
+                },
+            ],
+        }
+    )
 
 
 def facing(model, focal=500.0):
     """A distortion-free camera 2 m in front of the spheres (image x = world x), its rig and samples."""
     rot = np.diag([1.0, -1.0, -1.0])  # looking down -z
     eye = np.array([0.0, 0.0, 2.0])
-    camera = Camera("c", (640, 480), np.array([[focal, 0.0, 319.5], [0.0, focal, 239.5], [0.0, 0.0, 1.0]]),
-                    np.zeros(5), rot, -rot @ eye)
+    camera = Camera(
+        "c",
+        (640, 480),
+        np.array([[focal, 0.0, 319.5], [0.0, focal, 239.5], [0.0, 0.0, 1.0]]),
+        np.zeros(5),
+        rot,
+        -rot @ eye,
+    )
     rig = Rig.from_cameras([camera])
     poses = np.stack([np.eye(4), np.eye(4)])
     samples = sample_outlines(model, poses, rig, 2.0, Samples.allocate(2000))

@@ -12,11 +12,10 @@ from tracker.camera import load_calibration, save_calibration
 from tracker.cli import main
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
-from tracker.io.recording import open_recording
 from tracker.io.readers import FrameSeeker
+from tracker.io.recording import open_recording
 from tracker.model import joint_centres, load_model
 from tracker.track import Settings, Tracker
-
 
 
 def test_camera_rows_move_the_body_as_the_camera_moves():
@@ -77,25 +76,47 @@ def test_refine_command_writes_a_calibration_that_track_takes(tiny_recording, tm
     disturbed_rig = tmp_path / "disturbed.toml"
     save_calibration([true_rig[0], disturbed(true_rig[1], 1.5, 0.04, seed=2)], disturbed_rig)
     refined_rig = tmp_path / "refined.toml"
-    assert main(["refine", str(tiny_recording), "--model", str(HUMAN), "--poses", str(tiny_recording / "truth.npz"),
-                 "--calib", str(disturbed_rig), "--fix", "cam0", "--hold-poses", "--out", str(refined_rig),
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "refine",
+                str(tiny_recording),
+                "--model",
+                str(HUMAN),
+                "--poses",
+                str(tiny_recording / "truth.npz"),
+                "--calib",
+                str(disturbed_rig),
+                "--fix",
+                "cam0",
+                "--hold-poses",
+                "--out",
+                str(refined_rig),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "cam0: turned 0.00 deg, moved 0 mm" in printed and "(fixed)" in printed
     truth = load_poses(tiny_recording / "truth.npz")["joints"].reshape(-1, 3)
     moved = load_calibration(refined_rig)[1]
     assert np.linalg.norm(moved.project(truth) - true_rig[1].project(truth), axis=1).mean() < 1.0
-    np.testing.assert_array_equal(open_recording(tiny_recording, calibration=refined_rig).cameras[1].rotation,
-                                  moved.rotation)
+    np.testing.assert_array_equal(
+        open_recording(tiny_recording, calibration=refined_rig).cameras[1].rotation, moved.rotation
+    )
     assert recording.calibration_path == tiny_recording / "calibration.toml"
-    assert main(["track", str(tiny_recording), "--calib", str(refined_rig), "--out", str(tmp_path / "run"),
-                 "--quiet"]) == 0
+    assert (
+        main(["track", str(tiny_recording), "--calib", str(refined_rig), "--out", str(tmp_path / "run"), "--quiet"])
+        == 0
+    )
 
 
 def test_refine_command_errors(tiny_recording, tmp_path, capsys):
     def error(*argv: str) -> str:
-        assert main(["refine", str(tiny_recording), "--model", str(HUMAN), "--out", str(tmp_path / "r.toml"),
-                     *argv]) == 2
+        assert (
+            main(["refine", str(tiny_recording), "--model", str(HUMAN), "--out", str(tmp_path / "r.toml"), *argv]) == 2
+        )
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1
         return lines[0]

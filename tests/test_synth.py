@@ -8,14 +8,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
 from conftest import SHARED_DATA, TEST_DATA, needs_shared
+
 from tracker import motion, render, synth
-from tracker.io import bvh as bvh_io
-from tracker.io.avi import MjpegAviWriter
 from tracker.camera import load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
+from tracker.io import bvh as bvh_io
+from tracker.io.avi import MjpegAviWriter
 from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,8 +69,12 @@ def test_full_clip_parses_and_holds_the_committed_frames(bvh, human):
     np.testing.assert_array_equal(full.offsets, bvh.offsets)
     np.testing.assert_array_equal(full.motion[500:620], bvh.motion)
     # the same poses from either file (measured: 4.6e-8 apart, round-off)
-    np.testing.assert_allclose(motion.retarget(full, human, start=500, frames=40, stride=2),
-                               motion.retarget(bvh, human, start=0, frames=40, stride=2), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(
+        motion.retarget(full, human, start=500, frames=40, stride=2),
+        motion.retarget(bvh, human, start=0, frames=40, stride=2),
+        rtol=0,
+        atol=1e-6,
+    )
 
 
 def test_bvh_forward_kinematics_intrinsic_order(bvh):
@@ -97,8 +101,10 @@ def test_retarget_valid_poses_and_hinge_knee(bvh, human):
         w = np.array([se3.log_so3(np.ascontiguousarray(r)) for r in relative])
         angle = w @ human.axis[i]
         np.testing.assert_allclose(w, np.outer(angle, human.axis[i]), atol=1e-9)  # pure hinge
-    knee = [se3.log_so3(np.ascontiguousarray(r)) @ human.axis[human.index("shin_l")] for r in
-            np.einsum("fba,fbc->fac", rot[:, human.index("thigh_l")], rot[:, human.index("shin_l")])]
+    knee = [
+        se3.log_so3(np.ascontiguousarray(r)) @ human.axis[human.index("shin_l")]
+        for r in np.einsum("fba,fbc->fac", rot[:, human.index("thigh_l")], rot[:, human.index("shin_l")])
+    ]
     assert np.ptp(knee) > np.radians(30) and np.min(knee) > np.radians(-5)  # the knee bends, forwards only
     # walking: the pelvis moves, upright, feet on the floor, centred on the origin
     assert np.all(poses[:, 0, 2, 2] > 0.8)
@@ -214,8 +220,16 @@ def test_rays_through_limbs_hit_them(human):
     camera = synth.look_at_camera("c", (0.3, -3.5, 1.0), (0, 0, 0.9), (320, 240), 260.0, (-0.08, 0.02, 0, 0))
     comp, _, _ = _cast(human, poses, camera)
     middles = {  # a point on each limb's axis, in its frame
-        "upperarm_l": -0.145, "upperarm_r": -0.145, "forearm_l": -0.125, "forearm_r": -0.125,
-        "thigh_l": -0.21, "thigh_r": -0.21, "shin_l": -0.2, "shin_r": -0.2, "torso": 0.2, "head": 0.14,
+        "upperarm_l": -0.145,
+        "upperarm_r": -0.145,
+        "forearm_l": -0.125,
+        "forearm_r": -0.125,
+        "thigh_l": -0.21,
+        "thigh_r": -0.21,
+        "shin_l": -0.2,
+        "shin_r": -0.2,
+        "torso": 0.2,
+        "head": 0.14,
     }
     for name, z in middles.items():
         i = human.index(name)
@@ -287,8 +301,9 @@ def test_synthesize_writes_recording(tmp_path, human, motion):
     if motion == "bvh":
         motion = f"bvh:{CMU}"
     out = tmp_path / "rec"
-    summary = synth.synthesize(MODEL, _rig(tmp_path), out, motion=motion, frames=5, start=100, stride=2, seed=1,
-                               progress=False)  # bvh: the clip's frames 600-608
+    summary = synth.synthesize(
+        MODEL, _rig(tmp_path), out, motion=motion, frames=5, start=100, stride=2, seed=1, progress=False
+    )  # bvh: the clip's frames 600-608
     names = {"calibration.toml", "a.avi", "b.avi", "model.toml", "init.toml", "truth.npz", "README.md"}
     assert names <= {p.name for p in out.iterdir()}
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary files left

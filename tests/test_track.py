@@ -14,8 +14,8 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
-from tracker.synth import synthesize
 from tracker.status import LOST
+from tracker.synth import synthesize
 from tracker.track import Settings, Tracker, motion_since
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,8 +49,15 @@ def test_demo_first_frames_meet_the_accuracy_bar():
 def ring_recording(tmp_path_factory) -> Path:
     """The second recording: procedural motion seen by the four cameras of calib/ring4.toml."""
     out = tmp_path_factory.mktemp("ring") / "rec"
-    synthesize(ROOT / "models" / "human.toml", ROOT / "calib" / "ring4.toml", out, motion="procedural",
-               frames=30, seed=3, progress=False)
+    synthesize(
+        ROOT / "models" / "human.toml",
+        ROOT / "calib" / "ring4.toml",
+        out,
+        motion="procedural",
+        frames=30,
+        seed=3,
+        progress=False,
+    )
     return out
 
 
@@ -129,7 +136,9 @@ def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
 
 
 def _largest_turn(before: np.ndarray, after: np.ndarray) -> float:
-    return max(np.linalg.norm(se3.log_so3(np.ascontiguousarray(a[:3, :3] @ b[:3, :3].T))) for a, b in zip(after, before))
+    return max(
+        np.linalg.norm(se3.log_so3(np.ascontiguousarray(a[:3, :3] @ b[:3, :3].T))) for a, b in zip(after, before)
+    )
 
 
 def test_max_turn_scales_the_whole_step():

@@ -73,8 +73,14 @@ def test_point_velocity_matches_finite_differences():
 
 def test_batched_rotation_exp_and_log_match_the_se3_ones():
     rng = np.random.default_rng(9)
-    w = np.concatenate([rng.normal(size=(20, 3)), rng.normal(size=(5, 3)) * 1e-6, np.zeros((1, 3)),
-                        [[np.pi - 1e-3, 0.0, 0.0], [0.0, 2.9, 0.1]]])
+    w = np.concatenate(
+        [
+            rng.normal(size=(20, 3)),
+            rng.normal(size=(5, 3)) * 1e-6,
+            np.zeros((1, 3)),
+            [[np.pi - 1e-3, 0.0, 0.0], [0.0, 2.9, 0.1]],
+        ]
+    )
     rotations = se3.exp_so3_many(w)
     for i in range(len(w)):
         np.testing.assert_allclose(rotations[i], se3.exp_so3(w[i]), atol=1e-14)

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from tracker.errors import TrackerInputError
-from tracker.io.capture import (MJPG, Capture, CaptureError, Frame, Pairing, ReplayClock, ReplaySource,
-                                V4L2Source)
+from tracker.io.capture import MJPG, Capture, CaptureError, Frame, Pairing, ReplayClock, ReplaySource, V4L2Source
 from tracker.io.readers import grey_frames
 
 PERIOD = 1 / 60
@@ -209,8 +208,9 @@ def test_capture_of_replayed_files_gives_prepared_images_in_order(tiny_recording
     taken = _drain(capture)
     _settled(capture)
     assert taken, "no set was taken"
-    expected = [[blur(image) for _, image in zip(range(6), grey_frames(tiny_recording / f"cam{k}.avi"))]
-                for k in range(2)]
+    expected = [
+        [blur(image) for _, image in zip(range(6), grey_frames(tiny_recording / f"cam{k}.avi"))] for k in range(2)
+    ]
     numbers = []
     for frame_set in taken:
         assert frame_set.cameras == (0, 1)
@@ -244,8 +244,12 @@ class FakeDevice:
         return True
 
     def get(self, prop):
-        return {cv2.CAP_PROP_FOURCC: self.fourcc, cv2.CAP_PROP_FRAME_WIDTH: self.size[0],
-                cv2.CAP_PROP_FRAME_HEIGHT: self.size[1], cv2.CAP_PROP_FPS: self.fps}[prop]
+        return {
+            cv2.CAP_PROP_FOURCC: self.fourcc,
+            cv2.CAP_PROP_FRAME_WIDTH: self.size[0],
+            cv2.CAP_PROP_FRAME_HEIGHT: self.size[1],
+            cv2.CAP_PROP_FPS: self.fps,
+        }[prop]
 
     def grab(self):
         self.frames -= 1

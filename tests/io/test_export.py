@@ -11,14 +11,14 @@ import ezc3d
 import numpy as np
 import pandas
 import pytest
+from conftest import SHARED_DATA, TEST_DATA, needs_shared
 from scipy.spatial.transform import Rotation
 
-from conftest import SHARED_DATA, TEST_DATA, needs_shared
+from tracker.cli import build_parser
+from tracker.commands.export import run
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.bvh import bvh_global, load_bvh
-from tracker.cli import build_parser
-from tracker.commands.export import run
 from tracker.io.export import export
 from tracker.io.export.bvh import Z_UP_TO_Y_UP, depth_first, euler_zxy, hold_lost, motion, write_bvh
 from tracker.io.export.trc import read_trc, write_trc
@@ -88,21 +88,33 @@ def test_trc_read_by_pandas(tracked: Path, truth: dict[str, np.ndarray]) -> None
     assert header["DataRate"][0] == FPS and header["NumFrames"][0] == FRAMES and header["Units"][0] == "mm"
     table = pandas.read_csv(out, sep="\t", skiprows=5, header=None)
     assert list(table[0]) == list(range(1, FRAMES + 1))
-    values = table.iloc[:, 2:2 + 45].to_numpy(dtype=float).reshape(FRAMES, 15, 3) / 1000.0
+    values = table.iloc[:, 2 : 2 + 45].to_numpy(dtype=float).reshape(FRAMES, 15, 3) / 1000.0
     np.testing.assert_allclose(values, expected_joints(truth), rtol=0, atol=1e-9)
     with open(out) as file:
         names = file.read().splitlines()[3].split("\t")[2::3][:15]
     assert names == list(truth["joint_names"])
 
 
-@pytest.mark.parametrize("folder, name, markers, frames, rate, first", [
-    (MARKERS, "subject01_walk1.trc", 41, 60, 60.0, ("R.ASIS", [617.247620, 1055.275020, 170.781980])),
-    (MARKERS, "arm26_elbow_flex.trc", 3, 121, 120.0, ("r_acromion", [-13.05452443, 839.50547557, 169.5054756])),
-    pytest.param(FULL_MARKERS, "subject01_walk1.trc", 41, 151, 60.0,
-                 ("R.ASIS", [617.247620, 1055.275020, 170.781980]), marks=needs_shared("markers"), id="full-walk"),
-])
-def test_trc_reader_on_real_files_and_rewrite(tmp_path: Path, folder: Path, name: str, markers: int, frames: int,
-                                              rate: float, first: tuple[str, list[float]]) -> None:
+@pytest.mark.parametrize(
+    "folder, name, markers, frames, rate, first",
+    [
+        (MARKERS, "subject01_walk1.trc", 41, 60, 60.0, ("R.ASIS", [617.247620, 1055.275020, 170.781980])),
+        (MARKERS, "arm26_elbow_flex.trc", 3, 121, 120.0, ("r_acromion", [-13.05452443, 839.50547557, 169.5054756])),
+        pytest.param(
+            FULL_MARKERS,
+            "subject01_walk1.trc",
+            41,
+            151,
+            60.0,
+            ("R.ASIS", [617.247620, 1055.275020, 170.781980]),
+            marks=needs_shared("markers"),
+            id="full-walk",
+        ),
+    ],
+)
+def test_trc_reader_on_real_files_and_rewrite(
+    tmp_path: Path, folder: Path, name: str, markers: int, frames: int, rate: float, first: tuple[str, list[float]]
+) -> None:
     trc = read_trc(folder / name)
     assert trc.markers.shape == (frames, markers, 3) and len(trc.names) == markers
     assert int(trc.header["NumFrames"]) == frames and trc.rate == rate and trc.units == "mm"
@@ -183,8 +195,10 @@ def test_bvh_forward_kinematics_reproduces_the_joints(tracked: Path, truth: dict
     bvh = load_bvh(out)
     assert bvh.frames == FRAMES and bvh.frame_time == pytest.approx(1.0 / FPS, abs=1e-10)
     assert bvh.names == tuple(model.names[i] for i in depth_first(model))
-    assert all(model.parent[model.index(n)] == (model.index(bvh.names[p]) if p >= 0 else -1)
-               for n, p in zip(bvh.names, bvh.parents))
+    assert all(
+        model.parent[model.index(n)] == (model.index(bvh.names[p]) if p >= 0 else -1)
+        for n, p in zip(bvh.names, bvh.parents)
+    )
     assert bvh.channels[0] == ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
     assert set(bvh.channels[1:]) == {("Zrotation", "Xrotation", "Yrotation")}
     centres = bvh_joint_centres(out, list(truth["joint_names"]))
@@ -208,15 +222,37 @@ def test_bvh_read_by_bvhio(tracked: Path, truth: dict[str, np.ndarray]) -> None:
         np.testing.assert_allclose(centres, truth["joints"][frame], rtol=0, atol=1e-5)  # bvhio computes in float32
 
 
-TOY = {"name": "toy", "component": [
-    {"name": "base", "parent": "", "joint": "free", "quadric": [{"shape": "sphere", "radius": 0.1}]},
-    {"name": "arm", "parent": "base", "joint": "ball", "at": [0.1, 0.2, 0.3], "rest": [0.3, -0.2, 0.5],
-     "quadric": [{"shape": "cone", "from": [0, 0, 0], "to": [0, 0, -0.3], "radii": [0.05, 0.04]}]},
-    {"name": "elbow", "parent": "arm", "joint": "hinge", "axis": [0, 1, 1], "at": [0, 0, -0.3], "rest": [0, 0.4, 0]},
-    {"name": "tip", "parent": "elbow", "joint": "slide", "axis": [1, 0, 0], "at": [0, 0, -0.2],
-     "rest": [0.2, 0.1, -0.3]},
-    {"name": "side", "parent": "base", "joint": "fixed", "at": [-0.1, 0, 0], "rest": [0, 0, 1.0]},
-]}
+TOY = {
+    "name": "toy",
+    "component": [
+        {"name": "base", "parent": "", "joint": "free", "quadric": [{"shape": "sphere", "radius": 0.1}]},
+        {
+            "name": "arm",
+            "parent": "base",
+            "joint": "ball",
+            "at": [0.1, 0.2, 0.3],
+            "rest": [0.3, -0.2, 0.5],
+            "quadric": [{"shape": "cone", "from": [0, 0, 0], "to": [0, 0, -0.3], "radii": [0.05, 0.04]}],
+        },
+        {
+            "name": "elbow",
+            "parent": "arm",
+            "joint": "hinge",
+            "axis": [0, 1, 1],
+            "at": [0, 0, -0.3],
+            "rest": [0, 0.4, 0],
+        },
+        {
+            "name": "tip",
+            "parent": "elbow",
+            "joint": "slide",
+            "axis": [1, 0, 0],
+            "at": [0, 0, -0.2],
+            "rest": [0.2, 0.1, -0.3],
+        },
+        {"name": "side", "parent": "base", "joint": "fixed", "at": [-0.1, 0, 0], "rest": [0, 0, 1.0]},
+    ],
+}
 
 
 def toy_poses(model, frames: int, seed: int) -> np.ndarray:
@@ -229,10 +265,12 @@ def toy_poses(model, frames: int, seed: int) -> np.ndarray:
         out[f, 0] = se3.from_rotvec(rng.normal(size=3), rng.normal(size=3))
         for i in range(1, model.size):
             axis = model.axis[i]
-            local = {"ball": se3.from_rotvec(rng.normal(size=3)),
-                     "hinge": se3.from_rotvec(rng.uniform(-3, 3) * axis),
-                     "slide": se3.from_rotvec(np.zeros(3), rng.uniform(-0.2, 0.2) * axis),
-                     "fixed": np.eye(4)}[kinds[model.names[i]]]
+            local = {
+                "ball": se3.from_rotvec(rng.normal(size=3)),
+                "hinge": se3.from_rotvec(rng.uniform(-3, 3) * axis),
+                "slide": se3.from_rotvec(np.zeros(3), rng.uniform(-0.2, 0.2) * axis),
+                "fixed": np.eye(4),
+            }[kinds[model.names[i]]]
             out[f, i] = out[f, model.parent[i]] @ model.rest[i] @ local
     return out
 
@@ -246,8 +284,9 @@ def test_bvh_of_rest_rotations_hinges_and_slides(tmp_path: Path) -> None:
     bvh = load_bvh(tmp_path / "toy.bvh")
     assert bvh.channels[bvh.index("tip")][:3] == ("Xposition", "Yposition", "Zposition")
     assert len(bvh.channels[bvh.index("elbow")]) == 3
-    np.testing.assert_allclose(bvh_joint_centres(tmp_path / "toy.bvh", list(model.names)), poses[:, :, :3, 3],
-                               rtol=0, atol=1e-6)
+    np.testing.assert_allclose(
+        bvh_joint_centres(tmp_path / "toy.bvh", list(model.names)), poses[:, :, :3, 3], rtol=0, atol=1e-6
+    )
 
 
 def test_euler_zxy_reproduces_rotations_also_at_gimbal_lock() -> None:
@@ -259,8 +298,7 @@ def test_euler_zxy_reproduces_rotations_also_at_gimbal_lock() -> None:
     np.testing.assert_allclose(again, matrices, rtol=0, atol=1e-12)
     mild = angles[50:].copy()
     mild[:, 1] = rng.uniform(-80, 80, size=len(mild))
-    np.testing.assert_allclose(euler_zxy(Rotation.from_euler("ZXY", mild, degrees=True).as_matrix()), mild,
-                               atol=1e-9)
+    np.testing.assert_allclose(euler_zxy(Rotation.from_euler("ZXY", mild, degrees=True).as_matrix()), mild, atol=1e-9)
 
 
 def test_hold_lost_takes_the_last_good_frame() -> None:
@@ -272,7 +310,9 @@ def test_hold_lost_takes_the_last_good_frame() -> None:
 
 def test_run_prints_wrote_and_takes_the_format_case_insensitively(tracked: Path, capsys) -> None:
     out = tracked.parent / "sub" / "joints.csv"
-    assert run(build_parser().parse_args(["export", str(tracked), "--to", "CSV", "--out", str(out), "--fps", "25"])) == 0
+    assert (
+        run(build_parser().parse_args(["export", str(tracked), "--to", "CSV", "--out", str(out), "--fps", "25"])) == 0
+    )
     assert capsys.readouterr().out == f"wrote {out}\n"
     with open(out) as file:
         assert file.read().splitlines()[2].split(",")[1] == "0.040000000"  # --fps sets the time step
@@ -292,8 +332,13 @@ def test_bad_input(tmp_path: Path, tracked: Path, truth: dict[str, np.ndarray], 
     missing = tmp_path / "nowhere" / "poses.npz"
     assert str(missing) in one_line_error(lambda: export(missing, "trc")) and not missing.parent.exists()
     joints_only = tmp_path / "joints.npz"
-    np.savez(joints_only, joint_names=truth["joint_names"], joints=truth["joints"], frame=truth["frame"],
-             time=truth["frame"] / 60.0)
+    np.savez(
+        joints_only,
+        joint_names=truth["joint_names"],
+        joints=truth["joints"],
+        frame=truth["frame"],
+        time=truth["frame"] / 60.0,
+    )
     message = one_line_error(lambda: export(joints_only, "bvh", model=HUMAN))
     assert str(joints_only) in message and "'poses'" in message and "--to trc" in message
     message = one_line_error(lambda: export(tracked, "bvh"))

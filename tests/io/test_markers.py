@@ -11,8 +11,8 @@ from pathlib import Path
 import ezc3d
 import numpy as np
 import pytest
-
 from conftest import SHARED_DATA, TEST_DATA, needs_shared
+
 from tracker.io.export.c3d import write_c3d
 from tracker.io.markers import read_markers
 
@@ -44,7 +44,11 @@ def test_vicon_c3d_in_metres_with_its_gaps() -> None:
     markers = read_markers(MARKERS / "Vicon.c3d")
     gappy = ~np.isfinite(markers.positions).all(axis=2)
     assert [markers.labels[i] for i in np.nonzero(gappy.any(axis=0))[0]] == [
-        "Daphnee:LARMl", "Daphnee:STYLu", "Daphnee:LASTC", "Daphnee:MEDH"]
+        "Daphnee:LARMl",
+        "Daphnee:STYLu",
+        "Daphnee:LASTC",
+        "Daphnee:MEDH",
+    ]
     assert not gappy[:118].any() and gappy[118].any()
 
 
@@ -95,10 +99,13 @@ def test_names_match_after_a_subject_prefix_and_errors_name_the_file(one_line_er
     assert "Vicon.c3d" in message and "'ELBOW'" in message and "fix the name" in message
 
 
-@pytest.mark.parametrize("content, fix", [
-    (b"not a c3d file at all" * 20, "not a readable C3D file"),
-    (b"", "not a readable C3D file"),
-])
+@pytest.mark.parametrize(
+    "content, fix",
+    [
+        (b"not a c3d file at all" * 20, "not a readable C3D file"),
+        (b"", "not a readable C3D file"),
+    ],
+)
 def test_corrupt_c3d_is_one_line(tmp_path: Path, content: bytes, fix: str, one_line_error) -> None:
     bad = tmp_path / "bad.c3d"
     bad.write_bytes(content)

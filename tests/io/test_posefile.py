@@ -79,19 +79,22 @@ def write(path, text):
     return path
 
 
-ROOT = '[pose.pelvis]\nrotation = [0.1, 0.2, 0.3]\ntranslation = [0.0, 0.0, 1.0]\n'
+ROOT = "[pose.pelvis]\nrotation = [0.1, 0.2, 0.3]\ntranslation = [0.0, 0.0, 1.0]\n"
 
 
-@pytest.mark.parametrize("text", [
-    ROOT + '[pose.tail]\nrotation = [0.0, 0.0, 0.0]\n',  # unknown component
-    '[pose.pelvis]\nrotation = [0.1, 0.2, 0.3]\n',  # root without translation
-    '[pose.torso]\nrotation = [0.1, 0.2, 0.3]\n',  # root missing altogether
-    'title = "no poses"\n',
-    '[pose.pelvis]\nrotation = [0.1, 0.2]\ntranslation = [0.0, 0.0, 1.0]\n',
-    '[pose.pelvis]\nrotation = [0.1, 0.2, nan]\ntranslation = [0.0, 0.0, 1.0]\n',
-    ROOT + '[pose.head]\nrotation = "up"\n',
-    '[pose.pelvis\nrotation = [0.1, 0.2, 0.3]\n',  # not TOML
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        ROOT + "[pose.tail]\nrotation = [0.0, 0.0, 0.0]\n",  # unknown component
+        "[pose.pelvis]\nrotation = [0.1, 0.2, 0.3]\n",  # root without translation
+        "[pose.torso]\nrotation = [0.1, 0.2, 0.3]\n",  # root missing altogether
+        'title = "no poses"\n',
+        "[pose.pelvis]\nrotation = [0.1, 0.2]\ntranslation = [0.0, 0.0, 1.0]\n",
+        "[pose.pelvis]\nrotation = [0.1, 0.2, nan]\ntranslation = [0.0, 0.0, 1.0]\n",
+        ROOT + '[pose.head]\nrotation = "up"\n',
+        "[pose.pelvis\nrotation = [0.1, 0.2, 0.3]\n",  # not TOML
+    ],
+)
 def test_bad_pose_file_names_the_file(tmp_path, human, text):
     path = write(tmp_path / "init.toml", text)
     with pytest.raises(TrackerInputError) as info:
@@ -100,7 +103,7 @@ def test_bad_pose_file_names_the_file(tmp_path, human, text):
 
 
 def test_unknown_component_is_named(tmp_path, human):
-    path = write(tmp_path / "init.toml", ROOT + '[pose.tail]\nrotation = [0.0, 0.0, 0.0]\n')
+    path = write(tmp_path / "init.toml", ROOT + "[pose.tail]\nrotation = [0.0, 0.0, 0.0]\n")
     with pytest.raises(TrackerInputError, match="tail"):
         load_pose_file(path, human)
 
@@ -127,8 +130,11 @@ def test_hinge_rotation_off_its_axis_is_projected(tmp_path, human):
         # world rotation of the forearm: the parent's, then a relative rotation off the hinge axis
         relative_w = rng.normal(scale=0.6, size=3)
         child = se3.exp_so3(parent_w) @ se3.exp_so3(relative_w)
-        text = (ROOT + f"[pose.{human.names[p]}]\nrotation = {toml_list(parent_w)}\n"
-                + f"[pose.forearm_l]\nrotation = {toml_list(se3.log_so3(child))}\n")
+        text = (
+            ROOT
+            + f"[pose.{human.names[p]}]\nrotation = {toml_list(parent_w)}\n"
+            + f"[pose.forearm_l]\nrotation = {toml_list(se3.log_so3(child))}\n"
+        )
         poses = load_pose_file(write(tmp_path / "init.toml", text), human)
         gap, axis_error = joint_errors(human, poses)
         assert gap < 1e-12 and axis_error < 1e-12
@@ -143,12 +149,12 @@ def test_hinge_rotation_off_its_axis_is_projected(tmp_path, human):
 
 
 def test_child_translation_off_its_joint_warns_and_is_ignored(tmp_path, human):
-    text = ROOT + '[pose.head]\nrotation = [0.0, 0.3, 0.0]\ntranslation = [5.0, 5.0, 5.0]\n'
+    text = ROOT + "[pose.head]\nrotation = [0.0, 0.3, 0.0]\ntranslation = [5.0, 5.0, 5.0]\n"
     with pytest.warns(UserWarning, match="head"):
         poses = load_pose_file(write(tmp_path / "init.toml", text), human)
     assert max(joint_errors(human, poses)) < 1e-12
     # a translation that agrees with the joint does not warn
-    text = ROOT + f'[pose.torso]\ntranslation = {toml_list(poses[human.index("torso")][:3, 3])}\n'
+    text = ROOT + f"[pose.torso]\ntranslation = {toml_list(poses[human.index('torso')][:3, 3])}\n"
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_pose_file(write(tmp_path / "init2.toml", text), human)

@@ -43,12 +43,13 @@ def test_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(arrays["status"], np.arange(10, 110) % 3)
     np.testing.assert_allclose(arrays["residual"], 0.5 * np.arange(10, 110))
     np.testing.assert_allclose(arrays["elapsed"], 0.001 * np.arange(10, 110))
-    dtypes = {key: arrays[key].dtype.kind + str(arrays[key].dtype.itemsize) for key in ("frame", "time", "poses", "status")}
+    dtypes = {
+        key: arrays[key].dtype.kind + str(arrays[key].dtype.itemsize) for key in ("frame", "time", "poses", "status")
+    }
     assert dtypes == {"frame": "i8", "time": "f8", "poses": "f8", "status": "i1"}
     assert arrays["joint_names"].dtype.kind == "U"
     with np.load(path, allow_pickle=False) as raw:
-        keys = ["frame", "time", "component_names", "poses", "joint_names", "joints", "status", "residual",
-                "elapsed"]
+        keys = ["frame", "time", "component_names", "poses", "joint_names", "joints", "status", "residual", "elapsed"]
         assert sorted(raw.files) == sorted(keys)
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
 from conftest import SHARED_DATA, needs_shared
+
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.recording import frames, open_recording
@@ -31,7 +31,9 @@ def write_video(path: Path, camera: int, count: int = COUNT, size: tuple[int, in
     writer.release()
 
 
-def make_recording(folder: Path, videos: tuple[str, ...] = ("cam0", "cam1"), size: tuple[int, int] = (WIDTH, HEIGHT)) -> Path:
+def make_recording(
+    folder: Path, videos: tuple[str, ...] = ("cam0", "cam1"), size: tuple[int, int] = (WIDTH, HEIGHT)
+) -> Path:
     """A recording whose calibration has cam0, cam1, cam2 (all ``size``) and MJPG videos for ``videos``."""
     folder.mkdir()
     K = np.array([[50.0, 0.0, 32.0], [0.0, 50.0, 24.0], [0.0, 0.0, 1.0]])
@@ -48,7 +50,9 @@ def test_happy_path_yields_grey_frames(tmp_path: Path) -> None:
     recording = open_recording(folder)
     assert [c.name for c in recording.cameras] == ["cam0", "cam1"]  # cam2 has no video
     assert (recording.frame_count, recording.fps) == (COUNT, FPS)
-    assert recording.model_path == folder / "model.toml" and recording.init_path is None and recording.truth_path is None
+    assert (
+        recording.model_path == folder / "model.toml" and recording.init_path is None and recording.truth_path is None
+    )
     seen = []
     for index, images in frames(recording):
         seen.append(index)

@@ -125,9 +125,7 @@ def test_a_part_without_data_coasts():
     damped, qdots = body, [np.zeros(6), np.concatenate([velocity, np.zeros(3)])]
     alpha = 2.0
     for k in range(1, steps + 1):
-        damped, qdots = bd.second_order_step(
-            damped, qdots, data, 0.1, [None, None], dt, 6.0, damping=bd.Damping(alpha)
-        )
+        damped, qdots = bd.second_order_step(damped, qdots, data, 0.1, [None, None], dt, 6.0, damping=bd.Damping(alpha))
         ratio = np.linalg.norm(qdots[1][:3]) / np.linalg.norm(velocity)
         assert ratio == pytest.approx((1.0 - alpha * dt) ** k, rel=1e-9)
         assert abs(ratio - np.exp(-alpha * dt * k)) < 2e-3
@@ -159,8 +157,7 @@ def _second_order_error(dt):
     body = bd.assemble(parts, [SMALL] * 3, joints, [bd.RIGID, bd.LOCAL, bd.RIGID])
     qdots = [np.concatenate([0.5 * rng.normal(size=6), 0.05 * rng.normal(size=len(i) - 6)]) for i in bd.active(body)]
     data = [
-        bd.Attachment(kin.positions(p) + 0.1 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u)))
-        for p in body.parts
+        bd.Attachment(kin.positions(p) + 0.1 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u))) for p in body.parts
     ]
     k_nodes = bd.stiffnesses(body, 0.1, 0.5)
     a, duration = 6.0, 1.0
@@ -193,8 +190,7 @@ def test_first_order_body_loop_decays_exponentially():
     parts, joints = _chain(rng, [MESH, MESH, MESH], gap=0.1)
     start = bd.assemble(parts, [MESH] * 3, joints, [bd.LOCAL, bd.GLOBAL, bd.RIGID])
     data = [
-        bd.Attachment(kin.positions(p) + 0.2 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u)))
-        for p in start.parts
+        bd.Attachment(kin.positions(p) + 0.2 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u))) for p in start.parts
     ]
     k_nodes = bd.stiffnesses(start, 0.1, 0.5)
 
@@ -244,9 +240,7 @@ def kinetic_energy(body: bd.Body, qdots, mass: float = 1.0) -> float:
 
 def elastic_energy(body: bd.Body, k_nodes) -> float:
     """V = sum over LOCAL parts of tr(d^T K_node d) / 2 (section 3, the loaded membrane)."""
-    return sum(
-        0.5 * float(np.sum(part.d * (k @ part.d))) for part, k in zip(body.parts, k_nodes) if k is not None
-    )
+    return sum(0.5 * float(np.sum(part.d * (k @ part.d))) for part, k in zip(body.parts, k_nodes) if k is not None)
 
 
 def _posed_chain(rng):
@@ -325,8 +319,7 @@ def test_constrained_fit_of_a_three_part_chain_recovers_joints_and_nodes():
 def _energy(body, qdots, data, k_nodes, sigma):
     """T + membrane + data potential sum |z_j - x_k(j)|^2 / (2 sigma^2)."""
     potential = sum(
-        np.sum((att.points - kin.positions(p)[att.nodes]) ** 2) / (2.0 * sigma**2)
-        for p, att in zip(body.parts, data)
+        np.sum((att.points - kin.positions(p)[att.nodes]) ** 2) / (2.0 * sigma**2) for p, att in zip(body.parts, data)
     )
     return kinetic_energy(body, qdots) + elastic_energy(body, k_nodes) + potential
 

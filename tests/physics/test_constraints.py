@@ -47,7 +47,7 @@ def _kinematics(parts, qdots):
     the velocity products."""
     return (
         [kin.positions(p) for p in parts],
-        [kin.jacobians(p)[:, :, :len(q)] for p, q in zip(parts, qdots)],
+        [kin.jacobians(p)[:, :, : len(q)] for p, q in zip(parts, qdots)],
         [kin.velocity_products(p, _pad(p, q)) for p, q in zip(parts, qdots)],
     )
 
@@ -170,7 +170,7 @@ def _block_diag(blocks):
     out = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
     start = 0
     for b in blocks:
-        out[start:start + len(b), start:start + len(b)] = b
+        out[start : start + len(b), start : start + len(b)] = b
         start += len(b)
     return out
 

@@ -21,10 +21,7 @@ def grid():
 
 
 def rows_of(tables):
-    return [
-        {"density": d, "variance": v, **dict(zip(ex.ERRORS, errors))}
-        for (d, v), errors in tables.items()
-    ]
+    return [{"density": d, "variance": v, **dict(zip(ex.ERRORS, errors))} for (d, v), errors in tables.items()]
 
 
 def test_truth_follows_the_protocol():
@@ -98,7 +95,8 @@ def test_reduced_grid_holds_the_robust_claims(grid):
     assert [(r["density"], r["variance"]) for r in grid] == [(100, 10), (100, 0), (25, 10), (25, 0)]
     claims = {c[0]: c for c in ex.check_claims(grid)}
     for name in (
-        "node-position error grows with noise", "node-position error grows as density falls",
+        "node-position error grows with noise",
+        "node-position error grows as density falls",
         "rotation error is the smallest in every row",
         "local and position errors far more noise-sensitive than translation (100 %, var 10 / var 0)",
     ):

@@ -80,12 +80,14 @@ def test_data_force_is_l_transpose_r_and_the_note_blocks():
         f_d = np.zeros_like(part.d)
         for i in range(len(m.u)):
             f_d[i] = rot.T @ r[k == i].sum(axis=0) / SIGMA**2
-        blocks = np.concatenate([
-            r.sum(axis=0) / SIGMA**2,
-            sum(np.cross(rot @ p[kj], rj) for kj, rj in zip(k, r)) / SIGMA**2,
-            sum(jac[kj].T @ rot.T @ rj for kj, rj in zip(k, r)) / SIGMA**2,
-            f_d.ravel(),
-        ])
+        blocks = np.concatenate(
+            [
+                r.sum(axis=0) / SIGMA**2,
+                sum(np.cross(rot @ p[kj], rj) for kj, rj in zip(k, r)) / SIGMA**2,
+                sum(jac[kj].T @ rot.T @ rj for kj, rj in zip(k, r)) / SIGMA**2,
+                f_d.ravel(),
+            ]
+        )
         worst_l = max(worst_l, np.max(np.abs(f - l_transpose_r)))
         worst_blocks = max(worst_blocks, np.max(np.abs(f - blocks)))
     assert worst_l < 1e-12
@@ -214,7 +216,7 @@ def test_stability_limit_bounds_the_largest_eigenvalue():
 
     jac = kin.jacobians(part)[k]
     a = np.einsum("jak,jal->kl", jac, jac) / SIGMA**2
-    a[kin.SHAPE.stop:, kin.SHAPE.stop:] += np.kron(k_node.toarray(), np.eye(3))
+    a[kin.SHAPE.stop :, kin.SHAPE.stop :] += np.kron(k_node.toarray(), np.eye(3))
     free = np.arange(len(a)) != fit.FROZEN
     dense = 2.0 / np.linalg.eigvalsh(a[np.ix_(free, free)])[-1]
 

@@ -16,10 +16,7 @@ STEPS = 30
 @pytest.fixture(scope="module")
 def runs():
     """Both runs over 12 frames (a third of the flap cycle) with shortened schedules."""
-    return {
-        sparse: insect.run(sparse, frames=FRAMES, first_steps=FIRST_STEPS, steps=STEPS)
-        for sparse in (False, True)
-    }
+    return {sparse: insect.run(sparse, frames=FRAMES, first_steps=FIRST_STEPS, steps=STEPS) for sparse in (False, True)}
 
 
 def test_truth_holds_its_joints_and_moves():

@@ -91,8 +91,9 @@ def test_information_blocks_are_blocks_of_h_transpose_h():
         info = kf.information(part, assignment, VARIANCE)
         scale = np.max(np.abs(dense))
         np.testing.assert_allclose(info.global_, dense[np.ix_(kf.GLOBAL, kf.GLOBAL)], rtol=0, atol=1e-12 * scale)
-        np.testing.assert_allclose(np.kron(np.diag(info.node), np.eye(3)), dense[START:, START:],
-                                   rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(
+            np.kron(np.diag(info.node), np.eye(3)), dense[START:, START:], rtol=0, atol=1e-12 * scale
+        )
 
 
 def test_shape_block_step_matches_dense_computation():
@@ -106,7 +107,7 @@ def test_shape_block_step_matches_dense_computation():
     assignment = fit.nearest_nodes(points, kin.positions(part))
     settings = kf.Settings(measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0)
     state = kf.initial_state(part)
-    state.p_global[kin.RIGID:, kin.RIGID:] = random_spd(rng, kf.N_SHAPE)
+    state.p_global[kin.RIGID :, kin.RIGID :] = random_spd(rng, kf.N_SHAPE)
     k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
 
     moved, _ = kf.iteration(state, points, assignment, k_node, settings)
@@ -132,8 +133,9 @@ def test_covariance_stays_symmetric_positive_definite_and_shrinks_where_data_are
     """Five frames of a moving target seen at a quarter of its 123 nodes with noise, 100
     iterations each: every block stays exactly symmetric and positive definite; every
     diagonal entry shrinks from P(0) = I except (possibly) those of b2 and b3, which the data
-    barely see while b1 stays near its start 0 (their J columns vanish at b1 = 0); and P_node is smaller at the nodes that hold data than at those that do not (measured
-    mean diagonals 0.033 vs 0.039)."""
+    barely see while b1 stays near its start 0 (their J columns vanish at b1 = 0); and P_node is
+    smaller at the nodes that hold data than at those that do not (measured mean diagonals 0.033
+    vs 0.039)."""
     rng = np.random.default_rng(13)
     m = sq.mesh()
     target = random_part(rng, m)
@@ -162,8 +164,9 @@ def test_paper_initial_covariance_is_indefinite_and_rejected():
     per element but indefinite at node level on the 123-node mesh (note: minimum eigenvalue
     -0.17); initial_state refuses it and accepts the 0.2 version and the default I."""
     m = sq.mesh()
-    part = kin.Part(np.zeros(3), np.eye(3), np.array([1.0, 0.5, 0.5, 1.0, 1, 1, 0, 0, 0, 0, 0.5]),
-                    np.zeros((len(m.u), 3)), m.u, m.v)
+    part = kin.Part(
+        np.zeros(3), np.eye(3), np.array([1.0, 0.5, 0.5, 1.0, 1, 1, 0, 0, 0, 0, 0.5]), np.zeros((len(m.u), 3)), m.u, m.v
+    )
     paper = kf.mesh_covariance(m.triangles, len(m.u), 0.4)
     assert np.linalg.eigvalsh(paper)[0] == pytest.approx(-0.17, abs=0.01)
     element = np.full((3, 3), 0.4) + 0.6 * np.eye(3)
@@ -184,8 +187,9 @@ def test_paper_initial_covariance_is_indefinite_and_rejected():
 
 def rigid_global_target(q_s):
     m = sq.mesh()
-    return m, kin.Part(np.array([0.3, -0.2, 1.0]), exp_so3(np.array([0.3, -0.2, 0.5])), q_s,
-                       np.zeros((len(m.u), 3)), m.u, m.v)
+    return m, kin.Part(
+        np.array([0.3, -0.2, 1.0]), exp_so3(np.array([0.3, -0.2, 0.5])), q_s, np.zeros((len(m.u), 3)), m.u, m.v
+    )
 
 
 def test_filter_recovers_a_tapered_superquadric_from_clean_data():
@@ -226,7 +230,9 @@ def test_absorb_global_moves_a_global_change_out_of_d():
     part = replace(random_part(rng, m), d=np.zeros((len(m.u), 3)))
     part = replace(part, q_s=np.array([1.0, 0.5, 0.35, 1.2, 0.7, 1.2, 0.3, -0.2, 0.15, 0.1, 0.6]))
     target = replace(
-        part, c=part.c + [0.02, -0.01, 0.03], rotation=exp_so3(np.array([0.02, 0.01, -0.03])) @ part.rotation,
+        part,
+        c=part.c + [0.02, -0.01, 0.03],
+        rotation=exp_so3(np.array([0.02, 0.01, -0.03])) @ part.rotation,
         q_s=part.q_s + [0.0, 0.03, -0.02, 0.05, 0.04, -0.03, 0.05, 0.02, 0.03, 0.0, 0.0],
     )
     x = kin.positions(target)
@@ -273,7 +279,12 @@ def test_filter_frame_with_absorb_keeps_d_out_of_the_global_span():
     leftover, rms = {}, {}
     for absorb in (False, True):
         settings = kf.Settings(
-            max_iterations=60, tol=0.0, coupling="joint", prior_stiffness=True, covariance_cap=1.0, w1=5.0,
+            max_iterations=60,
+            tol=0.0,
+            coupling="joint",
+            prior_stiffness=True,
+            covariance_cap=1.0,
+            w1=5.0,
             absorb=absorb,
         )
         state, done = kf.filter_frame(kf.initial_state(start), data, world.triangles, settings, np.arange(len(data)))
@@ -356,12 +367,17 @@ def test_local_block_equals_the_full_covariance():
         a_full = dense_information(state.part, assignment)[START:, START:]
         force = fit.data_force(state.part, points, assignment, np.sqrt(VARIANCE))
         rate = kf.state_rate(state, force, k_node, settings)
-        np.testing.assert_allclose(rate[START:], p_full @ force[START:] - k_full @ state.part.d.ravel(),
-                                   rtol=1e-10, atol=1e-12 * np.max(np.abs(force)))
+        np.testing.assert_allclose(
+            rate[START:],
+            p_full @ force[START:] - k_full @ state.part.d.ravel(),
+            rtol=1e-10,
+            atol=1e-12 * np.max(np.abs(force)),
+        )
         dt = kf.step_size(state, kf.information(state.part, assignment, VARIANCE), k_node, settings)
         state, _ = kf.iteration(state, points, assignment, k_node, settings)
-        p_full = p_full + dt * (-k_full @ p_full - p_full @ k_full + 0.2 * np.eye(len(p_full))
-                                - p_full @ a_full @ p_full)
+        p_full = p_full + dt * (
+            -k_full @ p_full - p_full @ k_full + 0.2 * np.eye(len(p_full)) - p_full @ a_full @ p_full
+        )
         p_full = 0.5 * (p_full + p_full.T)
         np.testing.assert_allclose(np.kron(state.p_node, np.eye(3)), p_full, rtol=0, atol=1e-12)
     assert np.max(np.abs(state.p_node - kf.mesh_covariance(m.triangles, len(m.u), 0.2))) > 0.1
@@ -377,8 +393,8 @@ def dense_stiffness(state, k_node, settings):
         k_n = np.linalg.solve(state.p_node, k_n)
     n = kf.N_GLOBAL + 3 * len(k_n)
     out = np.zeros((n, n))
-    out[:kf.N_GLOBAL, :kf.N_GLOBAL] = k_g
-    out[kf.N_GLOBAL:, kf.N_GLOBAL:] = np.kron(k_n, np.eye(3))
+    out[: kf.N_GLOBAL, : kf.N_GLOBAL] = k_g
+    out[kf.N_GLOBAL :, kf.N_GLOBAL :] = np.kron(k_n, np.eye(3))
     return out
 
 
@@ -397,14 +413,18 @@ def test_newton_step_solves_the_dense_gauss_newton_system(prior):
     state = kf.State(part, random_spd(rng, kf.N_GLOBAL), random_spd(rng, len(m.u)))
     k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
 
-    free = np.r_[kf.GLOBAL, START:part.n_coordinates]
+    free = np.r_[kf.GLOBAL, START : part.n_coordinates]
     a = dense_information(part, assignment)[np.ix_(free, free)]
     k = dense_stiffness(state, k_node, settings)
     force = fit.data_force(part, points, assignment, np.sqrt(VARIANCE))[free]
     q = np.concatenate([kf.global_vector(part), part.d.ravel()])
     expected = np.linalg.solve(a + k, force - k @ q)
-    np.testing.assert_allclose(kf.newton_step(state, points, assignment, k_node, settings), expected,
-                               rtol=1e-8, atol=1e-10 * np.max(np.abs(expected)))
+    np.testing.assert_allclose(
+        kf.newton_step(state, points, assignment, k_node, settings),
+        expected,
+        rtol=1e-8,
+        atol=1e-10 * np.max(np.abs(expected)),
+    )
 
     rigid = replace(settings, local=False)
     g = kf.N_GLOBAL
@@ -421,8 +441,9 @@ def test_prior_form_state_and_riccati_steps_match_dense_computation():
     part = random_part(rng, m)
     points = noisy_points(rng, part, 60, noise=0.05)
     assignment = fit.nearest_nodes(points, kin.positions(part))
-    settings = kf.Settings(measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0,
-                           coupling="joint", prior_stiffness=True)
+    settings = kf.Settings(
+        measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0, coupling="joint", prior_stiffness=True
+    )
     state = kf.State(part, random_spd(rng, kf.N_GLOBAL), random_spd(rng, len(m.u)))
     k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
     info = kf.information(part, assignment, VARIANCE)
@@ -431,9 +452,9 @@ def test_prior_form_state_and_riccati_steps_match_dense_computation():
     k = dense_stiffness(state, k_node, settings)
     q = np.concatenate([kf.global_vector(part), part.d.ravel()])
     p = np.zeros_like(k)
-    p[:kf.N_GLOBAL, :kf.N_GLOBAL] = state.p_global
-    p[kf.N_GLOBAL:, kf.N_GLOBAL:] = np.kron(state.p_node, np.eye(3))
-    free = np.r_[kf.GLOBAL, START:part.n_coordinates]
+    p[: kf.N_GLOBAL, : kf.N_GLOBAL] = state.p_global
+    p[kf.N_GLOBAL :, kf.N_GLOBAL :] = np.kron(state.p_node, np.eye(3))
+    free = np.r_[kf.GLOBAL, START : part.n_coordinates]
     rate = kf.state_rate(state, force, k_node, settings)
     np.testing.assert_allclose(rate[free], p @ (force[free] - k @ q), rtol=1e-10, atol=1e-12 * np.max(np.abs(rate)))
     assert rate[kin.SHAPE.start] == 0.0  # a0
@@ -441,7 +462,9 @@ def test_prior_form_state_and_riccati_steps_match_dense_computation():
     dt = kf.step_size(state, info, k_node, settings)
     moved = kf.riccati(state, info, k_node, settings, dt)
     k_g = kf.global_stiffness(settings)
-    expected = state.p_global + dt * (0.3 * np.eye(kf.N_GLOBAL) - state.p_global @ (info.global_ + k_g) @ state.p_global)
+    expected = state.p_global + dt * (
+        0.3 * np.eye(kf.N_GLOBAL) - state.p_global @ (info.global_ + k_g) @ state.p_global
+    )
     np.testing.assert_allclose(moved.p_global, expected, rtol=1e-12, atol=1e-14)
     a_node = np.diag(info.node) + k_node.toarray()
     expected = state.p_node + dt * (0.3 * np.eye(len(m.u)) - state.p_node @ a_node @ state.p_node)

@@ -59,7 +59,7 @@ def test_jacobian_blocks():
     np.testing.assert_array_equal(big_l[:, :, 0:3], np.broadcast_to(np.eye(3), (4, 3, 3)))
     np.testing.assert_allclose(big_l[:, :, kin.SHAPE], part.rotation @ sq.jacobian(part.q_s, part.u, part.v))
     for i in range(4):
-        d_columns = big_l[i, :, kin.SHAPE.stop:].reshape(3, 4, 3)
+        d_columns = big_l[i, :, kin.SHAPE.stop :].reshape(3, 4, 3)
         np.testing.assert_array_equal(d_columns[:, i], part.rotation)
         assert not np.delete(d_columns, i, axis=1).any()
 
@@ -81,7 +81,7 @@ def _eq_43(part, qdot):
     """w x (w x R p) + 2 w x R pdot: the velocity product without R Jdot qdot_s."""
     w = qdot[3:6]
     rp = kin.positions(part) - part.c
-    pdot = sq.jacobian(part.q_s, part.u, part.v) @ qdot[kin.SHAPE] + qdot[kin.SHAPE.stop:].reshape(-1, 3)
+    pdot = sq.jacobian(part.q_s, part.u, part.v) @ qdot[kin.SHAPE] + qdot[kin.SHAPE.stop :].reshape(-1, 3)
     return np.cross(w, np.cross(w, rp)) + 2 * np.cross(w, pdot @ part.rotation.T)
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import TEST_DATA
+
 from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.geometry.se3 import exp_so3, log_so3
@@ -26,11 +26,13 @@ VICON_ARM = ROOT / "models" / "vicon_arm.points.toml"
 WALKER = ROOT / "models" / "qualisys_walker.points.toml"
 
 # a0, a1, a2, a3, eps1, eps2, t1, t2, b1, b2, b3: an upper arm, a forearm and a hand, metres
-SHAPES = np.array([
-    [1.0, 0.050, 0.045, 0.150, 0.8, 1.0, 0.1, 0.0, 0.0, 0.0, 0.5],
-    [1.0, 0.040, 0.035, 0.130, 0.8, 1.0, 0.2, 0.1, 0.0, 0.0, 0.5],
-    [1.0, 0.045, 0.015, 0.090, 0.9, 0.9, 0.0, 0.0, 0.0, 0.0, 0.5],
-])
+SHAPES = np.array(
+    [
+        [1.0, 0.050, 0.045, 0.150, 0.8, 1.0, 0.1, 0.0, 0.0, 0.0, 0.5],
+        [1.0, 0.040, 0.035, 0.130, 0.8, 1.0, 0.2, 0.1, 0.0, 0.0, 0.5],
+        [1.0, 0.045, 0.015, 0.090, 0.9, 0.9, 0.0, 0.0, 0.0, 0.0, 0.5],
+    ]
+)
 MESH = sq.mesh(7, 8)
 MARKER_NODES = [3, 6, 17, 20, 30, 33, 44, 47, 57]  # spread over the rings and longitudes
 
@@ -88,7 +90,7 @@ def test_synthetic_arm_is_tracked_with_its_joints(dynamics: str) -> None:
         assert fitted.violation < 1e-4
         assert np.linalg.norm(fitted.joints - true_joints, axis=1).max() < 0.035, f
         assert np.all(fitted.residual < 0.03) and np.all(fitted.seen == len(MARKER_NODES))
-        assert fitted.rms == pytest.approx(np.sqrt(np.mean(fitted.residual ** 2)))
+        assert fitted.rms == pytest.approx(np.sqrt(np.mean(fitted.residual**2)))
     moved = np.linalg.norm(_truth(11)[1] - _truth(0)[1], axis=1)
     assert moved.min() > 0.05  # the joints travel: following them is not standing still
 
@@ -104,9 +106,13 @@ def test_a_part_without_markers_keeps_moving_on_its_joint() -> None:
         frames[f] = frames[f].copy()
         frames[f][model.labels == 2] = np.nan
     fits = list(pts.track(frames, model, pts.PointsSettings(dynamics="second-order"), 0.01))
-    turned = [np.linalg.norm(log_so3(fit.body.parts[1].rotation.T @ fit.body.parts[2].rotation)
-                             - log_so3(fits[5].body.parts[1].rotation.T @ fits[5].body.parts[2].rotation))
-              for fit in fits[6:]]
+    turned = [
+        np.linalg.norm(
+            log_so3(fit.body.parts[1].rotation.T @ fit.body.parts[2].rotation)
+            - log_so3(fits[5].body.parts[1].rotation.T @ fits[5].body.parts[2].rotation)
+        )
+        for fit in fits[6:]
+    ]
     assert turned[0] > 0.0 and np.all(np.diff(turned) > 0.0)  # it keeps turning the way it was
     for f, fitted in enumerate(fits[6:], start=6):
         assert np.isnan(fitted.residual[2]) and fitted.seen[2] == 0 and fitted.violation < 1e-4
@@ -148,23 +154,35 @@ def test_start_frame_waits_for_three_markers_per_part() -> None:
         pts.start_frame(frames, model)
 
 
-@pytest.mark.parametrize("text, problem", [
-    ("name = 'x'\n", "no [[part]] tables"),
-    ("[[part]]\nname = 'a'\nmarkers = ['p', 'q']\n", "part 'a' has 2 markers"),
-    ("[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n[[part]]\nname = 'a'\nmarkers = ['s', 't', 'u']\n",
-     "part 'a' is defined twice"),
-    ("[[part]]\nname = 'a'\nparent = 'z'\nmarkers = ['p', 'q', 'r']\n", "parent 'z', which is not a part"),
-    ("[[part]]\nname = 'a'\nparent = 'b'\nmarkers = ['p', 'q', 'r']\n"
-     "[[part]]\nname = 'b'\nparent = 'a'\nmarkers = ['s', 't', 'u']\n", "form a loop"),
-    ("[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n[[part]]\nname = 'b'\nmarkers = ['r', 't', 'u']\n",
-     "marker 'r' is listed on two parts"),
-    ("mesh = [0, 8]\n[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n", "mesh = [0, 8]"),
-    ("[[part]]\nname = 'a'\nmarkers = 'p'\n", "needs markers = "),
-    ("mesh = [11]\n[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n", "must be [rings, longitudes]"),
-    ("[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n[[part]]\nname = 'b'\nparent = 'a'\njoint = 'j'\n"
-     "markers = ['s', 't', 'u']\n[[part]]\nname = 'c'\nparent = 'a'\njoint = 'j'\nmarkers = ['v', 'w', 'x']\n",
-     "joint 'j' is named twice"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("name = 'x'\n", "no [[part]] tables"),
+        ("[[part]]\nname = 'a'\nmarkers = ['p', 'q']\n", "part 'a' has 2 markers"),
+        (
+            "[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n[[part]]\nname = 'a'\nmarkers = ['s', 't', 'u']\n",
+            "part 'a' is defined twice",
+        ),
+        ("[[part]]\nname = 'a'\nparent = 'z'\nmarkers = ['p', 'q', 'r']\n", "parent 'z', which is not a part"),
+        (
+            "[[part]]\nname = 'a'\nparent = 'b'\nmarkers = ['p', 'q', 'r']\n"
+            "[[part]]\nname = 'b'\nparent = 'a'\nmarkers = ['s', 't', 'u']\n",
+            "form a loop",
+        ),
+        (
+            "[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n[[part]]\nname = 'b'\nmarkers = ['r', 't', 'u']\n",
+            "marker 'r' is listed on two parts",
+        ),
+        ("mesh = [0, 8]\n[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n", "mesh = [0, 8]"),
+        ("[[part]]\nname = 'a'\nmarkers = 'p'\n", "needs markers = "),
+        ("mesh = [11]\n[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n", "must be [rings, longitudes]"),
+        (
+            "[[part]]\nname = 'a'\nmarkers = ['p', 'q', 'r']\n[[part]]\nname = 'b'\nparent = 'a'\njoint = 'j'\n"
+            "markers = ['s', 't', 'u']\n[[part]]\nname = 'c'\nparent = 'a'\njoint = 'j'\nmarkers = ['v', 'w', 'x']\n",
+            "joint 'j' is named twice",
+        ),
+    ],
+)
 def test_bad_points_models_are_one_line_errors(tmp_path: Path, text: str, problem: str) -> None:
     path = tmp_path / "model.toml"
     path.write_text(text)
@@ -186,8 +204,19 @@ def test_points_command_on_the_vicon_arm(tmp_path: Path, capsys) -> None:
     """The real Vicon.c3d raising arm, frames 0-29: every part seen, joints held to a micrometre,
     every part's RMS marker-to-node distance under 2.5 cm (measured over all 580 frames of the full
     file in ../shared/data: medians 13-21 mm, see README)."""
-    code = main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--out", str(tmp_path),
-                 "--frames", "30", "--quiet"])
+    code = main(
+        [
+            "points",
+            str(MARKERS / "Vicon.c3d"),
+            "--model",
+            str(VICON_ARM),
+            "--out",
+            str(tmp_path),
+            "--frames",
+            "30",
+            "--quiet",
+        ]
+    )
     assert code == 0
     report = capsys.readouterr().out
     assert "fitted 30 frames" in report and "30 with every part seen" in report
@@ -204,8 +233,26 @@ def test_points_command_on_the_vicon_arm(tmp_path: Path, capsys) -> None:
 
 
 def test_every_other_frame_keeps_the_file_s_clock(tmp_path: Path) -> None:
-    assert main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--out", str(tmp_path),
-                 "--start", "10", "--frames", "6", "--every", "2", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "points",
+                str(MARKERS / "Vicon.c3d"),
+                "--model",
+                str(VICON_ARM),
+                "--out",
+                str(tmp_path),
+                "--start",
+                "10",
+                "--frames",
+                "6",
+                "--every",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     poses = load_poses(tmp_path / "poses.npz")
     assert list(poses["frame"]) == [10, 12, 14] and np.allclose(poses["time"], [0.0, 0.02, 0.04])
 
@@ -220,8 +267,22 @@ def test_ctrl_c_keeps_both_files_of_the_frames_done(tmp_path: Path, monkeypatch,
             yield fitted
 
     monkeypatch.setattr(pts, "track", interrupted)
-    assert main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--out", str(tmp_path),
-                 "--frames", "10", "--quiet"]) == 130
+    assert (
+        main(
+            [
+                "points",
+                str(MARKERS / "Vicon.c3d"),
+                "--model",
+                str(VICON_ARM),
+                "--out",
+                str(tmp_path),
+                "--frames",
+                "10",
+                "--quiet",
+            ]
+        )
+        == 130
+    )
     assert "interrupted after 3 frames" in capsys.readouterr().out
     poses, shapes = load_poses(tmp_path / "poses.npz"), np.load(tmp_path / "shapes.npz")
     assert list(poses["frame"]) == list(shapes["frame"]) == [0, 1, 2]

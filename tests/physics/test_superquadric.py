@@ -17,9 +17,7 @@ SPECIAL_U = np.array([0.0, np.pi / 2, -np.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.3, 0.3, 
 SPECIAL_V = np.array([0.0, 0.0, 1.0, np.pi / 2, -np.pi / 2, -np.pi, np.pi, np.pi, 0.0, np.pi / 2, np.pi / 2])
 
 
-def jacobian_central_difference(
-    q_s: np.ndarray, u: np.ndarray, v: np.ndarray, step: float = 1e-6
-) -> np.ndarray:
+def jacobian_central_difference(q_s: np.ndarray, u: np.ndarray, v: np.ndarray, step: float = 1e-6) -> np.ndarray:
     """Test oracle for ``sq.jacobian``: (s(q + h e_k) - s(q - h e_k)) / 2h, h = step max(0.1, |q_k|).
 
     22 shape evaluations per point (section 1); shape (..., 3, 11).
@@ -133,8 +131,12 @@ def test_shape_is_eq_20_and_21():
 def test_singular_points_are_finite_and_the_poles_collapse():
     for eps in (0.1, 0.5, 1.0, 1.9):
         q = np.array([1.5, 0.6, 0.4, 0.9, eps, eps, 0.5, -0.4, 0.3, 0.2, 0.6])
-        for values in (sq.shape(q, SPECIAL_U, SPECIAL_V), sq.jacobian(q, SPECIAL_U, SPECIAL_V),
-                       sq.normals(q, SPECIAL_U, SPECIAL_V), jacobian_central_difference(q, SPECIAL_U, SPECIAL_V)):
+        for values in (
+            sq.shape(q, SPECIAL_U, SPECIAL_V),
+            sq.jacobian(q, SPECIAL_U, SPECIAL_V),
+            sq.normals(q, SPECIAL_U, SPECIAL_V),
+            jacobian_central_difference(q, SPECIAL_U, SPECIAL_V),
+        ):
             assert np.isfinite(values).all()
         # a pole is one point for every v, on the (bent) axis: cos(pi/2) = 6e-17 is taken as 0
         v = np.linspace(-np.pi, np.pi, 9)
@@ -303,7 +305,7 @@ def test_interpolation_weights_are_linear_elements_of_the_mesh():
     # every point's nodes are the corners of one mesh triangle
     triangles = {frozenset(t) for t in m.triangles.tolist()}
     for row in range(len(u)):
-        nodes = frozenset(n.indices[n.indptr[row]:n.indptr[row + 1]].tolist())
+        nodes = frozenset(n.indices[n.indptr[row] : n.indptr[row + 1]].tolist())
         assert any(nodes <= t for t in triangles)
     # v is taken modulo 2 pi, and the field is continuous across v = +-pi
     assert np.allclose(sq.interpolation_matrix(m, u, v + 2 * np.pi).toarray(), dense)

@@ -11,8 +11,10 @@ from tracker.physics import experiment
 
 
 def test_superquadric_experiment_prints_ours_beside_the_paper(capsys) -> None:
-    assert main(["experiment", "superquadric", "--densities", "100", "--variances", "10,0", "--frames", "2",
-                 "--quiet"]) == 0
+    assert (
+        main(["experiment", "superquadric", "--densities", "100", "--variances", "10,0", "--frames", "2", "--quiet"])
+        == 0
+    )
     lines = capsys.readouterr().out.splitlines()
     rows = [line for line in lines if line.startswith("| 100 |")]
     assert len(rows) == 2
@@ -24,8 +26,23 @@ def test_superquadric_experiment_prints_ours_beside_the_paper(capsys) -> None:
 
 
 def test_superquadric_experiment_json(capsys) -> None:
-    assert main(["experiment", "superquadric", "--densities", "25", "--variances", "1", "--frames", "2",
-                 "--json", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "experiment",
+                "superquadric",
+                "--densities",
+                "25",
+                "--variances",
+                "1",
+                "--frames",
+                "2",
+                "--json",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     report = json.loads(capsys.readouterr().out)
     (row,) = report["rows"]
     assert (row["density"], row["variance"]) == (25, 1)

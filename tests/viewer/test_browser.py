@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.io.poses import load_poses
 from tracker.io.posefile import load_pose_file
+from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
 from tracker.track import Settings
@@ -23,8 +23,15 @@ from tracker.viewer.scene import BODY, Scene
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
 CHROMIUM = os.environ.get("CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync"]
+FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 if CHROMIUM is None and os.environ.get("TRACKER_REQUIRE_BROWSER"):
     pytest.fail("no Chromium found: install Debian's chromium package or set CHROMIUM", pytrace=False)
@@ -44,16 +51,20 @@ def _open(page, server, cameras: int) -> None:
     page.goto(f"http://127.0.0.1:{server.get_port()}")
     page.wait_for_selector("canvas", timeout=60_000)
     # every camera panel has received a decoded image
-    page.wait_for_function(f"() => [...document.querySelectorAll('img')].filter("
-                           f"i => i.complete && i.naturalWidth >= 320).length >= {cameras}", timeout=60_000)
+    page.wait_for_function(
+        f"() => [...document.querySelectorAll('img')].filter("
+        f"i => i.complete && i.naturalWidth >= 320).length >= {cameras}",
+        timeout=60_000,
+    )
 
 
 def _body_pixels(rgb: np.ndarray) -> int:
     """Pixels with the body's orange hue (shaded lighter or darker)."""
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
     target = cv2.cvtColor(np.uint8([[BODY]]), cv2.COLOR_RGB2HSV)[0, 0]
-    return int(((np.abs(hsv[..., 0].astype(int) - int(target[0])) <= 6) & (hsv[..., 1] > 120)
-                & (hsv[..., 2] > 60)).sum())
+    return int(
+        ((np.abs(hsv[..., 0].astype(int) - int(target[0])) <= 6) & (hsv[..., 1] > 120) & (hsv[..., 2] > 60)).sum()
+    )
 
 
 def test_viewer_draws_the_body_and_the_camera_images(server, page, tmp_path, tracked_demo):

@@ -7,10 +7,15 @@ from tracker.viewer.overlay import component_colours, draw, weight_colour
 def test_search_lines_are_coloured_by_weight_and_missing_edges_grey():
     image = np.full((60, 80), 200, np.uint8)
     inspection = Inspection(
-        camera=np.array([0, 0, 1]), component=np.array([0, 1, 0]),
-        pixel=np.array([[20.0, 15.0], [20.0, 45.0], [40.0, 30.0]]), normal=np.array([[1.0, 0.0]] * 3),
-        lo=np.array([-8, -8, -8]), hi=np.array([8, 8, 8]),
-        offset=np.array([0.0, np.nan, 1.0]), weight=np.array([0.5, 0.0, 1 / 3]))
+        camera=np.array([0, 0, 1]),
+        component=np.array([0, 1, 0]),
+        pixel=np.array([[20.0, 15.0], [20.0, 45.0], [40.0, 30.0]]),
+        normal=np.array([[1.0, 0.0]] * 3),
+        lo=np.array([-8, -8, -8]),
+        hi=np.array([8, 8, 8]),
+        offset=np.array([0.0, np.nan, 1.0]),
+        weight=np.array([0.5, 0.0, 1 / 3]),
+    )
     out = draw(image, inspection, 0, 2.0, component_colours(2))
     assert out.shape == (60, 80, 3) and out.dtype == np.uint8
     green = np.array(weight_colour(1.0))

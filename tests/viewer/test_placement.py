@@ -1,4 +1,5 @@
 import numpy as np
+import viser.transforms as vtf
 
 from tracker.cli import main
 from tracker.geometry import se3
@@ -7,7 +8,6 @@ from tracker.io.recording import open_recording
 from tracker.model import joint_centres, load_model
 from tracker.viewer.placement import Placement, in_view, subtree
 from tracker.viewer.scene import Scene
-import viser.transforms as vtf
 
 
 def test_subtree_of_a_breadth_first_tree():

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import TEST_DATA
 from scipy.spatial import cKDTree
 
-from conftest import TEST_DATA
 from tracker.cli import main
 from tracker.io.markers import read_markers
 from tracker.io.poses import load_poses
@@ -24,8 +24,26 @@ def test_points_run_is_rebuilt_and_recorded_for_the_viewer(tmp_path: Path) -> No
     """The nodes rebuilt from the two files reproduce each part's residual (RMS distance of its markers
     to their nearest nodes) to round-off, and --record writes a playable .viser file of every frame."""
     recording = tmp_path / "arm.viser"
-    assert main(["points", str(VICON), "--model", str(MODEL), "--out", str(tmp_path), "--frames", "4",
-                 "--record", str(recording), "--port", "0", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "points",
+                str(VICON),
+                "--model",
+                str(MODEL),
+                "--out",
+                str(tmp_path),
+                "--frames",
+                "4",
+                "--record",
+                str(recording),
+                "--port",
+                "0",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert recording.stat().st_size > 10_000
     results, shapes = load_poses(tmp_path / "poses.npz"), dict(np.load(tmp_path / "shapes.npz"))
     markers = read_markers(VICON).select([str(name) for name in shapes["marker_names"]])
@@ -35,12 +53,11 @@ def test_points_run_is_rebuilt_and_recorded_for_the_viewer(tmp_path: Path) -> No
         for p, part_nodes in enumerate(nodes):
             mine = markers[frame][shapes["marker_part"] == p]
             distances = cKDTree(part_nodes).query(mine)[0]
-            assert np.sqrt(np.mean(distances ** 2)) == pytest.approx(shapes["residual"][row, p], rel=1e-9)
+            assert np.sqrt(np.mean(distances**2)) == pytest.approx(shapes["residual"][row, p], rel=1e-9)
 
 
 def test_view_draws_each_frame_and_skips_unseen_markers(tmp_path: Path, server) -> None:
-    assert main(["points", str(VICON), "--model", str(MODEL), "--out", str(tmp_path), "--frames", "2",
-                 "--quiet"]) == 0
+    assert main(["points", str(VICON), "--model", str(MODEL), "--out", str(tmp_path), "--frames", "2", "--quiet"]) == 0
     results, shapes = load_poses(tmp_path / "poses.npz"), dict(np.load(tmp_path / "shapes.npz"))
     markers = read_markers(VICON).select([str(name) for name in shapes["marker_names"]])[:2].copy()
     markers[1, :3] = np.nan

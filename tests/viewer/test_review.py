@@ -133,8 +133,7 @@ def test_review_against_a_background_shows_the_difference_images(server, tracked
     rec = open_recording(recording)
     model = load_model(rec.model_path)
     rng = np.random.default_rng(3)
-    background = Background(tuple(rng.integers(0, 256, (c.size[1], c.size[0], 3), dtype=np.uint8)
-                                  for c in rec.cameras))
+    background = Background(tuple(rng.integers(0, 256, (c.size[1], c.size[0], 3), dtype=np.uint8) for c in rec.cameras))
     scene = Scene(server, model, rec.cameras)
     review = Review(scene, rec, model, results, None, Settings(), background)
     try:
@@ -142,7 +141,8 @@ def test_review_against_a_background_shows_the_difference_images(server, tracked
         seeker = FrameSeeker(rec.sources[0], colour=True)
         expected = background.difference(0, seeker.read(int(review.frames[2])))
         seeker.close()
-        np.testing.assert_array_equal(review.inspector.images[0, :expected.shape[0], :expected.shape[1]],
-                                      review.inspector.smooth(expected))
+        np.testing.assert_array_equal(
+            review.inspector.images[0, : expected.shape[0], : expected.shape[1]], review.inspector.smooth(expected)
+        )
     finally:
         review.close()
