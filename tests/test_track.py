@@ -14,7 +14,7 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
-from tracker.status import LOST
+from tracker.status import LOST, TRACKED
 from tracker.synth import synthesize
 from tracker.track import Settings, Tracker, motion_since
 
@@ -82,9 +82,19 @@ def test_converges_from_a_displaced_start():
     assert before > 0.04 and after < 0.01
 
 
-def test_one_camera_completes():
+def test_one_camera_holds_the_body_in_its_image():
+    """The demo seen by cam0 alone, 10 frames: one view leaves depth weakly observed, so the 3-D error is
+    several centimetres (measured 52 mm MPJPE), but in cam0's image the joints stay where the truth's are
+    (measured: mean 1.4 px, worst 9.5 px) and every frame is tracked with edges at nearly all samples."""
     report, results = _track(DEMO, 10, cameras=["cam0"])
-    assert len(results) == 10 and np.isfinite(report.mpjpe_mm)
+    assert [r.status for r in results] == [TRACKED] * 10
+    assert min(r.share for r in results) > 0.9 and max(r.residual for r in results) < 1.0
+    assert report.mpjpe_mm < 100.0
+    camera = open_recording(DEMO, ["cam0"]).cameras[0]
+    truth = load_poses(DEMO / "truth.npz")["joints"][:10]
+    tracked = joint_centres(np.stack([r.poses for r in results]))
+    pixels = np.linalg.norm([camera.project(a) - camera.project(b) for a, b in zip(tracked, truth)], axis=2)
+    assert pixels.mean() < 3.0 and pixels.max() < 20.0
 
 
 def test_ctrl_c_keeps_the_frames_done(tiny_recording, tmp_path, monkeypatch, capsys):
