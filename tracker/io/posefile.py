@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import tomli_w
@@ -87,4 +88,8 @@ def pose_table(model: Model, poses: np.ndarray) -> dict:
 def save_pose_file(path: str | os.PathLike, model: Model, poses: np.ndarray) -> None:
     """Write a pose TOML atomically."""
     text = tomli_w.dumps(pose_table(model, poses)).encode()
-    atomic_write(path, lambda f: f.write(text))
+
+    def write(file: BinaryIO) -> None:
+        file.write(text)
+
+    atomic_write(path, write)
