@@ -19,6 +19,7 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -96,7 +97,7 @@ def open_recording(
                     f"add it or pick cameras with a video from: {available_text}"
                 )
 
-    chosen_sources = [sources[name] for name in chosen]
+    chosen_sources = cast(list[Path], [sources[name] for name in chosen])  # each has a source: checked above
     probes = [_probe(source, rig[name]) for name, source in zip(chosen, chosen_sources)]
     counts = [count for count, _, _ in probes]
     for source, count in zip(chosen_sources, counts):
@@ -185,6 +186,7 @@ def _probe(source: Path, camera: Camera) -> tuple[int, float | None, Camera]:
             raise TrackerInputError(
                 f"{source}: corrupt or unsupported video (its first frame does not decode); re-encode it, e.g. as H.264 .mp4"
             )
+        assert image is not None  # ok: the frame decoded
         camera = _fit_size(source, image, camera)
         count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
         if count <= 0:  # the container does not say: count by decoding

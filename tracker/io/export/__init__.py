@@ -160,6 +160,7 @@ def export(
         from tracker.io.export.bvh import write_bvh
         from tracker.model import load_model
 
+        assert model is not None  # checked above for BVH
         body = load_model(model)
         write_bvh(target, body, _bvh_poses(rows, poses, body.names, Path(model)), rows.status, rows.rate)
     return target
