@@ -157,7 +157,8 @@ def _readme(
         f"- frames: {frames} at {fps:g} fps",
         f"- motion: `{motion}`"
         if bvh is None
-        else f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} (every {stride}),"
+        else f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} "
+        f"(every {stride}),"
         " retargeted onto the model",
         "",
         "## Credits and licences",

@@ -33,8 +33,8 @@ camera (the first camera), "f" the board at frame f, "c" a camera.
    tightly, Jacobian by finite differences on its known sparsity: a corner's residual depends on
    one camera and one board pose only). The first solve uses the Huber loss rho with a 1 px scale;
    observations whose error then exceeds max(3 px, 4 x the median) are dropped and plain least
-   squares (rho(s) = s) finishes, again after each change of the inlier set (at most twice). Cameras whose distortion is not
-   the 4-5 coefficient pinhole model (fixed intrinsics from a file: fisheye, rational, skew)
+   squares (rho(s) = s) finishes, again after each change of the inlier set (at most twice). Cameras
+   whose distortion is not the 4-5 coefficient pinhole model (fixed intrinsics from a file: fisheye, rational, skew)
    are measured in ideal pixels instead: (fx x_n + cx, fy y_n + cy) of the undistorted corner.
 """
 

@@ -36,7 +36,8 @@ def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
     unknown = sorted(set(table) - set(model.names))
     if unknown:
         raise TrackerInputError(
-            f"{path}: unknown component {unknown[0]!r} (model {model.name!r} has {', '.join(model.names)}); fix the name"
+            f"{path}: unknown component {unknown[0]!r} (model {model.name!r} has {', '.join(model.names)}); "
+            "fix the name"
         )
     root = model.names[0]
     if "translation" not in table.get(root, {}):

@@ -131,8 +131,8 @@ def frames(
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
 
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
-    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails to decode
-    raises TrackerInputError naming the file and the index.
+    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails
+    to decode raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
     if not 0 <= start <= stop <= recording.frame_count:
@@ -184,7 +184,8 @@ def _probe(source: Path, camera: Camera) -> tuple[int, float | None, Camera]:
         ok, image = capture.read() if capture.isOpened() else (False, None)
         if not ok:
             raise TrackerInputError(
-                f"{source}: corrupt or unsupported video (its first frame does not decode); re-encode it, e.g. as H.264 .mp4"
+                f"{source}: corrupt or unsupported video (its first frame does not decode); "
+                "re-encode it, e.g. as H.264 .mp4"
             )
         assert image is not None  # ok: the frame decoded
         camera = _fit_size(source, image, camera)
