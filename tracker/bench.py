@@ -70,6 +70,7 @@ def decode_only_fps(recording: Recording) -> float:
 
 def track_run(recording: Recording, model: Model, settings: Settings, out: Path) -> TrackRun:
     """One end-to-end pass: reader threads, tracking and the poses.npz writer."""
+    assert recording.init_path is not None  # the benchmark recording ships init.toml
     tracker = Tracker(model, recording.cameras, load_pose_file(recording.init_path, model), settings)
     tracker.warm_up()
     tracker.times = StageTimes()
@@ -91,6 +92,7 @@ def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) ->
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``)."""
     every = open_recording(path)
     first = open_recording(path, [every.cameras[0].name])
+    assert every.model_path is not None  # the benchmark recording ships model.toml
     model = load_model(every.model_path)
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)

@@ -27,6 +27,7 @@ import os
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -136,11 +137,11 @@ def preparers(
     """Per camera, what its reader thread makes of a BGR frame: ``smooth(F_k)`` for the edge search, or,
     with ``keep_grey``, the pair (grey frame, smooth(F_k)) so the frame itself can still be shown."""
 
-    def prepare(camera: int, frame: np.ndarray):
+    def prepare(camera: int, frame: np.ndarray) -> object:
         measured = smooth(background.difference(camera, frame))
         return (grey(frame), measured) if keep_grey else measured
 
-    return [lambda frame, camera=camera: prepare(camera, frame) for camera in range(len(background.images))]
+    return [partial(prepare, camera) for camera in range(len(background.images))]
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ order from the root, so ``parent[i] < i``; the flat arrays of
 
 from __future__ import annotations
 
+import os
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,7 +164,7 @@ def _breadth_first(names: list[str], parents: list[str], path: Path) -> list[int
     return order
 
 
-def load_model(path: str | Path) -> Model:
+def load_model(path: str | os.PathLike) -> Model:
     """Load and validate a body model TOML (formats.md, "Body model")."""
     path = Path(path)
     return model_from_dict(read_toml(path, "model", "pass --model with an existing models/*.toml"), path)

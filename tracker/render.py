@@ -373,7 +373,7 @@ class Renderer:
             y0, y1 = max(rows[0] - pad, 0), min(rows[-1] + pad + 1, h)
             x0, x1 = max(cols[0] - pad, 0), min(cols[-1] + pad + 1, w)
             c = comp[y0:y1, x0:x1]
-            mask = (c >= 0).astype(np.float32)
+            mask: np.ndarray = (c >= 0).astype(np.float32)
             body = self.albedo[np.maximum(c, 0)] * (shade[y0:y1, x0:x1].astype(np.float32) * mask)[..., None]
             if self.blur > 0:
                 body = cv2.GaussianBlur(body, (0, 0), self.blur, borderType=cv2.BORDER_REPLICATE)

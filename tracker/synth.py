@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
+from typing import Any, BinaryIO
 
 import cv2
 import numpy as np
@@ -123,7 +124,7 @@ def motion_poses(
 def write_truth(path: str | os.PathLike, model: Model, poses: np.ndarray, frame: np.ndarray | None = None) -> None:
     """truth.npz (formats.md): frame, component_names, poses, joint_names, joints; unicode strings, atomic."""
     frame = np.arange(len(poses)) if frame is None else np.asarray(frame)
-    arrays = {
+    arrays: dict[str, Any] = {  # Any: numpy's savez stub types **kwds like allow_pickle
         "frame": frame.astype(np.int64),
         "component_names": np.array(model.names, dtype=str),
         "poses": np.asarray(poses, dtype=np.float64),
@@ -156,7 +157,8 @@ def _readme(
         f"- frames: {frames} at {fps:g} fps",
         f"- motion: `{motion}`"
         if bvh is None
-        else f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} (every {stride}),"
+        else f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} "
+        f"(every {stride}),"
         " retargeted onto the model",
         "",
         "## Credits and licences",
@@ -229,7 +231,10 @@ def synthesize(
     renderers = [Renderer(model, cam, bg, noise=noise, blur=blur) for cam, bg in zip(cameras, photos)]
     rng = np.random.default_rng(seed)
 
-    writers, temps, finals = [], [], []
+    writers: list[Path | MjpegAviWriter | cv2.VideoWriter] = []  # a PNG folder or a video writer per camera
+    writer: Path | MjpegAviWriter | cv2.VideoWriter
+    temps: list[Path] = []
+    finals: list[Path] = []
     for cam in cameras:
         if codec == "png":
             folder = out / cam.name
@@ -241,7 +246,7 @@ def synthesize(
         if codec == "MJPG":
             writer = MjpegAviWriter(temp, rate, cam.size, quality)
         else:
-            writer = cv2.VideoWriter(str(temp), cv2.VideoWriter_fourcc(*codec), rate, cam.size)
+            writer = cv2.VideoWriter(str(temp), cv2.VideoWriter.fourcc(*codec), rate, cam.size)
             if not writer.isOpened():
                 raise TrackerInputError(f"{temp}: OpenCV cannot write {codec} video here; use codec='MJPG' or 'png'")
         writers.append(writer)
@@ -256,8 +261,10 @@ def synthesize(
                 image = renderer.render(poses[f], rng)
                 render_seconds += time.perf_counter() - tick
                 if codec == "png":
+                    assert isinstance(writer, Path)
                     cv2.imwrite(str(writer / f"{f:06d}.png"), image)
                 else:
+                    assert not isinstance(writer, Path)
                     writer.write(image)
         done = True
     finally:
@@ -274,11 +281,19 @@ def synthesize(
 
     save_calibration(cameras, out / "calibration.toml")
     model_bytes = model_path.read_bytes()
-    atomic_write(out / "model.toml", lambda file: file.write(model_bytes))
+
+    def write_model(file: BinaryIO) -> None:
+        file.write(model_bytes)
+
+    atomic_write(out / "model.toml", write_model)
     save_pose_file(out / "init.toml", model, poses[0])
     write_truth(out / "truth.npz", model, poses)
     text = _readme(out.name, motion, bvh_path, used, frames, rate, cameras, model_path, start, stride).encode()
-    atomic_write(out / "README.md", lambda file: file.write(text))
+
+    def write_readme(file: BinaryIO) -> None:
+        file.write(text)
+
+    atomic_write(out / "README.md", write_readme)
     files = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file() and not p.name.startswith(".")}
     in_view = visibility(model, poses, cameras).mean(axis=0)
     return {

@@ -251,7 +251,8 @@ class Tracker:
             )
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
-        self.lo = self.hi = None
+        self.lo: np.ndarray | None = None  # each sample's search limits, set by sample()
+        self.hi: np.ndarray | None = None
         self.times = StageTimes()
 
     def with_cameras(self, cameras) -> Tracker:
@@ -412,6 +413,7 @@ class Tracker:
         self.sample(search_range)
         self.measure(search_range, self.still)
         n = s.count
+        assert self.lo is not None and self.hi is not None  # set by sample()
         return Inspection(
             s.camera[:n].copy(),
             s.component[:n].copy(),
@@ -451,6 +453,7 @@ class Tracker:
         previous frame).  Returns the predicted state's ``dynamics.position_inverse``, which the
         correction reuses."""
         st = self.settings
+        assert self.dynamics is not None  # motion "kalman"
         predicted = dynamics.predict(
             self.dynamics, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
         )
@@ -479,6 +482,7 @@ class Tracker:
                 fallback=self.noise_scale / s,
             )
         data = self.information - self.prior
+        assert self.dynamics is not None  # motion "kalman"
         information = dynamics.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
         self.dynamics = dynamics.correct(self.dynamics, self.poses, information, inverse)
 

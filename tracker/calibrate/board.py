@@ -171,7 +171,7 @@ class BoardDetector:
 
     def __init__(self, board: Board):
         self.board = board
-        self._charuco = None
+        self._charuco: cv2.aruco.CharucoDetector | None = None
         if board.kind == "charuco":
             dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board.dictionary))
             cv_board = cv2.aruco.CharucoBoard((board.cols, board.rows), board.square, board.marker, dictionary)
@@ -188,6 +188,7 @@ class BoardDetector:
     def _detect_charuco(self, grey: np.ndarray) -> Detection | None:
         """The board's front side, else its mirrored back (double-sided boards): the back's corners are
         those of the front seen in a left-right flipped image, mapped back by x -> W - 1 - x."""
+        assert self._charuco is not None  # called for ChArUco boards only
         for mirrored in (False, True):
             image = cv2.flip(grey, 1) if mirrored else grey
             corners, ids, _, _ = self._charuco.detectBoard(image)
@@ -212,7 +213,11 @@ class BoardDetector:
             if scale == 1.0
             else cv2.resize(grey, (round(width * scale), round(height * scale)), interpolation=cv2.INTER_AREA)
         )
-        found, corners = cv2.findChessboardCorners(small, (cols, rows), _CHESSBOARD_FLAGS)
+        # NOTE: the third positional argument is OpenCV's ``corners`` output, not ``flags``: OpenCV takes the
+        # int as an output array and runs with its default flags (no CALIB_CB_FAST_CHECK). Kept as it is so
+        # results do not change; passing ``flags=_CHESSBOARD_FLAGS`` would be a behaviour change.
+        pattern = (cols, rows)
+        found, corners = cv2.findChessboardCorners(small, pattern, _CHESSBOARD_FLAGS)  # type: ignore[call-overload]
         if not found:
             return None
         corners = corners.reshape(-1, 2).astype(np.float64)

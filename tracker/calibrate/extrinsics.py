@@ -33,8 +33,8 @@ camera (the first camera), "f" the board at frame f, "c" a camera.
    tightly, Jacobian by finite differences on its known sparsity: a corner's residual depends on
    one camera and one board pose only). The first solve uses the Huber loss rho with a 1 px scale;
    observations whose error then exceeds max(3 px, 4 x the median) are dropped and plain least
-   squares (rho(s) = s) finishes, again after each change of the inlier set (at most twice). Cameras whose distortion is not
-   the 4-5 coefficient pinhole model (fixed intrinsics from a file: fisheye, rational, skew)
+   squares (rho(s) = s) finishes, again after each change of the inlier set (at most twice). Cameras
+   whose distortion is not the 4-5 coefficient pinhole model (fixed intrinsics from a file: fisheye, rational, skew)
    are measured in ideal pixels instead: (fx x_n + cx, fy y_n + cy) of the undistorted corner.
 """
 
@@ -324,13 +324,13 @@ class _Problem:
         blocks.append((rows_of_obs, self.n_cam + 6 * frame, 6))
         if self.refine:
             blocks.append((rows_of_obs, self.n_cam + self.n_frame + 9 * cam, 9))
-        rows, cols = [], []
+        row_parts, col_parts = [], []
         for obs_rows, start, width in blocks:
             r = np.repeat(obs_rows, width, axis=1)  # (m, 2 width)
             c = np.tile(start[:, None] + np.arange(width), (1, 2))
-            rows.append(r.ravel())
-            cols.append(c.ravel())
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
+            row_parts.append(r.ravel())
+            col_parts.append(c.ravel())
+        rows, cols = np.concatenate(row_parts), np.concatenate(col_parts)
         if self.refine:  # held intrinsics (see calibrate_rig) get no Jacobian column and so stay put
             held = np.flatnonzero(self.held.ravel()) + self.n_cam + self.n_frame
             keep = ~np.isin(cols, held)
@@ -381,10 +381,10 @@ def calibrate_rig(
     shared = sorted(f for f, cams in seen.items() if len(cams) > 1)
     if len(shared) > max_frames:
         shared = [shared[i] for i in np.linspace(0, len(shared) - 1, max_frames).round().astype(int)]
-    frames = set(shared) | {f for f in keep_frames if f in seen}
+    chosen = set(shared) | {f for f in keep_frames if f in seen}
     if refine_intrinsics or count == 1:
-        frames |= set(seen)
-    frames = sorted(frames)
+        chosen |= set(seen)
+    frames = sorted(chosen)
 
     board_poses = {}
     for f in frames:

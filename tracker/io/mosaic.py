@@ -37,7 +37,7 @@ class MosaicWriter:
         self.widths = [max(2, int(w * scale) // 2 * 2) for w in widths]
         self.temp = temporary_beside(self.path)
         self.writer = cv2.VideoWriter(
-            str(self.temp), cv2.VideoWriter_fourcc(*codec), fps, (sum(self.widths), self.height)
+            str(self.temp), cv2.VideoWriter.fourcc(*codec), fps, (sum(self.widths), self.height)
         )
         if not self.writer.isOpened():
             raise TrackerInputError(f"{self.path}: OpenCV cannot write this video type here; try .avi")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import tomli_w
@@ -35,7 +36,8 @@ def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
     unknown = sorted(set(table) - set(model.names))
     if unknown:
         raise TrackerInputError(
-            f"{path}: unknown component {unknown[0]!r} (model {model.name!r} has {', '.join(model.names)}); fix the name"
+            f"{path}: unknown component {unknown[0]!r} (model {model.name!r} has {', '.join(model.names)}); "
+            "fix the name"
         )
     root = model.names[0]
     if "translation" not in table.get(root, {}):
@@ -87,4 +89,8 @@ def pose_table(model: Model, poses: np.ndarray) -> dict:
 def save_pose_file(path: str | os.PathLike, model: Model, poses: np.ndarray) -> None:
     """Write a pose TOML atomically."""
     text = tomli_w.dumps(pose_table(model, poses)).encode()
-    atomic_write(path, lambda f: f.write(text))
+
+    def write(file: BinaryIO) -> None:
+        file.write(text)
+
+    atomic_write(path, write)

@@ -26,6 +26,7 @@ import os
 import zipfile
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 
@@ -67,7 +68,7 @@ class PosesWriter:
         self._component_names = np.array(component_names, dtype=str)
         self._joint_names = np.array(joint_names, dtype=str)
         n, j = len(component_names), len(joint_names)
-        self._columns = {
+        self._columns: dict[str, np.ndarray] = {
             "frame": np.empty(_INITIAL_CAPACITY, np.int64),
             "poses": np.empty((_INITIAL_CAPACITY, n, 4, 4), np.float64),
             "joints": np.empty((_INITIAL_CAPACITY, j, 3), np.float64),
@@ -103,7 +104,7 @@ class PosesWriter:
             self._timed = time is not None
         elif self._timed != (time is not None):
             raise ValueError(f"{self.path}: give every frame a time or none")
-        row = {
+        row: dict[str, Any] = {
             "frame": frame_index,
             "poses": poses,
             "joints": joints,
@@ -146,7 +147,7 @@ class PosesWriter:
 
     def flush(self) -> None:
         """Rewrite poses.npz atomically with every frame so far."""
-        arrays = self.arrays()
+        arrays: dict[str, Any] = self.arrays()  # Any: numpy's savez stub types **kwds like allow_pickle
         atomic_write(self.path, lambda file: np.savez(file, **arrays))
         self._unflushed = 0
 

@@ -15,7 +15,7 @@ import itertools
 import queue
 import re
 import threading
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from pathlib import Path
 
 import cv2
@@ -71,7 +71,7 @@ def _bgr(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, code)
 
 
-def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Iterator[np.ndarray]:
+def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Generator[np.ndarray, None, None]:
     """Grey (or, with ``colour``, BGR) frames of one video file or image folder from frame ``start`` on
     (the caller stops)."""
     if source.is_dir():
@@ -183,6 +183,7 @@ class FrameSeeker:
     def __init__(self, source: Path, colour: bool = False):
         self.source, self.colour = source, colour
         self.files = image_files(source) if source.is_dir() else None
+        self.capture: cv2.VideoCapture | None
         self.capture, self.raw = (None, False) if self.files is not None else open_video(source)
         self.next_index = 0
 
@@ -190,6 +191,7 @@ class FrameSeeker:
         """Frame ``index`` decoded exactly as the tracker's readers decode it."""
         if self.files is not None:
             return read_image(self.files[index], index, cv2.IMREAD_COLOR if self.colour else cv2.IMREAD_GRAYSCALE)
+        assert self.capture is not None  # a video: opened in __init__
         if index != self.next_index:
             self.capture.set(cv2.CAP_PROP_POS_FRAMES, index)
         image = _read_frame(self.capture, self.raw, self.source, index, self.colour)

@@ -19,6 +19,7 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -96,7 +97,7 @@ def open_recording(
                     f"add it or pick cameras with a video from: {available_text}"
                 )
 
-    chosen_sources = [sources[name] for name in chosen]
+    chosen_sources = cast(list[Path], [sources[name] for name in chosen])  # each has a source: checked above
     probes = [_probe(source, rig[name]) for name, source in zip(chosen, chosen_sources)]
     counts = [count for count, _, _ in probes]
     for source, count in zip(chosen_sources, counts):
@@ -130,8 +131,8 @@ def frames(
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
 
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
-    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails to decode
-    raises TrackerInputError naming the file and the index.
+    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails
+    to decode raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
     if not 0 <= start <= stop <= recording.frame_count:
@@ -183,8 +184,10 @@ def _probe(source: Path, camera: Camera) -> tuple[int, float | None, Camera]:
         ok, image = capture.read() if capture.isOpened() else (False, None)
         if not ok:
             raise TrackerInputError(
-                f"{source}: corrupt or unsupported video (its first frame does not decode); re-encode it, e.g. as H.264 .mp4"
+                f"{source}: corrupt or unsupported video (its first frame does not decode); "
+                "re-encode it, e.g. as H.264 .mp4"
             )
+        assert image is not None  # ok: the frame decoded
         camera = _fit_size(source, image, camera)
         count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
         if count <= 0:  # the container does not say: count by decoding

@@ -140,7 +140,8 @@ def export(
         raise TrackerInputError(f"{poses}: cannot export to {fmt!r}; choose --to {', '.join(FORMATS)}")
     if fmt == "bvh" and model is None:
         raise TrackerInputError(
-            f"{poses}: BVH export needs the body model the poses were tracked with; pass --model (e.g. models/human.toml)"
+            f"{poses}: BVH export needs the body model the poses were tracked with; "
+            "pass --model (e.g. models/human.toml)"
         )
     rows = regular_rows(load_poses(poses), poses, fps)
     target = Path(out) if out is not None else default_out(poses, fmt)
@@ -160,6 +161,7 @@ def export(
         from tracker.io.export.bvh import write_bvh
         from tracker.model import load_model
 
+        assert model is not None  # checked above for BVH
         body = load_model(model)
         write_bvh(target, body, _bvh_poses(rows, poses, body.names, Path(model)), rows.status, rows.rate)
     return target

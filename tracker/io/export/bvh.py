@@ -33,6 +33,7 @@ Format facts (as read by :mod:`tracker.io.bvh` and Blender's importer):
 from __future__ import annotations
 
 import os
+from typing import BinaryIO
 
 import numpy as np
 
@@ -197,4 +198,8 @@ def write_bvh(path: str | os.PathLike, model: Model, poses: np.ndarray, status: 
     At least one frame must be :func:`usable` and the component names single words (BVH splits on white space).
     """
     text = "\n".join(bvh_lines(model, poses, status, rate)) + "\n"
-    atomic_write(path, lambda file: file.write(text.encode()))
+
+    def write(file: BinaryIO) -> None:
+        file.write(text.encode())
+
+    atomic_write(path, write)

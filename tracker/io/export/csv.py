@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from typing import BinaryIO
 
 import numpy as np
 
@@ -50,4 +51,8 @@ def write_csv(
 ) -> None:
     """Write the CSV file ``path`` (atomically): one row per frame, joints (F, J, 3) in metres."""
     text = "\n".join(csv_lines(names, frame, time, status, residual, joints)) + "\n"
-    atomic_write(path, lambda file: file.write(text.encode()))
+
+    def write(file: BinaryIO) -> None:
+        file.write(text.encode())
+
+    atomic_write(path, write)

@@ -25,6 +25,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -97,7 +98,11 @@ def write_trc(
     """Write ``joints`` (F, M, 3) metres, NaN for gaps, as the TRC file ``path`` (mm, atomically)."""
     path = Path(path)
     text = "\n".join(trc_lines(path.name, names, frame, rate, joints)) + "\n"
-    atomic_write(path, lambda file: file.write(text.encode()))
+
+    def write(file: BinaryIO) -> None:
+        file.write(text.encode())
+
+    atomic_write(path, write)
 
 
 def read_trc(path: str | os.PathLike) -> Trc:
