@@ -38,6 +38,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -67,7 +68,7 @@ def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> l
             f"to {path}'s cameras in order)"
         )
     if named:
-        pairs = [tuple(spec.split("=", 1)) for spec in specs]
+        pairs = [cast(tuple[str, str], tuple(spec.split("=", 1))) for spec in specs]
         for name, device in pairs:
             if name not in names:
                 raise TrackerInputError(f"{path}: has no camera {name!r}; name one of {', '.join(names)}")
@@ -99,7 +100,7 @@ def open_sources(
     try:
         for device, camera in zip(devices, cameras):
             if Path(device).is_file():
-                source = ReplaySource(device, clock)
+                source: Source = ReplaySource(device, clock)
             elif Path(device).suffix.lower() in VIDEO_SUFFIXES:
                 raise TrackerInputError(f"{device}: no such video file; check the path")
             else:
@@ -272,6 +273,7 @@ def track_live(
                             file=sys.stderr,
                         )
                         if recording:
+                            assert recorder is not None  # recording only with a recorder
                             print(
                                 f"tracker: the recording ends at its {recorder.frames} frames: a recording "
                                 "folder needs every camera in every frame",
@@ -282,7 +284,7 @@ def track_live(
                     images = [frame.image for frame in frame_set.frames]
                     result, spent = step_and_write(tracker, writer, frames, images, at=at, previous=last)
                     last = at
-                    if recording and not recorder.write(frame_set, capture.started):
+                    if recording and recorder is not None and not recorder.write(frame_set, capture.started):
                         print(
                             f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
                             "the 1 GiB an AVI file can hold; tracking goes on",

@@ -74,10 +74,10 @@ def run(args: argparse.Namespace) -> int:
 
         densities = args.densities or experiment.DENSITIES
         variances = args.variances or experiment.VARIANCES
-        frames = {} if args.frames is None else {"frames": args.frames}
+        frames_arg = {} if args.frames is None else {"frames": args.frames}
         progress = options.bar(args, None, "cell", leave=True)
         with progress(total=len(densities) * len(variances)) as bar:
-            rows = experiment.run(densities, variances, seed=args.seed, progress=lambda row: bar.update(), **frames)
+            rows = experiment.run(densities, variances, seed=args.seed, progress=lambda row: bar.update(), **frames_arg)
         claims = experiment.check_claims(rows)
         if args.json:
             print(

@@ -10,6 +10,7 @@ import argparse
 import functools
 import sys
 from pathlib import Path
+from typing import Any
 
 from tracker.errors import TrackerInputError
 
@@ -74,7 +75,7 @@ def add_recording_options(parser: argparse.ArgumentParser) -> None:
 
 def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] = TUNING) -> None:
     """The tracker's tuning options (Settings fields) that a command offers."""
-    options = {
+    options: dict[str, tuple[list[str], dict[str, Any]]] = {
         "iterations": (["--iterations"], dict(type=positive_int, help="IRLS iterations per frame (default 6)")),
         "spacing": (["--spacing"], dict(type=positive_float, help="pixels between outline samples (default 4)")),
         "resample_every": (

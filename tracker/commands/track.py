@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from tracker.commands import options
@@ -83,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
         overlay = OverlayVideo(Path(args.overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
     if background is None:
-        prepare = tracker.smooth
+        prepare: Callable[[np.ndarray], np.ndarray] | list[Callable[[np.ndarray], object]] = tracker.smooth
     else:
         from tracker.foreground import preparers
 
@@ -130,10 +131,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost")
     results = load_poses(out / "poses.npz") if truth is not None or live is not None else None
     if truth is not None:
+        assert results is not None  # loaded when there is a truth
         print(format_report(evaluate(results, truth)))
     if live is not None and done > 0:
         from tracker.viewer.review import Review
 
+        assert results is not None  # loaded when there is a live view
         review = Review(live.scene, rec, model, results, truth, settings)
         review.show(done - 1)
         return serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
@@ -151,7 +154,8 @@ def _background(args: argparse.Namespace, rec, out: Path):
     background = median_background(rec, SAMPLES, options.bar(args, "background", "frame"))
     folder = save_background(background, rec, out / "background")
     print(
-        f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, saved in {folder} "
+        f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, "
+        f"saved in {folder} "
         f"(reuse with --background {folder})",
         file=sys.stderr,
     )

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 import scipy.linalg as sla
@@ -155,8 +156,8 @@ def assemble(
     The quaternions are taken from the parts' rotation matrices and R is re-derived from them."""
     theta = Rotation.from_matrix(np.stack([p.rotation for p in parts])).as_quat(scalar_first=True)
     parts = tuple(replace(p, rotation=r) for p, r in zip(parts, rotation_matrix(theta)))
-    levels = (levels,) * len(parts) if np.isscalar(levels) else tuple(levels)
-    points = [[] for _ in parts]
+    levels = (cast(int, levels),) * len(parts) if np.isscalar(levels) else tuple(cast(Sequence[int], levels))
+    points: list[list[tuple[float, float]]] = [[] for _ in parts]
     rows = np.zeros((len(joints), 2), dtype=np.int64)
     for j, joint in enumerate(joints):
         for side, (p, point) in enumerate(((joint.a, joint.point_a), (joint.b, joint.point_b))):
@@ -473,12 +474,12 @@ def lumped_masses(body: Body, jacobians: Sequence[np.ndarray], mass: float, regu
 class Damping:
     """D = alpha M + beta I (section 3); ``alpha`` one rate for every part or one per part."""
 
-    alpha: float | Sequence[float] = 0.0
+    alpha: float | Sequence[float] | np.ndarray = 0.0
     beta: float = 0.0
 
     def rate(self, part: int) -> float:
         """alpha of part ``part``."""
-        return float(self.alpha if np.isscalar(self.alpha) else self.alpha[part])
+        return float(cast(float, self.alpha) if np.isscalar(self.alpha) else cast(np.ndarray, self.alpha)[part])
 
 
 def second_order_step(

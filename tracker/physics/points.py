@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -230,7 +230,8 @@ def start_frame(points: np.ndarray, model: PointsModel, start: int | None = None
         if len(short):
             raise TrackerInputError(
                 f"{model.path}: part {model.parts[short[0]]!r} has {counts[start, short[0]]} markers seen in frame "
-                f"{start}, fewer than {MIN_MARKERS}; start from another frame (without --start: the first that has them)"
+                f"{start}, fewer than {MIN_MARKERS}; start from another frame "
+                "(without --start: the first that has them)"
             )
         return start
     ready = np.nonzero((counts >= MIN_MARKERS).all(axis=1))[0]
@@ -365,7 +366,7 @@ def second_order_frame(
 
 
 def track(
-    frames: Sequence[np.ndarray], model: PointsModel, settings: PointsSettings, interval: float
+    frames: Iterable[np.ndarray], model: PointsModel, settings: PointsSettings, interval: float
 ) -> Iterator[FrameFit]:
     """Fit ``frames`` (each (M, 3), the first the start frame, ``interval`` seconds apart) one after
     another (module docstring)."""
@@ -377,6 +378,7 @@ def track(
             body = replace(body, levels=(level,) * len(body.parts))
             velocities = [np.zeros(len(index)) for index in bd.active(body)]
         elif settings.dynamics == "second-order":
+            assert velocities is not None  # set with body on the first frame
             body, velocities = second_order_frame(body, velocities, points, model, settings, interval)
         elif np.isfinite(points).all(axis=1).any():  # first order: without any marker nothing moves
             body, _ = bd.fit_frame(

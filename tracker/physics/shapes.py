@@ -20,6 +20,7 @@ x_i = c + R (s(q_s; u_i, v_i) + d_i).  Written atomically, like poses.npz.
 from __future__ import annotations
 
 import os
+from typing import Any, cast
 
 import numpy as np
 
@@ -73,6 +74,7 @@ class ShapesWriter:
     def write(self, count: int | None = None) -> dict[str, np.ndarray]:
         """Rewrite shapes.npz with the first ``count`` frames (default all), atomically; returns its arrays."""
         arrays = self.arrays(count)
-        atomic_write(self.path, lambda file: np.savez(file, **arrays))
+        # the cast: numpy's stub takes any key of **arrays for allow_pickle (a bool)
+        atomic_write(self.path, lambda file: np.savez(file, **cast(dict[str, Any], arrays)))
         self._unflushed = 0
         return arrays

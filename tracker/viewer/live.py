@@ -50,13 +50,15 @@ class LiveView:
         self.scene, self.rate, self.truth_joints, self.record_path = scene, rate, truth, record
         self.inspector = Tracker(model, cameras, initial_poses, settings)
         self.serializer = scene.server.get_scene_serializer() if record is not None else None
-        self.latest = None
+        self.latest: tuple[int, list[np.ndarray], FrameResult] | None = None
         self.lock = threading.Lock()
         self.arrived = threading.Event()
         self.stopping = threading.Event()
         self.shown = 0
-        self.history = {key: deque(maxlen=history) for key in ("frame", "status", "residual", "elapsed")}
-        self.trajectory = deque(maxlen=history)
+        self.history: dict[str, deque[float]] = {
+            key: deque(maxlen=history) for key in ("frame", "status", "residual", "elapsed")
+        }
+        self.trajectory: deque[np.ndarray] = deque(maxlen=history)
         gui = scene.server.gui
         with gui.add_folder("Live", order=20):
             self.plots = add_run_plots(gui, np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2))

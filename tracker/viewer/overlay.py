@@ -11,6 +11,7 @@ red or grey lines, and the white dots show which edge pulled it.
 from __future__ import annotations
 
 import colorsys
+from typing import cast
 
 import cv2
 import numpy as np
@@ -57,7 +58,7 @@ def draw(image: np.ndarray, inspection: Inspection, camera: int, robust_c: float
     outline = _fixed(pixel)
     component = inspection.component[mine]
     for i in np.unique(component):
-        colour = tuple(int(c) for c in colours[i])
+        colour = cast(tuple[int, int, int], tuple(int(c) for c in colours[i]))  # RGB
         for x, y in outline[component == i]:
             cv2.circle(out, (int(x), int(y)), 2 << _SHIFT, colour, -1, cv2.LINE_AA, _SHIFT)
     for x, y in _fixed(pixel[found] + offset[found, None] * normal[found]):

@@ -80,7 +80,7 @@ class Placement:
                 disable_sliders=not root,
                 depth_test=False,
             )
-            gizmo.on_update(lambda _, i=i: self.moved(i))
+            gizmo.on_update(lambda _, i=i: self.moved(i))  # type: ignore[misc]  # mypy cannot type the default i=i
             self.gizmos.append(gizmo)
         with server.gui.add_folder("Initial pose", order=0):
             self.snap_button = server.gui.add_button("Snap to the images")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import viser
@@ -48,7 +49,7 @@ class PointsView:
                 f"/parts/{name}",
                 nodes.astype(np.float32),
                 self.mesh.triangles.astype(np.uint32),
-                color=tuple(int(c) for c in colour),
+                color=cast(tuple[int, int, int], tuple(int(c) for c in colour)),  # RGB
                 flat_shading=False,
                 opacity=0.6,
             )
@@ -101,7 +102,7 @@ class PointsView:
                     f"{self.results['residual'][row]:.1f} mm"
                 )
             self.row = row
-        self.slider.value = row  # its callback finds the row shown and returns
+        self.slider.value = row  # type: ignore[misc]  # viser's setter; its callback finds the row shown and returns
 
     def record(self, path: Path, progress: bool = True) -> None:
         """Write every frame, at the marker file's rate, as a .viser file for viser's static client."""

@@ -95,7 +95,7 @@ class Review:
             )
 
     def step(self, delta: int) -> None:
-        self.play.value = False
+        self.play.value = False  # type: ignore[misc]  # viser's setter, which mypy does not see
         self.show(int(np.clip(self.row + delta, 0, len(self.frames) - 1)))
 
     def show(self, row: int) -> None:
@@ -115,7 +115,7 @@ class Review:
             truth = None if self.truth is None else self.truth[row]
             self.scene.show(Frame(poses, images, inspection, truth, label))
             self.row = row
-            self.slider.value = row
+            self.slider.value = row  # type: ignore[misc]  # viser's setter, which mypy does not see
 
     def _play(self) -> None:
         """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up
@@ -133,7 +133,7 @@ class Review:
             row = min(first + int((time.monotonic() - started) * rate), len(self.frames) - 1)
             self.show(row)
             if row == len(self.frames) - 1:  # playback ends on the last frame, even when it skips to it
-                self.play.value = False
+                self.play.value = False  # type: ignore[misc]  # viser's setter, which mypy does not see
                 continue
             played = row
             self.stopping.wait(max(0.0, started + (row + 1 - first) / rate - time.monotonic()))

@@ -54,7 +54,7 @@ def add_plot(
     gui, title: str, label: str, colour: str, x: np.ndarray, y: np.ndarray, y_range: tuple[float, float] | None = None
 ):
     """A uPlot line chart of ``y`` against frame numbers ``x`` in the GUI panel (``y_range`` fixes its axis)."""
-    scales = {"x": {"time": False}}
+    scales: dict[str, dict[str, object]] = {"x": {"time": False}}
     if y_range is not None:
         scales["y"] = {"auto": False, "range": list(y_range)}
     return gui.add_uplot(
@@ -151,7 +151,7 @@ class Scene:
             self.truth = scene.add_line_segments(
                 "/truth", np.zeros((model.size - 1, 2, 3), np.float32), TRUTH, thickness=0.008
             )
-        self.trajectory = None
+        self.trajectory: viser.LineSegmentsHandle | None = None
         self.frustums = []
         self.panels = []
         folder = server.gui.add_folder("Cameras", order=30)
