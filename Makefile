@@ -18,7 +18,10 @@ demo: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/tracker track recordings/demo --out out/demo
 
 test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest
 
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out .mypy_cache .ruff_cache

@@ -72,7 +72,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         temp.unlink(missing_ok=True)
 
 
-def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], None]) -> None:
+def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], object]) -> None:
     """Write ``path`` atomically: ``write_fn(file)`` fills a temporary binary file that then replaces ``path``.
 
     The folder is created if missing. The file gets the usual permissions

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import cv2
 import numpy as np
@@ -282,18 +282,12 @@ def synthesize(
     save_calibration(cameras, out / "calibration.toml")
     model_bytes = model_path.read_bytes()
 
-    def write_model(file: BinaryIO) -> None:
-        file.write(model_bytes)
-
-    atomic_write(out / "model.toml", write_model)
+    atomic_write(out / "model.toml", lambda file: file.write(model_bytes))
     save_pose_file(out / "init.toml", model, poses[0])
     write_truth(out / "truth.npz", model, poses)
     text = _readme(out.name, motion, bvh_path, used, frames, rate, cameras, model_path, start, stride).encode()
 
-    def write_readme(file: BinaryIO) -> None:
-        file.write(text)
-
-    atomic_write(out / "README.md", write_readme)
+    atomic_write(out / "README.md", lambda file: file.write(text))
     files = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file() and not p.name.startswith(".")}
     in_view = visibility(model, poses, cameras).mean(axis=0)
     return {

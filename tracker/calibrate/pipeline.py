@@ -93,7 +93,8 @@ def calibrate(
             raise TrackerInputError(
                 f"{camera.source}: no {board.describe()} found in any of the {camera.searched} frames searched; "
                 "check --board (chessboard sizes count inner corners, ChArUco sizes count squares"
-                f"{'' if board.inverted else ', add :inverted for a light-on-dark board'}) and that the board is in view"
+                f"{'' if board.inverted else ', add :inverted for a light-on-dark board'}) "
+                "and that the board is in view"
             )
         if fixed_cameras is None and len(camera.detections) < MIN_VIEWS:
             raise TrackerInputError(

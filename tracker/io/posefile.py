@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 import tomli_w
@@ -90,7 +89,4 @@ def save_pose_file(path: str | os.PathLike, model: Model, poses: np.ndarray) -> 
     """Write a pose TOML atomically."""
     text = tomli_w.dumps(pose_table(model, poses)).encode()
 
-    def write(file: BinaryIO) -> None:
-        file.write(text)
-
-    atomic_write(path, write)
+    atomic_write(path, lambda file: file.write(text))

@@ -86,8 +86,8 @@ def stability_limit(
     move, by default all but a0 (frozen); a subset has the limit of its principal submatrix,
     which is never smaller (e.g. a rigid part is not held to the step its shape and nodal
     displacements would need).  lambda_max is the largest eigenvalue of that symmetric matrix,
-    found by Lanczos iteration on its products with vectors.  The bound is that of the dynamics linearised in the Gauss-Newton sense (the
-    r . d^2x/dq^2 terms dropped).
+    found by Lanczos iteration on its products with vectors.  The bound is that of the dynamics
+    linearised in the Gauss-Newton sense (the r . d^2x/dq^2 terms dropped).
     """
     if coordinates is None:
         coordinates = np.delete(np.arange(part.n_coordinates), [FROZEN])

@@ -33,7 +33,6 @@ Format facts (as read by :mod:`tracker.io.bvh` and Blender's importer):
 from __future__ import annotations
 
 import os
-from typing import BinaryIO
 
 import numpy as np
 
@@ -199,7 +198,4 @@ def write_bvh(path: str | os.PathLike, model: Model, poses: np.ndarray, status: 
     """
     text = "\n".join(bvh_lines(model, poses, status, rate)) + "\n"
 
-    def write(file: BinaryIO) -> None:
-        file.write(text.encode())
-
-    atomic_write(path, write)
+    atomic_write(path, lambda file: file.write(text.encode()))

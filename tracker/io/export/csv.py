@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import BinaryIO
 
 import numpy as np
 
@@ -52,7 +51,4 @@ def write_csv(
     """Write the CSV file ``path`` (atomically): one row per frame, joints (F, J, 3) in metres."""
     text = "\n".join(csv_lines(names, frame, time, status, residual, joints)) + "\n"
 
-    def write(file: BinaryIO) -> None:
-        file.write(text.encode())
-
-    atomic_write(path, write)
+    atomic_write(path, lambda file: file.write(text.encode()))

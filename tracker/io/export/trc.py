@@ -25,7 +25,6 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 
@@ -99,10 +98,7 @@ def write_trc(
     path = Path(path)
     text = "\n".join(trc_lines(path.name, names, frame, rate, joints)) + "\n"
 
-    def write(file: BinaryIO) -> None:
-        file.write(text.encode())
-
-    atomic_write(path, write)
+    atomic_write(path, lambda file: file.write(text.encode()))
 
 
 def read_trc(path: str | os.PathLike) -> Trc:
