@@ -170,8 +170,16 @@ def test_a_port_out_of_range_is_a_usage_error(tiny_recording, capsys):
 
 
 @pytest.mark.parametrize("option", [["--dynamics", "kalman"], ["--motion", "none"]])
-def test_motion_models_from_the_command_line(tiny_recording, tmp_path, option):
+def test_motion_models_from_the_command_line(tiny_recording, tmp_path, option, capsys):
+    """--dynamics picks the motion model; the old name --motion (which names the clip in synth) still works,
+    with a warning, and is not in --help."""
     from tracker.io.poses import load_poses
 
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--quiet", *option]) == 0
     assert len(load_poses(tmp_path / "poses.npz")["frame"]) == 6
+    warned = "--motion is now --dynamics" in capsys.readouterr().err
+    assert warned == (option[0] == "--motion")
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    shown = capsys.readouterr().out
+    assert "--dynamics" in shown and "--motion" not in shown

@@ -300,3 +300,18 @@ def test_points_command_errors_are_one_line(tmp_path: Path, capsys) -> None:
     assert "--start 9999 is outside the marker file's frames 0..159" in capsys.readouterr().err
     assert main(["experiment", "insect", "--densities", "50"]) == 2
     assert "the insect has neither" in capsys.readouterr().err
+
+
+def test_fit_option_and_its_old_name(tmp_path: Path, capsys) -> None:
+    """--fit second-order fits with mass and momentum; the old spelling --dynamics (the motion prior's
+    name in track) gives the same poses, with a warning that names --fit."""
+    common = ["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--frames", "5", "--quiet"]
+    assert main([*common, "--fit", "second-order", "--out", str(tmp_path / "new")]) == 0
+    assert "is now" not in capsys.readouterr().err
+    assert main([*common, "--dynamics", "second-order", "--out", str(tmp_path / "old")]) == 0
+    assert "--dynamics is now --fit" in capsys.readouterr().err
+    new, old = (load_poses(tmp_path / name / "poses.npz") for name in ("new", "old"))
+    np.testing.assert_array_equal(new["poses"], old["poses"])
+    first = load_poses(tmp_path / "new" / "poses.npz")
+    assert main([*common, "--out", str(tmp_path / "first")]) == 0
+    assert not np.array_equal(load_poses(tmp_path / "first" / "poses.npz")["poses"], first["poses"])

@@ -94,7 +94,7 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
             ),
         ),
         "motion": (
-            ["--dynamics", "--motion"],
+            ["--dynamics"],
             dict(
                 dest="motion",
                 choices=("none", "constant-velocity", "kalman"),
@@ -123,6 +123,26 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
     for key in which:
         flags, kwargs = options[key]
         parser.add_argument(*flags, **kwargs)
+    if "motion" in which:  # --motion names the rendered clip in `tracker synth`
+        parser.add_argument("--motion", **options["motion"][1] | renamed("--dynamics"))
+
+
+class _Renamed(argparse.Action):
+    """Stores the value like the option's new name does, after a warning that names the new one."""
+
+    def __init__(self, *args: Any, new: str, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.new = new
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        print(f"tracker: warning: {option_string} is now {self.new}; the old name will go", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def renamed(new: str) -> dict[str, Any]:
+    """add_argument keywords for an old option name kept for old scripts: hidden from --help, and a
+    warning naming ``new`` when used."""
+    return dict(action=_Renamed, new=new, help=argparse.SUPPRESS)
 
 
 def settings_from(args: argparse.Namespace, frame_rate: float | None = None):

@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from tracker.commands import options
 from tracker.commands.viewing import serve
@@ -32,19 +33,21 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="what moves after the first frame: rigid (pose only, the shapes fitted on the first "
         "frame; default), global (also the superquadric shape) or local (also the nodes)",
     )
+    fit: dict[str, Any] = dict(choices=("first-order", "second-order"), dest="fit")
     parser.add_argument(
-        "--dynamics",
-        choices=("first-order", "second-order"),
+        "--fit",
         default="first-order",
-        help="first-order (default): --steps fitting steps per frame, no momentum; second-order: "
-        "parts with mass and momentum follow the markers in time (about 3-5x faster, looser), "
-        "and a part whose markers vanish keeps moving",
+        help="how the parts follow the markers in time: first-order (default), --steps fitting steps per "
+        "frame, no momentum; second-order: parts with mass and momentum (faster, looser), and a part whose "
+        "markers vanish keeps moving",
+        **fit,
     )
+    parser.add_argument("--dynamics", **fit | options.renamed("--fit"))  # --dynamics is the motion prior in track
     parser.add_argument(
         "--steps",
         type=options.positive_int,
         default=40,
-        help="fitting steps per frame with --dynamics first-order (default 40)",
+        help="fitting steps per frame with --fit first-order (default 40)",
     )
     parser.add_argument(
         "--sigma",
@@ -75,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     points = markers.select(model.marker_names)
     first = start_frame(points, model, args.start)
     frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames), args.every)
-    settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level, dynamics=args.dynamics)
+    settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level, dynamics=args.fit)
     out = Path(args.out) if args.out else Path("out") / markers.path.stem
     print(
         f"fitting {markers.path} frames {markers.first_frame + frames.start}..{markers.first_frame + frames[-1]} "
