@@ -51,8 +51,8 @@ def test_project_matches_pinhole_brown_formula(length: int) -> None:
 
 def test_pose_and_center() -> None:
     camera = make_camera()
-    np.testing.assert_allclose(camera.pose @ np.append(camera.center, 1.0), [0, 0, 0, 1], atol=1e-12)
-    np.testing.assert_allclose(camera.pose[:3, :3], camera.rotation)
+    np.testing.assert_allclose(camera.camera_from_world @ np.append(camera.center, 1.0), [0, 0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(camera.camera_from_world[:3, :3], camera.rotation)
     assert not camera.rotation.flags.writeable
 
 

@@ -213,7 +213,7 @@ def triangulate(cameras, pixels: np.ndarray) -> np.ndarray:
     rows = []
     for camera, pixel in zip(cameras, pixels):
         x, y = camera.undistort_pixels(pixel[None])[0]
-        projection = camera.pose[:3]
+        projection = camera.camera_from_world[:3]
         rows += [x * projection[2] - projection[0], y * projection[2] - projection[1]]
     point = np.linalg.svd(np.array(rows))[2][-1]
     return point[:3] / point[3]

@@ -139,7 +139,7 @@ def camera_centres(poses, comp, cams, cam_index):
 def ray_hits(cam, pose, q, pixels):
     """For each distorted pixel: does its viewing ray (s > 0) meet the (unclipped) quadric?"""
     xn = cam.undistort_pixels(pixels)
-    cam_from_comp = cam.pose @ pose
+    cam_from_comp = cam.camera_from_world @ pose
     r, t = cam_from_comp[:3, :3], cam_from_comp[:3, 3]
     origin = -r.T @ t
     dirs = homog(xn) @ r  # R^T d for each row
@@ -506,7 +506,7 @@ def test_jacobian_row_matches_material_point_finite_differences(name):
 
 def outline_conic(cam, pose, q):
     """C_pix = K^-T (c A - b b^T) K^-1 with Q' = E^-T Q E^-1, E = camera-from-component (design note)."""
-    e_inv = np.linalg.inv(cam.pose @ pose)
+    e_inv = np.linalg.inv(cam.camera_from_world @ pose)
     qc = e_inv.T @ q @ e_inv
     a, b, c = qc[:3, :3], qc[:3, 3], qc[3, 3]
     k_inv = np.linalg.inv(cam.matrix)
@@ -603,7 +603,7 @@ def test_place_matches_the_matrix_formula():
         model.quadric_bound,
         model.quadric_component,
         poses,
-        rig.pose,
+        rig.camera_from_world,
         placed.camera_from,
         placed.quadric,
         placed.clip,
@@ -612,7 +612,7 @@ def test_place_matches_the_matrix_formula():
     )
     for k in range(2):
         for j, c in enumerate(model.quadric_component):
-            e = rig.pose[k] @ poses[c]
+            e = rig.camera_from_world[k] @ poses[c]
             e_inv = np.linalg.inv(e)
             np.testing.assert_allclose(placed.camera_from[k, j], e, atol=1e-12)
             np.testing.assert_allclose(placed.quadric[k, j], e_inv.T @ model.quadric[j] @ e_inv, rtol=1e-10, atol=1e-9)

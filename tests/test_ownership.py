@@ -32,7 +32,7 @@ def placed_at(model, poses, rig) -> Placed:
         model.quadric_bound,
         model.quadric_component,
         poses,
-        rig.pose,
+        rig.camera_from_world,
         placed.camera_from,
         placed.quadric,
         placed.clip,
@@ -50,7 +50,7 @@ def brute_labels(model, poses, camera: Camera, pixels):
     nearest = np.full(len(rays), np.inf)
     label = np.full(len(rays), -1)
     for j in range(model.quadric.shape[0]):
-        e_inv = np.linalg.inv(camera.pose @ poses[model.quadric_component[j]])
+        e_inv = np.linalg.inv(camera.camera_from_world @ poses[model.quadric_component[j]])
         q = e_inv.T @ model.quadric[j] @ e_inv
         c = e_inv.T @ model.clip[j] @ e_inv
         qa = np.einsum("ma,ab,mb->m", rays, q[:3, :3], rays)
@@ -157,7 +157,7 @@ def test_fast_labels_match_brute_force(human_views, r):
             model.quadric_bound,
             model.quadric_component,
             poses,
-            rig.pose,
+            rig.camera_from_world,
             placed.camera_from,
             placed.quadric,
             placed.clip,

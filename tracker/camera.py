@@ -69,12 +69,12 @@ class Camera:
         object.__setattr__(self, "fisheye", bool(self.fisheye))
 
     @property
-    def pose(self) -> np.ndarray:
-        """camera_from_world, the 4x4 transform [[R, t], [0, 1]]."""
-        pose = np.eye(4)
-        pose[:3, :3] = self.rotation
-        pose[:3, 3] = self.translation
-        return pose
+    def camera_from_world(self) -> np.ndarray:
+        """The extrinsics as a 4x4 transform [[R, t], [0, 1]]: X_camera = camera_from_world @ X_world."""
+        transform = np.eye(4)
+        transform[:3, :3] = self.rotation
+        transform[:3, 3] = self.translation
+        return transform
 
     @property
     def center(self) -> np.ndarray:

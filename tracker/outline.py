@@ -39,12 +39,12 @@ _MAX_STEPS = 4096
 
 @dataclass(frozen=True)
 class Rig:
-    """Flat camera arrays: intrinsics ``matrix`` (C,3,3), ``pose`` camera-from-world (C,4,4),
+    """Flat camera arrays: intrinsics ``matrix`` (C,3,3), ``camera_from_world`` (C,4,4),
     ``distortion`` (C,5) as k1 k2 p1 p2 k3, ``size`` (C,2) width and height."""
 
     names: tuple[str, ...]
     matrix: np.ndarray
-    pose: np.ndarray
+    camera_from_world: np.ndarray
     distortion: np.ndarray
     size: np.ndarray
 
@@ -57,7 +57,7 @@ class Rig:
         return cls(
             names=tuple(c.name for c in cameras),
             matrix=np.array([c.matrix for c in cameras], dtype=np.float64),
-            pose=np.array([c.pose for c in cameras], dtype=np.float64),
+            camera_from_world=np.array([c.camera_from_world for c in cameras], dtype=np.float64),
             distortion=distortion,
             size=np.array([c.size for c in cameras], dtype=np.int64),
         )
@@ -341,7 +341,9 @@ def _emit(
 
 
 @njit(cache=True, nogil=True)
-def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_quadric, o_clip, o_sphere, o_cone):
+def place(
+    quadric, clip, bound, quadric_component, poses, camera_from_world, o_from, o_quadric, o_clip, o_sphere, o_cone
+):
     """Every quadric in every camera's frame: with E = P_k W_c (camera from component), ``o_from`` = E,
     ``o_quadric`` = E^-T Q E^-1 and ``o_clip`` = E^-T Q2 E^-1 (C, Q, 4, 4), ``o_sphere`` (C, Q, 4)
     the bounding sphere (centre in the camera frame, radius) and ``o_cone`` (C, Q, 6) the cone of
@@ -349,8 +351,8 @@ def place(quadric, clip, bound, quadric_component, poses, cam_pose, o_from, o_qu
     e_inv = np.zeros((4, 4))
     half = np.empty((4, 4))
     e_inv[3, 3] = 1.0
-    for k in range(cam_pose.shape[0]):
-        p = cam_pose[k]
+    for k in range(camera_from_world.shape[0]):
+        p = camera_from_world[k]
         for j in range(quadric.shape[0]):
             w = poses[quadric_component[j]]
             e = o_from[k, j]
@@ -391,7 +393,7 @@ def outline_kernel(
     quadric_component,
     poses,
     cam_matrix,
-    cam_pose,
+    camera_from_world,
     cam_dist,
     cam_size,
     spacing,
@@ -417,7 +419,7 @@ def outline_kernel(
         bound,
         quadric_component,
         poses,
-        cam_pose,
+        camera_from_world,
         placed_from,
         placed_quadric,
         placed_clip,
@@ -630,7 +632,7 @@ def sample_outlines(
         model.quadric_component,
         poses,
         rig.matrix,
-        rig.pose,
+        rig.camera_from_world,
         rig.distortion,
         rig.size,
         float(spacing),

@@ -41,7 +41,7 @@ def pixel_rays(camera: Camera) -> np.ndarray:
 
 def view_quadrics(model: Model, poses: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Surfaces and clips of every quadric in the camera frame (Q, 4, 4): T^-T Q T^-1 with T = P_cam E_c."""
-    transforms = camera.pose @ poses[model.quadric_component]
+    transforms = camera.camera_from_world @ poses[model.quadric_component]
     inverse = np.linalg.inv(transforms)
     inverse_t = np.transpose(inverse, (0, 2, 1))
     surfaces = inverse_t @ model.quadric @ inverse

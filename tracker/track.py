@@ -345,7 +345,7 @@ class Tracker:
             m.quadric_component,
             self.poses,
             self.rig.matrix,
-            self.rig.pose,
+            self.rig.camera_from_world,
             self.rig.distortion,
             self.rig.size,
             st.spacing,

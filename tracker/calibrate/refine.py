@@ -62,7 +62,9 @@ def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], 
     seen = tracker.inspect(images, smoothed=True, poses=poses, search_range=search_range)
     found = seen.weight > 0
     camera, component = seen.camera[found], seen.component[found]
-    rows = camera_rows(tracker.samples.jacobian[: len(found)][found], camera, component, tracker.rig.pose, poses)
+    rows = camera_rows(
+        tracker.samples.jacobian[: len(found)][found], camera, component, tracker.rig.camera_from_world, poses
+    )
     return camera, rows, seen.offset[found], seen.weight[found]
 
 
@@ -111,9 +113,9 @@ def refine_rig(
             np.add.at(information, camera, weighted[:, :, None] * rows[:, None, :])
             np.add.at(eta, camera, weighted * offset[:, None])
         for k in set(range(len(cameras))) - fixed:
-            moved = se3.log(cameras[k].pose @ se3.inverse(start[k].pose))
+            moved = se3.log(cameras[k].camera_from_world @ se3.inverse(start[k].camera_from_world))
             xi = np.linalg.solve(information[k] + prior, eta[k] - prior @ moved)
-            pose = se3.exp(xi) @ cameras[k].pose
+            pose = se3.exp(xi) @ cameras[k].camera_from_world
             cameras[k] = replace(cameras[k], rotation=pose[:3, :3], translation=pose[:3, 3])
         tracker = tracker.with_cameras(cameras)
         if refit:
