@@ -23,6 +23,7 @@ from tracker.foreground import (
     save_background,
 )
 from tracker.io.poses import PosesWriter
+from tracker.io.readers import keeping_grey
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model, rest_poses
 from tracker.render import Renderer, load_backgrounds
@@ -95,7 +96,7 @@ def test_median_background_recovers_the_empty_scene(png_recording):
 def test_readers_hand_colour_frames_to_per_camera_preparers(png_recording):
     recording = open_recording(png_recording)
     background = Background(tuple(scene(camera) for camera in range(2)))
-    prepared = preparers(background, lambda image: image, keep_grey=True)
+    prepared = [keeping_grey(prepare) for prepare in preparers(background, lambda image: image)]
     for index, items in frames(recording, prepare=prepared, colour=True):
         for camera, (grey, measured) in enumerate(items):
             np.testing.assert_array_equal(grey, cv2.cvtColor(frame(camera, index), cv2.COLOR_BGR2GRAY))

@@ -16,7 +16,7 @@ from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synth import synthesize
-from tracker.track import Settings, Tracker, motion_since
+from tracker.track import Settings, Tracker, motion_since, smoother
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "recordings" / "demo"
@@ -168,3 +168,18 @@ def test_max_turn_scales_the_whole_step():
         tracker.iterate(0)
         turns.append(_largest_turn(before, tracker.poses))
     assert turns[0] > 0.1 and turns[1] <= 0.03 * 1.05, turns  # coercion may add a little
+
+
+@pytest.mark.parametrize("size", [(640, 480), (1920, 1080), (1080, 1920)])
+def test_smoother_blurs_as_the_tracker_does(size):
+    """smoother(settings, cameras) is the Tracker's own smoothing for those cameras: the blur grows with
+    the short side beyond 480 pixels (sigma 1 at 640x480, 2.25 at HD)."""
+    from dataclasses import replace
+
+    model = load_model(Path(__file__).resolve().parents[1] / "models" / "human.toml")
+    demo = load_calibration(Path(__file__).resolve().parents[1] / "recordings" / "demo" / "calibration.toml")
+    cameras = [replace(camera, size=size) for camera in demo]
+    image = np.random.default_rng(4).integers(0, 256, size[::-1], dtype=np.uint8)
+    tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
+    np.testing.assert_array_equal(smoother(Settings(), cameras)(image), tracker.smooth(image))
+    assert tracker.settings.blur_sigma == pytest.approx(max(1.0, min(size) / 480))

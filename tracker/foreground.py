@@ -36,7 +36,7 @@ import numpy as np
 from tracker.atomic import atomic_path, ensure_writable_folder
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.io.readers import FrameSeeker, grey, read_image
+from tracker.io.readers import FrameSeeker, read_image
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.render import Renderer
@@ -132,14 +132,12 @@ def save_background(background: Background, recording: Recording, folder: str | 
 
 
 def preparers(
-    background: Background, smooth: Callable[[np.ndarray], np.ndarray], keep_grey: bool = False
-) -> list[Callable[[np.ndarray], object]]:
-    """Per camera, what its reader thread makes of a BGR frame: ``smooth(F_k)`` for the edge search, or,
-    with ``keep_grey``, the pair (grey frame, smooth(F_k)) so the frame itself can still be shown."""
+    background: Background, smooth: Callable[[np.ndarray], np.ndarray]
+) -> list[Callable[[np.ndarray], np.ndarray]]:
+    """Per camera, what its reader thread makes of a BGR frame for the edge search: ``smooth(F_k)``."""
 
-    def prepare(camera: int, frame: np.ndarray) -> object:
-        measured = smooth(background.difference(camera, frame))
-        return (grey(frame), measured) if keep_grey else measured
+    def prepare(camera: int, frame: np.ndarray) -> np.ndarray:
+        return smooth(background.difference(camera, frame))
 
     return [partial(prepare, camera) for camera in range(len(background.images))]
 

@@ -19,7 +19,9 @@ that found an edge and the robust mean residual.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cv2
@@ -91,6 +93,18 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         threshold=settings.threshold / k,
         reference_size=short_side,
     )
+
+
+def smooth(image: np.ndarray, sigma: float) -> np.ndarray:
+    """A grey image smoothed by a Gaussian of ``sigma`` pixels (none for sigma 0), as the edge search reads it."""
+    return cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
+
+
+def smoother(settings: Settings, cameras) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`smooth` at the blur that a :class:`Tracker` of ``settings`` uses for the images of ``cameras``
+    (``blur_sigma`` scaled to their largest short side, :func:`scaled_to`)."""
+    sigma = scaled_to(settings, max(min(camera.size) for camera in cameras)).blur_sigma
+    return functools.partial(smooth, sigma=sigma)
 
 
 @dataclass(frozen=True)
@@ -277,8 +291,7 @@ class Tracker:
 
         Thread-safe, so reader threads can run it beside the tracker (``step(..., smoothed=True)``).
         """
-        sigma = self.settings.blur_sigma
-        return cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image
+        return smooth(image, self.settings.blur_sigma)
 
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, smoothing them unless ``smoothed``."""

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.camera import load_calibration, save_calibration
     from tracker.foreground import camera_stacks, sample_indices
     from tracker.io.readers import grey
-    from tracker.track import Tracker
+    from tracker.track import smoother
 
     rec, model = options.opened(args)
     poses_path, results = options.tracked(args.poses, rec, model)
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         )
     picked = np.flatnonzero(usable)[sample_indices(int(usable.sum()), args.samples)]
     settings = options.settings_from(args, rec.fps)
-    smooth = Tracker(model, rec.cameras, results["poses"][picked[0]], settings).smooth
+    smooth = smoother(settings, rec.cameras)
     if args.background:
         from tracker.foreground import load_background, preparers
 

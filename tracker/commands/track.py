@@ -87,8 +87,10 @@ def run(args: argparse.Namespace) -> int:
         prepare: Callable[[np.ndarray], np.ndarray] | list[Callable[[np.ndarray], object]] = tracker.smooth
     else:
         from tracker.foreground import preparers
+        from tracker.io.readers import keeping_grey
 
-        prepare = preparers(background, tracker.smooth, keep_grey=overlay is not None)
+        measured = preparers(background, tracker.smooth)
+        prepare = [keeping_grey(camera) for camera in measured] if overlay is not None else list(measured)
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
     residuals = []
     interrupted = False

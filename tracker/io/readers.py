@@ -15,7 +15,7 @@ import itertools
 import queue
 import re
 import threading
-from collections.abc import Generator, Iterator
+from collections.abc import Callable, Generator, Iterator
 from pathlib import Path
 
 import cv2
@@ -61,6 +61,12 @@ def grey(image: np.ndarray) -> np.ndarray:
         return image
     code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
     return cv2.cvtColor(image, code)
+
+
+def keeping_grey(prepare: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """A frame's preparation that also keeps the frame itself: frame -> (grey(frame), prepare(frame)), so it
+    can still be shown (e.g. in an overlay video) after the edge search's image was made from it."""
+    return lambda frame: (grey(frame), prepare(frame))
 
 
 def _bgr(image: np.ndarray) -> np.ndarray:
