@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import SHARED_DATA, TEST_DATA, needs_shared
 
-from tracker import motion, render, synth
+from tracker import clips, render, synth
 from tracker.camera import load_calibration, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
@@ -70,8 +70,8 @@ def test_full_clip_parses_and_holds_the_committed_frames(bvh, human):
     np.testing.assert_array_equal(full.motion[500:620], bvh.motion)
     # the same poses from either file (measured: 4.6e-8 apart, round-off)
     np.testing.assert_allclose(
-        motion.retarget(full, human, start=500, frames=40, stride=2),
-        motion.retarget(bvh, human, start=0, frames=40, stride=2),
+        clips.retarget(full, human, start=500, frames=40, stride=2),
+        clips.retarget(bvh, human, start=0, frames=40, stride=2),
         rtol=0,
         atol=1e-6,
     )
@@ -90,7 +90,7 @@ def test_bvh_forward_kinematics_intrinsic_order(bvh):
 
 
 def test_retarget_valid_poses_and_hinge_knee(bvh, human):
-    poses = motion.retarget(bvh, human, start=0, frames=40, stride=2)  # the clip's frames 500-578
+    poses = clips.retarget(bvh, human, start=0, frames=40, stride=2)  # the clip's frames 500-578
     assert poses.shape == (40, human.size, 4, 4)
     assert joint_gap(human, poses) < 1e-9
     rot = poses[:, :, 0:3, 0:3]
@@ -108,15 +108,15 @@ def test_retarget_valid_poses_and_hinge_knee(bvh, human):
     assert np.ptp(knee) > np.radians(30) and np.min(knee) > np.radians(-5)  # the knee bends, forwards only
     # walking: the pelvis moves, upright, feet on the floor, centred on the origin
     assert np.all(poses[:, 0, 2, 2] > 0.8)
-    assert abs(float(np.median(motion.lowest_points(human, poses)))) < 1e-9
+    assert abs(float(np.median(clips.lowest_points(human, poses)))) < 1e-9
 
 
 def test_retarget_follows_bvh_bone_directions(bvh, human):
-    poses = motion.retarget(bvh, human, start=100, frames=5, stride=3, centre=False)  # the clip's 600-612
+    poses = clips.retarget(bvh, human, start=100, frames=5, stride=3, centre=False)  # the clip's 600-612
     world = bvh_io.bvh_global(bvh, 100 + 3 * np.arange(5))
     for name in ("thigh_r", "shin_r", "upperarm_l", "forearm_l", "foot_r"):
-        joint, tip, direction = motion.RETARGET_MAP[name]
-        bone = (world[:, bvh.index(tip), 0:3, 3] - world[:, bvh.index(joint), 0:3, 3]) @ motion.BVH_TO_WORLD.T
+        joint, tip, direction = clips.RETARGET_MAP[name]
+        bone = (world[:, bvh.index(tip), 0:3, 3] - world[:, bvh.index(joint), 0:3, 3]) @ clips.BVH_TO_WORLD.T
         bone /= np.linalg.norm(bone, axis=1, keepdims=True)
         ours = poses[:, human.index(name), 0:3, 0:3] @ np.asarray(direction)
         np.testing.assert_allclose(ours, bone, atol=1e-6)
@@ -154,7 +154,7 @@ Frame Time: 0.0083333
     np.testing.assert_allclose(world[1, 1, 0:3, 3], [0, 19, 1])
     np.testing.assert_allclose(world[1, 1, 0:3, 0:3] @ [0, 1, 0], [0, 0, 1], atol=1e-12)  # 90 deg about X
     with pytest.raises(TrackerInputError, match="tiny.bvh.*no joint"):
-        motion.retarget(tiny, human, path=path)
+        clips.retarget(tiny, human, path=path)
     with pytest.raises(TrackerInputError, match="no joint"):
         synth.synthesize(MODEL, _rig(tmp_path), tmp_path / "out", motion=f"bvh:{path}", frames=1, progress=False)
     (tmp_path / "bad.bvh").write_text("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0\n")
@@ -163,9 +163,9 @@ Frame Time: 0.0083333
 
 
 def test_procedural_motion_valid(human):
-    poses = motion.procedural_motion(human, 30, fps=30.0, seed=3)
+    poses = clips.procedural_motion(human, 30, fps=30.0, seed=3)
     assert joint_gap(human, poses) < 1e-9
-    assert abs(float(np.median(motion.lowest_points(human, poses)))) < 1e-9
+    assert abs(float(np.median(clips.lowest_points(human, poses)))) < 1e-9
     step = np.linalg.norm(np.diff(joint_centres(poses), axis=0), axis=2)
     assert step.max() < 0.1  # smooth: under 3 m/s at 30 fps
     assert not np.allclose(poses[0], poses[-1])
@@ -203,11 +203,11 @@ def test_sphere_silhouette_matches_analytic_projection(distortions):
 
 def test_kernel_matches_pure_render(human):
     camera = synth.look_at_camera("c", (2.5, -2.5, 1.4), (0, 0, 0.9), (120, 100), 150.0, (-0.08, 0.02, 0, 0))
-    poses = motion.procedural_motion(human, 1, seed=1)[0]
+    poses = clips.procedural_motion(human, 1, seed=1)[0]
     comp, shade, depth = _cast(human, poses, camera)
-    surfaces, clips = render.view_quadrics(human, poses, camera)
+    surfaces, planes = render.view_quadrics(human, poses, camera)
     light = camera.rotation @ (render.DEFAULT_LIGHT / np.linalg.norm(render.DEFAULT_LIGHT))
-    comp2, shade2, depth2 = render.render(render.pixel_rays(camera), surfaces, clips, human.quadric_component, light)
+    comp2, shade2, depth2 = render.render(render.pixel_rays(camera), surfaces, planes, human.quadric_component, light)
     assert np.count_nonzero(comp >= 0) > 500
     assert np.count_nonzero(comp != comp2) <= 2  # root ties at grazing rays only
     same = (comp == comp2) & (comp >= 0)
@@ -264,7 +264,7 @@ def test_clipped_cylinder_ends_and_open_tube():
 def test_renderer_speed_and_image(human):
     camera = synth.demo3_rig()[0]
     renderer = render.Renderer(human, camera)
-    poses = motion.procedural_motion(human, 2, seed=0)
+    poses = clips.procedural_motion(human, 2, seed=0)
     image = renderer.render(poses[0], np.random.default_rng(0))
     assert image.shape == (480, 640, 3) and image.dtype == np.uint8
     import time

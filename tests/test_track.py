@@ -75,7 +75,7 @@ def test_converges_from_a_displaced_start():
     start = truth.copy()
     start[0] = truth[0] @ se3.exp(np.array([0.04, -0.03, 0.02, 0.05, 0.1, -0.05]))
     start = model.coerce(np.concatenate([start[:1], truth[1:]]))
-    tracker = Tracker(model, rec.cameras, start, Settings(motion="none", iterations=10))
+    tracker = Tracker(model, rec.cameras, start, Settings(dynamics="none", iterations=10))
     _, images = next(frames(rec))
     before = np.linalg.norm(joint_centres(start) - joint_centres(truth), axis=1).mean()
     after = np.linalg.norm(joint_centres(tracker.step(images).poses) - joint_centres(truth), axis=1).mean()
@@ -162,7 +162,7 @@ def test_max_turn_scales_the_whole_step():
     images = next(iter(frames(rec)))[1]
     turns = []
     for max_turn in (float("inf"), 0.03):
-        tracker = Tracker(model, rec.cameras, turned, Settings(motion="none", max_turn=max_turn))
+        tracker = Tracker(model, rec.cameras, turned, Settings(dynamics="none", max_turn=max_turn))
         tracker.load_images(images)
         before = tracker.poses
         tracker.iterate(0)

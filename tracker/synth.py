@@ -2,7 +2,7 @@
 
 Pipeline of :func:`synthesize`::
 
-    motion (BVH clip | procedural)  -> model poses (F, N, 4, 4)          (tracker.motion)
+    motion (BVH clip | procedural)  -> model poses (F, N, 4, 4)          (tracker.clips)
     per frame and camera            -> ray-cast body over a background   (tracker.render)
     writers                         -> <cam>.avi (MJPG), calibration.toml, model.toml, init.toml, truth.npz
 
@@ -21,12 +21,12 @@ import numpy as np
 
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.clips import procedural_motion, retarget, surface_samples
 from tracker.errors import TrackerInputError
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file
 from tracker.model import Model, joint_centres, load_model
-from tracker.motion import procedural_motion, retarget, surface_samples
 from tracker.render import Renderer, load_backgrounds
 
 # ---------------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """The frame loop (docs/method-tracking.md, section 6): render, measure, solve, update, coerce.
 
-Per frame the poses are predicted from the motion model (``Settings.motion``: none, constant
-velocity, or the second-order Kalman filter of :mod:`tracker.dynamics`), then each IRLS
+Per frame the poses are predicted from the motion model (``Settings.dynamics``: none, constant
+velocity, or the second-order Kalman filter of :mod:`tracker.motion_prior`), then each IRLS
 iteration samples the visible outlines in every camera, measures their edges,
 adds a weak Gaussian prior ``P = diag(lt I3, lr I3)`` about the predicted pose
 (so that every ``C_i`` is invertible, section 3, and the iterations of a frame
@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from tracker import dynamics
+from tracker import motion_prior
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
 from tracker.measure import Statistics, measure_kernel
@@ -37,7 +37,7 @@ from tracker.outline import Placed, Rig, Samples, outline_kernel
 from tracker.ownership import Ownership
 from tracker.status import LOST, TRACKED, UNCERTAIN
 
-MOTION_MODELS = ("none", "constant-velocity", "kalman")
+DYNAMICS = ("none", "constant-velocity", "kalman")
 
 
 @dataclass(frozen=True)
@@ -53,9 +53,9 @@ class Settings:
     prior_translation: float = 1e3  # prior about the predicted pose, per m^2
     prior_rotation: float = 10.0  # per rad^2
     blur_sigma: float = 1.0  # Gaussian smoothing before the edge search, pixels
-    motion: str = "constant-velocity"  # or "none", or "kalman" (tracker.dynamics)
+    dynamics: str = "constant-velocity"  # or "none", or "kalman" (tracker.motion_prior)
     damping: float = 1.0  # share of the last frame's motion carried into the prediction (constant-velocity)
-    # motion = "kalman" (tracker.dynamics): a second-order Kalman filter per component, translation and rotation
+    # dynamics = "kalman" (tracker.motion_prior): a second-order Kalman filter per component, translation and rotation
     # blocks apart; it predicts the poses, and the information s' P^-1 of its predicted covariance is the prior about
     # them (prior_translation/prior_rotation become its floor).  The defaults below were tuned on rendered
     # recordings at several frame rates and checked on real footage (docs/motion-models.md); treat them as gains
@@ -218,9 +218,9 @@ class Tracker:
     """Tracks one body in a fixed rig, frame after frame."""
 
     def __init__(self, model: Model, cameras, initial_poses: np.ndarray, settings: Settings = Settings()):
-        if settings.motion not in MOTION_MODELS:
-            raise ValueError(f"motion model must be one of {MOTION_MODELS}")
-        if settings.motion == "kalman" and not (
+        if settings.dynamics not in DYNAMICS:
+            raise ValueError(f"dynamics must be one of {DYNAMICS}")
+        if settings.dynamics == "kalman" and not (
             settings.frame_rate > 0
             and settings.kalman_noise_scale > 0
             and settings.kalman_q_translation >= 0
@@ -228,7 +228,7 @@ class Tracker:
             and settings.kalman_decay >= 0
         ):
             raise ValueError(
-                "motion 'kalman' needs frame_rate > 0, kalman_noise_scale > 0 and "
+                "dynamics 'kalman' needs frame_rate > 0, kalman_noise_scale > 0 and "
                 "kalman_q_translation, kalman_q_rotation, kalman_decay >= 0"
             )
         self.model = model
@@ -256,11 +256,11 @@ class Tracker:
         self.poses = model.coerce(initial_poses)
         self.previous: np.ndarray | None = None
         self.anchor = self.poses
-        self.dynamics: dynamics.MotionState | None = None
+        self.motion_state: motion_prior.MotionState | None = None
         self.noise_scale = np.full(n, float(settings.kalman_noise_scale))  # s' per component (kalman)
-        if settings.motion == "kalman":
+        if settings.dynamics == "kalman":
             s = settings.kalman_noise_scale
-            self.dynamics = dynamics.initial_state(
+            self.motion_state = motion_prior.initial_state(
                 self.poses, position_variance=(s / settings.prior_translation, s / settings.prior_rotation)
             )
         self.sampled_poses = self.poses
@@ -275,7 +275,7 @@ class Tracker:
         filter's state and noise scales (kalman); buffers and timings start afresh."""
         other = Tracker(self.model, cameras, self.poses, self.settings)
         other.previous = self.previous
-        other.dynamics, other.noise_scale = self.dynamics, self.noise_scale
+        other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
         return other
 
     def warm_up(self) -> None:
@@ -441,53 +441,53 @@ class Tracker:
     def step(self, images, smoothed: bool = False, dt: float | None = None) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not.
 
-        ``dt``: seconds since the previous frame (motion "kalman" only; default ``1 / frame_rate``).
+        ``dt``: seconds since the previous frame (dynamics "kalman" only; default ``1 / frame_rate``).
         """
         self.load_images(images, smoothed)
         current = self.poses
         st = self.settings
-        if st.motion == "constant-velocity" and self.previous is not None:
+        if st.dynamics == "constant-velocity" and self.previous is not None:
             self.poses = self.model.coerce(constant_velocity(self.previous, current, st.damping))
-        elif st.motion == "kalman":
+        elif st.dynamics == "kalman":
             inverse = self.predict_kalman(1.0 / st.frame_rate if dt is None else dt)
         self.anchor = self.poses
         for iteration in range(st.iterations):
             stats = self.iterate(iteration)
-        if st.motion == "kalman":
+        if st.dynamics == "kalman":
             self.correct_kalman(inverse)
         self.previous = current
         share = stats.found / stats.visible if stats.visible else 0.0
         return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)
 
     def predict_kalman(self, dt: float) -> np.ndarray:
-        """Predict every component ``dt`` ahead independently (:func:`tracker.dynamics.predict`), coerce the
+        """Predict every component ``dt`` ahead independently (:func:`tracker.motion_prior.predict`), coerce the
         predicted poses onto the joints (the filter's means follow), and set the prior about them to the
         predicted information ``s' P_xx^-1`` (floored at prior_translation/prior_rotation; ``s'`` of the
-        previous frame).  Returns the predicted state's ``dynamics.position_inverse``, which the
+        previous frame).  Returns the predicted state's ``motion_prior.position_inverse``, which the
         correction reuses."""
         st = self.settings
-        assert self.dynamics is not None  # motion "kalman"
-        predicted = dynamics.predict(
-            self.dynamics, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
+        assert self.motion_state is not None  # dynamics "kalman"
+        predicted = motion_prior.predict(
+            self.motion_state, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
         )
         self.poses = self.model.coerce(predicted.poses)
-        self.dynamics = dynamics.rereference(predicted, self.poses)
-        inverse = dynamics.position_inverse(self.dynamics)
-        self.prior = dynamics.prior_information(
-            self.dynamics, self.noise_scale, (st.prior_translation, st.prior_rotation), inverse
+        self.motion_state = motion_prior.rereference(predicted, self.poses)
+        inverse = motion_prior.position_inverse(self.motion_state)
+        self.prior = motion_prior.prior_information(
+            self.motion_state, self.noise_scale, (st.prior_translation, st.prior_rotation), inverse
         )
         return inverse
 
     def correct_kalman(self, inverse: np.ndarray) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
         (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
-        ``s' = s sigma0_i^2`` (:func:`tracker.dynamics.variance_factor` of the same samples); ``inverse``
+        ``s' = s sigma0_i^2`` (:func:`tracker.motion_prior.variance_factor` of the same samples); ``inverse``
         is the predicted state's P_xx^-1 that :meth:`predict_kalman` returned."""
         st = self.settings
         s = float(st.kalman_noise_scale)
         if st.kalman_residual_variance:  # without any edge the last frame's values stay
             n = self.samples.count
-            self.noise_scale = s * dynamics.variance_factor(
+            self.noise_scale = s * motion_prior.variance_factor(
                 self.samples.component[:n],
                 self.offset[:n],
                 self.weight[:n],
@@ -495,9 +495,9 @@ class Tracker:
                 fallback=self.noise_scale / s,
             )
         data = self.information - self.prior
-        assert self.dynamics is not None  # motion "kalman"
-        information = dynamics.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
-        self.dynamics = dynamics.correct(self.dynamics, self.poses, information, inverse)
+        assert self.motion_state is not None  # dynamics "kalman"
+        information = motion_prior.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
+        self.motion_state = motion_prior.correct(self.motion_state, self.poses, information, inverse)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings

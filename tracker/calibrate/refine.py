@@ -99,7 +99,7 @@ def refine_rig(
     start, cameras = tuple(cameras), list(cameras)
     fixed = set(fixed)
     poses = np.array(poses)
-    settings = replace(settings, motion="none")  # each frame's fit starts from its own body, as tracked
+    settings = replace(settings, dynamics="none")  # each frame's fit starts from its own body, as tracked
     tracker = Tracker(model, cameras, poses[0], settings)
     prior = tracker.prior[0]  # the tracker's P = diag(lt I3, lr I3), the same for every component
     first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range

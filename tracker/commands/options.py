@@ -14,7 +14,7 @@ from typing import Any
 
 from tracker.errors import TrackerInputError
 
-TUNING = ("iterations", "spacing", "resample_every", "search_range", "motion", "damping", "max_turn")
+TUNING = ("iterations", "spacing", "resample_every", "search_range", "dynamics", "damping", "max_turn")
 
 
 def positive_int(text: str) -> int:
@@ -93,10 +93,10 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 help="edge search in the first iteration, pixels either side (default 20; the last uses 6)",
             ),
         ),
-        "motion": (
+        "dynamics": (
             ["--dynamics"],
             dict(
-                dest="motion",
+                dest="dynamics",
                 choices=("none", "constant-velocity", "kalman"),
                 help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
                 "(a second-order Kalman filter per component whose prediction and covariance set the prior)",
@@ -123,8 +123,8 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
     for key in which:
         flags, kwargs = options[key]
         parser.add_argument(*flags, **kwargs)
-    if "motion" in which:  # --motion names the rendered clip in `tracker synth`
-        parser.add_argument("--motion", **options["motion"][1] | renamed("--dynamics"))
+    if "dynamics" in which:  # --motion names the rendered clip in `tracker synth`
+        parser.add_argument("--motion", **options["dynamics"][1] | renamed("--dynamics"))
 
 
 class _Renamed(argparse.Action):

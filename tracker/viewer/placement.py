@@ -62,7 +62,7 @@ class Placement:
         self.images = [seeker.read(0) for seeker in seekers]
         for seeker in seekers:
             seeker.close()
-        self.settings = Settings(motion="none", iterations=snap_iterations)
+        self.settings = Settings(dynamics="none", iterations=snap_iterations)
         self.inspector = Tracker(model, recording.cameras, poses, self.settings)
         self.smoothed = [self.inspector.smooth(image) for image in self.images]  # frame 0 never changes:
         self.inspector.load_images(self.smoothed, smoothed=True)  # smoothed and loaded once for every redraw

@@ -65,7 +65,7 @@ that depend on ``x`` only)
     P_xx+ = (P_xx^-1 + C / s')^-1,
 
 which equals the textbook update ``K = P H^T (H P H^T + V)^-1``, ``H = [I3 0]`` (``update`` in
-tests/test_dynamics.py does that from a measured pose and is tested against it).  A component's
+tests/test_motion_prior.py does that from a measured pose and is tested against it).  A component's
 ``C_i`` counts its own edges only, not what its neighbours say through the joints, so its ``P_xx+``
 errs on the large side (its prior on the next frame on the weak side).
 
@@ -75,7 +75,7 @@ raised to them): that keeps every ``C_i`` invertible (drummond-cipolla note, sec
 far the prior can fade while a component has no data; a component without data keeps moving with its
 velocity while its covariance grows (``q dt^3 / 3`` per frame and more).
 
-Relation to the note's section 5 (``fitting_step`` in tests/test_dynamics.py): its first-order filter
+Relation to the note's section 5 (``fitting_step`` in tests/test_motion_prior.py): its first-order filter
 runs the Riccati equation over inner iterations of one frame; integrated over unit pseudo-time on a linear measurement
 it gives exactly our discrete update, and with ``P = I`` held (no Riccati step) it is plain dynamic
 fitting, ``qdot = H^T V^-1 r - K q`` (eqs. 16/18).  The note's "same fixed point" holds for rigid

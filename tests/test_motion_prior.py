@@ -1,4 +1,4 @@
-"""The second-order Kalman motion prior (tracker/dynamics.py; metaxas-terzopoulos-math.md, sections 3, 5)."""
+"""The second-order Kalman motion prior (tracker/motion_prior.py; metaxas-terzopoulos-math.md, sections 3, 5)."""
 
 import itertools
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from tracker import dynamics
+from tracker import motion_prior
 from tracker.evaluate import evaluate
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
@@ -21,16 +21,17 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "recordings" / "demo"
 
 
-def update(state: dynamics.MotionState, measured: np.ndarray, information: np.ndarray) -> dynamics.MotionState:
+def update(state: motion_prior.MotionState, measured: np.ndarray, information: np.ndarray) -> motion_prior.MotionState:
     """The Kalman update from measured poses ``z`` with information ``W = V^-1`` per block (N,2,3,3):
-    ``x+ = x + P_xx+ W (z - x)`` (information form of ``x + K (z - H x)``), then :func:`tracker.dynamics.correct`."""
-    diff = dynamics._difference(state.poses, np.asarray(measured, dtype=np.float64))
+    ``x+ = x + P_xx+ W (z - x)`` (information form of ``x + K (z - H x)``), then
+    :func:`tracker.motion_prior.correct`."""
+    diff = motion_prior._difference(state.poses, np.asarray(measured, dtype=np.float64))
     posterior = np.linalg.inv(np.linalg.inv(state.covariance[..., :3, :3]) + information)
     step = np.einsum("nbij,nbj->nbi", posterior @ information, diff)
     poses = state.poses.copy()
-    poses[:, :3, 3] += step[:, dynamics.TRANSLATION]
-    poses[:, :3, :3] = state.poses[:, :3, :3] @ se3.exp_so3_many(np.ascontiguousarray(step[:, dynamics.ROTATION]))
-    return dynamics.correct(state, poses, information)
+    poses[:, :3, 3] += step[:, motion_prior.TRANSLATION]
+    poses[:, :3, :3] = state.poses[:, :3, :3] @ se3.exp_so3_many(np.ascontiguousarray(step[:, motion_prior.ROTATION]))
+    return motion_prior.correct(state, poses, information)
 
 
 def fitting_step(
@@ -49,7 +50,7 @@ def fitting_step(
 
     with ``g = H^T V^-1 r`` (``force``) and ``A = H^T V^-1 H`` (``hessian``), both at the current ``x``.
     With ``riccati=False`` and ``P = I`` this is dynamic fitting (eqs. 16/18).  For comparison and tests;
-    the tracker uses the discrete form (:func:`tracker.dynamics.correct`)."""
+    the tracker uses the discrete form (:func:`tracker.motion_prior.correct`)."""
     k = np.zeros_like(cov) if stiffness is None else stiffness
     x = x + dt * (cov @ force - k @ x)
     if riccati:
@@ -97,10 +98,12 @@ def test_discrete_propagation_equals_the_continuous_riccati_solution(dt, q, deca
         k3 = rhs(p + 0.5 * h * k2)
         k4 = rhs(p + h * k3)
         p = p + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    exact = dynamics.propagate_covariance(p0, dt, q, decay)
+    exact = motion_prior.propagate_covariance(p0, dt, q, decay)
     np.testing.assert_allclose(exact, p, rtol=1e-9, atol=1e-14 * np.abs(p).max())
     # the mean's transition is exp(F dt), and the noise term alone is the integral with P0 = 0
-    np.testing.assert_allclose(np.kron(dynamics.transition(dt, decay), np.eye(3)), expm(f * dt), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        np.kron(motion_prior.transition(dt, decay), np.eye(3)), expm(f * dt), rtol=1e-12, atol=1e-15
+    )
 
 
 def test_identity_covariance_and_no_data_is_plain_dynamic_fitting():
@@ -155,7 +158,7 @@ def test_section5_filter_over_unit_pseudo_time_is_the_discrete_update():
     cov = np.zeros((1, 2, 6, 6))
     cov[0, 0] = _spd(rng, scale=0.02)
     cov[0, 1] = _spd(rng, scale=0.02)
-    state = dynamics.MotionState(np.eye(4)[None], rng.normal(size=(1, 2, 3)), cov)
+    state = motion_prior.MotionState(np.eye(4)[None], rng.normal(size=(1, 2, 3)), cov)
     info = np.stack([_spd(rng, 3, 50.0), _spd(rng, 3, 50.0)])[None]
     measured = np.eye(4)[None].copy()
     measured[0, :3, 3] = rng.normal(size=3) * 0.05
@@ -180,7 +183,7 @@ def test_update_is_the_textbook_kalman_update():
     n = 3
     poses = _random_poses(rng, n)
     cov = np.stack([np.stack([_spd(rng, scale=0.01), _spd(rng, scale=0.01)]) for _ in range(n)])
-    state = dynamics.MotionState(poses, rng.normal(size=(n, 2, 3)), cov)
+    state = motion_prior.MotionState(poses, rng.normal(size=(n, 2, 3)), cov)
     info = np.stack([np.stack([_spd(rng, 3, 100.0), _spd(rng, 3, 100.0)]) for _ in range(n)])
     measured = np.stack([poses[i] @ se3.exp(rng.normal(size=6) * 0.05) for i in range(n)])
     updated = update(state, measured, info)
@@ -225,11 +228,11 @@ def test_a_constant_velocity_trajectory_is_tracked_exactly_without_lag():
     rng = np.random.default_rng(5)
     dt, count = 1 / 60, 120
     truth, velocity, spin = _trajectory(rng, 4, count, dt)
-    state = dynamics.initial_state(truth[0])
+    state = motion_prior.initial_state(truth[0])
     info = np.broadcast_to(np.diag([1e4, 1e4, 1e4]), (4, 2, 3, 3))
     errors = []
     for k in range(1, count):
-        state = dynamics.predict(state, dt, (1.0, 30.0))
+        state = motion_prior.predict(state, dt, (1.0, 30.0))
         errors.append(max(np.abs(state.poses - truth[k]).max() for _ in [0]))
         state = update(state, truth[k], info)
     assert errors[0] > 1e-3  # started at rest: the first prediction lags
@@ -242,19 +245,19 @@ def test_a_component_without_measurements_keeps_moving_and_its_covariance_grows(
     rng = np.random.default_rng(6)
     dt, count = 1 / 60, 150
     truth, _, _ = _trajectory(rng, 2, count, dt)
-    state = dynamics.initial_state(truth[0])
+    state = motion_prior.initial_state(truth[0])
     info = np.broadcast_to(np.diag([1e5, 1e5, 1e5]), (2, 2, 3, 3)).copy()
     floor = (10.0, 0.1)
     priors, traces = [], []
     for k in range(1, count):
-        state = dynamics.predict(state, dt, (1.0, 30.0))
+        state = motion_prior.predict(state, dt, (1.0, 30.0))
         if k > 100:
             np.testing.assert_allclose(state.poses, truth[k], atol=1e-9)  # still on its trajectory
-            priors.append(dynamics.prior_information(state, 1.0, floor))
+            priors.append(motion_prior.prior_information(state, 1.0, floor))
             traces.append(np.trace(state.covariance, axis1=-2, axis2=-1))
             info[1] = 0.0  # component 1 loses its data
         before = state
-        state = dynamics.correct(
+        state = motion_prior.correct(
             state, np.where(np.arange(2)[:, None, None] == 1, state.poses, truth[k]) if k > 100 else truth[k], info
         )
         if k > 100:  # no data: correct changes nothing for component 1
@@ -276,15 +279,15 @@ def test_prior_information_is_the_inverse_position_covariance_in_body_twist_coor
     rng = np.random.default_rng(7)
     poses = _random_poses(rng, 2)
     cov = np.stack([np.stack([_spd(rng, scale=1e-4), _spd(rng, scale=1e-3)]) for _ in range(2)])
-    state = dynamics.MotionState(poses, np.zeros((2, 2, 3)), cov)
-    prior = dynamics.prior_information(state, 0.5)
+    state = motion_prior.MotionState(poses, np.zeros((2, 2, 3)), cov)
+    prior = motion_prior.prior_information(state, 0.5)
     for i in range(2):
         r = poses[i, :3, :3]
         # a body twist (v, 0) moves the origin by R v: its cost is (R v)^T Pt^-1 (R v)
         np.testing.assert_allclose(prior[i, :3, :3], 0.5 * r.T @ np.linalg.inv(cov[i, 0, :3, :3]) @ r, rtol=1e-9)
         np.testing.assert_allclose(prior[i, 3:, 3:], 0.5 * np.linalg.inv(cov[i, 1, :3, :3]), rtol=1e-9)
         np.testing.assert_array_equal(prior[i, :3, 3:], 0.0)
-    floored = dynamics.prior_information(state, 1e-9, (7.0, 3.0))
+    floored = motion_prior.prior_information(state, 1e-9, (7.0, 3.0))
     np.testing.assert_allclose(floored[:, :3, :3], np.broadcast_to(7.0 * np.eye(3), (2, 3, 3)), rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(floored[:, 3:, 3:], np.broadcast_to(3.0 * np.eye(3), (2, 3, 3)), rtol=1e-6, atol=1e-12)
 
@@ -293,13 +296,13 @@ def test_block_information_is_the_marginal_information_of_each_block():
     rng = np.random.default_rng(8)
     poses = _random_poses(rng, 3)
     c = np.stack([_spd(rng, scale=100.0) for _ in range(3)])
-    blocks = dynamics.block_information(c, poses)
+    blocks = motion_prior.block_information(c, poses)
     for i in range(3):
         cov = np.linalg.inv(c[i])
         r = poses[i, :3, :3]
         np.testing.assert_allclose(blocks[i, 0], r @ np.linalg.inv(cov[:3, :3]) @ r.T, rtol=1e-6)
         np.testing.assert_allclose(blocks[i, 1], np.linalg.inv(cov[3:, 3:]), rtol=1e-6)
-    np.testing.assert_array_equal(dynamics.block_information(np.zeros((2, 6, 6)), poses[:2]), 0.0)
+    np.testing.assert_array_equal(motion_prior.block_information(np.zeros((2, 6, 6)), poses[:2]), 0.0)
 
 
 def _track(settings, count, blank=()):
@@ -317,7 +320,7 @@ def _track(settings, count, blank=()):
 
 
 def test_demo_first_frames_with_the_kalman_prior_meet_the_accuracy_bar():
-    model, rec, results, _, _ = _track(Settings(motion="kalman"), 40)
+    model, rec, results, _, _ = _track(Settings(dynamics="kalman"), 40)
     poses = np.stack([r.poses for r in results])
     tracked = {
         "frame": np.arange(40),
@@ -335,7 +338,7 @@ def test_demo_first_frames_with_the_kalman_prior_meet_the_accuracy_bar():
 def test_tracker_without_images_keeps_the_body_moving_and_weakens_its_prior():
     """Frames 20-22 blank in every camera: the poses follow the filter's constant-velocity prediction and
     the prior about it weakens frame by frame; afterwards the images take over again."""
-    model, rec, results, priors, predicted = _track(Settings(motion="kalman"), 30, blank={20, 21, 22})
+    model, rec, results, priors, predicted = _track(Settings(dynamics="kalman"), 30, blank={20, 21, 22})
     for k in (20, 21, 22):
         np.testing.assert_allclose(results[k].poses, predicted[k], atol=1e-6)
     root = results[19].poses[0, :3, 3]
@@ -359,7 +362,7 @@ def test_variance_factor_is_the_weighted_residual_variance_per_component():
     offset = np.concatenate([rng.normal(0, 0.5, 400), rng.normal(0, 3.0, 30), rng.normal(0, 1.0, 7)])
     weight = 1.0 / (2.0 + np.abs(offset))
     offset[::10], weight[::10] = np.nan, 0.0
-    factor = dynamics.variance_factor(component, offset, weight, 4)
+    factor = motion_prior.variance_factor(component, offset, weight, 4)
     found = weight > 0
     sums = np.array([np.sum((weight * offset**2)[found & (component == i)]) for i in range(4)])
     counts = np.array([np.sum(found & (component == i)) for i in range(4)])
@@ -367,7 +370,7 @@ def test_variance_factor_is_the_weighted_residual_variance_per_component():
     np.testing.assert_allclose(factor, (sums + 12 * pooled) / (np.maximum(counts - 6, 0) + 12), rtol=1e-12)
     assert factor[1] > 5 * factor[0]  # the noisy component is trusted less
     assert factor[2] == pytest.approx(pooled)  # no samples: the pooled value
-    np.testing.assert_array_equal(dynamics.variance_factor(component[:0], offset[:0], weight[:0], 2), 1.0)
+    np.testing.assert_array_equal(motion_prior.variance_factor(component[:0], offset[:0], weight[:0], 2), 1.0)
     np.testing.assert_array_equal(
-        dynamics.variance_factor(component[:0], offset[:0], weight[:0], 2, fallback=[0.2, 0.3]), [0.2, 0.3]
+        motion_prior.variance_factor(component[:0], offset[:0], weight[:0], 2, fallback=[0.2, 0.3]), [0.2, 0.3]
     )
