@@ -171,16 +171,8 @@ def render_kernel(rays, surfaces, clips, boxes, owner, light, ambient, key, fill
             shade_out[v, u] = ambient + key * max(lambert, 0.0) + fill * abs(facing)
 
 
-def _forms(m, x, y, z, w):
-    """Vectorised X~^T M X~ over arrays x, y, z, w."""
-    return (
-        m[0, 0] * x * x
-        + m[1, 1] * y * y
-        + m[2, 2] * z * z
-        + m[3, 3] * w * w
-        + 2.0
-        * (m[0, 1] * x * y + m[0, 2] * x * z + m[0, 3] * x * w + m[1, 2] * y * z + m[1, 3] * y * w + m[2, 3] * z * w)
-    )
+_forms = _form.py_func
+"""Vectorised X~^T M X~ over arrays x, y, z, w: :func:`_form` itself, run by numpy."""
 
 
 def render(rays, surfaces, clips, owner, light, ambient=0.35, key=0.45, fill=0.3):
