@@ -1,7 +1,7 @@
-"""The README's commands run as written, and the documentation's links hold.
+"""The commands of the README and of docs/ run as written, and the documentation's links hold.
 
-Convention: a shell block (```sh) in README.md that holds a ``tracker`` command is preceded by
-one of two HTML comments:
+Convention: a shell block (```sh) in README.md or a docs/ page that holds a ``tracker`` command is
+preceded by one of two HTML comments:
 
 * ``<!-- test -->``: the block uses only files the repository ships (``recordings/demo``,
   ``models/``, ``calib/``) and is run here, one command after the other, in a temporary folder
@@ -72,18 +72,29 @@ def _tracker_blocks(path: Path):
             yield marker, block, line
 
 
-README_TESTED = [(line, block) for marker, block, line in _tracker_blocks(README) if marker == "<!-- test -->"]
+def _pages() -> list[Path]:
+    return [README, *sorted(DOCS.glob("*.md"))]
+
+
+TESTED = [
+    (f"{page.relative_to(ROOT)}:{line}", block)
+    for page in _pages()
+    for marker, block, line in _tracker_blocks(page)
+    if marker == "<!-- test -->"
+]
 
 
 def test_every_tracker_block_is_tested_or_excused():
-    for marker, block, line in _tracker_blocks(README):
-        excused = re.fullmatch(r"<!-- not tested: (.+\S) -->", marker)
-        assert marker == "<!-- test -->" or excused, f"README.md line {line}: mark the block test or not tested"
-        if marker == "<!-- test -->":
-            for words in _commands(block):
-                assert words[0] == "tracker", f"README.md line {line}: only tracker commands in a tested block"
-                assert not any("../shared" in word for word in words), f"line {line}: ../shared is not shipped"
-    assert README_TESTED, "no tested block in the README"
+    for page in _pages():
+        where = page.relative_to(ROOT)
+        for marker, block, line in _tracker_blocks(page):
+            excused = re.fullmatch(r"<!-- not tested: (.+\S) -->", marker)
+            assert marker == "<!-- test -->" or excused, f"{where} line {line}: mark the block test or not tested"
+            if marker == "<!-- test -->":
+                for words in _commands(block):
+                    assert words[0] == "tracker", f"{where} line {line}: only tracker commands in a tested block"
+                    assert not any("../shared" in word for word in words), f"{where} line {line}: not shipped"
+    assert any(where.startswith("README.md") for where, _ in TESTED), "no tested block in the README"
 
 
 def _makefile_demo() -> list[str]:
@@ -98,7 +109,9 @@ def _frames_of(poses: Path) -> int:
         return len(arrays["joints"])
 
 
-def _check_poses(path: Path, recording: Path | None) -> None:
+def _check_poses(path: Path, recording: Path | None, views: int) -> None:
+    """Mostly tracked, finite joints, and near the truth where there is one: MPJPE under 25 mm, or 100 mm
+    with a single view (depth is then weakly observed)."""
     with np.load(path) as arrays:
         joints, status, frames = arrays["joints"], arrays["status"], arrays["frame"]
         names = list(arrays["joint_names"])
@@ -112,15 +125,16 @@ def _check_poses(path: Path, recording: Path | None) -> None:
             true = truth["joints"][[rows[int(f)] for f in frames]]
             columns = [list(truth["joint_names"]).index(name) for name in names]
         error_mm = 1000 * np.linalg.norm(joints - true[:, columns], axis=2)
-        assert np.nanmean(error_mm) < 25.0, f"{path}: MPJPE {np.nanmean(error_mm):.1f} mm"
+        bound = 25.0 if views != 1 else 100.0
+        assert np.nanmean(error_mm) < bound, f"{path}: MPJPE {np.nanmean(error_mm):.1f} mm"
 
 
-def _check_output(path: Path, recording: Path | None) -> None:
+def _check_output(path: Path, recording: Path | None, views: int) -> None:
     """A written file holds what it should, with sensible numbers."""
     assert path.stat().st_size > 0, path
     poses = path.with_suffix(".npz")
     if path.name == "poses.npz":
-        _check_poses(path, recording)
+        _check_poses(path, recording, views)
     elif path.name == "truth.npz":
         assert _frames_of(path) > 0
     elif path.suffix == ".trc":
@@ -154,7 +168,8 @@ def _run(words: list[str], cwd: Path) -> None:
         assert written, f"{shlex.join(words)} wrote no file"
     recording = _recording_of(words, cwd) if subcommand == "track" else None
     for path in written:
-        _check_output(path, recording)
+        views = len(words[words.index("--cameras") + 1].split(",")) if "--cameras" in words else 0
+        _check_output(path, recording, views)
     if subcommand == "synth":
         out = cwd / words[words.index("--out") + 1]
         assert (out / "calibration.toml").exists() and _frames_of(out / "truth.npz") == 6
@@ -169,8 +184,8 @@ def workdir(tmp_path, monkeypatch) -> Path:
     return tmp_path
 
 
-@pytest.mark.parametrize("line,block", README_TESTED, ids=[f"README.md:{line}" for line, _ in README_TESTED])
-def test_readme_block_runs(line, block, workdir):
+@pytest.mark.parametrize("where,block", TESTED, ids=[where for where, _ in TESTED])
+def test_documented_block_runs(where, block, workdir):
     for words in _commands(block):
         _run(words, workdir)
 
@@ -184,10 +199,6 @@ def test_make_demo_command_runs(workdir):
 # --- links -----------------------------------------------------------------------------------
 
 LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
-
-
-def _pages() -> list[Path]:
-    return [README, *sorted(DOCS.glob("*.md"))]
 
 
 def _relative_links(page: Path) -> list[str]:
