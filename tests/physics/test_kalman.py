@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from tracker.geometry.se3 import exp_so3, log_so3
+from tracker.geometry.se3 import exp_so3, log_so3, skew
 from tracker.physics import experiment as ex
 from tracker.physics import fitting as fit
 from tracker.physics import kalman as kf
@@ -211,6 +211,26 @@ def test_filter_recovers_a_tapered_superquadric_from_clean_data():
     assert np.linalg.norm(log_so3(part.rotation.T @ target.rotation)) < 1e-9
     np.testing.assert_allclose(part.q_s[:9], q_s[:9], rtol=0, atol=1e-9)
     np.testing.assert_allclose(part.q_s[9:], q_s[9:], rtol=0, atol=0.01)
+
+
+def test_global_jacobians_are_the_rigid_global_columns_of_l():
+    """global_jacobians (kinematics.active_jacobians at GLOBAL) is [ I3 | -[y_i]x | R J_i ] with
+    y_i = R p_i and J_i without its a0 column, built here column by column, and the same columns
+    of the full kin.jacobians, to 1e-15 on random parts of two meshes."""
+    rng = np.random.default_rng(21)
+    for m in (sq.mesh(), sq.mesh(5, 7)):
+        for _ in range(5):
+            part = random_part(rng, m)
+            jac = kf.global_jacobians(part)
+            n = len(m.u)
+            y = kin.local_points(part) @ part.rotation.T
+            expected = np.zeros((n, 3, kf.N_GLOBAL))
+            expected[:, :, 0:3] = np.eye(3)
+            expected[:, :, 3:6] = -np.stack([skew(yi) for yi in y])
+            expected[:, :, kin.RIGID :] = part.rotation @ sq.jacobian(part.q_s, part.u, part.v)[:, :, 1:]
+            assert jac.shape == (n, 3, kf.N_GLOBAL)
+            np.testing.assert_allclose(jac, expected, rtol=0, atol=1e-15)
+            np.testing.assert_allclose(jac, kin.jacobians(part)[:, :, kf.GLOBAL], rtol=0, atol=1e-15)
 
 
 def global_leftover(part):

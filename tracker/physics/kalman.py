@@ -220,8 +220,8 @@ def initial_state(part: kin.Part, scale: float = 1.0, p_node: np.ndarray | None 
 
 def global_jacobians(part: kin.Part) -> np.ndarray:
     """L_g,i = [ I3 | -[y_i]x | R J_i ] (y_i = R p_i, J_i without its a0 column): the rigid +
-    global columns of L_i (section 2), shape (n, 3, 16)."""
-    return kin.rigid_global_jacobians(part)[:, :, GLOBAL]
+    global columns of L_i (section 2), shape (n, 3, 16): ``kinematics.active_jacobians`` at ``GLOBAL``."""
+    return kin.active_jacobians(part, GLOBAL)
 
 
 def absorb_global(part: kin.Part, damping: float = 0.0, rounds: int = 3) -> kin.Part:

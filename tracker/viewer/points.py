@@ -8,18 +8,15 @@ dots in their part's colour, the joints black dots.
 
 from __future__ import annotations
 
-import threading
-from pathlib import Path
 from typing import cast
 
 import numpy as np
 import viser
-from tqdm import tqdm
 
 from tracker.physics import kinematics as kin
 from tracker.physics import superquadric as sq
 from tracker.viewer.overlay import component_colours
-from tracker.viewer.scene import write_viser
+from tracker.viewer.timeline import Timeline
 
 
 def node_positions(poses: np.ndarray, q_s: np.ndarray, d: np.ndarray, mesh: sq.Mesh) -> np.ndarray:
@@ -32,12 +29,14 @@ def node_positions(poses: np.ndarray, q_s: np.ndarray, d: np.ndarray, mesh: sq.M
     )
 
 
-class PointsView:
+class PointsView(Timeline):
     """A frame slider over one ``tracker points`` run: ``results`` (poses.npz arrays), ``shapes``
-    (shapes.npz arrays) and ``markers`` (F, M, 3) the fitted markers of the same frames."""
+    (shapes.npz arrays) and ``markers`` (F, M, 3) the fitted markers of the same frames, recorded at
+    ``rate`` frames a second."""
 
     def __init__(self, server: viser.ViserServer, results: dict, shapes: dict, markers: np.ndarray, rate: float):
-        self.server, self.results, self.shapes, self.markers, self.rate = server, results, shapes, markers, rate
+        super().__init__(server, len(results["frame"]), rate)
+        self.results, self.shapes, self.markers = results, shapes, markers
         self.mesh = sq.mesh(*(int(n) for n in shapes["mesh"]))
         names = [str(name) for name in shapes["part_names"]]
         colours = np.array(component_colours(len(names)))
@@ -70,46 +69,23 @@ class PointsView:
             point_size=0.025,
             point_shape="circle",
         )
-        self.lock = threading.Lock()  # browsers move the slider from viser's threads
-        self.row = -1
         self.status = server.gui.add_markdown("")
-        self.slider = server.gui.add_slider(
-            "frame", min=0, max=max(len(results["frame"]) - 1, 1), step=1, initial_value=0
-        )
-        self.slider.on_update(lambda _: self.show(int(self.slider.value)))
+        self.add_slider(server.gui)
         centre = first.reshape(-1, 3).mean(axis=0)
         server.initial_camera.look_at = tuple(centre)
         server.initial_camera.position = tuple(centre + np.array([2.0, -2.0, 1.0]))
 
-    def show(self, row: int) -> None:
-        """Draw row ``row`` of the run (clamped to its rows; a row already shown is not redrawn)."""
-        row = min(max(int(row), 0), len(self.results["frame"]) - 1)
-        with self.lock:
-            if row == self.row:
-                return
-            nodes = node_positions(
-                self.results["poses"][row], self.shapes["q_s"][row], self.shapes["d"][row], self.mesh
+    def draw(self, row: int) -> None:
+        """Draw row ``row`` of the run: its parts, the markers seen and the joints."""
+        nodes = node_positions(self.results["poses"][row], self.shapes["q_s"][row], self.shapes["d"][row], self.mesh)
+        with self.server.atomic():
+            for handle, part_nodes in zip(self.parts, nodes):
+                handle.vertices = part_nodes.astype(np.float32)
+            seen = np.isfinite(self.markers[row]).all(axis=1)  # markers not seen this frame are not drawn
+            self.dots.points = self.markers[row][seen].astype(np.float32)
+            self.dots.colors = self.marker_colours[seen]
+            self.joints.points = self.results["joints"][row].astype(np.float32)
+            self.status.content = (
+                f"frame {int(self.results['frame'][row])}: RMS marker-to-node distance "
+                f"{self.results['residual'][row]:.1f} mm"
             )
-            with self.server.atomic():
-                for handle, part_nodes in zip(self.parts, nodes):
-                    handle.vertices = part_nodes.astype(np.float32)
-                seen = np.isfinite(self.markers[row]).all(axis=1)  # markers not seen this frame are not drawn
-                self.dots.points = self.markers[row][seen].astype(np.float32)
-                self.dots.colors = self.marker_colours[seen]
-                self.joints.points = self.results["joints"][row].astype(np.float32)
-                self.status.content = (
-                    f"frame {int(self.results['frame'][row])}: RMS marker-to-node distance "
-                    f"{self.results['residual'][row]:.1f} mm"
-                )
-            self.row = row
-        self.slider.value = row  # type: ignore[misc]  # viser's setter; its callback finds the row shown and returns
-
-    def record(self, path: Path, progress: bool = True) -> None:
-        """Write every frame, at the marker file's rate, as a .viser file for viser's static client."""
-        serializer = self.server.get_scene_serializer()
-        for row in tqdm(
-            range(len(self.results["frame"])), unit="frame", desc="recording the viewer", disable=not progress
-        ):
-            self.show(row)
-            serializer.insert_sleep(1.0 / self.rate)
-        write_viser(serializer, path)

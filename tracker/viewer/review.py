@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from tracker.foreground import Background
 from tracker.io.readers import FrameSeeker
@@ -23,7 +21,8 @@ from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.status import NAMES
 from tracker.track import Settings, Tracker
-from tracker.viewer.scene import Frame, Scene, add_run_plots, write_viser
+from tracker.viewer.scene import Frame, Scene, add_run_plots
+from tracker.viewer.timeline import Timeline
 
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 
@@ -41,7 +40,7 @@ def truth_rows(truth: dict | None, frames: np.ndarray) -> np.ndarray | None:
     return out
 
 
-class Review:
+class Review(Timeline):
     """Timeline controls and plots for one poses file over its recording."""
 
     def __init__(
@@ -56,24 +55,21 @@ class Review:
     ):
         """``background``: the run's empty scene (``tracker track --background``), so the panels show and
         search the same difference images the tracker did; None: grey images."""
+        super().__init__(scene.server, len(results["frame"]), recording.fps)
         self.scene, self.recording, self.results = scene, recording, results
         self.frames = results["frame"]
         self.truth = truth_rows(truth, self.frames)
         self.background = background
         self.seekers = [FrameSeeker(source, colour=background is not None) for source in recording.sources]
         self.inspector = Tracker(model, recording.cameras, results["poses"][0], settings)
-        self.lock = threading.RLock()
         self.stopping = threading.Event()
-        self.row = -1
         gui = scene.server.gui
-        count = len(self.frames)
         with gui.add_folder("Timeline", order=0):
-            self.slider = gui.add_slider("frame", min=0, max=max(count - 1, 1), step=1, initial_value=0)
+            self.add_slider(gui)
             self.play = gui.add_checkbox("play", initial_value=False)
             self.previous = gui.add_button("previous frame")
             self.next = gui.add_button("next frame")
             self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="1x")
-        self.slider.on_update(lambda _: self.show(int(self.slider.value)))
         self.previous.on_click(lambda _: self.step(-1))
         self.next.on_click(lambda _: self.step(1))
         self._plots(gui)
@@ -96,26 +92,20 @@ class Review:
 
     def step(self, delta: int) -> None:
         self.play.value = False  # type: ignore[misc]  # viser's setter, which mypy does not see
-        self.show(int(np.clip(self.row + delta, 0, len(self.frames) - 1)))
+        self.show(int(np.clip(self.row + delta, 0, self.count - 1)))
 
-    def show(self, row: int) -> None:
-        """Draw row ``row`` of the poses file, clamped to its rows (thread-safe; a row already shown is not redrawn)."""
-        row = min(max(int(row), 0), len(self.frames) - 1)
-        with self.lock:
-            if row == self.row:
-                return
-            index = int(self.frames[row])
-            images = [seeker.read(index) for seeker in self.seekers]
-            if self.background is not None:
-                images = [self.background.difference(k, image) for k, image in enumerate(images)]
-            poses = self.results["poses"][row]
-            inspection = self.inspector.inspect(images, poses=poses)
-            status = NAMES[int(self.results["status"][row])]
-            label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
-            truth = None if self.truth is None else self.truth[row]
-            self.scene.show(Frame(poses, images, inspection, truth, label))
-            self.row = row
-            self.slider.value = row  # type: ignore[misc]  # viser's setter, which mypy does not see
+    def draw(self, row: int) -> None:
+        """Draw row ``row`` of the poses file: its poses, truth and camera images with the edge search redone."""
+        index = int(self.frames[row])
+        images = [seeker.read(index) for seeker in self.seekers]
+        if self.background is not None:
+            images = [self.background.difference(k, image) for k, image in enumerate(images)]
+        poses = self.results["poses"][row]
+        inspection = self.inspector.inspect(images, poses=poses)
+        status = NAMES[int(self.results["status"][row])]
+        label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
+        truth = None if self.truth is None else self.truth[row]
+        self.scene.show(Frame(poses, images, inspection, truth, label))
 
     def _play(self) -> None:
         """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up
@@ -126,25 +116,17 @@ class Review:
                 clock = None
                 self.stopping.wait(0.05)
                 continue
-            rate = self.recording.fps * float(self.speed.value.rstrip("x"))
+            rate = self.rate * float(self.speed.value.rstrip("x"))
             if clock is None or clock[2] != rate or self.row != played:
                 clock = (time.monotonic(), max(self.row, 0), rate)
             started, first, _ = clock
-            row = min(first + int((time.monotonic() - started) * rate), len(self.frames) - 1)
+            row = min(first + int((time.monotonic() - started) * rate), self.count - 1)
             self.show(row)
-            if row == len(self.frames) - 1:  # playback ends on the last frame, even when it skips to it
+            if row == self.count - 1:  # playback ends on the last frame, even when it skips to it
                 self.play.value = False  # type: ignore[misc]  # viser's setter, which mypy does not see
                 continue
             played = row
             self.stopping.wait(max(0.0, started + (row + 1 - first) / rate - time.monotonic()))
-
-    def record(self, path: Path, progress: bool = True) -> None:
-        """Write every frame, at the recording's rate, as a .viser file that viser's static client plays back."""
-        serializer = self.scene.server.get_scene_serializer()
-        for row in tqdm(range(len(self.frames)), unit="frame", desc="recording the viewer", disable=not progress):
-            self.show(row)
-            serializer.insert_sleep(1.0 / self.recording.fps)
-        write_viser(serializer, path)
 
     def close(self) -> None:
         self.stopping.set()
