@@ -30,14 +30,13 @@ from conftest import SHARED_DATA, TEST_DATA, needs_shared
 
 from tracker.calibrate.board import Detection, parse_board
 from tracker.calibrate.extrinsics import (
-    Pose,
-    angle_between,
     calibrate_rig,
     chordal_mean,
 )
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.cli import build_parser
 from tracker.errors import TrackerInputError
+from tracker.geometry.se3 import from_rotation, inverse, rotation_angle
 from tracker.synth import look_at_camera
 
 OPENCV = SHARED_DATA / "opencv-stereo-chessboard"
@@ -153,7 +152,7 @@ def test_opencv_stereo_against_opencv(tmp_path, capsys):
     assert abs(np.linalg.norm(T) - np.linalg.norm(T_cv)) < 0.01 * np.linalg.norm(T_cv)
     direction = np.degrees(np.arccos(np.dot(T, T_cv) / np.linalg.norm(T) / np.linalg.norm(T_cv)))
     assert direction < 0.4
-    assert np.degrees(angle_between(R, R_cv)) < 0.3
+    assert np.degrees(rotation_angle(R.T @ R_cv)) < 0.3
 
 
 # ------------------------------------------------------------------------------------------------ #
@@ -177,7 +176,7 @@ def test_caliscope_camera_array_loads_and_round_trips(tmp_path):
     cameras = _caliscope_cameras()
     assert [c.name for c in cameras] == ["cam_0", "cam_1", "cam_2", "cam_3"]
     assert all(c.size == (1280, 720) for c in cameras)
-    assert np.linalg.norm(cameras[1].center) < 0.004 and np.degrees(angle_between(cameras[1].rotation, np.eye(3))) < 0.3
+    assert np.linalg.norm(cameras[1].center) < 0.004 and np.degrees(rotation_angle(cameras[1].rotation)) < 0.3
     assert all(1.0 < np.linalg.norm(c.center) < 2.0 for c in cameras if c.name != "cam_1")
     save_calibration(cameras, tmp_path / "caliscope.toml")
     for ours, theirs in zip(load_calibration(tmp_path / "caliscope.toml"), cameras):
@@ -223,7 +222,7 @@ def test_caliscope_rig_against_caliscope(tmp_path, capsys):
         R_ours, c_ours = _relative(ours, 1, index)
         R_ref, c_ref = _relative(reference, 1, index)
         assert np.linalg.norm(c_ours - c_ref) < 0.02, index
-        assert np.degrees(angle_between(R_ours, R_ref)) < 1.0, index
+        assert np.degrees(rotation_angle(R_ours.T @ R_ref)) < 1.0, index
 
 
 # ------------------------------------------------------------------------------------------------ #
@@ -317,7 +316,7 @@ def _rig() -> list[Camera]:
     ]
 
 
-def _board_poses(count: int, rig: list[Camera], seed: int = 0) -> list[Pose]:
+def _board_poses(count: int, rig: list[Camera], seed: int = 0) -> list[np.ndarray]:
     """world_from_board poses of a 9x6 board near the origin, face up, fully in view of every camera."""
     rng = np.random.default_rng(seed)
     corners = parse_board(f"chessboard:9x6:{SQUARE}").object_points
@@ -337,7 +336,7 @@ def _board_poses(count: int, rig: list[Camera], seed: int = 0) -> list[Pose]:
             facing = (R[:, 2] @ (world[0] - camera.center)) > 0  # board z points away from the camera
             ok &= bool(inside and facing and (depth > 0).all())
         if ok:
-            poses.append(Pose(R, t))
+            poses.append(from_rotation(R, t))
     return poses
 
 
@@ -356,12 +355,12 @@ def _rays(camera: Camera) -> np.ndarray:
     return _RAYS[key]
 
 
-def _render(camera: Camera, pose: Pose, rng) -> np.ndarray:
+def _render(camera: Camera, world_from_board: np.ndarray, rng) -> np.ndarray:
     """A grey 9x6 chessboard (one square of white margin) on a grey background, 2x supersampled."""
     w, h = camera.size
     rays = _rays(camera)
-    R = camera.rotation @ pose.R
-    t = camera.rotation @ pose.t + camera.translation
+    camera_from_board = camera.camera_from_world @ world_from_board
+    R, t = camera_from_board[:3, :3], camera_from_board[:3, 3]
     # board point X = R^T (lambda d - t) with X_z = 0
     a, b = R.T @ t, rays @ R  # (3,), (n, 3): R^T d
     lam = a[2] / b[:, 2]
@@ -378,7 +377,7 @@ def _render(camera: Camera, pose: Pose, rng) -> np.ndarray:
     return np.clip(image, 0, 255).astype(np.uint8)
 
 
-def _write_views(folder: Path, rig: list[Camera], poses: list[Pose], visible=None, seed: int = 1) -> None:
+def _write_views(folder: Path, rig: list[Camera], poses: list[np.ndarray], visible=None, seed: int = 1) -> None:
     rng = np.random.default_rng(seed)
     for c, camera in enumerate(rig):
         (folder / camera.name).mkdir(parents=True)
@@ -408,24 +407,24 @@ def test_synthetic_images_recover_rig_and_board_world(synthetic, tmp_path, capsy
         assert _ray_error(camera, truth, reach=0.5) < 2.0  # where the board was seen; measured 1.2 px
     # --world board: the board of frame 0 lies face up on the floor, so the truth's world
     # (world_from_board(0) = diag(1, -1, -1) there) is ours moved by world_from_board(0)
-    floor = Pose(np.diag([1.0, -1.0, -1.0]), np.zeros(3))
-    truth_from_ours = poses[0] @ floor.inverse()
+    floor = np.diag([1.0, -1.0, -1.0, 1.0])
+    truth_from_ours = poses[0] @ inverse(floor)
     for camera, truth in zip(ours, rig):
-        centre = truth_from_ours.R @ camera.center + truth_from_ours.t
+        centre = truth_from_ours[:3, :3] @ camera.center + truth_from_ours[:3, 3]
         assert np.linalg.norm(centre - truth.center) < 0.004
-        R = camera.rotation @ truth_from_ours.R.T
-        assert np.degrees(angle_between(R, truth.rotation)) < 0.2
+        R = camera.rotation @ truth_from_ours[:3, :3].T
+        assert np.degrees(rotation_angle(R.T @ truth.rotation)) < 0.2
         assert camera.center[2] > 0.5  # above the floor
 
 
-def _projected_views(rig: list[Camera], poses: list[Pose], noise: float, seed: int = 2):
+def _projected_views(rig: list[Camera], poses: list[np.ndarray], noise: float, seed: int = 2):
     rng = np.random.default_rng(seed)
     board = parse_board(f"chessboard:9x6:{SQUARE}")
     views = []
     for camera in rig:
         found = {}
         for f, pose in enumerate(poses):
-            pixels = camera.project(board.object_points @ pose.R.T + pose.t) + rng.normal(0, noise, (54, 2))
+            pixels = camera.project(board.object_points @ pose[:3, :3].T + pose[:3, 3]) + rng.normal(0, noise, (54, 2))
             found[f] = Detection(np.arange(54), pixels)
         views.append(found)
     return board, views
@@ -459,7 +458,7 @@ def test_synthetic_corners_bundle_adjustment_improves_and_recovers():
         R_ours, c_ours = _relative(result.cameras, 0, index)
         R_true, c_true = _relative(rig, 0, index)
         assert np.linalg.norm(c_ours - c_true) < 0.001
-        assert np.degrees(angle_between(R_ours, R_true)) < 0.05
+        assert np.degrees(rotation_angle(R_ours.T @ R_true)) < 0.05
 
 
 def test_robust_pose_average_rejects_flipped_estimates():
@@ -470,10 +469,10 @@ def test_robust_pose_average_rejects_flipped_estimates():
     translations = [np.array([0.5, 0, 0]) + rng.normal(0, 0.001, 3) for _ in range(20)] + [np.array([0.2, 0.1, 0])] * 5
     from tracker.calibrate.extrinsics import robust_mean_pose
 
-    pose, kept = robust_mean_pose(np.array(rotations), np.array(translations))
+    pose, kept = robust_mean_pose(from_rotation(np.array(rotations), np.array(translations)))
     assert kept == 20
-    assert np.degrees(angle_between(pose.R, truth)) < 0.1
-    assert np.linalg.norm(pose.t - [0.5, 0, 0]) < 0.002
+    assert np.degrees(rotation_angle(pose[:3, :3].T @ truth)) < 0.1
+    assert np.linalg.norm(pose[:3, 3] - [0.5, 0, 0]) < 0.002
     assert np.allclose(chordal_mean(np.array([truth] * 3)), truth)
 
 

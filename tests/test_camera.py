@@ -54,6 +54,11 @@ def test_pose_and_center() -> None:
     np.testing.assert_allclose(camera.camera_from_world @ np.append(camera.center, 1.0), [0, 0, 0, 1], atol=1e-12)
     np.testing.assert_allclose(camera.camera_from_world[:3, :3], camera.rotation)
     assert not camera.rotation.flags.writeable
+    moved = np.array(camera.camera_from_world)
+    moved[:3, 3] += [0.1, 0.2, 0.3]
+    other = camera.with_camera_from_world(moved)
+    assert np.array_equal(other.camera_from_world, moved) and other.name == camera.name
+    assert np.array_equal(other.matrix, camera.matrix) and not other.translation.flags.writeable
 
 
 @pytest.mark.parametrize("fisheye", [False, True])

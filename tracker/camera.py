@@ -76,6 +76,11 @@ class Camera:
         transform[:3, 3] = self.translation
         return transform
 
+    def with_camera_from_world(self, camera_from_world: np.ndarray) -> Camera:
+        """This camera with its extrinsics set from a 4x4 camera_from_world (R its upper left 3x3,
+        t its last column's top three)."""
+        return replace(self, rotation=camera_from_world[:3, :3], translation=camera_from_world[:3, 3])
+
     @property
     def center(self) -> np.ndarray:
         """The camera's optical centre in world coordinates, c = -R^T t."""

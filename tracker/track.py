@@ -33,7 +33,7 @@ from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
-from tracker.outline import Placed, Rig, Samples, outline_kernel
+from tracker.outline import Placed, Rig, Samples, sample_outlines
 from tracker.ownership import Ownership
 from tracker.status import LOST, TRACKED, UNCERTAIN
 
@@ -351,30 +351,7 @@ class Tracker:
         """Sample the visible outlines at the current poses and limit each one's search (ownership)."""
         s, m, st = self.samples, self.model, self.settings
         started = time.perf_counter()
-        s.count = outline_kernel(
-            m.quadric,
-            m.clip,
-            m.quadric_bound,
-            m.quadric_component,
-            self.poses,
-            self.rig.matrix,
-            self.rig.camera_from_world,
-            self.rig.distortion,
-            self.rig.size,
-            st.spacing,
-            self.placed.camera_from,
-            self.placed.quadric,
-            self.placed.clip,
-            self.placed.sphere,
-            self.placed.cone,
-            s.camera,
-            s.component,
-            s.quadric,
-            s.pixel,
-            s.normal,
-            s.jacobian,
-            s.point,
-        )
+        sample_outlines(m, self.poses, self.rig, st.spacing, s, self.placed)
         started = self.times.add("outline", started)
         if st.ownership:
             self.lo, self.hi = self.ownership.limits(self.placed, s, search_range)

@@ -87,3 +87,31 @@ def test_batched_rotation_exp_and_log_match_the_se3_ones():
     logs = se3.log_so3_many(rotations)
     for i in range(len(w)):
         np.testing.assert_allclose(logs[i], se3.log_so3(rotations[i]), atol=1e-10)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-6, 1e-2, 1.0, 3.0, np.pi - 1e-6, np.pi])
+def test_rotation_angle_is_the_norm_of_log(angle):
+    """rotation_angle(R) = |log_so3(R)| to round-off, also where arccos of the trace loses digits
+    (near 0), one rotation (a float) or a stack (an array)."""
+    rng = np.random.default_rng(5)
+    axes = rng.normal(size=(20, 3))
+    rotations = se3.exp_so3_many(angle * axes / np.linalg.norm(axes, axis=1, keepdims=True))
+    angles = se3.rotation_angle(rotations)
+    assert angles.shape == (20,)
+    assert np.abs(angles - angle).max() < 1e-15 + 1e-14 * angle
+    assert np.abs(angles - np.linalg.norm(se3.log_so3_many(rotations), axis=1)).max() < 1e-14
+    assert isinstance(se3.rotation_angle(rotations[0]), float)
+    # between two rotations: the angle of Ra^T Rb
+    assert abs(se3.rotation_angle(rotations[0].T @ rotations[0]) - 0.0) < 1e-15
+
+
+def test_from_rotation_builds_transforms():
+    r = se3.exp_so3(np.array([0.3, -0.2, 0.1]))
+    t = np.array([1.0, 2.0, 3.0])
+    e = se3.from_rotation(r, t)
+    assert np.array_equal(e[:3, :3], r) and np.array_equal(e[:3, 3], t) and np.array_equal(e[3], [0, 0, 0, 1])
+    stack = se3.from_rotation(np.stack([r, r.T]), np.stack([t, -t]))
+    assert (
+        stack.shape == (2, 4, 4) and np.array_equal(stack[1, :3, :3], r.T) and np.array_equal(stack[1, 3], [0, 0, 0, 1])
+    )
+    assert np.array_equal(se3.from_rotation(r), se3.from_rotation(r, np.zeros(3)))

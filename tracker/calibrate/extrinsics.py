@@ -1,8 +1,11 @@
 """Rig extrinsics from shared board views: board poses, pairwise camera poses, a spanning tree,
 and a bundle adjustment.
 
-Notation: T_ab = (R_ab, t_ab) maps frame b to frame a, X_a = R_ab X_b + t_ab; "r" is the root
-camera (the first camera), "f" the board at frame f, "c" a camera.
+Notation: T_ab = [[R_ab, t_ab], [0, 1]] maps frame b to frame a, X_a = R_ab X_b + t_ab; "r" is the
+root camera (the first camera), "f" the board at frame f, "c" a camera.  In the code T_ab is a 4x4
+array named ``a_from_b`` (``camera_from_board``, ``camera_from_root``, ``root_from_board``), as
+everywhere in the package (tracker/__init__.py); OpenCV's (rvec, tvec) and the adjustment's
+parameter vector are converted to and from it where they are met.
 
 1. Board pose per view. With the camera's intrinsics the corners' pixels u_k are undistorted to
    ideal normalised coordinates x_k, and T_cf solves the planar PnP problem x_k ~ pi(R X_k + t)
@@ -50,24 +53,10 @@ from scipy.sparse import csr_matrix
 from tracker.calibrate.board import Board, Detection
 from tracker.calibrate.intrinsics import K2_REACH, K3_REACH, corner_reach
 from tracker.camera import Camera
-from tracker.geometry.se3 import exp_so3_many, log_so3
+from tracker.geometry.se3 import exp_so3_many, from_rotation, inverse, log_so3, rotation_angle
 
 _HUBER_SCALE = 1.0  # pixels
 _OUTLIER_FLOOR = 3.0  # pixels
-
-
-@dataclass(frozen=True)
-class Pose:
-    """T = (R, t): X_to = R X_from + t."""
-
-    R: np.ndarray
-    t: np.ndarray
-
-    def inverse(self) -> Pose:
-        return Pose(self.R.T, -self.R.T @ self.t)
-
-    def __matmul__(self, other: Pose) -> Pose:
-        return Pose(self.R @ other.R, self.R @ other.t + self.t)
 
 
 class SplitRigError(ValueError):
@@ -80,15 +69,15 @@ class SplitRigError(ValueError):
 
 @dataclass(frozen=True)
 class PairEstimate:
-    pose: Pose  # T_ab: camera a from camera b
+    a_from_b: np.ndarray  # T_ab (4, 4): camera a from camera b
     shared: int  # frames both cameras see the board in
     kept: int  # estimates left after outlier rejection
 
 
 @dataclass
 class RigResult:
-    cameras: list[Camera]  # camera_from_root poses
-    board_poses: dict[int, Pose]  # root_from_board per frame used
+    cameras: list[Camera]  # their camera_from_world is camera_from_root
+    root_from_board: dict[int, np.ndarray]  # (4, 4) per frame used
     rms: list[float]  # per camera, px, over the inlier observations, after the adjustment
     initial_rms: list[float]  # per camera, px, same observations, with the chained start poses
     frames: list[int]  # per camera: board views that entered the adjustment
@@ -99,48 +88,39 @@ class RigResult:
 # rotations
 
 
-def angle_of_trace(trace):
-    """Geodesic angle (radians) of a rotation R (elementwise over arrays) from its trace: arccos((trace - 1) / 2)."""
-    return np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
-
-
-def angle_between(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """Geodesic angle (radians) between two rotations: the angle of Ra^T Rb."""
-    return float(angle_of_trace(np.trace(Ra.T @ Rb)))
-
-
 def chordal_mean(rotations: np.ndarray) -> np.ndarray:
     """argmin_R sum ||R - R_i||_F^2 over SO(3): the SVD projection of sum R_i."""
     u, _, vt = np.linalg.svd(np.sum(rotations, axis=0))
     return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
 
 
-def robust_mean_pose(rotations: np.ndarray, translations: np.ndarray) -> tuple[Pose, int]:
-    """Robust average of pose estimates (see the module docstring): pose, estimates kept."""
-    rotations = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
-    translations = np.asarray(translations, dtype=np.float64).reshape(-1, 3)
+def robust_mean_pose(estimates: np.ndarray) -> tuple[np.ndarray, int]:
+    """Robust average (see the module docstring) of estimates (n, 4, 4) of one transform a_from_b:
+    the average a_from_b (4, 4) and the number of estimates kept."""
+    estimates = np.asarray(estimates, dtype=np.float64).reshape(-1, 4, 4)
+    rotations, translations = estimates[:, :3, :3], estimates[:, :3, 3]
     n = len(rotations)
     if n == 1:
-        return Pose(rotations[0], translations[0]), 1
+        return from_rotation(rotations[0], translations[0]), 1
     probe = np.linspace(0, n - 1, min(n, 200)).round().astype(int)
-    traces = np.einsum("iab,jab->ij", rotations[probe], rotations[probe])
-    angles = angle_of_trace(traces)
+    angles = rotation_angle(np.einsum("iba,jbc->ijac", rotations[probe], rotations[probe]))  # of R_i^T R_j
     medoid = rotations[probe[int(np.argmin(angles.sum(axis=1)))]]
-    angle = angle_of_trace(np.einsum("ab,iab->i", medoid, rotations))
+    angle = rotation_angle(np.einsum("ba,ibc->iac", medoid, rotations))  # of R_m^T R_i
     centre = np.median(translations, axis=0)
     distance = np.linalg.norm(translations - centre, axis=1)
     keep = (angle <= max(np.radians(1.0), 3.0 * np.median(angle))) & (distance <= max(0.01, 3.0 * np.median(distance)))
     if not np.any(keep):
         keep = angle <= np.median(angle)
-    return Pose(chordal_mean(rotations[keep]), translations[keep].mean(axis=0)), int(keep.sum())
+    return from_rotation(chordal_mean(rotations[keep]), translations[keep].mean(axis=0)), int(keep.sum())
 
 
 # ---------------------------------------------------------------------------------------------- #
 # steps 1-3
 
 
-def board_pose(board: Board, detection: Detection, camera: Camera) -> Pose | None:
-    """T_cf, the camera-from-board pose of one view (planar PnP on undistorted corners)."""
+def board_pose(board: Board, detection: Detection, camera: Camera) -> np.ndarray | None:
+    """T_cf, camera_from_board (4, 4) of one view (planar PnP on undistorted corners); None when
+    PnP fails or puts the board behind the camera."""
     objects = board.object_points[detection.ids]
     normalised = camera.undistort_pixels(detection.pixels).reshape(-1, 1, 2)
     try:
@@ -152,20 +132,21 @@ def board_pose(board: Board, detection: Detection, camera: Camera) -> Pose | Non
     r, t = cv2.solvePnPRefineLM(objects, normalised, np.eye(3), None, rvecs[0].copy(), tvecs[0].copy())
     if t[2, 0] <= 0:
         return None
-    return Pose(cv2.Rodrigues(r)[0], t.ravel())
+    return from_rotation(cv2.Rodrigues(r)[0], t.ravel())
 
 
-def pairwise_poses(poses: list[dict[int, Pose]]) -> dict[tuple[int, int], PairEstimate]:
-    """T_ab for every camera pair a < b that sees the board in at least one common frame."""
+def pairwise_poses(camera_from_board: list[dict[int, np.ndarray]]) -> dict[tuple[int, int], PairEstimate]:
+    """T_ab for every camera pair a < b that sees the board in at least one common frame, from each
+    camera's camera_from_board (4, 4) per frame: T_ab = T_af T_bf^-1."""
     pairs = {}
-    for a in range(len(poses)):
-        for b in range(a + 1, len(poses)):
-            shared = sorted(set(poses[a]) & set(poses[b]))
+    for a in range(len(camera_from_board)):
+        for b in range(a + 1, len(camera_from_board)):
+            shared = sorted(set(camera_from_board[a]) & set(camera_from_board[b]))
             if not shared:
                 continue
-            estimates = [poses[a][f] @ poses[b][f].inverse() for f in shared]
-            pose, kept = robust_mean_pose(np.array([e.R for e in estimates]), np.array([e.t for e in estimates]))
-            pairs[(a, b)] = PairEstimate(pose, len(shared), kept)
+            estimates = [camera_from_board[a][f] @ inverse(camera_from_board[b][f]) for f in shared]
+            a_from_b, kept = robust_mean_pose(np.array(estimates))
+            pairs[(a, b)] = PairEstimate(a_from_b, len(shared), kept)
     return pairs
 
 
@@ -186,15 +167,17 @@ def spanning_tree(pairs: dict[tuple[int, int], PairEstimate], root: int = 0) -> 
         parent[best[2]] = best[1]
 
 
-def chain_poses(parent: dict[int, int], pairs: dict[tuple[int, int], PairEstimate], root: int = 0) -> dict[int, Pose]:
-    """T_cr of every camera in the tree, composed along it: T_cr = T_cp T_pr."""
-    result = {root: Pose(np.eye(3), np.zeros(3))}
+def chain_poses(
+    parent: dict[int, int], pairs: dict[tuple[int, int], PairEstimate], root: int = 0
+) -> dict[int, np.ndarray]:
+    """T_cr, camera_from_root (4, 4), of every camera in the tree, composed along it: T_cr = T_cp T_pr."""
+    result = {root: np.eye(4)}
 
-    def solve(c: int) -> Pose:
+    def solve(c: int) -> np.ndarray:
         if c not in result:
             p = parent[c]
-            T_cp = pairs[(c, p)].pose if (c, p) in pairs else pairs[(p, c)].pose.inverse()
-            result[c] = T_cp @ solve(p)
+            c_from_p = pairs[(c, p)].a_from_b if (c, p) in pairs else inverse(pairs[(p, c)].a_from_b)
+            result[c] = c_from_p @ solve(p)
         return result[c]
 
     for c in parent:
@@ -229,6 +212,11 @@ def project(intrinsics: np.ndarray, points_camera: np.ndarray) -> np.ndarray:
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     return np.stack([fx * xd + cx, fy * yd + cy], axis=1)
+
+
+def _rotvec_translation(a_from_b: np.ndarray) -> np.ndarray:
+    """(log_so3(R), t) (6,) of a transform: the adjustment's parameters of one pose."""
+    return np.concatenate([log_so3(np.ascontiguousarray(a_from_b[:3, :3], dtype=np.float64)), a_from_b[:3, 3]])
 
 
 class _Problem:
@@ -279,15 +267,10 @@ class _Problem:
                 self.held[c, 8] = reach < K3_REACH  # k3, as in intrinsics.py
                 self.held[c, 5] = reach < K2_REACH  # k2
 
-    def pack(self, camera_poses: dict[int, Pose], board_poses: dict[int, Pose]) -> np.ndarray:
-        cams = [
-            np.concatenate([log_so3(np.ascontiguousarray(camera_poses[c].R, dtype=np.float64)), camera_poses[c].t])
-            for c in self.free
-        ]
-        boards = [
-            np.concatenate([log_so3(np.ascontiguousarray(board_poses[f].R, dtype=np.float64)), board_poses[f].t])
-            for f in self.frames
-        ]
+    def pack(self, camera_from_root: dict[int, np.ndarray], root_from_board: dict[int, np.ndarray]) -> np.ndarray:
+        """The parameter vector: per free camera, then per board frame, (rotation vector, translation)."""
+        cams = [_rotvec_translation(camera_from_root[c]) for c in self.free]
+        boards = [_rotvec_translation(root_from_board[f]) for f in self.frames]
         parts = cams + boards + ([self.intrinsics.ravel()] if self.refine else [])
         return np.concatenate(parts) if parts else np.zeros(0)
 
@@ -360,22 +343,22 @@ def calibrate_rig(
     ``unreached``: the cameras' indices) when the rig's graph of shared views is split.
     """
     count = len(cameras)
-    poses: list[dict[int, Pose]] = []
+    camera_from_board: list[dict[int, np.ndarray]] = []
     for camera, detections in zip(cameras, views):
         found = {}
         for f, detection in detections.items():
             pose = board_pose(board, detection, camera)
             if pose is not None:
                 found[f] = pose
-        poses.append(found)
-    pairs = pairwise_poses(poses)
+        camera_from_board.append(found)
+    pairs = pairwise_poses(camera_from_board)
     parent = spanning_tree(pairs)  # the root is camera 0
     if len(parent) < count:
         raise SplitRigError(sorted(set(range(count)) - set(parent)))
-    camera_poses = chain_poses(parent, pairs)
+    camera_from_root = chain_poses(parent, pairs)
 
     seen: dict[int, list[int]] = {}
-    for c, found in enumerate(poses):
+    for c, found in enumerate(camera_from_board):
         for f in found:
             seen.setdefault(f, []).append(c)
     shared = sorted(f for f, cams in seen.items() if len(cams) > 1)
@@ -386,20 +369,20 @@ def calibrate_rig(
         chosen |= set(seen)
     frames = sorted(chosen)
 
-    board_poses = {}
+    root_from_board = {}
     for f in frames:
-        estimates = [camera_poses[c].inverse() @ poses[c][f] for c in seen[f]]
-        board_poses[f], _ = robust_mean_pose(np.array([e.R for e in estimates]), np.array([e.t for e in estimates]))
+        estimates = [inverse(camera_from_root[c]) @ camera_from_board[c][f] for c in seen[f]]
+        root_from_board[f], _ = robust_mean_pose(np.array(estimates))
 
     problem = _Problem(
         board,
         cameras,
-        [{f: d for f, d in v.items() if f in poses[c]} for c, v in enumerate(views)],
+        [{f: d for f, d in v.items() if f in camera_from_board[c]} for c, v in enumerate(views)],
         frames,
         refine_intrinsics,
         root=0,
     )
-    x = problem.pack(camera_poses, board_poses)
+    x = problem.pack(camera_from_root, root_from_board)
     select = np.ones(len(problem.cam), dtype=bool)
     initial = np.linalg.norm(problem.residuals(x), axis=1)
     for round_ in range(3):
@@ -439,10 +422,10 @@ def calibrate_rig(
     used = set(frames)
     return RigResult(
         cameras=out,
-        board_poses={f: Pose(board_rot[i], board_t[i]) for i, f in enumerate(frames)},
+        root_from_board={f: from_rotation(board_rot[i], board_t[i]) for i, f in enumerate(frames)},
         rms=per_camera_rms(errors[select], problem.cam[select], count),
         initial_rms=per_camera_rms(initial[select], problem.cam[select], count),
-        frames=[len(used.intersection(poses[c])) for c in range(count)],
+        frames=[len(used.intersection(camera_from_board[c])) for c in range(count)],
         dropped=int((~select).sum()),
     )
 
@@ -450,14 +433,12 @@ def calibrate_rig(
 # ---------------------------------------------------------------------------------------------- #
 # world frames
 
-FLOOR_FROM_BOARD = Pose(np.diag([1.0, -1.0, -1.0]), np.zeros(3))  # board face up on the floor: z up
+FLOOR_FROM_BOARD = np.diag([1.0, -1.0, -1.0, 1.0])  # board face up on the floor: z up
+FLOOR_FROM_BOARD.setflags(write=False)
 
 
-def to_world(cameras: list[Camera], world_from_root: Pose) -> list[Camera]:
-    """Cameras re-expressed in a new world frame: T_cw = T_cr T_rw."""
-    root_from_world = world_from_root.inverse()
-    out = []
-    for camera in cameras:
-        T = Pose(camera.rotation, camera.translation) @ root_from_world
-        out.append(replace(camera, rotation=T.R, translation=T.t))
-    return out
+def to_world(cameras: list[Camera], world_from_root: np.ndarray) -> list[Camera]:
+    """Cameras re-expressed in a new world frame: T_cw = T_cr T_rw (their camera_from_world is
+    camera_from_root on the way in)."""
+    root_from_world = inverse(world_from_root)
+    return [camera.with_camera_from_world(camera.camera_from_world @ root_from_world) for camera in cameras]

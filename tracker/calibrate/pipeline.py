@@ -35,6 +35,7 @@ from tracker.calibrate.intrinsics import MIN_VIEWS, Intrinsics, calibrate_intrin
 from tracker.calibrate.sources import CameraViews, detect_all, find_sources
 from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
+from tracker.geometry import se3
 
 
 @dataclass
@@ -137,10 +138,10 @@ def calibrate(
         raise _split_rig_error(folder, views, error.unreached) from None
     cameras = rig.cameras
     if world == "board":
-        root_from_board = rig.board_poses.get(first)
+        root_from_board = rig.root_from_board.get(first)
         if root_from_board is None:  # the first view gave no usable pose: take the earliest that did
-            root_from_board = rig.board_poses[min(rig.board_poses)]
-        cameras = to_world(cameras, FLOOR_FROM_BOARD @ root_from_board.inverse())
+            root_from_board = rig.root_from_board[min(rig.root_from_board)]
+        cameras = to_world(cameras, FLOOR_FROM_BOARD @ se3.inverse(root_from_board))
         heights = [camera.center[2] for camera in cameras]
         if np.median(heights) < 0:
             warnings.warn(

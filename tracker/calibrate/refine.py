@@ -116,13 +116,13 @@ def refine_rig(
             moved = se3.log(cameras[k].camera_from_world @ se3.inverse(start[k].camera_from_world))
             xi = np.linalg.solve(information[k] + prior, eta[k] - prior @ moved)
             pose = se3.exp(xi) @ cameras[k].camera_from_world
-            cameras[k] = replace(cameras[k], rotation=pose[:3, :3], translation=pose[:3, 3])
+            cameras[k] = cameras[k].with_camera_from_world(pose)
         tracker = tracker.with_cameras(cameras)
         if refit:
             for f, images in enumerate(frames):
                 tracker.poses = model.coerce(poses[f])
                 poses[f] = tracker.step(images, smoothed=True).poses
     after = _residuals(tracker, poses, frames, len(cameras), last)
-    turn = [np.degrees(np.linalg.norm(se3.log_so3(b.rotation @ a.rotation.T))) for a, b in zip(start, cameras)]
+    turn = [np.degrees(se3.rotation_angle(b.rotation @ a.rotation.T)) for a, b in zip(start, cameras)]
     shift = [np.linalg.norm(b.center - a.center) for a, b in zip(start, cameras)]
     return Refined(tuple(cameras), np.array(turn), np.array(shift), before, after)

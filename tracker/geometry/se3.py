@@ -8,8 +8,9 @@ another frame (``X_a = E_a_from_b X_b``).  A motion is a twist
     G1..G3: translation along x, y, z        (G_i[0:3, 3] = e_i)
     G4..G6: right-handed rotation about x, y, z   (G_{3+j}[0:3, 0:3] = [e_j]x)
 
-All functions are numba ``@njit`` so the per-frame kernels can call them; they
-work unchanged from Python on float64 arrays.
+The kernels' functions are numba ``@njit`` so the per-frame kernels can call them; they
+work unchanged from Python on float64 arrays.  ``generators``, ``from_rotvec``,
+``from_rotation`` and ``rotation_angle`` are plain numpy, for Python callers.
 """
 
 from __future__ import annotations
@@ -230,3 +231,30 @@ def from_rotvec(rotvec, translation=(0.0, 0.0, 0.0)) -> np.ndarray:
     out[0:3, 0:3] = exp_so3(np.asarray(rotvec, dtype=np.float64))
     out[0:3, 3] = np.asarray(translation, dtype=np.float64)
     return out
+
+
+def from_rotation(rotation, translation=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """4x4 pose ``[[R, t], [0, 1]]`` from a rotation matrix R (3, 3) and a translation t (3,), or a
+    stack of them (..., 4, 4) from (..., 3, 3) and (..., 3)."""
+    rotation = np.asarray(rotation, dtype=np.float64)
+    out = np.zeros((*rotation.shape[:-2], 4, 4))
+    out[..., 0:3, 0:3] = rotation
+    out[..., 0:3, 3] = np.asarray(translation, dtype=np.float64)
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def rotation_angle(rotation):
+    """Geodesic angle (radians, in [0, pi]) of a rotation R (..., 3, 3): |log_so3(R)|, the angle
+    between frames a and b for ``R = a_from_b``; ``rotation_angle(Ra.T @ Rb)`` is the angle between
+    two rotations.  atan2(|s|, (trace R - 1) / 2) with s = vee(R - R^T) / 2 (|s| = sin th), as in
+    ``log_so3``: exact near 0 and pi, where arccos of the trace alone loses half the digits.  A
+    float for one rotation, an array over the leading axes for many."""
+    r = np.asarray(rotation, dtype=np.float64)
+    s0 = r[..., 2, 1] - r[..., 1, 2]
+    s1 = r[..., 0, 2] - r[..., 2, 0]
+    s2 = r[..., 1, 0] - r[..., 0, 1]
+    sin_t = 0.5 * np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    cos_t = 0.5 * (r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2] - 1.0)
+    angle = np.arctan2(sin_t, cos_t)
+    return float(angle) if angle.ndim == 0 else angle
