@@ -144,26 +144,13 @@ def test_fast_labels_match_brute_force(human_views, r):
     model, cameras, rig, views = human_views
     n_quadrics = model.quadric.shape[0]
     grid = undistort_grid(rig.matrix, rig.distortion, rig.size)
-    placed = Placed.allocate(len(cameras), n_quadrics)
     cand = np.zeros(n_quadrics, np.int64)
     coef = np.zeros((n_quadrics, NCOEF))
     total = agree = 0
     ts = np.arange(-r - 1, r + 2)
     used = ts != 0
     for poses, s in views:
-        place(
-            model.quadric,
-            model.clip,
-            model.quadric_bound,
-            model.quadric_component,
-            poses,
-            rig.camera_from_world,
-            placed.camera_from,
-            placed.quadric,
-            placed.clip,
-            placed.sphere,
-            placed.cone,
-        )
+        placed = placed_at(model, poses, rig)
         fast = np.zeros(2 * r + 3, np.int64)
         for i in range(0, s.count, 3):
             k = s.camera[i]
