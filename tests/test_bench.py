@@ -1,6 +1,9 @@
 """`tracker bench`: the JSON keys other tools read, and sane figures (no timing is asserted)."""
 
 import json
+import shutil
+
+import pytest
 
 from tracker.bench import HUMAN, _copies, _side_by_side
 from tracker.cli import main
@@ -43,3 +46,13 @@ def test_bodies_side_by_side_for_the_scaling_table():
     poses = _side_by_side(model, single, 3)
     roots = [poses[model.index(f"pelvis_{k}")][0, 3] for k in range(3)]
     assert roots == [-0.8, 0.0, 0.8]
+
+
+@pytest.mark.parametrize("missing", ["model.toml", "init.toml"])
+def test_bench_on_a_folder_without_model_or_first_pose_is_one_line(tiny_recording, tmp_path, capsys, missing):
+    folder = tmp_path / "rec"
+    shutil.copytree(tiny_recording, folder)
+    (folder / missing).unlink()
+    assert main(["bench", str(folder), "--repeats", "1"]) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("tracker: error:")]
+    assert len(errors) == 1 and f"{folder}: no {missing}" in errors[0]

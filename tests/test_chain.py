@@ -1,4 +1,4 @@
-"""Joint constraints, tree solve and coercion (tracker.chain) against the design note, sections 4-5."""
+"""Joint constraints, tree solve and coercion (tracker.chain) against docs/method-tracking.md, sections 4-5."""
 
 import numpy as np
 import pytest

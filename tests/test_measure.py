@@ -1,4 +1,4 @@
-"""Edge search and IRLS information (tracker.measure) against the design note, section 3."""
+"""Edge search and IRLS information (tracker.measure) against docs/method-tracking.md, section 3."""
 
 from __future__ import annotations
 

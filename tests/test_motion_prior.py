@@ -1,4 +1,4 @@
-"""The second-order Kalman motion prior (tracker/motion_prior.py; metaxas-terzopoulos-math.md, sections 3, 5)."""
+"""The second-order Kalman motion prior (tracker/motion_prior.py; docs/method-physics.md, sections 3, 5)."""
 
 import itertools
 from pathlib import Path
@@ -44,7 +44,7 @@ def fitting_step(
     q: float = 0.0,
     riccati: bool = True,
 ):
-    """One inner iteration of the note's first-order continuous EKF for one block (section 5):
+    """One inner iteration of the method's first-order continuous EKF for one block (section 5):
 
         x <- x + dt (P g - K x),   P <- P + dt (-K P - P K + q I - P A P),   P <- (P + P^T) / 2
 
@@ -135,7 +135,7 @@ def test_identity_covariance_and_no_data_is_plain_dynamic_fitting():
     np.testing.assert_allclose(fitting, fixed_point, rtol=1e-9)
     np.testing.assert_allclose(kalman, fixed_point, rtol=1e-9)
     assert not np.allclose(p, np.eye(3))  # the Riccati step changed the metric, not the answer
-    # with stiffness the note's "same fixed point (H^T V^-1 r = K q)" holds for P = I only: the filter
+    # with stiffness the method's "same fixed point (H^T V^-1 r = K q)" holds for P = I only: the filter
     # stops where P g = K x
     fitting, kalman, p = x.copy(), x.copy(), np.eye(3)
     for _ in range(6000):
@@ -151,7 +151,8 @@ def test_identity_covariance_and_no_data_is_plain_dynamic_fitting():
 
 
 def test_section5_filter_over_unit_pseudo_time_is_the_discrete_update():
-    """The note's continuous filter on one frame's linear measurement (x' = P H^T W (z - H x),
+    """The continuous filter of docs/method-physics.md on one frame's linear measurement
+    (x' = P H^T W (z - H x),
     P' = -P H^T W H P, H = [I3 0]) integrated over unit pseudo-time lands on our discrete update
     (position, velocity and covariance; Euler error O(1/steps))."""
     rng = np.random.default_rng(3)

@@ -1,4 +1,4 @@
-"""Outline sampling kernel (tracker.outline) against the design note, sections 2 and 3.
+"""Outline sampling kernel (tracker.outline) against docs/method-tracking.md, sections 2 and 3.
 
 Every check recomputes the geometry independently in numpy (or with OpenCV
 through Camera.project / Camera.undistort_pixels) from the model's quadrics,
@@ -505,7 +505,8 @@ def test_jacobian_row_matches_material_point_finite_differences(name):
 
 
 def outline_conic(cam, pose, q):
-    """C_pix = K^-T (c A - b b^T) K^-1 with Q' = E^-T Q E^-1, E = camera-from-component (design note)."""
+    """C_pix = K^-T (c A - b b^T) K^-1 with Q' = E^-T Q E^-1, E = camera-from-component
+    (docs/method-tracking.md, section 2)."""
     e_inv = np.linalg.inv(cam.camera_from_world @ pose)
     qc = e_inv.T @ q @ e_inv
     a, b, c = qc[:3, :3], qc[:3, 3], qc[3, 3]

@@ -25,6 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import PosesWriter
@@ -70,7 +71,10 @@ def decode_only_fps(recording: Recording) -> float:
 
 def track_run(recording: Recording, model: Model, settings: Settings, out: Path) -> TrackRun:
     """One end-to-end pass: reader threads, tracking and the poses.npz writer."""
-    assert recording.init_path is not None  # the benchmark recording ships init.toml
+    if recording.init_path is None:
+        raise TrackerInputError(
+            f"{recording.path}: no init.toml; tracker bench needs a recording folder with its first pose"
+        )
     tracker = Tracker(model, recording.cameras, load_pose_file(recording.init_path, model), settings)
     tracker.warm_up()
     tracker.times = StageTimes()
@@ -92,7 +96,11 @@ def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) ->
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``)."""
     every = open_recording(path)
     first = open_recording(path, [every.cameras[0].name])
-    assert every.model_path is not None  # the benchmark recording ships model.toml
+    if every.model_path is None or every.init_path is None:
+        missing = "model.toml" if every.model_path is None else "init.toml"
+        raise TrackerInputError(
+            f"{path}: no {missing}; tracker bench needs a recording folder with a model and a first pose"
+        )
     model = load_model(every.model_path)
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)

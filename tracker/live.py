@@ -282,8 +282,6 @@ def track_live(
                             recording = False
                     at = float(f"{frame_set.frames[0].time - capture.started:.6f}")  # as timestamps.csv has it
                     images = [frame.image for frame in frame_set.frames]
-                    result, spent = step_and_write(tracker, writer, frames, images, at=at, previous=last)
-                    last = at
                     if recording and recorder is not None and not recorder.write(frame_set, capture.started):
                         print(
                             f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
@@ -291,6 +289,8 @@ def track_live(
                             file=sys.stderr,
                         )
                         recording = False
+                    result, spent = step_and_write(tracker, writer, frames, images, at=at, previous=last)
+                    last = at
                     if view is not None:
                         shown = list(blanks)
                         for camera, frame in zip(frame_set.cameras, frame_set.frames):

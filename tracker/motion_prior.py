@@ -1,4 +1,4 @@
-"""A second-order motion prior per component: a continuous-discrete Kalman filter (``motion = "kalman"``).
+"""A second-order motion prior per component: a continuous-discrete Kalman filter (``Settings.dynamics = "kalman"``).
 
 docs/method-physics.md: section 3 (second-order dynamics
 ``M qddot + D qdot = f`` with ``D = gamma M``) and section 5 (the continuous EKF as code: the state
@@ -42,7 +42,7 @@ unit weight of the component's fit (:func:`variance_factor`: small on clean rend
 cluttered real footage, so one ``s`` trusts clean images and distrusts cluttered ones; values in
 docs/motion-models.md), used in
 information form ``V^-1 = C_i / s'`` so that a component without edges (``C_i = 0``, ``V`` infinite)
-needs no inverse.  Why not the note's ``V = sigma^2 I`` on the pose?  In the note ``V = sigma_v^2 I``
+needs no inverse.  Why not the method's ``V = sigma^2 I`` on the pose?  In docs/method-physics.md ``V = sigma_v^2 I``
 is the noise of the *data points*; their information about the parameters is ``H^T V^-1 H``
 (section 3).  Our data are edge offsets with (IRLS-weighted) isotropic noise, so the same choice gives
 exactly ``H^T V^-1 H = C_i / s'`` in pose space: a scalar ``V`` per sample (estimated from the
@@ -71,14 +71,14 @@ errs on the large side (its prior on the next frame on the weak side).
 
 **Prior about the prediction.**  The information ``s' P_xx^-1`` of the predicted position replaces the
 fixed ``prior_translation``/``prior_rotation``, which remain as its floor (eigenvalues below them are
-raised to them): that keeps every ``C_i`` invertible (drummond-cipolla note, section 3) and bounds how
+raised to them): that keeps every ``C_i`` invertible (docs/method-tracking.md, section 3) and bounds how
 far the prior can fade while a component has no data; a component without data keeps moving with its
 velocity while its covariance grows (``q dt^3 / 3`` per frame and more).
 
-Relation to the note's section 5 (``fitting_step`` in tests/test_motion_prior.py): its first-order filter
+Relation to docs/method-physics.md, section 5 (``fitting_step`` in tests/test_motion_prior.py): its first-order filter
 runs the Riccati equation over inner iterations of one frame; integrated over unit pseudo-time on a linear measurement
 it gives exactly our discrete update, and with ``P = I`` held (no Riccati step) it is plain dynamic
-fitting, ``qdot = H^T V^-1 r - K q`` (eqs. 16/18).  The note's "same fixed point" holds for rigid
+fitting, ``qdot = H^T V^-1 r - K q`` (eqs. 16/18).  Its "same fixed point" holds for rigid
 blocks (``K = 0``, ours); with stiffness the filter stops where ``P g = K q``, not ``g = K q``.
 """
 

@@ -1,4 +1,5 @@
-"""SE(3): exp/log against scipy's expm, the group axioms and the adjoint identity (design note, section 8)."""
+"""SE(3): exp/log against scipy's expm, the group axioms and the adjoint identity
+(docs/method-tracking.md, section 8)."""
 
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """Multi-part bodies: the quaternion state, coasting without data, Baumgarte decay in the body's
 own second- and first-order loops, constrained fitting of a three-part chain and the
-semi-implicit Euler step limit (design note metaxas-terzopoulos-math.md, sections 2-4 and 7)."""
+semi-implicit Euler step limit (docs/method-physics.md, sections 2-4 and 7)."""
 
 from dataclasses import replace
 

@@ -1,6 +1,5 @@
 """Point-to-point constraints: Baumgarte decay laws under explicit Euler, the fast constraint-force
-solve against a dense KKT solve, chains and redundant closed loops (design note
-metaxas-terzopoulos-math.md, sections 4 and 7)."""
+solve against a dense KKT solve, chains and redundant closed loops (docs/method-physics.md, sections 4 and 7)."""
 
 import numpy as np
 

@@ -1,4 +1,4 @@
-"""The synthetic error experiment of Tables I-IV (design note metaxas-terzopoulos-math.md,
+"""The synthetic error experiment of Tables I-IV (docs/method-physics.md,
 section 6): the truth follows the protocol, the a0 gauge fix keeps the shape, the claim checks
 on the paper's own tables, and a reduced grid (100 / 25 % x variance 10 / 0, 4 frames) that
 holds the robust claims and is deterministic for its seed."""
@@ -45,7 +45,7 @@ def test_truth_follows_the_protocol():
 
 def test_gauge_fix_keeps_the_shape():
     """in_gauge moves q_s to another a0 along (a0, a1, a2, a3) -> (k a0, a1/k, a2/k, a3/k):
-    the shell is unchanged (note section 1, degeneracy 4)."""
+    the shell is unchanged (docs/method-physics.md, section 1, degeneracy 4)."""
     m = sq.mesh()
     q_s = np.array([2.7, 0.15, 0.22, 0.7, 0.8, 1.1, 0.3, -0.2, 0.1, 0.05, 0.3])
     moved = ex.in_gauge(q_s, 1.0)

@@ -1,6 +1,6 @@
-"""Dynamic fitting: data forces against the note's blocks and a finite-difference gradient,
-moment initialisation, first-order Euler fitting and its stability limit (design note
-metaxas-terzopoulos-math.md, sections 1, 3, 5 and 7)."""
+"""Dynamic fitting: data forces against the method's blocks and a finite-difference gradient,
+moment initialisation, first-order Euler fitting and its stability limit
+(docs/method-physics.md, sections 1, 3, 5 and 7)."""
 
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """The 'insect' experiment: five deformable superquadric parts, four point-to-point joints,
-tracked frame to frame from dense and from sparse data (design note
-metaxas-terzopoulos-math.md, sections 4 and 6; paper Figs 9-10)."""
+tracked frame to frame from dense and from sparse data (docs/method-physics.md, sections 4 and 6;
+paper Figs 9-10)."""
 
 import numpy as np
 import pytest

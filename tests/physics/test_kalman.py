@@ -1,4 +1,4 @@
-"""The decoupled continuous EKF (design note metaxas-terzopoulos-math.md, sections 5 and 7):
+"""The decoupled continuous EKF (docs/method-physics.md, sections 5 and 7):
 dynamic fitting as the P = I special case, the information blocks and the Riccati step against
 dense computations, P staying symmetric positive definite and shrinking where there are data,
 the paper's indefinite P(0), recovery of a rigid + global superquadric and its slow
@@ -49,7 +49,7 @@ def assert_parts_equal(a, b, atol):
 @pytest.mark.parametrize("local", [True, False])
 def test_filter_with_identity_covariance_is_dynamic_fitting(local):
     """P_b = I and no Riccati step: 200 filter updates equal 200 fitting.euler_step calls to
-    round-off (the note's "degenerate Kalman filter"), on the 123-node mesh with noisy data,
+    round-off (the method's "degenerate Kalman filter"), on the 123-node mesh with noisy data,
     the assignment and K_node refreshed every 10 steps, dt half the Euler limit.  Measured:
     bitwise equal, while the mean point-to-node residual falls from 0.21 to 0.059."""
     rng = np.random.default_rng(10)
@@ -195,7 +195,7 @@ def rigid_global_target(q_s):
 def test_filter_recovers_a_tapered_superquadric_from_clean_data():
     """Clean data at the 123 nodes of a tapered superquadric without bend (b1 = 0), rigid +
     global filter (d frozen) from the moment initialisation: c, rotation and q_s but b2, b3
-    recovered to round-off within 1000 iterations (the note's 4 trials: 2.6e-6 / 1e-8 rad /
+    recovered to round-off within 1000 iterations (the method's 4 trials: 2.6e-6 / 1e-8 rad /
     3.3e-6; measured here 3e-15).  b2 and b3 act only through b1 (their J columns
     vanish at b1 = 0): they stay near the start's (0, 0.5), off by what the transient b1
     moved them (measured 2e-3)."""
@@ -341,7 +341,7 @@ def test_bent_superquadric_leaves_the_slow_cx_b1_b3_mode():
     """With a bend (b1 = 0.15, b2 = 0.1, b3 = 0.4) 1000 iterations fit the nodes (RMS 2e-3)
     and every coordinate but c_x (model frame), b1, b2 and b3 to 1e-3 (measured 3e-4), while
     c_x, b1 and b3 stay off by 0.072, -0.069 and 0.19 (b2 by -0.008) with dc_x = -db1: the
-    note's weakest direction of H^T H, which the decoupled filter needs 1e4-1e5 steps to
+    method's weakest direction of H^T H, which the decoupled filter needs 1e4-1e5 steps to
     settle (section 5).  The error along it does shrink (0.24 -> 0.21 over the last 500)."""
     q_s = np.array([1.0, 0.5, 0.35, 1.2, 0.7, 1.2, 0.3, -0.2, 0.15, 0.1, 0.4])
     m, target = rigid_global_target(q_s)
@@ -527,7 +527,7 @@ def test_joint_block_settles_the_slow_mode():
     """The target of test_bent_superquadric_leaves_the_slow_cx_b1_b3_mode, 1000 iterations of
     the joint rigid + global block with P_g capped at 1: c_x, b1 and b3 are off by 0.0086,
     -0.0085 and 0.014 (measured), against 0.072, -0.069 and 0.19 for the decoupled filter
-    (note section 5: the joint block needs 0.7k-2.8k steps where the decoupled one needs
+    (docs/method-physics.md, section 5: the joint block needs 0.7k-2.8k steps where the decoupled one needs
     24k-257k); every other coordinate to 1e-4."""
     q_s = np.array([1.0, 0.5, 0.35, 1.2, 0.7, 1.2, 0.3, -0.2, 0.15, 0.1, 0.4])
     m, target = rigid_global_target(q_s)

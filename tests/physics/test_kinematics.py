@@ -1,5 +1,5 @@
 """Part kinematics: x = c + R (s + d), L against central differences, Ldot qdot against a
-difference of L qdot along a trajectory, the lumped mass (design note metaxas-terzopoulos-math.md,
+difference of L qdot along a trajectory, the lumped mass (docs/method-physics.md,
 sections 2, 3 and 7)."""
 
 import numpy as np

@@ -1,5 +1,5 @@
 """Deformable superquadric shells: s, J against central differences, normals, the mesh, the
-displacement interpolation and the membrane stiffness (design note metaxas-terzopoulos-math.md,
+displacement interpolation and the membrane stiffness (docs/method-physics.md,
 sections 1, 3 and 7)."""
 
 import numpy as np

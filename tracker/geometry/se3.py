@@ -44,7 +44,7 @@ def hat(alpha):
 
 
 def generators() -> np.ndarray:
-    """The six 4x4 generators G1..G6 in the note's order (translations, then rotations)."""
+    """The six 4x4 generators G1..G6, translations then rotations (docs/method-tracking.md, section 1)."""
     return np.stack([hat(np.eye(6)[i]) for i in range(6)])
 
 

@@ -1,1 +1,1 @@
-"""Input and output: recording folders, frame readers, poses.npz, atomic file writes."""
+"""Input and output: recording folders, frame readers, pose files, poses.npz, live capture, marker files and exports."""

@@ -7,7 +7,7 @@ increment) updates
 
     theta <- normalise(exp(dphi / 2) (x) theta),   exp(w) = (cos|w|, sin|w| w / |w|)
 
-and R = R(theta).  Since R(exp(dphi / 2)) = Exp([dphi]x) this is the note's minimal update
+and R = R(theta).  Since R(exp(dphi / 2)) = Exp([dphi]x) this is the minimal update of docs/method-physics.md
 R <- Exp([dphi]x) R (section 7: 'quaternion vs minimal update: 0'); the quaternion is the state,
 R is derived from it.
 

@@ -1,5 +1,5 @@
-"""The paper's 'insect' experiment (Metaxas & Terzopoulos 1993, section VI, Figs 9-10; design
-note metaxas-terzopoulos-math.md, sections 4 and 6): five deformable superquadric parts of 27
+"""The paper's 'insect' experiment (Metaxas & Terzopoulos 1993, section VI, Figs 9-10;
+docs/method-physics.md, sections 4 and 6): five deformable superquadric parts of 27
 nodes each (``superquadric.mesh(5, 5)``) joined by four point-to-point constraints, tracked
 from dense data (every node of every part) and from sparse data (7 fixed nodes per part).
 

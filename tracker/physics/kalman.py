@@ -18,7 +18,7 @@ dynamic fitting; with P = I the filter *is* dynamic fitting (``fitting.euler_ste
 Blocks (section 5).  P keeps diagonal blocks, each integrated on its own: P_g over the
 rigid + global vector (c, dphi, q_s without a0; 16 x 16, dphi the world-frame increment of
 ``kinematics.retract``) and P_d over q_d.  P_g is either the paper's decoupled c | phi | q_s
-(3x3, 3x3, 10x10; ``Settings.coupling`` "decoupled") or one joint block ("joint", the note's
+(3x3, 3x3, 10x10; ``Settings.coupling`` "decoupled") or one joint block ("joint", docs/method-physics.md's
 "joint rigid+global block").  With isotropic V, Q and P_d(0) the local block stays exactly
 P_d = P_node (x) I3 (n x n P_node), because K_dd = K_node (x) I3 and H_d^T V^-1 H_d =
 diag(#points at node i / v) (x) I3: every term of the Riccati equation keeps the (x) I3
@@ -41,7 +41,7 @@ g_b = H_b^T V^-1 r:
 K_b is zero for c and phi, K_node (the loaded membrane over the current shell) for d, and
 for b1 ``Settings.bend_stiffness`` (zero by default).
 
-Findings of the note handled here:
+Findings of docs/method-physics.md, section 5, handled here:
 
 * Gauge (section 1, degeneracy 4): a0 is frozen; P_g leaves it out and its step is zero.
 * Initial covariance: the paper's P(0) (1 on the diagonal, 0.4 on the stiffness pattern) is

@@ -5,7 +5,7 @@ A part carries the generalized coordinates
     q = (c (3), phi (3), q_s (11), q_d (3 per node))
 
 where c is the world position of the model frame, phi a world-frame rotation increment (the
-note's recommended minimal parameterisation: the rotation itself is kept as a matrix R and a
+minimal parameterisation recommended in docs/method-physics.md: the rotation itself is kept as a matrix R and a
 step dphi acts as R <- Exp([dphi]x) R), q_s the global shape parameters of ``superquadric``
 and q_d = d.ravel() the nodal displacements.  Node i sits at the material point (u_i, v_i) and
 its world position is
