@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_ownership import placed_at
 
 from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.geometry.quadric import KEEP_ALL
 from tracker.model import load_model, model_from_dict
-from tracker.outline import Placed, Rig, Samples, place, sample_outlines
+from tracker.outline import Rig, Samples, sample_outlines
 
 SIZE = (640, 480)
 
@@ -597,20 +598,7 @@ def test_place_matches_the_matrix_formula():
     poses = np.stack([se3.exp(rng.normal(size=6)) for _ in range(model.size)])
     cams = random_cameras(rng, 2, distorted=False)
     rig = Rig.from_cameras(cams)
-    placed = Placed.allocate(2, model.quadric.shape[0])
-    place(
-        model.quadric,
-        model.clip,
-        model.quadric_bound,
-        model.quadric_component,
-        poses,
-        rig.camera_from_world,
-        placed.camera_from,
-        placed.quadric,
-        placed.clip,
-        placed.sphere,
-        placed.cone,
-    )
+    placed = placed_at(model, poses, rig)
     for k in range(2):
         for j, c in enumerate(model.quadric_component):
             e = rig.camera_from_world[k] @ poses[c]
