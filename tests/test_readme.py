@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from tracker.cli import main
+from tracker.keypoints.store import load_keypoints
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -37,6 +38,7 @@ LIMITS: dict[str, list[str]] = {
     "background": ["--samples", "5", "--quiet"],
     "bench": ["--repeats", "1"],
     "experiment": ["--frames", "2", "--quiet"],
+    "keypoints": ["--frames", "6", "--quiet"],
 }
 
 
@@ -145,6 +147,10 @@ def _check_output(path: Path, recording: Path | None, views: int) -> None:
     elif path.suffix == ".bvh":
         counts = re.findall(r"^Frames:\s*(\d+)", path.read_text(), re.M)
         assert counts and (not poses.exists() or int(counts[0]) == _frames_of(poses))
+    elif path.name == "keypoints.npz":
+        keypoints = load_keypoints(path)
+        assert keypoints.pixels.shape[:2] == (6, len(keypoints.camera_names))
+        assert (keypoints.confidence.max(axis=2) > 0.5).mean() > 0.5  # a person in most images
     elif path.suffix == ".csv" and poses.exists():
         assert len(path.read_text().splitlines()) == 1 + _frames_of(poses)
 

@@ -1,0 +1,46 @@
+"""``tracker keypoints``: the 2-D keypoint detector over a recording, written to OUT/keypoints.npz."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tracker.commands import options
+from tracker.errors import TrackerInputError
+
+HELP = "detect BlazePose's 33 landmarks in every camera and frame, write DIR/keypoints.npz"
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker keypoints``."""
+    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
+    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
+    options.add_recording_options(parser)
+    parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    parser.add_argument("--frames", type=options.positive_int, help="number of frames (default: all)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Detect (or reuse OUT/keypoints.npz when it holds the same frames, cameras and detector) and print
+    how often a person was found per camera."""
+    from tracker.atomic import ensure_writable_folder
+    from tracker.io.recording import open_recording
+    from tracker.keypoints.detect import detect_recording
+
+    rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib)
+    if not 0 <= args.start < rec.frame_count:
+        raise TrackerInputError(
+            f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
+        )
+    stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
+    out = ensure_writable_folder(Path(args.out) if args.out else Path("out") / rec.path.resolve().name)
+    path = out / "keypoints.npz"
+    keypoints, reused = detect_recording(
+        rec, args.start, stop, cache=path, progress=options.bar(args, "detecting", "frame")
+    )
+    print(f"{'reused' if reused else 'wrote'} {path} (frames {args.start}..{stop - 1}, {len(rec.cameras)} cameras)")
+    found = (keypoints.confidence.max(axis=2) > 0).mean(axis=0)
+    for name, share in zip(keypoints.camera_names, found):
+        print(f"  {name}: a person in {100 * share:.1f} % of the frames")
+    return 0
