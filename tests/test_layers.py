@@ -16,7 +16,14 @@ LAYERS = (
     ("tracker.errors", "tracker.status", "tracker.atomic", "tracker.tomlfile", "tracker.geometry"),
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
     ("tracker.model", "tracker.camera"),
-    ("tracker.outline", "tracker.ownership", "tracker.measure", "tracker.motion_prior", "tracker.render"),
+    (
+        "tracker.outline",
+        "tracker.ownership",
+        "tracker.measure",
+        "tracker.keypoint_cue",
+        "tracker.motion_prior",
+        "tracker.render",
+    ),
     ("tracker.track",),
     ("tracker.io", "tracker.clips", "tracker.synth", "tracker.evaluate", "tracker.foreground"),
     ("tracker.viewer", "tracker.calibrate", "tracker.physics", "tracker.keypoints", "tracker.bench", "tracker.live"),

@@ -1,0 +1,146 @@
+"""The keypoint cue: 2-D landmarks pulling on model points, summed into the edges' information.
+
+A detected landmark ``d`` (recorded pixels, in camera k) is the image of a point ``X`` fixed in
+component i's frame.  With ``u(E_i)`` its predicted image (camera_from_world P_k, the lens model of
+:func:`tracker.outline.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
+component's body twist, the same chain as an outline sample's row (docs/method-tracking.md, section 3),
+
+    J = J_d (1/Z) [K2 | -(p - c0)] R D(X),   D(X) = [I3 | -[X]x],
+
+the residual ``r = d - u`` adds, per component, summed over landmarks and cameras,
+
+    C_i += w J^T J,   eta_i += w J^T r,   w = s q / (c + |r|)
+
+where ``q`` is the detection's confidence, ``c`` the robust constant (IRLS, as the edges) and ``s``
+the cue's weight against the edges.  So one tree solve fuses both cues.  Left/right swaps are
+rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
+predicted images better the other way round (summed distance), neither is used in that camera.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from tracker.model import Model
+from tracker.outline import distort
+
+SIDES = {
+    "shoulder": "upperarm",
+    "elbow": "forearm",
+    "wrist": "hand",
+    "hip": "thigh",
+    "knee": "shin",
+    "ankle": "foot",
+}
+"""BlazePose landmark -> the component whose origin (its joint with its parent) it marks, in the naming
+of models/human.toml (``<part>_l`` / ``<part>_r`` for the person's left and right)."""
+
+
+def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each of ``landmarks``: its component (K,) int (-1 when the model has none) and its point (K, 3)
+    in that component's frame (the joint centre), and the left/right pairs (P, 2) of landmark indices."""
+    component = np.full(len(landmarks), -1, np.int64)
+    for index, name in enumerate(landmarks):
+        side, _, part = name.partition("_")
+        if side in ("left", "right") and part in SIDES and f"{SIDES[part]}_{side[0]}" in model.names:
+            component[index] = model.names.index(f"{SIDES[part]}_{side[0]}")
+    pairs = [
+        (index, landmarks.index("right_" + name[5:]))
+        for index, name in enumerate(landmarks)
+        if name.startswith("left_") and "right_" + name[5:] in landmarks
+    ]
+    return component, np.zeros((len(landmarks), 3)), np.array(pairs, np.int64).reshape(-1, 2)
+
+
+@njit(cache=True)
+def project_point(k_mat, dist, camera_from_component, point):
+    """Recorded pixel (2,) of ``point`` (3,) of a component and its Jacobian (2, 6) with respect to the
+    component's body twist; NaN when the point is behind the camera."""
+    e = camera_from_component
+    x_cam = e[:3, :3] @ point + e[:3, 3]
+    jac = np.zeros((2, 6))
+    if x_cam[2] <= 1e-9:
+        return np.full(2, np.nan), jac
+    depth = x_cam[2]
+    px = k_mat[0, 0] * x_cam[0] / depth + k_mat[0, 1] * x_cam[1] / depth + k_mat[0, 2]
+    py = k_mat[1, 1] * x_cam[1] / depth + k_mat[1, 2]
+    u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
+    for row in range(2):
+        gx, gy = (j00, j01) if row == 0 else (j10, j11)
+        dy0 = gx * k_mat[0, 0] / depth
+        dy1 = (gx * k_mat[0, 1] + gy * k_mat[1, 1]) / depth
+        dy2 = -(gx * (px - k_mat[0, 2]) + gy * (py - k_mat[1, 2])) / depth
+        rx = e[0, 0] * dy0 + e[1, 0] * dy1 + e[2, 0] * dy2
+        ry = e[0, 1] * dy0 + e[1, 1] * dy1 + e[2, 1] * dy2
+        rz = e[0, 2] * dy0 + e[1, 2] * dy1 + e[2, 2] * dy2
+        jac[row, 0] = rx
+        jac[row, 1] = ry
+        jac[row, 2] = rz
+        jac[row, 3] = point[1] * rz - point[2] * ry
+        jac[row, 4] = point[2] * rx - point[0] * rz
+        jac[row, 5] = point[0] * ry - point[1] * rx
+    return np.array([u, v]), jac
+
+
+@njit(cache=True, nogil=True)
+def keypoint_kernel(
+    poses,
+    camera_from_world,
+    matrix,
+    distortion,
+    component,
+    point,
+    pairs,
+    pixels,
+    confidence,
+    min_confidence,
+    robust_c,
+    scale,
+    information,
+    eta,
+):
+    """Add every usable landmark's w J^T J and w J^T r to ``information`` (N, 6, 6) and ``eta`` (N, 6).
+
+    ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's detections; a landmark is used when
+    its component is >= 0, its confidence at least ``min_confidence``, its pixel finite, and it is not
+    half of a left/right pair of ``pairs`` (P, 2) that fits better swapped.  Returns (landmarks used,
+    pairs rejected)."""
+    cameras, count = pixels.shape[0], pixels.shape[1]
+    used = 0
+    rejected = 0
+    predicted = np.full((count, 2), np.nan)
+    jacobians = np.zeros((count, 2, 6))
+    usable = np.zeros(count, np.bool_)
+    for k in range(cameras):
+        for j in range(count):
+            i = component[j]
+            usable[j] = (
+                i >= 0
+                and confidence[k, j] >= min_confidence
+                and np.isfinite(pixels[k, j, 0])
+                and np.isfinite(pixels[k, j, 1])
+            )
+            if usable[j]:
+                predicted[j], jacobians[j] = project_point(
+                    matrix[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
+                )
+                usable[j] = np.isfinite(predicted[j, 0])
+        for p in range(pairs.shape[0]):
+            a, b = pairs[p, 0], pairs[p, 1]
+            if usable[a] and usable[b]:
+                straight = np.linalg.norm(pixels[k, a] - predicted[a]) + np.linalg.norm(pixels[k, b] - predicted[b])
+                swapped = np.linalg.norm(pixels[k, a] - predicted[b]) + np.linalg.norm(pixels[k, b] - predicted[a])
+                if swapped < straight:
+                    usable[a] = usable[b] = False
+                    rejected += 1
+        for j in range(count):
+            if not usable[j]:
+                continue
+            r = pixels[k, j] - predicted[j]
+            w = scale * confidence[k, j] / (robust_c + np.sqrt(r[0] * r[0] + r[1] * r[1]))
+            jac = jacobians[j]
+            information[component[j]] += w * (jac.T @ jac)
+            eta[component[j]] += w * (jac.T @ r)
+            used += 1
+    return used, rejected
