@@ -11,8 +11,7 @@ import pytest
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoint_cue import keypoint_kernel, landmark_points, project_point
-from tracker.keypoints.detector import LANDMARKS
+from tracker.keypoint_cue import LANDMARKS, keypoint_kernel, landmark_points, project_point
 from tracker.model import load_model
 from tracker.outline import Rig
 
@@ -106,3 +105,45 @@ def test_swapped_pairs_are_rejected_and_low_confidence_ignored(demo_frame):
     (used, rejected), _, eta = _add(model, rig, component, point, pairs, poses, swapped, confidence)
     assert rejected == 1 and used == 3 * 12 - 2 - 1
     np.testing.assert_allclose(eta, 0.0, atol=1e-6)
+
+
+def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
+    """The demo from a first pose 15 cm and 20 degrees off (about the root): the edges alone stay lost
+    (measured: MPJPE 288 mm over frames 0-9), while the same tracker fed perfect landmarks (the true joint
+    centres' images, 12 per camera) in the same IRLS is back within millimetres by frame 10 (measured:
+    19 mm over frames 0-9, 3.3 mm after)."""
+    import itertools
+
+    from tracker.io.posefile import load_pose_file
+    from tracker.io.recording import frames
+    from tracker.model import joint_centres
+    from tracker.track import Tracker
+
+    model, rig, component, point, pairs, _, _ = demo_frame
+    recording = open_recording(DEMO)
+    truth = load_poses(DEMO / "truth.npz")
+    first = load_pose_file(recording.init_path, model)
+    turn = se3.exp(np.r_[0.15, -0.1, 0.0, 0.0, 0.0, np.radians(20)])
+    root = first[0, :3, 3]
+    off = np.eye(4)
+    off[:3, :3] = turn[:3, :3]
+    off[:3, 3] = root - turn[:3, :3] @ root + turn[:3, 3]
+    start = off @ first
+    count = 20
+    images = [images for _, images in itertools.islice(frames(recording), count)]
+
+    def landmarks(index):
+        pixels = np.full((len(recording.cameras), len(LANDMARKS), 2), np.nan)
+        for k, camera in enumerate(recording.cameras):
+            for j in np.flatnonzero(component >= 0):
+                pixels[k, j] = camera.project(truth["poses"][index, component[j], :3, 3])
+        return pixels, np.ones(pixels.shape[:2])
+
+    def mpjpe(fed: bool) -> np.ndarray:
+        tracker = Tracker(model, recording.cameras, start)
+        poses = [tracker.step(images[i], keypoints=landmarks(i) if fed else None).poses for i in range(count)]
+        return 1000 * np.linalg.norm(joint_centres(np.array(poses)) - truth["joints"][:count], axis=2).mean(axis=1)
+
+    alone, fused = mpjpe(False), mpjpe(True)
+    assert alone[:10].mean() > 100.0
+    assert fused[10:].max() < 10.0 and fused[:10].mean() < 50.0, fused.round(1)

@@ -31,6 +31,7 @@ from numba import njit
 from tracker import motion_prior
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
+from tracker.keypoint_cue import LANDMARKS, keypoint_kernel, landmark_points
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
 from tracker.outline import Placed, Rig, Samples, sample_outlines
@@ -74,6 +75,8 @@ class Settings:
     ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
     reference_size: int = 480  # the pixel settings above are for images this many pixels on their short side
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
+    keypoint_weight: float = 1.0  # s: a landmark's weight against an edge sample's (tracker.keypoint_cue)
+    keypoint_confidence: float = 0.5  # landmarks less confident than this are not used
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
 
 
@@ -268,6 +271,8 @@ class Tracker:
         self.lo: np.ndarray | None = None  # each sample's search limits, set by sample()
         self.hi: np.ndarray | None = None
         self.times = StageTimes()
+        self.landmarks = landmark_points(model, LANDMARKS)
+        self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
@@ -325,6 +330,8 @@ class Tracker:
             twist = motion_since(self.sampled_poses, self.poses)
         started = time.perf_counter()
         visible, found, sum_wm, sum_w = self.measure(search_range, twist)
+        if self.keypoints is not None:
+            self.add_keypoints(*self.keypoints)
         started = self.times.add("measure", started)
         self.poses = update_kernel(
             self.information,
@@ -415,11 +422,43 @@ class Tracker:
             self.weight[:n].copy(),
         )
 
-    def step(self, images, smoothed: bool = False, dt: float | None = None) -> FrameResult:
+    def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:
+        """Add the landmarks' information to the edges' (:func:`tracker.keypoint_cue.keypoint_kernel`):
+        ``pixels`` (C, 33, 2) and ``confidence`` (C, 33), one row per camera of the rig.  Returns (landmarks
+        used, left/right pairs rejected)."""
+        st = self.settings
+        component, point, pairs = self.landmarks
+        return keypoint_kernel(
+            self.poses,
+            self.rig.camera_from_world,
+            self.rig.matrix,
+            self.rig.distortion,
+            component,
+            point,
+            pairs,
+            np.ascontiguousarray(pixels, dtype=np.float64),
+            np.ascontiguousarray(confidence, dtype=np.float64),
+            st.keypoint_confidence,
+            st.robust_c,
+            st.keypoint_weight,
+            self.information,
+            self.eta,
+        )
+
+    def step(
+        self,
+        images,
+        smoothed: bool = False,
+        dt: float | None = None,
+        keypoints: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not.
 
         ``dt``: seconds since the previous frame (dynamics "kalman" only; default ``1 / frame_rate``).
+        ``keypoints``: the frame's landmarks, (pixels (C, 33, 2), confidence (C, 33)), fused with the edges
+        in every iteration (:meth:`add_keypoints`).
         """
+        self.keypoints = keypoints
         self.load_images(images, smoothed)
         current = self.poses
         st = self.settings

