@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from tracker.model import Model
-from tracker.outline import distort
+from tracker.outline import component_row, distort
 
 LANDMARKS = (
     "nose",
@@ -105,12 +105,7 @@ def project_point(k_mat, dist, camera_from_component, point):
     u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
     for row in range(2):
         gx, gy = (j00, j01) if row == 0 else (j10, j11)
-        dy0 = gx * k_mat[0, 0] / depth
-        dy1 = (gx * k_mat[0, 1] + gy * k_mat[1, 1]) / depth
-        dy2 = -(gx * (px - k_mat[0, 2]) + gy * (py - k_mat[1, 2])) / depth
-        rx = e[0, 0] * dy0 + e[1, 0] * dy1 + e[2, 0] * dy2
-        ry = e[0, 1] * dy0 + e[1, 1] * dy1 + e[2, 1] * dy2
-        rz = e[0, 2] * dy0 + e[1, 2] * dy1 + e[2, 2] * dy2
+        rx, ry, rz = component_row(k_mat, e, px, py, depth, gx, gy)
         jac[row, 0] = rx
         jac[row, 1] = ry
         jac[row, 2] = rz

@@ -131,6 +131,21 @@ def distort(k_mat, dist, px, py):
     return fx * dx + s * dy + cx, fy * dy + cy, j00, j01, j10, j11
 
 
+@njit(cache=True, inline="always")
+def component_row(k_mat, camera_from_component, px, py, depth, gx, gy):
+    """g^T dp/dY R for a direction g = (gx, gy) at the ideal pixel (px, py) of a point at ``depth``: the
+    change of g . p per unit motion of the point in the component's frame, (3,), with
+    dp/dY = (1/Z) [K2 | -(p - c0)] and R the rotation of ``camera_from_component``."""
+    dy0 = gx * k_mat[0, 0] / depth
+    dy1 = (gx * k_mat[0, 1] + gy * k_mat[1, 1]) / depth
+    dy2 = -(gx * (px - k_mat[0, 2]) + gy * (py - k_mat[1, 2])) / depth
+    e = camera_from_component
+    rx = e[0, 0] * dy0 + e[1, 0] * dy1 + e[2, 0] * dy2
+    ry = e[0, 1] * dy0 + e[1, 1] * dy1 + e[2, 1] * dy2
+    rz = e[0, 2] * dy0 + e[1, 2] * dy1 + e[2, 2] * dy2
+    return rx, ry, rz
+
+
 @njit(cache=True)
 def _outside(px, py, width, height):
     """Distance (ideal pixels) from (px, py) to the image grown by a quarter of its size on each side
@@ -307,13 +322,8 @@ def _emit(
     # (1/Z) [K2 | -(p - c0)], contracted with g, then R^T of it (the component frame)
     gx = nx * j00 + ny * j10
     gy = nx * j01 + ny * j11
-    dy0 = gx * k_mat[0, 0] / depth
-    dy1 = (gx * k_mat[0, 1] + gy * k_mat[1, 1]) / depth
-    dy2 = -(gx * (px - k_mat[0, 2]) + gy * (py - k_mat[1, 2])) / depth
     e = cam_from_comp
-    rx = e[0, 0] * dy0 + e[1, 0] * dy1 + e[2, 0] * dy2
-    ry = e[0, 1] * dy0 + e[1, 1] * dy1 + e[2, 1] * dy2
-    rz = e[0, 2] * dy0 + e[1, 2] * dy1 + e[2, 2] * dy2
+    rx, ry, rz = component_row(k_mat, e, px, py, depth, gx, gy)
     d0 = x_cam[0] - e[0, 3]
     d1 = x_cam[1] - e[1, 3]
     d2 = x_cam[2] - e[2, 3]
