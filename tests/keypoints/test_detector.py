@@ -116,3 +116,25 @@ def test_command_errors_are_one_line(tmp_path, capsys):
     assert len(lines) == 1 and "--start 500 is outside its frames 0..159" in lines[0]
     with pytest.raises(TrackerInputError, match="not found"):
         load_keypoints(tmp_path / "keypoints.npz")
+
+
+def test_views_that_disagree_are_dropped(demo_keypoints):
+    """Frames 0-19 of the demo: cam1's detector follows a basketball player in the background photo, whose
+    landmarks triangulate with neither other view, so most of cam1's are dropped; cam0's and cam2's, which
+    agree, are kept."""
+    from tracker.keypoints.consistency import consistent
+
+    recording = open_recording(DEMO)
+    checked, dropped = consistent(demo_keypoints, recording.cameras)
+    assert dropped[1] > 0.5 and dropped[0] < 0.2 and dropped[2] < 0.2, dropped
+    assert (checked.confidence <= demo_keypoints.confidence).all()
+    np.testing.assert_array_equal(checked.pixels, demo_keypoints.pixels)
+
+
+def test_triangulation_of_exact_rays_is_exact():
+    from tracker.keypoints.consistency import triangulate
+
+    cameras = open_recording(DEMO).cameras
+    point = np.array([0.2, -0.1, 1.1])
+    normalised = np.array([camera.undistort_pixels(camera.project(point))[0] for camera in cameras])
+    np.testing.assert_allclose(triangulate(cameras, normalised), point, atol=1e-9)
