@@ -424,8 +424,8 @@ class Tracker:
 
     def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:
         """Add the landmarks' information to the edges' (:func:`tracker.keypoint_cue.keypoint_kernel`):
-        ``pixels`` (C, 33, 2) and ``confidence`` (C, 33), one row per camera of the rig.  Returns (landmarks
-        used, left/right pairs rejected)."""
+        ``pixels`` (C, 33, 2) and ``confidence`` (C, 33) float64, one row per camera of the rig.  Returns
+        (landmarks used, left/right pairs rejected)."""
         st = self.settings
         component, point, pairs = self.landmarks
         return keypoint_kernel(
@@ -436,8 +436,8 @@ class Tracker:
             component,
             point,
             pairs,
-            np.ascontiguousarray(pixels, dtype=np.float64),
-            np.ascontiguousarray(confidence, dtype=np.float64),
+            pixels,
+            confidence,
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
@@ -458,7 +458,10 @@ class Tracker:
         ``keypoints``: the frame's landmarks, (pixels (C, 33, 2), confidence (C, 33)), fused with the edges
         in every iteration (:meth:`add_keypoints`).
         """
-        self.keypoints = keypoints
+        self.keypoints = None
+        if keypoints is not None:
+            pixels, confidence = keypoints
+            self.keypoints = (np.ascontiguousarray(pixels, np.float64), np.ascontiguousarray(confidence, np.float64))
         self.load_images(images, smoothed)
         current = self.poses
         st = self.settings
