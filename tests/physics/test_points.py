@@ -37,6 +37,11 @@ MESH = sq.mesh(7, 8)
 MARKER_NODES = [3, 6, 17, 20, 30, 33, 44, 47, 57]  # spread over the rings and longitudes
 
 
+def vicon_arm(*options: str) -> int:
+    """``tracker points`` on the Vicon arm's markers with its model, and ``options``."""
+    return main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), *options])
+
+
 def _model(path: Path = Path("synthetic.toml")) -> pts.PointsModel:
     names = ("upper_arm", "forearm", "hand")
     markers = tuple(tuple(f"{name}{k}" for k in range(len(MARKER_NODES))) for name in names)
@@ -204,19 +209,7 @@ def test_points_command_on_the_vicon_arm(tmp_path: Path, capsys) -> None:
     """The real Vicon.c3d raising arm, frames 0-29: every part seen, joints held to a micrometre,
     every part's RMS marker-to-node distance under 2.5 cm (measured over all 580 frames of the full
     file in ../shared/data: medians 13-21 mm, see README)."""
-    code = main(
-        [
-            "points",
-            str(MARKERS / "Vicon.c3d"),
-            "--model",
-            str(VICON_ARM),
-            "--out",
-            str(tmp_path),
-            "--frames",
-            "30",
-            "--quiet",
-        ]
-    )
+    code = vicon_arm("--out", str(tmp_path), "--frames", "30", "--quiet")
     assert code == 0
     report = capsys.readouterr().out
     assert "fitted 30 frames" in report and "30 with every part seen" in report
@@ -233,26 +226,7 @@ def test_points_command_on_the_vicon_arm(tmp_path: Path, capsys) -> None:
 
 
 def test_every_other_frame_keeps_the_file_s_clock(tmp_path: Path) -> None:
-    assert (
-        main(
-            [
-                "points",
-                str(MARKERS / "Vicon.c3d"),
-                "--model",
-                str(VICON_ARM),
-                "--out",
-                str(tmp_path),
-                "--start",
-                "10",
-                "--frames",
-                "6",
-                "--every",
-                "2",
-                "--quiet",
-            ]
-        )
-        == 0
-    )
+    assert vicon_arm("--out", str(tmp_path), "--start", "10", "--frames", "6", "--every", "2", "--quiet") == 0
     poses = load_poses(tmp_path / "poses.npz")
     assert list(poses["frame"]) == [10, 12, 14] and np.allclose(poses["time"], [0.0, 0.02, 0.04])
 
@@ -267,22 +241,7 @@ def test_ctrl_c_keeps_both_files_of_the_frames_done(tmp_path: Path, monkeypatch,
             yield fitted
 
     monkeypatch.setattr(pts, "track", interrupted)
-    assert (
-        main(
-            [
-                "points",
-                str(MARKERS / "Vicon.c3d"),
-                "--model",
-                str(VICON_ARM),
-                "--out",
-                str(tmp_path),
-                "--frames",
-                "10",
-                "--quiet",
-            ]
-        )
-        == 130
-    )
+    assert vicon_arm("--out", str(tmp_path), "--frames", "10", "--quiet") == 130
     assert "interrupted after 3 frames" in capsys.readouterr().out
     poses, shapes = load_poses(tmp_path / "poses.npz"), np.load(tmp_path / "shapes.npz")
     assert list(poses["frame"]) == list(shapes["frame"]) == [0, 1, 2]
@@ -296,7 +255,7 @@ def test_points_command_errors_are_one_line(tmp_path: Path, capsys) -> None:
     assert len(error) == 1 and "Vicon.c3d" in error[0] and "'NOSUCH'" in error[0]
     assert main(["points", str(tmp_path / "none.c3d"), "--model", str(VICON_ARM)]) == 2
     assert "marker file not found" in capsys.readouterr().err
-    assert main(["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--start", "9999"]) == 2
+    assert vicon_arm("--start", "9999") == 2
     assert "--start 9999 is outside the marker file's frames 0..159" in capsys.readouterr().err
     assert main(["experiment", "insect", "--densities", "50"]) == 2
     assert "the insect has neither" in capsys.readouterr().err
@@ -305,13 +264,13 @@ def test_points_command_errors_are_one_line(tmp_path: Path, capsys) -> None:
 def test_fit_option_and_its_old_name(tmp_path: Path, capsys) -> None:
     """--fit second-order fits with mass and momentum; the old spelling --dynamics (the motion prior's
     name in track) gives the same poses, with a warning that names --fit."""
-    common = ["points", str(MARKERS / "Vicon.c3d"), "--model", str(VICON_ARM), "--frames", "5", "--quiet"]
-    assert main([*common, "--fit", "second-order", "--out", str(tmp_path / "new")]) == 0
+    common = ["--frames", "5", "--quiet"]
+    assert vicon_arm(*common, "--fit", "second-order", "--out", str(tmp_path / "new")) == 0
     assert "is now" not in capsys.readouterr().err
-    assert main([*common, "--dynamics", "second-order", "--out", str(tmp_path / "old")]) == 0
+    assert vicon_arm(*common, "--dynamics", "second-order", "--out", str(tmp_path / "old")) == 0
     assert "--dynamics is now --fit" in capsys.readouterr().err
     new, old = (load_poses(tmp_path / name / "poses.npz") for name in ("new", "old"))
     np.testing.assert_array_equal(new["poses"], old["poses"])
     first = load_poses(tmp_path / "new" / "poses.npz")
-    assert main([*common, "--out", str(tmp_path / "first")]) == 0
+    assert vicon_arm(*common, "--out", str(tmp_path / "first")) == 0
     assert not np.array_equal(load_poses(tmp_path / "first" / "poses.npz")["poses"], first["poses"])
