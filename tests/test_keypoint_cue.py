@@ -63,7 +63,7 @@ def demo_frame():
     return model, rig, component, point, pairs, poses, pixels
 
 
-def _add(model, rig, component, point, pairs, poses, pixels, confidence):
+def _add(model, rig, component, point, pairs, poses, pixels, confidence, tolerance=0.0):
     information = np.zeros((model.size, 6, 6))
     eta = np.zeros((model.size, 6))
     counts = keypoint_kernel(
@@ -79,6 +79,7 @@ def _add(model, rig, component, point, pairs, poses, pixels, confidence):
         0.5,
         2.0,
         1.0,
+        tolerance,
         information,
         eta,
     )
@@ -105,6 +106,27 @@ def test_swapped_pairs_are_rejected_and_low_confidence_ignored(demo_frame):
     (used, rejected), _, eta = _add(model, rig, component, point, pairs, poses, swapped, confidence)
     assert rejected == 1 and used == 3 * 12 - 2 - 1
     np.testing.assert_allclose(eta, 0.0, atol=1e-6)
+
+
+def test_landmarks_within_the_detector_noise_are_not_used_and_further_ones_pull_by_the_excess(demo_frame):
+    model, rig, component, point, pairs, poses, pixels = demo_frame
+    confidence = np.ones(pixels.shape[:2])
+    knee = LANDMARKS.index("left_knee")
+    shin = component[knee]
+    extent = [np.linalg.norm(np.ptp(pixels[k][component >= 0], axis=0)) for k in range(len(pixels))]
+    radius = 0.03 * extent[0]
+    near, far = pixels.copy(), pixels.copy()
+    near[0, knee, 0] += 0.9 * radius
+    far[0, knee, 0] += 3.0 * radius
+    (used, _), information, eta = _add(model, rig, component, point, pairs, poses, near, confidence, 0.03)
+    assert used == 0 and not information.any() and not eta.any()
+    (used, _), information, eta = _add(model, rig, component, point, pairs, poses, far, confidence, 0.03)
+    assert used == 1 and not np.delete(information, shin, axis=0).any()
+    # the weight is w = (e / |r|) / (c + e) with the excess e = 2 radius over |r| = 3 radius (s = q = 1)
+    _, jacobian = project_point(rig.matrix[0], rig.distortion[0], rig.camera_from_world[0] @ poses[shin], point[knee])
+    w = (2.0 / 3.0) / (2.0 + 2.0 * radius)
+    np.testing.assert_allclose(information[shin], w * jacobian.T @ jacobian, rtol=1e-9)
+    np.testing.assert_allclose(eta[shin], w * jacobian.T @ np.array([3.0 * radius, 0.0]), rtol=1e-9, atol=1e-12)
 
 
 def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):

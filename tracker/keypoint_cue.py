@@ -9,10 +9,13 @@ component's body twist, the same chain as an outline sample's row (docs/method-t
 
 the residual ``r = d - u`` adds, per component, summed over landmarks and cameras,
 
-    C_i += w J^T J,   eta_i += w J^T r,   w = s q / (c + |r|)
+    C_i += w J^T J,   eta_i += w J^T r,   w = s q (e / |r|) / (c + e),   e = |r| - t
 
-where ``q`` is the detection's confidence, ``c`` the robust constant (IRLS, as the edges) and ``s``
-the cue's weight against the edges.  So one tree solve fuses both cues.  Left/right swaps are
+where ``q`` is the detection's confidence, ``c`` the robust constant (IRLS, as the edges), ``s``
+the cue's weight against the edges and ``t`` the detector's noise in that image (a share of the
+predicted body's size there): a landmark within ``t`` of its prediction is not used (e <= 0), so a
+detector's few pixels of scatter and bias never pull against the edges, while a body that has
+drifted off is pulled back by the excess.  So one tree solve fuses both cues.  Left/right swaps are
 rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
 predicted images better the other way round (summed distance), neither is used in that camera.
 """
@@ -129,6 +132,7 @@ def keypoint_kernel(
     min_confidence,
     robust_c,
     scale,
+    tolerance,
     information,
     eta,
 ):
@@ -136,8 +140,11 @@ def keypoint_kernel(
 
     ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's detections; a landmark is used when
     its component is >= 0, its confidence at least ``min_confidence``, its pixel finite, and it is not
-    half of a left/right pair of ``pairs`` (P, 2) that fits better swapped.  Returns (landmarks used,
-    pairs rejected)."""
+    half of a left/right pair of ``pairs`` (P, 2) that fits better swapped.  Each residual is shrunk by
+    the detector's noise, ``tolerance`` times the predicted body's size in that image (the diagonal of
+    its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
+    excess e = |r| - radius, w = s q (e / |r|) / (c + e), so its pull grows from zero at the zone's
+    edge.  Returns (landmarks used, pairs rejected)."""
     cameras, count = pixels.shape[0], pixels.shape[1]
     used = 0
     rejected = 0
@@ -145,19 +152,26 @@ def keypoint_kernel(
     jacobians = np.zeros((count, 2, 6))
     usable = np.zeros(count, np.bool_)
     for k in range(cameras):
+        low = np.full(2, np.inf)
+        high = np.full(2, -np.inf)
         for j in range(count):
             i = component[j]
+            predicted[j] = np.nan
+            if i >= 0:
+                predicted[j], jacobians[j] = project_point(
+                    matrix[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
+                )
+                if np.isfinite(predicted[j, 0]):
+                    low = np.minimum(low, predicted[j])
+                    high = np.maximum(high, predicted[j])
             usable[j] = (
                 i >= 0
                 and confidence[k, j] >= min_confidence
                 and np.isfinite(pixels[k, j, 0])
                 and np.isfinite(pixels[k, j, 1])
+                and np.isfinite(predicted[j, 0])
             )
-            if usable[j]:
-                predicted[j], jacobians[j] = project_point(
-                    matrix[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
-                )
-                usable[j] = np.isfinite(predicted[j, 0])
+        radius = tolerance * np.sqrt(((high - low) ** 2).sum()) if high[0] >= low[0] else 0.0
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
             if usable[a] and usable[b]:
@@ -170,7 +184,12 @@ def keypoint_kernel(
             if not usable[j]:
                 continue
             r = pixels[k, j] - predicted[j]
-            w = scale * confidence[k, j] / (robust_c + np.sqrt(r[0] * r[0] + r[1] * r[1]))
+            length = np.sqrt(r[0] * r[0] + r[1] * r[1])
+            excess = length - radius
+            if radius > 0.0 and excess <= 0.0:
+                continue
+            share = excess / length if radius > 0.0 else 1.0
+            w = scale * confidence[k, j] * share / (robust_c + excess)
             jac = jacobians[j]
             information[component[j]] += w * (jac.T @ jac)
             eta[component[j]] += w * (jac.T @ r)

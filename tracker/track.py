@@ -77,6 +77,7 @@ class Settings:
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
     keypoint_weight: float = 1.0  # s: a landmark's weight against an edge sample's (tracker.keypoint_cue)
     keypoint_confidence: float = 0.5  # landmarks less confident than this are not used
+    keypoint_tolerance: float = 0.03  # detector noise, a share of the body's image size: closer landmarks unused
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
 
 
@@ -441,6 +442,7 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
+            st.keypoint_tolerance,
             self.information,
             self.eta,
         )

@@ -73,6 +73,21 @@ def test_frame_range_and_camera_choice(tmp_path: Path) -> None:
         frames(recording, start=5, stop=11)
 
 
+def test_every_step_th_frame_decodes_as_reading_them_all(tmp_path: Path) -> None:
+    """``step`` skips frames (undecoded) in videos and image folders; the frames it gives are the same."""
+    folder = make_recording(tmp_path / "rec", videos=("cam0",))
+    (folder / "cam1").mkdir()
+    for index in range(COUNT):
+        cv2.imwrite(str(folder / "cam1" / f"{index:06d}.png"), content(1, index))
+    recording = open_recording(folder)
+    every = dict(frames(recording, 1, 9))
+    stepped = list(frames(recording, 1, 9, step=3, colour=False))
+    assert [index for index, _ in stepped] == [1, 4, 7]
+    for index, images in stepped:
+        for image, same in zip(images, every[index]):
+            np.testing.assert_array_equal(image, same)
+
+
 def test_image_folder_source(tmp_path: Path) -> None:
     folder = make_recording(tmp_path / "rec", videos=())
     (folder / "cam2").mkdir()

@@ -49,6 +49,35 @@ def port(text: str) -> int:
     return value
 
 
+KEYPOINTS_DEFAULT = "4"
+"""``--keypoints``: the detector sees every 4th frame (docs/keypoints.md: its cost and what it buys)."""
+
+
+def keypoint_step(text: str) -> int:
+    """Argument type of ``--keypoints``: every -> 1, off -> 0, N -> every N-th frame."""
+    if text in ("every", "off"):
+        return 1 if text == "every" else 0
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be every, off or a whole number of frames >= 1, got {text}")
+    return value
+
+
+def add_keypoint_options(parser: argparse.ArgumentParser) -> None:
+    """``--keypoints``: how often the 2-D keypoint detector runs beside the tracker."""
+    parser.add_argument(
+        "--keypoints",
+        type=keypoint_step,
+        default=keypoint_step(KEYPOINTS_DEFAULT),
+        metavar="every|N|off",
+        help="run the 2-D keypoint detector (BlazePose) on every N-th frame beside the tracker and fuse its "
+        f"landmarks with the edges; detections are cached in OUT/keypoints.npz (default {KEYPOINTS_DEFAULT})",
+    )
+
+
 def camera_names(text: str | None) -> list[str] | None:
     """The names in a comma-separated list of cameras (``--cameras``, ``--fix``); None when not given."""
     return [c.strip() for c in text.split(",") if c.strip()] if text else None

@@ -25,6 +25,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     parser.add_argument("--frames", type=options.positive_int, help="number of frames to track (default: all)")
     options.add_tuning_options(parser)
+    options.add_keypoint_options(parser)
     parser.add_argument(
         "--background",
         default="none",
@@ -73,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
+    stream = _keypoints(args, rec, stop, out)  # the detector starts up while the kernels load
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
@@ -106,7 +108,10 @@ def run(args: argparse.Namespace) -> int:
                 if background is not None and overlay is not None:
                     shown, images = zip(*images)
                 at = None if times is None else float(times[index])
-                result, spent = step_and_write(tracker, writer, index, images, at=at, previous=last)
+                keypoints = None if stream is None else stream.get(index)
+                result, spent = step_and_write(
+                    tracker, writer, index, images, at=at, previous=last, keypoints=keypoints
+                )
                 last = at
                 if live is not None:
                     live.offer(index, images, result, spent)
@@ -119,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
         finally:
             if overlay is not None:
                 overlay.close()
+            if stream is not None:
+                stream.close()
     elapsed = time.perf_counter() - started
     if live is not None:
         live.close()
@@ -143,6 +150,20 @@ def run(args: argparse.Namespace) -> int:
         review.show(done - 1)
         return serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
+
+
+def _keypoints(args: argparse.Namespace, rec, stop: int, out: Path):
+    """The detector's stream of every ``--keypoints``-th frame (cached in OUT/keypoints.npz), or None (off)."""
+    if not args.keypoints:
+        return None
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.stream import KeypointStream
+
+    stream = KeypointStream(rec, args.start, stop, args.keypoints, ensure_writable_folder(out) / "keypoints.npz")
+    every = "every frame" if args.keypoints == 1 else f"every {args.keypoints}th frame"
+    source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
+    print(f"keypoints: {every}, {source}", file=sys.stderr)
+    return stream
 
 
 def _background(args: argparse.Namespace, rec, out: Path):

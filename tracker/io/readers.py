@@ -77,23 +77,28 @@ def _bgr(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, code)
 
 
-def grey_frames(source: Path, start: int = 0, colour: bool = False) -> Generator[np.ndarray, None, None]:
-    """Grey (or, with ``colour``, BGR) frames of one video file or image folder from frame ``start`` on
-    (the caller stops)."""
+def grey_frames(source: Path, start: int = 0, colour: bool = False, step: int = 1) -> Generator[np.ndarray, None, None]:
+    """Grey (or, with ``colour``, BGR) frames start, start + step, ... of one video file or image folder (the
+    caller stops); the frames between are skipped undecoded where the container allows."""
     if source.is_dir():
         flags = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
-        for index, file in enumerate(image_files(source)[start:], start):
-            yield read_image(file, index, flags)
-        raise TrackerInputError(
-            f"{source}: image folder ended before the recording's last frame; add the missing images"
-        )
+        files = image_files(source)
+        for index in itertools.count(start, step):
+            if index >= len(files):
+                raise TrackerInputError(
+                    f"{source}: image folder ended before the recording's last frame; add the missing images"
+                )
+            yield read_image(files[index], index, flags)
     capture, raw = open_video(source)
     try:
         for index in range(start):
             if not capture.grab():
                 raise _decode_error(source, index)
-        for index in itertools.count(start):
+        for index in itertools.count(start, step):
             yield _read_frame(capture, raw, source, index, colour)
+            for skipped in range(index + 1, index + step):
+                if not capture.grab():
+                    raise _decode_error(source, skipped)
     finally:
         capture.release()
 
@@ -126,15 +131,18 @@ def _read_frame(capture: cv2.VideoCapture, raw: bool, source: Path, index: int, 
 class _Reader:
     """A thread that decodes ``count`` frames of one source into a bounded queue (errors travel along)."""
 
-    def __init__(self, source: Path, start: int, count: int, queue_size: int, prepare=None, colour: bool = False):
+    def __init__(
+        self, source: Path, start: int, count: int, queue_size: int, prepare=None, colour: bool = False, step: int = 1
+    ):
         self.source, self.start, self.count, self.prepare, self.colour = source, start, count, prepare, colour
+        self.step = step
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
         self.thread.start()
 
     def _run(self) -> None:
-        frames = grey_frames(self.source, self.start, self.colour)
+        frames = grey_frames(self.source, self.start, self.colour, self.step)
         try:
             for image in itertools.islice(frames, self.count):
                 if not self._put(image if self.prepare is None else self.prepare(image)):
@@ -165,17 +173,18 @@ class _Reader:
 
 
 def read_frames(
-    sources: list[Path], start: int, stop: int, queue_size: int = 4, prepare=None, colour: bool = False
+    sources: list[Path], start: int, stop: int, queue_size: int = 4, prepare=None, colour: bool = False, step: int = 1
 ) -> Iterator[tuple[int, list]]:
-    """(index, one grey image per source) for frames start..stop-1, each source decoded by its own thread
-    (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that thread too (e.g. the
-    tracker's smoothing); a list of them gives each source its own."""
+    """(index, one grey image per source) for frames start, start + step, ... before stop, each source decoded
+    by its own thread (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that
+    thread too (e.g. the tracker's smoothing); a list of them gives each source its own."""
     preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
+    indices = range(start, stop, step)
     readers = [
-        _Reader(source, start, stop - start, queue_size, each, colour) for source, each in zip(sources, preparers)
+        _Reader(source, start, len(indices), queue_size, each, colour, step) for source, each in zip(sources, preparers)
     ]
     try:
-        for index in range(start, stop):
+        for index in indices:
             yield index, [reader.get() for reader in readers]
     finally:
         for reader in readers:

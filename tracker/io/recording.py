@@ -126,9 +126,10 @@ def open_recording(
 
 
 def frames(
-    recording: Recording, start: int = 0, stop: int | None = None, prepare=None, colour: bool = False
+    recording: Recording, start: int = 0, stop: int | None = None, prepare=None, colour: bool = False, step: int = 1
 ) -> Iterator[tuple[int, list]]:
-    """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1.
+    """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1 (every
+    ``step``-th of them: the others are skipped undecoded where the container allows).
 
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
     with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails
@@ -140,7 +141,7 @@ def frames(
             f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
             "pick a range inside it"
         )
-    return read_frames(recording.sources, start, stop, prepare=prepare, colour=colour)
+    return read_frames(recording.sources, start, stop, prepare=prepare, colour=colour, step=step)
 
 
 def capture_times(recording: Recording) -> np.ndarray | None:

@@ -4,23 +4,34 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from tracker.io.poses import PosesWriter
 from tracker.model import joint_centres
 from tracker.track import FrameResult, Tracker
 
 
 def step_and_write(
-    tracker: Tracker, writer: PosesWriter, index: int, images, *, at: float | None = None, previous: float | None = None
+    tracker: Tracker,
+    writer: PosesWriter,
+    index: int,
+    images,
+    *,
+    at: float | None = None,
+    previous: float | None = None,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[FrameResult, float]:
     """Track frame ``index`` from its smoothed grey images (one per camera, rig order) and append its row
     (poses, joint centres, status, residual, seconds spent, capture time ``at``) to ``writer``.
 
     ``at`` and ``previous`` are the capture times of this frame and of the one tracked before it, in
-    seconds (None for a recording without them); their difference is the step's ``dt``.  Returns the
+    seconds (None for a recording without them); their difference is the step's ``dt``.  ``keypoints``:
+    the frame's landmarks, fused with the edges (:meth:`tracker.track.Tracker.step`).  Returns the
     tracker's result and the seconds it spent on the frame.
     """
     begun = time.perf_counter()
-    result = tracker.step(images, smoothed=True, dt=None if at is None or previous is None else at - previous)
+    dt = None if at is None or previous is None else at - previous
+    result = tracker.step(images, smoothed=True, dt=dt, keypoints=keypoints)
     spent = time.perf_counter() - begun
     writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual, spent, at)
     return result, spent

@@ -7,6 +7,12 @@ in undistorted normalised coordinates), each camera's reprojection distance to t
 measured, and the pair whose point most cameras reach within ``gate`` (a share of the image's
 short side) wins; the cameras it leaves out keep the landmark at confidence 0.  With one camera
 there is nothing to check against, and the landmark is kept.
+
+Two checks come first.  A view that disagrees on most of the landmarks that could be checked in it
+(seen by two other views) shows someone else, and all its landmarks of that frame are dropped, the
+unchecked ones too.  Then a view whose left and right are swapped (the detector mistook the
+person's back for their front) is put right when the other views, triangulated, place both
+landmarks of a left/right pair the other way round (three views or more).
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import itertools
 import numpy as np
 
 from tracker.camera import Camera
+from tracker.keypoint_cue import LANDMARKS
 from tracker.keypoints.store import Keypoints
 
 GATE = 0.05
@@ -26,38 +33,133 @@ GATE = 0.05
 def triangulate(cameras: list[Camera], normalised: np.ndarray) -> np.ndarray:
     """The world point (3,) nearest in the linear (DLT) sense to the rays of ``normalised`` (len(cameras), 2),
     ideal normalised image coordinates."""
-    rows = []
-    for camera, (x, y) in zip(cameras, normalised):
-        projection = camera.camera_from_world[:3]
-        rows += [x * projection[2] - projection[0], y * projection[2] - projection[1]]
-    point = np.linalg.svd(np.array(rows))[2][-1]
-    return point[:3] / point[3]
+    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    return triangulate_many(projections, normalised[None], np.ones((1, len(cameras)), bool))[0]
+
+
+def triangulate_many(projections: np.ndarray, normalised: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """World points (M, 3) nearest in the linear (DLT) sense to the rays of ``normalised`` (M, C, 2) in the
+    cameras whose ``seen`` (M, C) is set; NaN where fewer than two cameras see a point.  ``projections``
+    (C, 3, 4): each camera's [R | t]."""
+    x, y = normalised[..., 0:1], normalised[..., 1:2]  # (M, C, 1)
+    rows = np.concatenate(
+        [x * projections[None, :, 2] - projections[None, :, 0], y * projections[None, :, 2] - projections[None, :, 1]],
+        axis=1,
+    )  # (M, 2C, 4)
+    weight = np.concatenate([seen, seen], axis=1)[..., None]
+    rows = np.where(weight, np.nan_to_num(rows), 0.0)
+    point = np.linalg.svd(rows)[2][:, -1]  # (M, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        world = point[:, :3] / point[:, 3:4]
+    world[seen.sum(axis=1) < 2] = np.nan
+    return world
 
 
 def consistent(
     keypoints: Keypoints, cameras: list[Camera], *, min_confidence: float = 0.5, gate: float = GATE
 ) -> tuple[Keypoints, np.ndarray]:
-    """``keypoints`` with the confidence of every detection that disagrees with the other views set to 0,
-    and the share (C,) of each camera's confident detections so dropped."""
+    """``keypoints`` checked across the views, and the share (C,) of each camera's confident detections
+    dropped.  First the views that show someone else are dropped whole, then swapped views are put right
+    (:func:`unswapped`: pixels, confidence and world of each swapped pair exchanged), then every detection
+    that disagrees with the other views is dropped (confidence 0)."""
+    usable = _usable(keypoints, min_confidence)
     confidence = keypoints.confidence.copy()
-    usable = (confidence >= min_confidence) & np.isfinite(keypoints.pixels).all(axis=3)
+    disagree, checked = _disagreements(keypoints, cameras, usable, gate)
+    confidence[2 * (checked & disagree).sum(axis=2) > checked.sum(axis=2)] = 0.0  # (F, C): someone else
+    keypoints = unswapped(dataclasses.replace(keypoints, confidence=confidence), cameras, min_confidence=min_confidence)
+    disagree, _ = _disagreements(keypoints, cameras, _usable(keypoints, min_confidence), gate)
+    confidence = np.where(disagree, 0.0, keypoints.confidence)
+    dropped = ((confidence < min_confidence) & usable).sum(axis=(0, 2)) / np.maximum(usable.sum(axis=(0, 2)), 1)
+    return dataclasses.replace(keypoints, confidence=confidence), dropped
+
+
+def _usable(keypoints: Keypoints, min_confidence: float) -> np.ndarray:
+    """(F, C, K): confident detections with finite pixels."""
+    return (keypoints.confidence >= min_confidence) & np.isfinite(keypoints.pixels).all(axis=3)
+
+
+def _disagreements(
+    keypoints: Keypoints, cameras: list[Camera], usable: np.ndarray, gate: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(F, C, K) each: the ``usable`` detections that the best pair of views' triangulation does not reach
+    within ``gate`` of the image's short side, and those seen with two other views to check against.  The
+    best pair is the one most views agree with, then the one they agree with most closely."""
+    frames, count, landmarks = usable.shape
+    seen = usable.transpose(0, 2, 1).reshape(-1, count)  # (M, C), M = F K
+    normalised = _normalised(keypoints, cameras, usable).transpose(0, 2, 1, 3).reshape(-1, count, 2)
+    pixels = keypoints.pixels.transpose(0, 2, 1, 3).reshape(-1, count, 2)
     limits = np.array([gate * min(camera.size) for camera in cameras])
+    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    best = np.zeros(seen.shape, bool)
+    best_count = np.full(len(seen), -1)
+    best_sum = np.full(len(seen), np.inf)
+    for a, b in itertools.combinations(range(count), 2):
+        pair = np.zeros(count, bool)
+        pair[[a, b]] = True
+        both = seen[:, a] & seen[:, b]
+        point = triangulate_many(projections, normalised, seen & pair)
+        distance = np.linalg.norm(_project(cameras, point) - pixels, axis=2)  # (M, C)
+        agree = seen & (np.nan_to_num(distance, nan=np.inf) < limits)
+        agreeing = agree.sum(axis=1)
+        total = np.where(agree, distance, 0.0).sum(axis=1)
+        better = both & ((agreeing > best_count) | ((agreeing == best_count) & (total < best_sum)))
+        best[better], best_count[better], best_sum[better] = agree[better], agreeing[better], total[better]
+    views = seen.sum(axis=1)
+    disagree = seen & ~best & (views >= 2)[:, None]
+    checked = seen & (views >= 3)[:, None]
+    shape = (frames, landmarks, count)
+    return disagree.reshape(shape).transpose(0, 2, 1), checked.reshape(shape).transpose(0, 2, 1)
+
+
+def unswapped(keypoints: Keypoints, cameras: list[Camera], *, min_confidence: float = 0.5) -> Keypoints:
+    """``keypoints`` with every view's left/right pair exchanged where the other views disagree with it:
+    both landmarks triangulated (linear, every other view that sees both) reproject nearer to this view's
+    detections swapped than as labelled (summed distance).  Needs two other views; views and frames
+    without them are left as they are."""
+    pixels, confidence, world = keypoints.pixels.copy(), keypoints.confidence.copy(), keypoints.world.copy()
+    usable = _usable(keypoints, min_confidence)
+    normalised = _normalised(keypoints, cameras, usable)
+    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    count = len(cameras)
+    for a, b in landmark_pairs():
+        both = usable[:, :, a] & usable[:, :, b]  # (F, C)
+        for k in range(count):
+            others = both.copy()
+            others[:, k] = False
+            frames = np.flatnonzero(both[:, k] & (others.sum(axis=1) >= 2))
+            if not len(frames):
+                continue
+            place = [
+                cameras[k].project(triangulate_many(projections, normalised[frames, :, j], others[frames]))
+                for j in (a, b)
+            ]
+            left, right = pixels[frames, k, a], pixels[frames, k, b]
+            straight = np.linalg.norm(place[0] - left, axis=1) + np.linalg.norm(place[1] - right, axis=1)
+            crossed = np.linalg.norm(place[0] - right, axis=1) + np.linalg.norm(place[1] - left, axis=1)
+            swap = frames[crossed < straight]
+            for array in (pixels, confidence, world):
+                array[swap, k, a], array[swap, k, b] = array[swap, k, b].copy(), array[swap, k, a].copy()
+    return dataclasses.replace(keypoints, pixels=pixels, confidence=confidence, world=world)
+
+
+def landmark_pairs() -> list[tuple[int, int]]:
+    """The (left, right) landmark index pairs of BlazePose's landmarks."""
+    return [
+        (index, LANDMARKS.index("right_" + name[5:]))
+        for index, name in enumerate(LANDMARKS)
+        if name.startswith("left_") and "right_" + name[5:] in LANDMARKS
+    ]
+
+
+def _project(cameras: list[Camera], points: np.ndarray) -> np.ndarray:
+    """Pixels (M, C, 2) of world points (M, 3) in every camera; NaN for NaN points."""
+    return np.stack([camera.project(points) for camera in cameras], axis=1)
+
+
+def _normalised(keypoints: Keypoints, cameras: list[Camera], usable: np.ndarray) -> np.ndarray:
+    """Ideal normalised image coordinates (F, C, K, 2) of the ``usable`` detections, NaN elsewhere."""
     normalised = np.full(keypoints.pixels.shape, np.nan)
     for k, camera in enumerate(cameras):
         seen = usable[:, k]
         normalised[:, k][seen] = camera.undistort_pixels(keypoints.pixels[:, k][seen])
-    for frame, landmark in zip(*np.nonzero(usable.sum(axis=1) >= 2)):
-        views = np.flatnonzero(usable[frame, :, landmark])
-        best, best_key = views, (-1, np.inf)
-        for a, b in itertools.combinations(views, 2):
-            point = triangulate([cameras[a], cameras[b]], normalised[frame, [a, b], landmark])
-            distance = np.array(
-                [np.linalg.norm(cameras[k].project(point)[0] - keypoints.pixels[frame, k, landmark]) for k in views]
-            )
-            agree = distance < limits[views]
-            key = (int(agree.sum()), float(distance[agree].sum()))
-            if key[0] > best_key[0] or (key[0] == best_key[0] and key[1] < best_key[1]):
-                best, best_key = views[agree], key
-        confidence[frame, np.setdiff1d(views, best), landmark] = 0.0
-    dropped = ((confidence == 0) & usable).sum(axis=(0, 2)) / np.maximum(usable.sum(axis=(0, 2)), 1)
-    return dataclasses.replace(keypoints, confidence=confidence), dropped
+    return normalised

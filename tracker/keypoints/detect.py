@@ -1,9 +1,16 @@
-"""The detector over frames of a recording, one landmarker per camera, reusing a cache that matches."""
+"""The detector over frames of a recording, one landmarker per camera, and the cache that keeps its output.
+
+A cache (``keypoints.npz``) belongs to one recording: its fingerprint names each camera's video by
+size and a hash of its first bytes.  A cache of another recording, or made by another detector, is
+an error rather than something to overwrite silently; one that lacks some of the wanted frames is
+completed and written back with every frame it held.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -14,9 +21,25 @@ from tracker.io.recording import Recording, frames
 from tracker.keypoints.detector import DETECTOR, Detector
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
+_HASHED = 1 << 16
+"""Bytes of each video (or first image) hashed into a recording's fingerprint."""
 
-def cached(path: Path, recording: Recording, start: int, stop: int) -> Keypoints | None:
-    """The keypoints in ``path`` if it holds frames start..stop-1 of these cameras from this detector."""
+
+def fingerprint(recording: Recording) -> str:
+    """The recording's identity for caches: per camera its name, its video's size and a hash of its start
+    (an image folder: its first image's)."""
+    parts = []
+    for camera, source in zip(recording.cameras, recording.sources):
+        file = min(path for path in source.iterdir() if path.is_file()) if source.is_dir() else source
+        with open(file, "rb") as handle:
+            digest = hashlib.sha1(handle.read(_HASHED)).hexdigest()[:12]
+        parts.append(f"{camera.name}={file.stat().st_size}:{digest}")
+    return " ".join(parts)
+
+
+def cached(path: Path, recording: Recording) -> Keypoints | None:
+    """The keypoints of ``recording`` held in ``path`` (None when there is no file, or an unreadable one);
+    a file of another recording or another detector is a one-line error naming the fix."""
     if not path.is_file():
         return None
     try:
@@ -24,10 +47,79 @@ def cached(path: Path, recording: Recording, start: int, stop: int) -> Keypoints
     except TrackerInputError:
         return None
     names = tuple(camera.name for camera in recording.cameras)
-    wanted = np.arange(start, stop)
-    if found.detector != DETECTOR or found.camera_names != names or not np.array_equal(found.frame, wanted):
-        return None
+    if found.camera_names != names or (found.recording and found.recording != fingerprint(recording)):
+        raise TrackerInputError(
+            f"{path}: holds the keypoints of another recording (cameras {', '.join(found.camera_names)}); "
+            "delete it or choose another output folder"
+        )
+    if found.detector != DETECTOR:
+        raise TrackerInputError(
+            f"{path}: made by another detector ({found.detector}, this is {DETECTOR}); delete it to detect again"
+        )
     return found
+
+
+def holding(keypoints: Keypoints | None, wanted: np.ndarray) -> Keypoints | None:
+    """``keypoints`` cut to the frames ``wanted`` if it holds every one of them, else None."""
+    if keypoints is None or not np.isin(wanted, keypoints.frame).all():
+        return None
+    return keypoints.rows(wanted)
+
+
+def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
+    """The frames of both, sorted; ``new``'s rows where both hold a frame."""
+    if old is None:
+        return new
+    keep = ~np.isin(old.frame, new.frame)
+    frame = np.concatenate([old.frame[keep], new.frame])
+    order = np.argsort(frame, kind="stable")
+    return Keypoints(
+        frame[order],
+        new.camera_names,
+        np.concatenate([old.pixels[keep], new.pixels])[order],
+        np.concatenate([old.confidence[keep], new.confidence])[order],
+        np.concatenate([old.world[keep], new.world])[order],
+        new.detector,
+        new.recording,
+    )
+
+
+def detections(recording: Recording, start: int, stop: int, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
+    """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
+    camera in video mode (so each follows its person from detected frame to detected frame)."""
+    names = tuple(camera.name for camera in recording.cameras)
+    identity = fingerprint(recording)
+    with ExitStack() as stack:
+        detectors = [Detector() for _ in recording.cameras]
+        for detector in detectors:
+            stack.callback(detector.close)
+        for index, images in frames(recording, start, stop, colour=True, step=step):
+            found = [detector(image) for detector, image in zip(detectors, images)]
+            yield (
+                index,
+                Keypoints(
+                    np.array([index]),
+                    names,
+                    np.stack([detection.pixels for detection in found])[None],
+                    np.stack([detection.confidence for detection in found])[None],
+                    np.stack([detection.world for detection in found])[None],
+                    recording=identity,
+                ),
+            )
+
+
+def stacked(rows: list[Keypoints]) -> Keypoints:
+    """One-frame (or several-frame) keypoints of the same cameras, one after the other."""
+    first = rows[0]
+    return Keypoints(
+        np.concatenate([row.frame for row in rows]),
+        first.camera_names,
+        np.concatenate([row.pixels for row in rows]),
+        np.concatenate([row.confidence for row in rows]),
+        np.concatenate([row.world for row in rows]),
+        first.detector,
+        first.recording,
+    )
 
 
 def detect_recording(
@@ -39,28 +131,14 @@ def detect_recording(
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
 ) -> tuple[Keypoints, bool]:
     """The landmarks of frames start..stop-1 in every camera of ``recording``, and whether they came from
-    ``cache`` (a keypoints.npz of the same frames, cameras and detector); otherwise they are detected and,
-    with ``cache``, written there.  ``progress(iterable, total=)`` wraps the frames (e.g. a tqdm bar)."""
+    ``cache`` (the recording's keypoints.npz holding those frames); otherwise they are detected and, with
+    ``cache``, written there beside the frames it already held.  ``progress(iterable, total=)`` wraps the
+    frames (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
-    if cache is not None and (reused := cached(Path(cache), recording, start, stop)) is not None:
+    old = cached(Path(cache), recording) if cache is not None else None
+    if (reused := holding(old, np.arange(start, stop))) is not None:
         return reused, True
-    count, cameras = stop - start, len(recording.cameras)
-    pixels = np.full((count, cameras, 33, 2), np.nan)
-    confidence = np.zeros((count, cameras, 33))
-    world = np.full((count, cameras, 33, 3), np.nan)
-    with ExitStack() as stack:
-        detectors = [Detector() for _ in range(cameras)]
-        for detector in detectors:
-            stack.callback(detector.close)
-        for index, images in progress(frames(recording, start, stop, colour=True), total=count):
-            for camera, (detector, image) in enumerate(zip(detectors, images)):
-                detection, row = detector(image), index - start
-                pixels[row, camera] = detection.pixels
-                confidence[row, camera] = detection.confidence
-                world[row, camera] = detection.world
-    keypoints = Keypoints(
-        np.arange(start, stop), tuple(camera.name for camera in recording.cameras), pixels, confidence, world
-    )
+    keypoints = stacked([row for _, row in progress(detections(recording, start, stop), total=stop - start)])
     if cache is not None:
-        save_keypoints(cache, keypoints)
+        save_keypoints(cache, merged(old, keypoints))
     return keypoints, False

@@ -9,6 +9,7 @@ Arrays, F frames, C cameras, 33 landmarks (:data:`tracker.keypoints.detector.LAN
     confidence (F, C, 33) float64        visibility, 0..1 (0: no person found)
     world (F, C, 33, 3) float64          metric world landmarks, metres, origin between the hips
     detector () str                      what made them (a cache of another detector is not reused)
+    recording () str                     the recording's fingerprint (optional; "" when unknown)
 
 Written atomically; loads without pickle.
 """
@@ -40,6 +41,21 @@ class Keypoints:
     confidence: np.ndarray
     world: np.ndarray
     detector: str = DETECTOR
+    recording: str = ""
+
+    def rows(self, frames: np.ndarray) -> Keypoints:
+        """The same keypoints for ``frames`` only (each must be held), in that order."""
+        index = {int(frame): row for row, frame in enumerate(self.frame)}
+        rows = np.array([index[int(frame)] for frame in frames], np.int64)
+        return Keypoints(
+            np.asarray(frames, np.int64),
+            self.camera_names,
+            self.pixels[rows],
+            self.confidence[rows],
+            self.world[rows],
+            self.detector,
+            self.recording,
+        )
 
 
 def save_keypoints(path: str | os.PathLike, keypoints: Keypoints) -> None:
@@ -52,6 +68,7 @@ def save_keypoints(path: str | os.PathLike, keypoints: Keypoints) -> None:
         "confidence": np.asarray(keypoints.confidence, dtype=np.float64),
         "world": np.asarray(keypoints.world, dtype=np.float64),
         "detector": np.array(keypoints.detector, dtype=str),
+        "recording": np.array(keypoints.recording, dtype=str),
     }
     atomic_write(path, lambda file: np.savez(file, **arrays))
 
@@ -89,4 +106,5 @@ def load_keypoints(path: str | os.PathLike) -> Keypoints:
         arrays["confidence"],
         arrays["world"],
         str(arrays["detector"]),
+        str(arrays["recording"]) if "recording" in arrays else "",
     )

