@@ -46,8 +46,8 @@ def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:
 
 
 def _replayed(recording: Path, out: Path, *extra: str) -> dict:
-    """poses.npz of `tracker track` on a recording folder."""
-    assert main(["track", str(recording), "--out", str(out), "--quiet", *extra]) == 0
+    """poses.npz of `tracker track` on a recording folder, with the live run's cues (edges only)."""
+    assert main(["track", str(recording), "--out", str(out), "--quiet", "--keypoints", "off", *extra]) == 0
     return load_poses(out / "poses.npz")
 
 

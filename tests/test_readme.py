@@ -149,8 +149,8 @@ def _check_output(path: Path, recording: Path | None, views: int) -> None:
         assert counts and (not poses.exists() or int(counts[0]) == _frames_of(poses))
     elif path.name == "keypoints.npz":
         keypoints = load_keypoints(path)
-        assert keypoints.pixels.shape[:2] == (6, len(keypoints.camera_names))
-        assert (keypoints.confidence.max(axis=2) > 0.5).mean() > 0.5  # a person in most images
+        assert 1 <= len(keypoints.frame) <= 6 and keypoints.pixels.shape[1] == len(keypoints.camera_names)
+        assert (keypoints.confidence.max(axis=2) > 0.5).any(axis=1).all()  # a person in some view of every frame
     elif path.suffix == ".csv" and poses.exists():
         assert len(path.read_text().splitlines()) == 1 + _frames_of(poses)
 

@@ -13,6 +13,7 @@ from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
+from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synth import synthesize
@@ -101,17 +102,18 @@ def test_ctrl_c_keeps_the_frames_done(tiny_recording, tmp_path, monkeypatch, cap
     calls = {"n": 0}
     step = Tracker.step
 
-    def interrupted_step(self, images, smoothed=False, dt=None):
+    def interrupted_step(self, images, smoothed=False, dt=None, keypoints=None):
         calls["n"] += 1
         if calls["n"] == 4:
             raise KeyboardInterrupt
-        return step(self, images, smoothed, dt)
+        return step(self, images, smoothed, dt, keypoints)
 
     monkeypatch.setattr(Tracker, "step", interrupted_step)
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--quiet"]) == 130
     saved = load_poses(tmp_path / "poses.npz")
     assert saved["poses"].shape[0] == 3 and list(saved["frame"]) == [0, 1, 2]
     assert "interrupted" in capsys.readouterr().err
+    assert 0 in load_keypoints(tmp_path / "keypoints.npz").frame  # the detections the tracker took are kept
 
 
 def test_plain_search_without_ownership_still_tracks():

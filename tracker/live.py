@@ -21,8 +21,8 @@ Outputs: ``DIR/poses.npz`` (default ``out/live``) as ``tracker track`` writes it
 ``<camera>.avi`` per camera holding each frame's JPEG byte for byte as the camera gave it,
 ``calibration.toml``, ``model.toml`` and ``init.toml`` (copies), and ``timestamps.csv`` (frame and
 each camera's capture time in seconds since capture started; the videos state the cameras' nominal
-frame rate).  So ``tracker track DIR`` with the
-same settings decodes the same images and computes the same poses as the live run.  A recording
+frame rate).  So ``tracker track DIR --keypoints off`` with the same settings decodes the same images and
+computes the same poses as the live run (which tracks edges only).  A recording
 needs every camera in every frame: when a camera drops, the recording ends there (tracking
 goes on), and it still replays identically.
 
