@@ -17,6 +17,8 @@ KEYS = {
     "core_ms_per_view_iteration",
     "views",
     "frames",
+    "detector_ms_per_view",
+    "fps_all_views_with_keypoints",
 }
 
 
@@ -28,12 +30,22 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert result["fps_all_views"] > 0 and result["decode_only_fps_all_views"] > 0
     assert abs(result["ratio_all_views"] - result["fps_all_views"] / result["decode_only_fps_all_views"]) < 1e-9
     assert set(result["stage_ms_per_frame_all_views"]) >= {"decode", "outline", "measure", "solve", "output"}
+    assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0
+    assert result["fps_all_views_with_keypoints"] > 0
+
+
+def test_bench_without_the_cue_times_the_edges_only(tiny_recording, capsys):
+    assert main(["bench", str(tiny_recording), "--json", "--repeats", "1", "--keypoints", "off"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["keypoint_step"] == 0 and result["fps_all_views"] > 0
+    assert result["fps_all_views_with_keypoints"] != result["fps_all_views_with_keypoints"]  # NaN: not timed
 
 
 def test_bench_table_is_printed(tiny_recording, capsys):
     assert main(["bench", str(tiny_recording), "--repeats", "1"]) == 0
     out = capsys.readouterr().out
     assert "ratio tracking / decode only" in out and "ms per view per IRLS iteration" in out
+    assert "Keypoint cue: the detector takes" in out
 
 
 def test_bodies_side_by_side_for_the_scaling_table():

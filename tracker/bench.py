@@ -10,11 +10,16 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * end to end: frames per second of the whole ``tracker track`` loop (reader
   threads, tracking, writing) with the first camera only and with all cameras;
 * decode only: frames per second of the same reader threads with no tracking,
-  the floor that tracking is compared with (``ratio_all_views``).
+  the floor that tracking is compared with (``ratio_all_views``);
+* the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
+  in this process), and frames per second end to end with the detector beside the tracker at its
+  default rate (a worker process started afresh in each pass, as ``tracker track`` does, so its
+  start-up counts).
 """
 
 from __future__ import annotations
 
+import itertools
 import statistics
 import tempfile
 import time
@@ -32,6 +37,8 @@ from tracker.io.poses import PosesWriter
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.io.stepwrite import step_and_write
+from tracker.keypoints.detector import Detector
+from tracker.keypoints.stream import DEFAULT_STEP, KeypointStream
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
@@ -69,22 +76,46 @@ def decode_only_fps(recording: Recording) -> float:
     return count / (time.perf_counter() - started)
 
 
-def track_run(recording: Recording, model: Model, settings: Settings, out: Path) -> TrackRun:
-    """One end-to-end pass: reader threads, tracking and the poses.npz writer."""
+def detector_ms(recording: Recording, count: int = 40) -> float:
+    """Median milliseconds per image of the keypoint detector over the first ``count`` frames of each camera
+    (one landmarker per camera in video mode, as the tracker's worker runs them)."""
+    seconds = []
+    for source in recording.sources:
+        detector, images = Detector(), grey_frames(source, colour=True)
+        try:
+            for image in itertools.islice(images, min(count, recording.frame_count)):
+                started = time.perf_counter()
+                detector(image)
+                seconds.append(time.perf_counter() - started)
+        finally:
+            images.close()
+            detector.close()
+    return 1e3 * _median(seconds)
+
+
+def track_run(recording: Recording, model: Model, settings: Settings, out: Path, keypoint_step: int = 0) -> TrackRun:
+    """One end-to-end pass: reader threads, tracking and the poses.npz writer; with ``keypoint_step`` the
+    detector's worker on every keypoint_step-th frame beside them, started before the kernels load."""
     if recording.init_path is None:
         raise TrackerInputError(
             f"{recording.path}: no init.toml; tracker bench needs a recording folder with its first pose"
         )
+    stream = KeypointStream(recording, 0, recording.frame_count, keypoint_step) if keypoint_step else None
     tracker = Tracker(model, recording.cameras, load_pose_file(recording.init_path, model), settings)
     tracker.warm_up()
     tracker.times = StageTimes()
     output = 0.0
     started = time.perf_counter()
-    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
-        for index, images in frames(recording, prepare=tracker.smooth):
-            mark = time.perf_counter()
-            _, spent = step_and_write(tracker, writer, index, images)
-            output += time.perf_counter() - mark - spent
+    try:
+        with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
+            for index, images in frames(recording, prepare=tracker.smooth):
+                mark = time.perf_counter()
+                keypoints = None if stream is None else stream.get(index)
+                _, spent = step_and_write(tracker, writer, index, images, keypoints=keypoints)
+                output += time.perf_counter() - mark - spent
+    finally:
+        if stream is not None:
+            stream.close()
     elapsed = time.perf_counter() - started
     count = recording.frame_count
     stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.times.seconds.items()}
@@ -92,8 +123,11 @@ def track_run(recording: Recording, model: Model, settings: Settings, out: Path)
     return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
 
 
-def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) -> dict:
-    """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``)."""
+def run(
+    path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3, keypoint_step: int = DEFAULT_STEP
+) -> dict:
+    """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
+    cue's at ``keypoint_step`` (0: not timed)."""
     every = open_recording(path)
     first = open_recording(path, [every.cameras[0].name])
     if every.model_path is None or every.init_path is None:
@@ -109,6 +143,10 @@ def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) ->
         floor_one = [decode_only_fps(first) for _ in range(repeats)]
         runs_all = [track_run(every, model, settings, out) for _ in range(repeats)]
         runs_one = [track_run(first, model, settings, out) for _ in range(repeats)]
+        runs_cue = [
+            track_run(every, model, settings, out, keypoint_step) for _ in range(repeats if keypoint_step else 0)
+        ]
+        detector = detector_ms(every) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
@@ -130,6 +168,9 @@ def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3) ->
         "decode_only_fps_all_views": decode_all,
         "ratio_one_view": _median([r.fps for r in runs_one]) / _median(floor_one),
         "ratio_all_views": fps_all / decode_all,
+        "keypoint_step": keypoint_step,
+        "detector_ms_per_view": detector,
+        "fps_all_views_with_keypoints": _median([r.fps for r in runs_cue]) if runs_cue else float("nan"),
     }
 
 
@@ -165,6 +206,13 @@ def format_table(result: dict) -> str:
         f"Tracker core (outline + ownership + measure + solve): {result['core_ms_per_view_iteration']:.3f} ms per view "
         "per IRLS iteration.",
     ]
+    if result["keypoint_step"]:
+        lines += [
+            "",
+            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on every "
+            f"{result['keypoint_step']}th frame beside the tracker (a worker process, its start-up included), "
+            f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
+        ]
     return "\n".join(lines)
 
 

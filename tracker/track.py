@@ -321,7 +321,7 @@ class Tracker:
         iterations between reuse them, each sample moved along its normal by its Jacobian row times its
         component's motion since (first order, section 3), which costs a few flops instead of a render.
         """
-        m, st = self.model, self.settings
+        st = self.settings
         search_range = self.search_range(iteration)
         if iteration % max(st.resample_every, 1) == 0:
             self.sample(search_range)
@@ -334,11 +334,19 @@ class Tracker:
         if self.keypoints is not None:
             self.add_keypoints(*self.keypoints)
         started = self.times.add("measure", started)
-        self.poses = update_kernel(
+        self.poses = self.update(self.poses)
+        self.times.add("solve", started)
+        residual = sum_wm / sum_w if sum_w > 0 else float("nan")
+        return Statistics(visible, found, residual)
+
+    def update(self, poses: np.ndarray) -> np.ndarray:
+        """Prior, tree solve, step and coercion (:func:`update_kernel`) with the information gathered."""
+        m, st = self.model, self.settings
+        return update_kernel(
             self.information,
             self.eta,
             self.prior,
-            self.poses,
+            poses,
             self.anchor,
             m.parent,
             m.constraint,
@@ -351,9 +359,6 @@ class Tracker:
             m.upper,
             st.max_turn,
         )
-        self.times.add("solve", started)
-        residual = sum_wm / sum_w if sum_w > 0 else float("nan")
-        return Statistics(visible, found, residual)
 
     def sample(self, search_range: int) -> None:
         """Sample the visible outlines at the current poses and limit each one's search (ownership)."""

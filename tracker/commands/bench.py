@@ -21,6 +21,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="time one iteration against the number of components (7-120) and of cameras (1-8)",
     )
     parser.add_argument("--repeats", type=options.positive_int, default=3, help="passes per figure (default 3)")
+    options.add_keypoint_options(parser, "time the keypoint cue at this rate")
     options.add_tuning_options(parser, ("iterations", "spacing", "resample_every"))
 
 
@@ -36,6 +37,6 @@ def run(args: argparse.Namespace) -> int:
         result = bench.scaling()
         print(json.dumps(result, indent=2) if args.json else bench.format_scaling(result))
         return 0
-    result = bench.run(Path(args.recording) if args.recording else bench.DEMO, settings, args.repeats)
+    result = bench.run(Path(args.recording) if args.recording else bench.DEMO, settings, args.repeats, args.keypoints)
     print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
     return 0

@@ -49,10 +49,6 @@ def port(text: str) -> int:
     return value
 
 
-KEYPOINTS_DEFAULT = "4"
-"""``--keypoints``: the detector sees every 4th frame (docs/keypoints.md: its cost and what it buys)."""
-
-
 def keypoint_step(text: str) -> int:
     """Argument type of ``--keypoints``: every -> 1, off -> 0, N -> every N-th frame."""
     if text in ("every", "off"):
@@ -66,15 +62,21 @@ def keypoint_step(text: str) -> int:
     return value
 
 
-def add_keypoint_options(parser: argparse.ArgumentParser) -> None:
-    """``--keypoints``: how often the 2-D keypoint detector runs beside the tracker."""
+def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = None) -> None:
+    """``--keypoints``: how often the 2-D keypoint detector runs beside the tracker (``what``: the help's
+    first words, if not tracking's)."""
+    from tracker.keypoints.stream import DEFAULT_STEP
+
+    what = what or (
+        "run the 2-D keypoint detector (BlazePose) on every N-th frame beside the tracker and fuse its "
+        "landmarks with the edges (interpolated between); detections are cached in OUT/keypoints.npz"
+    )
     parser.add_argument(
         "--keypoints",
         type=keypoint_step,
-        default=keypoint_step(KEYPOINTS_DEFAULT),
+        default=DEFAULT_STEP,
         metavar="every|N|off",
-        help="run the 2-D keypoint detector (BlazePose) on every N-th frame beside the tracker and fuse its "
-        f"landmarks with the edges; detections are cached in OUT/keypoints.npz (default {KEYPOINTS_DEFAULT})",
+        help=f"{what} (default {DEFAULT_STEP})",
     )
 
 

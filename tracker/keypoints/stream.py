@@ -5,7 +5,10 @@ landmarker per camera, checks the views against each other (:mod:`tracker.keypoi
 and hands each frame's landmarks over a queue, in frame order.  It is a process, not a thread, so
 the detector's Python glue never holds the tracker's interpreter lock; on a machine with two cores
 the two run side by side.  The tracker asks for a frame's landmarks when it reaches that frame and
-waits only if the worker has not got there yet, so a run's result does not depend on timing.
+waits only if the worker has not got there yet, so a run's result does not depend on timing.  A
+frame between two detected ones gets their landmarks interpolated (so the tracker waits for the
+later one): at 60 frames a second a body moves little in a few frames, and a cue in every frame
+holds it far better than one in every fourth.
 
 A cache (``keypoints.npz``, :mod:`tracker.keypoints.detect`) that already holds the scheduled
 frames is used instead of the worker; otherwise what the worker detected is added to it when the
@@ -27,6 +30,9 @@ from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import cached, detections, holding, merged, stacked
 from tracker.keypoints.detector import require_detector
 from tracker.keypoints.store import Keypoints, save_keypoints
+
+DEFAULT_STEP = 4
+"""The detector sees every 4th frame by default (``--keypoints``; docs/keypoints.md: its cost and what it buys)."""
 
 _POLL = 0.5
 """Seconds between checks that the worker is still alive while waiting for it."""
@@ -75,12 +81,26 @@ class KeypointStream:
 
     def get(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of ``frame`` (pixels (C, 33, 2), confidence (C, 33)), waiting for the
-        worker if need be; None for a frame the detector does not see."""
-        if frame not in self.checked and self.worker is not None and not self.finished:
-            if not np.isin(frame, self.wanted):
-                return None
-            while frame not in self.checked and not self.finished:
-                self._receive()
+        worker if need be.  Between two detected frames the landmarks are interpolated linearly (each
+        where both frames hold it, at the lower confidence); None after the last detected frame."""
+        after = int(np.searchsorted(self.wanted, frame))
+        if after < len(self.wanted) and self.wanted[after] == frame:
+            return self._checked(frame)
+        if after == 0 or after == len(self.wanted):
+            return None
+        before, next_frame = int(self.wanted[after - 1]), int(self.wanted[after])
+        earlier, later = self._checked(before), self._checked(next_frame)
+        if earlier is None or later is None:
+            return None
+        share = (frame - before) / (next_frame - before)
+        pixels = (1.0 - share) * earlier[0] + share * later[0]
+        confidence = np.minimum(earlier[1], later[1])
+        return pixels, np.where(np.isfinite(pixels).all(axis=2), confidence, 0.0)
+
+    def _checked(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The checked landmarks of a scheduled frame, waiting for the worker if need be."""
+        while frame not in self.checked and self.worker is not None and not self.finished:
+            self._receive()
         found = self.checked.get(frame)
         return None if found is None else (found.pixels[0], found.confidence[0])
 
