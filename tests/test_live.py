@@ -8,6 +8,7 @@ messages of a dropped camera.
 
 import _thread
 import argparse
+import re
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,8 @@ def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:
             str(rec / "model.toml"),
             "--init",
             str(rec / "init.toml"),
+            "--keypoints",  # edges only, as `tracker track --keypoints off` replays it; a later one overrides
+            "off",
             *extra,
         ]
     )
@@ -221,3 +224,42 @@ def test_a_full_video_ends_the_recording_and_tracking_goes_on(tiny_recording, tm
     assert summary.recorded < summary.frames
     rows = (tmp_path / "rec" / "timestamps.csv").read_text().splitlines()
     assert len(rows) == summary.recorded + 1  # videos and timestamps agree: the frame that did not fit is in neither
+
+
+def test_the_keypoint_detector_runs_beside_the_live_tracker(tmp_path, capsys):
+    """The demo replayed live with the detector offered every 2nd frame set: it takes those it is free for,
+    its detections are fused (each once, moved to the frame it arrives in), and the body is held."""
+    cameras = ["cam0", "cam1", "cam2"]
+    files = [str(DEMO / f"{name}.avi") for name in cameras]
+    out = tmp_path / "out"
+    assert run(_args(DEMO, files, "--out", str(out), "--keypoints", "2")) == 0
+    printed = capsys.readouterr().out
+    fused, taken, offered = (
+        int(word)
+        for word in re.findall(r"keypoints: (\d+) detections fused; the detector took (\d+) of the (\d+)", printed)[0]
+    )
+    assert 0 < fused <= taken <= offered
+    live = load_poses(out / "poses.npz")
+    truth = load_poses(DEMO / "truth.npz")
+    shown = np.clip(np.rint(live["time"] * 60.0).astype(int), 0, 159)  # the demo's frame at each capture time
+    error = np.linalg.norm(live["joints"] - truth["joints"][shown], axis=2).mean(axis=1)
+    assert np.median(error) < 0.02 and not (live["status"] == 2).any()
+
+
+def test_late_landmarks_move_with_the_tracked_body():
+    from tracker.keypoint_cue import LANDMARKS, landmark_points
+    from tracker.keypoints.live import transferred
+
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")
+    component, point, _ = landmark_points(model, LANDMARKS)
+    then, now = truth["poses"][10], truth["poses"][14]
+    pixels = np.full((3, len(LANDMARKS), 2), np.nan)
+    expected = pixels.copy()
+    for k, camera in enumerate(recording.cameras):
+        for j in np.flatnonzero(component >= 0):
+            pixels[k, j] = camera.project(then[component[j], :3, 3]) + (3.0, -2.0)  # a misfit of (3, -2) px
+            expected[k, j] = camera.project(now[component[j], :3, 3]) + (3.0, -2.0)
+    moved = transferred(pixels, then, now, recording.cameras, component, point)
+    np.testing.assert_allclose(moved, expected, atol=1e-9)

@@ -50,12 +50,14 @@ from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySou
 from tracker.io.poses import PosesWriter
 from tracker.io.recording import VIDEO_SUFFIXES
 from tracker.io.stepwrite import step_and_write
+from tracker.keypoints.live import LiveDetector, transferred
 from tracker.model import Model
 from tracker.track import Settings, Tracker
 
 DEFAULT_OUT = Path("out") / "live"
 STATUS_PERIOD = 1.0  # seconds between status lines
 TAKE_WAIT = 0.1  # seconds the loop waits for a set before it looks at the status and the stop request
+HISTORY = 120  # frames whose tracked poses are kept, to move late landmarks to the present
 
 
 def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> list[tuple[Camera, str]]:
@@ -223,6 +225,20 @@ def drops(counts: Counts) -> str:
     return f"dropped {counts.stale} stale sets, unpaired frames {unpaired}"
 
 
+def _landmarks_now(
+    detector: LiveDetector, history: dict[int, np.ndarray], tracker: Tracker, cameras: list[Camera], rig
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The detector's newest landmarks (if any arrived, of a frame still in ``history``) moved to the frame
+    about to be tracked by the motion tracked since their capture, for the cameras of ``rig``."""
+    newest = detector.newest()
+    if newest is None or newest[0] not in history:
+        return None
+    number, pixels, confidence = newest
+    component, point, _ = tracker.landmarks
+    moved = transferred(pixels, history[number], tracker.poses, cameras, component, point)
+    return moved[list(rig)], confidence[list(rig)]
+
+
 def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
     """A tracker for ``cameras`` that goes on from ``tracker``'s poses and motion with its (pixel-scaled) settings."""
     return tracker.with_cameras(cameras)
@@ -237,18 +253,22 @@ def track_live(
     out: Path,
     recorder: Recorder | None = None,
     view=None,
+    detector: LiveDetector | None = None,
 ) -> Summary:
     """Track the sets ``capture`` delivers until its sources end, no camera is left, or Ctrl-C.
 
     ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order; ``recorder`` and
     ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the recorder
-    until a camera drops) and stay open for the caller to close.  Closes ``capture``.
+    until a camera drops) and stay open for the caller to close.  ``detector``, if given, is offered every
+    frame set and its newest landmarks are fused with the edges (moved to the frame by the tracked motion
+    since their capture, :func:`tracker.keypoints.live.transferred`); it stays open too.  Closes ``capture``.
     """
     tracker = Tracker(model, cameras, init, settings)
     rig = tuple(range(len(cameras)))
     blanks = [np.zeros((camera.size[1], camera.size[0]), np.uint8) for camera in cameras]  # viewer, dropped cameras
     recording = recorder is not None
     frames = 0
+    history: dict[int, np.ndarray] = {}  # tracked poses of the recent frames, by frame number
     try:
         with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), capture.fps) as writer:
             print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
@@ -289,7 +309,18 @@ def track_live(
                             file=sys.stderr,
                         )
                         recording = False
-                    result, spent = step_and_write(tracker, writer, frames, images, at=at, previous=last)
+                    keypoints = None
+                    if detector is not None:
+                        jpegs: list[np.ndarray | None] = [None] * len(cameras)
+                        for camera, frame in zip(frame_set.cameras, frame_set.frames):
+                            jpegs[camera] = frame.jpeg
+                        detector.offer(frames, jpegs)
+                        keypoints = _landmarks_now(detector, history, tracker, cameras, rig)
+                    result, spent = step_and_write(
+                        tracker, writer, frames, images, at=at, previous=last, keypoints=keypoints
+                    )
+                    history[frames] = result.poses
+                    history.pop(frames - HISTORY, None)
                     last = at
                     if view is not None:
                         shown = list(blanks)

@@ -257,16 +257,10 @@ class Tracker:
         height = int(self.rig.size[:, 1].max())
         width = int(self.rig.size[:, 0].max())
         self.images = np.zeros((len(cameras), height, width), np.uint8)
-        self.poses = model.coerce(initial_poses)
         self.previous: np.ndarray | None = None
-        self.anchor = self.poses
         self.motion_state: motion_prior.MotionState | None = None
         self.noise_scale = np.full(n, float(settings.kalman_noise_scale))  # s' per component (kalman)
-        if settings.dynamics == "kalman":
-            s = settings.kalman_noise_scale
-            self.motion_state = motion_prior.initial_state(
-                self.poses, position_variance=(s / settings.prior_translation, s / settings.prior_rotation)
-            )
+        self.restart(initial_poses)
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
         self.lo: np.ndarray | None = None  # each sample's search limits, set by sample()
@@ -283,6 +277,20 @@ class Tracker:
         other.previous = self.previous
         other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
         return other
+
+    def restart(self, poses: np.ndarray) -> None:
+        """Go on from ``poses`` (coerced) as from a first pose: no motion carried over, the motion filter
+        (kalman) started afresh about them."""
+        self.poses = self.model.coerce(poses)
+        self.previous = None
+        self.anchor = self.poses
+        if self.settings.dynamics == "kalman":
+            st = self.settings
+            s = st.kalman_noise_scale
+            self.motion_state = motion_prior.initial_state(
+                self.poses, position_variance=(s / st.prior_translation, s / st.prior_rotation)
+            )
+            self.noise_scale = np.full(self.model.size, float(s))
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""

@@ -57,6 +57,11 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="also write the tracked frames as a recording folder that `tracker track DIR` replays to the same poses",
     )
     options.add_tuning_options(parser)
+    options.add_keypoint_options(
+        parser,
+        "offer every N-th frame set to the 2-D keypoint detector, a worker process that takes one when it is free "
+        "(the tracker never waits), and fuse its landmarks with the edges",
+    )
     options.add_live_view_options(parser, "while it tracks")
     options.add_viewer_options(parser, record=False)
 
@@ -107,7 +112,13 @@ def run(args: argparse.Namespace) -> int:
                 Scene(server, model, cameras, settings.robust_c), model, cameras, init, settings, rate=args.view_rate
             )
             stack.callback(view.close)
-        summary = track_live(capture, cameras, model, init, settings, out, recorder, view)
+        detector = None
+        if args.keypoints:
+            from tracker.keypoints.live import LiveDetector
+
+            detector = LiveDetector(cameras, args.keypoints)
+            stack.callback(detector.close)
+        summary = track_live(capture, cameras, model, init, settings, out, recorder, view, detector)
     counts = summary.counts
     print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
     if recorder is not None:
@@ -119,6 +130,11 @@ def run(args: argparse.Namespace) -> int:
     captured = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.captured))
     print(f"frames per second: {rate:.1f} tracked; frames captured: {captured}")
     print(f"sets: {counts.sets} paired, {counts.taken} tracked; {drops(counts)}")
+    if detector is not None:
+        print(
+            f"keypoints: {detector.used} detections fused; the detector took {detector.taken} of the "
+            f"{detector.offered} frame sets offered"
+        )
     if summary.interrupted:
         print("interrupted: the frames done so far are saved", file=sys.stderr)
         return 130
