@@ -320,8 +320,10 @@ def _staging_lines(staging: Staging, cameras: list[Camera], seed: int) -> list[s
     if staging.tables:
         names = ", ".join(c.name for c in staging.table_cameras(cameras))
         lines.append(f"- a table ({' x '.join(f'{v:g}' for v in TABLE_SIZE)} m) before {names}, hiding the legs")
-    if staging.zoom != 1.0 or staging.distance != 1.0:
-        lines.append(f"- rig: focal lengths x {staging.zoom:g}, cameras {staging.distance:g} times as far")
+    if staging.zoom != 1.0:
+        lines.append(f"- rig: focal lengths x {staging.zoom:g} (`calibration.toml` holds the zoomed rig)")
+    if staging.distance != 1.0:
+        lines.append(f"- rig: cameras {staging.distance:g} times as far (`calibration.toml` holds the moved rig)")
     if staging.motion_blur > 1:
         lines.append(f"- motion blur: {staging.motion_blur} sub-frames over {staging.shutter:g} frame intervals")
     if lines:
