@@ -48,7 +48,8 @@ def _pair(name: str) -> str:
 
 
 def _capsule(spec: dict, scale: float, widen: float) -> list[dict]:
-    """The quadric tables of the capsule replacing one model quadric, lengths x ``scale``, radius x ``widen``."""
+    """The quadric tables of the capsule replacing one model quadric, lengths x ``scale``, radius x ``widen``
+    (an ellipsoid's clipping planes are dropped: the capsule is whole)."""
     shape = spec["shape"]
     if shape in ("cone", "cylinder"):
         radii = spec["radii"] if shape == "cone" else [spec["radius"]] * 2

@@ -4,7 +4,9 @@ One ray per pixel (exact lens distortion: the rays go through the undistorted
 pixel centres) is intersected with every clipped quadric (no conics), so a
 disagreement between this renderer and :mod:`tracker.outline` points at a bug
 in one of them.  :class:`Renderer` shades the hits, softens the edges and
-composites the body over a background photo with sensor noise.
+composites the body over a background photo with sensor noise; optionally it paints
+clothes on the body (:mod:`tracker.texture`), stands opaque props such as a table in
+the scene (:mod:`tracker.props`) and averages sub-frame poses into motion blur.
 """
 
 from __future__ import annotations
@@ -296,7 +298,11 @@ def load_backgrounds(cameras: list[Camera], paths=None, seed: int = 0) -> tuple[
 
 
 class Renderer:
-    """Renders one camera: pixel rays precomputed once, then :meth:`render` per frame."""
+    """Renders one camera: pixel rays precomputed once, then :meth:`render` per frame.
+
+    ``texture`` paints the body's colours (None: the plain :func:`albedos`); ``props`` are drawn
+    into the background once, and their depth hides the body behind them.
+    """
 
     def __init__(
         self,

@@ -390,7 +390,9 @@ def synthesize(
     poses, rate, bvh_path = motion_poses(model, motion, frames, start, stride, fps, seed)
     body, shown = model, poses  # the body rendered and its poses
     if staging.body == "capsules":
-        body = model_from_dict(capsule_body(read_toml(model_path, "model", ""), staging.jitter, seed), model_path)
+        body = model_from_dict(
+            capsule_body(read_toml(model_path, "model", "pass --model"), staging.jitter, seed), model_path
+        )
         shown = actor_poses(body, model, poses)
     props = tuple(table_before(camera) for camera in staging.table_cameras(cameras))
     texture = (
