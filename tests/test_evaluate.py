@@ -93,3 +93,26 @@ def test_format_report_lists_every_joint() -> None:
     assert "MPJPE" in text and "PA-MPJPE" in text and "PCK@50mm" in text
     for name in NAMES:
         assert name in text
+
+
+def test_unknown_truth_joints_are_left_out_of_every_mean() -> None:
+    """NaN truth joints (no camera saw them) are not scored: whatever is tracked there changes nothing."""
+    true = truth()
+    unseen = np.zeros(true["joints"].shape[:2], dtype=bool)
+    unseen[:, 1] = True  # knee_l never seen
+    unseen[4:, 2] = True  # knee_r unseen from frame 4 on
+    unseen[7] = True  # frame 7: nothing seen
+    tracked_joints = true["joints"].copy()
+    tracked_joints[..., 0] += 0.02
+    hidden = dict(true, joints=np.where(unseen[..., None], np.nan, true["joints"]))
+    wild = tracked_joints.copy()
+    wild[unseen] += 5.0  # far off where the truth is unknown
+    report = evaluate(tracked(wild), hidden)
+    assert report.mpjpe_mm == pytest.approx(20.0)
+    assert report.pa_mpjpe_mm < 1e-9  # a pure shift of the joints scored
+    assert report.pck == pytest.approx(1.0)
+    assert (report.lost_frames, report.frames) == (0, 10)
+    assert np.isnan(report.per_joint["knee_l"][0]) and np.isnan(report.per_joint["knee_l"][1])
+    assert report.per_joint["knee_r"][0] == pytest.approx(20.0)
+    wild[..., 0] += 0.05  # now 70 mm off everywhere: PCK counts the known joint-frames only
+    assert evaluate(tracked(wild), hidden).pck == 0.0

@@ -39,6 +39,7 @@ LIMITS: dict[str, list[str]] = {
     "bench": ["--repeats", "1"],
     "experiment": ["--frames", "2", "--quiet"],
     "keypoints": ["--frames", "6", "--quiet"],
+    "suite": ["--frames", "3", "--quiet"],  # make: 3 frames a render; run: passed on to tracker track
 }
 
 

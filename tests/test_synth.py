@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import tomllib
 from pathlib import Path
 
@@ -10,13 +11,16 @@ import numpy as np
 import pytest
 from conftest import SHARED_DATA, TEST_DATA, needs_shared
 
-from tracker import clips, render, synth
+from tracker import actor as capsules
+from tracker import clips, props, render, synth, texture
 from tracker.camera import load_calibration, save_calibration
+from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io import bvh as bvh_io
 from tracker.io.avi import MjpegAviWriter
 from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
+from tracker.tomlfile import read_toml
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "models" / "human.toml"
@@ -364,3 +368,235 @@ def test_committed_rigs_are_the_ones_write_rigs_makes(tmp_path):
             np.testing.assert_allclose(a.matrix, b.matrix)
             np.testing.assert_allclose(a.rotation, b.rotation, atol=1e-12)
             np.testing.assert_allclose(a.translation, b.translation, atol=1e-12)
+
+
+# --- renders unlike the model ---------------------------------------------------------------
+
+
+def _tiny_camera(size=(160, 120), focal=150.0):
+    return synth.look_at_camera("c", (0.6, -3.6, 1.3), (0.0, 0.0, 0.9), size, focal, (-0.05, 0.01, 0.0, 0.0))
+
+
+def _moved(camera, world_from_new):
+    """The camera seeing the world moved by ``world_from_new`` as it saw the old one."""
+    return camera.with_camera_from_world(camera.camera_from_world @ np.linalg.inv(world_from_new))
+
+
+def test_texture_changes_body_pixels_only_moves_with_the_body_and_is_deterministic(human):
+    camera = _tiny_camera()
+    poses = clips.procedural_motion(human, 1, seed=2)[0]
+    plain = render.Renderer(human, camera, noise=0.0, blur=0.0)
+    comp = plain.cast(poses)[0].copy()
+    reference = plain.render(poses)
+    for kind in texture.KINDS:
+        made = texture.make_texture(kind, human.names, render.albedos(human), seed=4)
+        dressed = render.Renderer(human, camera, noise=0.0, blur=0.0, texture=made).render(poses)
+        changed = np.any(dressed != reference, axis=2)
+        assert not np.any(changed & (comp < 0)), kind  # the background is untouched
+        assert changed[comp >= 0].mean() > 0.1, kind  # a good share of the body is repainted
+        again = render.Renderer(human, camera, noise=0.0, blur=0.0, texture=made).render(poses)
+        np.testing.assert_array_equal(again, dressed)
+        # body, camera and light moved together by one rigid motion: the same image, so the pattern rides on the body
+        motion = se3.from_rotvec((0.1, -0.2, 0.7), (0.4, -0.3, 0.2))
+        light = motion[0:3, 0:3] @ render.DEFAULT_LIGHT
+        riding = render.Renderer(human, _moved(camera, motion), light=light, noise=0.0, blur=0.0, texture=made)
+        moved = riding.render(np.einsum("ab,nbc->nac", motion, poses))
+        assert np.mean(moved.astype(int) != dressed) < 0.002  # a few edge pixels round differently
+    other = texture.make_texture("stripes", human.names, render.albedos(human), seed=5)
+    first = texture.make_texture("stripes", human.names, render.albedos(human), seed=4)
+    assert not np.allclose(other.period, first.period)
+    left, right = human.index("thigh_l"), human.index("thigh_r")
+    assert first.period[left] == first.period[right]  # a pair of trousers
+
+
+def test_capsule_body_sizes_within_jitter_and_seeded(human):
+    data = read_toml(MODEL, "model", "")
+    actor = model_from_dict(capsules.capsule_body(data, 0.1, seed=3))
+    assert actor.names == human.names and set(actor.quadric_shape) == {"cylinder", "sphere"}
+    np.testing.assert_array_equal(actor.parent, human.parent)
+    np.testing.assert_array_equal(actor.joint_type, human.joint_type)
+    bones = np.linalg.norm(human.rest[:, 0:3, 3], axis=1) > 0
+    ratio = np.linalg.norm(actor.rest[bones, 0:3, 3], axis=1) / np.linalg.norm(human.rest[bones, 0:3, 3], axis=1)
+    assert np.all((ratio >= 0.9) & (ratio <= 1.1)) and np.ptp(ratio) > 0.05
+    for name in ("thigh_l", "shin_r", "upperarm_l", "forearm_r"):  # cones -> capsules of the mean radius, +-10 %
+        model_radius = np.mean(human.quadric_params[list(human.quadric_component).index(human.index(name))]["radii"])
+        radii = [p["radius"] for p, c in zip(actor.quadric_params, actor.quadric_component) if c == actor.index(name)]
+        assert len(set(radii)) == 1 and 0.9 <= radii[0] / model_radius <= 1.1
+    pair = [actor.quadric_params[list(actor.quadric_component).index(actor.index(n))] for n in ("shin_l", "shin_r")]
+    assert pair[0]["radius"] == pair[1]["radius"]  # left and right alike
+    assert capsules.capsule_body(data, 0.1, seed=3) == capsules.capsule_body(data, 0.1, seed=3)
+    assert capsules.capsule_body(data, 0.1, seed=4) != capsules.capsule_body(data, 0.1, seed=3)
+
+
+def test_capsule_render_truth_is_the_rendered_body(tmp_path, human):
+    out = tmp_path / "rec"
+    staging = synth.Staging(body="capsules")
+    synth.synthesize(
+        MODEL, _rig(tmp_path), out, frames=3, seed=2, codec="png", noise=0.0, progress=False, staging=staging
+    )
+    assert (out / "model.toml").read_bytes() == MODEL.read_bytes()  # the tracking model, unperturbed
+    with np.load(out / "truth.npz") as truth:
+        true_poses, joints, names = truth["poses"], truth["joints"], list(truth["joint_names"])
+    assert names == list(human.joint_names)
+    actor = model_from_dict(capsules.capsule_body(read_toml(MODEL, "model", ""), 0.1, seed=2))
+    motion, _, _ = synth.motion_poses(human, "procedural", 3, seed=2)
+    np.testing.assert_allclose(true_poses, capsules.actor_poses(actor, human, motion), atol=1e-12)
+    np.testing.assert_allclose(joints, joint_centres(true_poses))  # all seen here
+    assert joint_gap(actor, true_poses) < 1e-9
+    assert np.abs(joint_centres(motion) - joints).max() > 0.02  # not the model's joints
+    camera = load_calibration(out / "calibration.toml")[0]
+    background = cv2.imread(str(out / "a" / "000001.png"))
+    photo = render.load_backgrounds([camera], None, 2)[0][0]
+    assert np.array_equal(render.Renderer(actor, camera, photo, noise=0.0).render(true_poses[1]), background)
+    assert not np.array_equal(render.Renderer(human, camera, photo, noise=0.0).render(true_poses[1]), background)
+
+
+def test_seen_joints_behind_a_box_or_outside_every_image():
+    camera = synth.look_at_camera("c", (0.0, -4.0, 1.0), (0.0, 0.0, 1.0), (200, 100), 200.0)
+    points = np.array([[[0.0, 0.0, 1.0], [0.0, 0.0, 0.3], [3.0, 0.0, 1.0]]])  # centre, low, far off to the side
+    np.testing.assert_array_equal(synth.seen_joints(points, [camera]), [[True, True, False]])
+    box = props.Box(se3.from_rotvec((0.0, 0.0, 0.0), (0.0, -1.0, 0.25)), np.array([0.5, 0.2, 0.25]))
+    np.testing.assert_array_equal(synth.seen_joints(points, [camera], (box,)), [[True, False, False]])
+    behind = props.Box(se3.from_rotvec((0.0, 0.0, 0.0), (0.0, 1.0, 0.25)), np.array([0.5, 0.2, 0.25]))
+    np.testing.assert_array_equal(synth.seen_joints(points, [camera], (behind,)), [[True, True, False]])
+    side = synth.look_at_camera("s", (4.0, 0.0, 1.0), (0.0, 0.0, 1.0), (200, 100), 200.0)
+    np.testing.assert_array_equal(synth.seen_joints(points, [camera, side], (box,)), [[True, True, True]])
+    # the box's depth along a ray: its near face, 4 - 1 - 0.2 = 2.8 m from the camera
+    depth, index, normal = props.cast_boxes([box], camera, np.array([[0.0, 0.75 / 2.8], [0.0, -0.2]]))
+    assert depth[0] == pytest.approx(2.8) and index.tolist() == [0, -1] and np.isinf(depth[1])
+    np.testing.assert_allclose(normal[0], [0.0, 0.0, -1.0], atol=1e-12)
+
+
+def test_table_hides_the_legs_in_the_images_and_the_truth(tmp_path, human):
+    out = tmp_path / "rec"
+    rig = _rig(tmp_path)
+    staging = synth.Staging(tables=("all",))
+    synth.synthesize(MODEL, rig, out, frames=2, seed=1, codec="png", noise=0.0, progress=False, staging=staging)
+    with np.load(out / "truth.npz") as truth:
+        joints, poses = truth["joints"], truth["poses"]
+    hidden = [human.names[j] for j in np.flatnonzero(np.isnan(joints).any(axis=(0, 2)))]
+    assert {"foot_l", "foot_r"} <= set(hidden) and "head" not in hidden and "pelvis" not in hidden
+    assert not np.isnan(poses).any()  # the poses stay whole; only unseen joints are NaN
+    cameras = load_calibration(out / "calibration.toml")
+    for camera in cameras:  # the ankles' pixels show the table, not the body
+        image = cv2.imread(str(out / camera.name / "000000.png"))
+        plain = render.Renderer(human, camera, render.load_backgrounds([camera], None, 1)[0][0], noise=0.0)
+        comp = plain.cast(poses[0])[0]
+        for name in ("foot_l", "foot_r"):
+            u, v = np.rint(camera.project(poses[0, human.index(name), 0:3, 3][None])[0]).astype(int)
+            assert comp[v, u] >= 0  # the body is there without the table ...
+            table = np.array(props.TABLE_ALBEDO) * 255.0 * 0.35  # ... and now the table's colour, at least its ambient
+            assert np.all(image[v, u] >= table - 2) and np.all(image[v, u] < 255 * np.array(props.TABLE_ALBEDO) + 2)
+
+
+def test_exposure_poses_interpolate_between_frames(human):
+    poses = clips.procedural_motion(human, 6, fps=30.0, seed=1)
+    exposure = clips.exposure_poses(human, poses, 3, 2.0)  # offsets -1, 0, +1 frame
+    np.testing.assert_allclose(exposure[2:5, 0], poses[1:4], atol=1e-9)
+    np.testing.assert_allclose(exposure[2:5, 1], poses[2:5], atol=0)
+    np.testing.assert_allclose(exposure[2:5, 2], poses[3:6], atol=1e-9)
+    half = clips.exposure_poses(human, poses, 5, 1.0)
+    assert joint_gap(human, half) < 1e-9
+    np.testing.assert_array_equal(clips.exposure_poses(human, poses, 1, 1.0)[:, 0], poses)
+    middle = joint_centres(half[3, 4])  # half a frame on: between frames 3 and 4
+    assert np.linalg.norm(middle - 0.5 * (joint_centres(poses[3]) + joint_centres(poses[4])), axis=1).max() < 0.01
+
+
+def test_motion_blur_changes_only_near_moving_edges(human):
+    camera = _tiny_camera()
+    poses = clips.athletic_motion(human, 40, fps=30.0, seed=7)
+    exposure = clips.exposure_poses(human, poses, 6, 1.0)[25]
+    renderer = render.Renderer(human, camera, noise=0.0, blur=0.7)
+    sharp = renderer.render(poses[25]).astype(int)
+    blurred = renderer.render(exposure).astype(int)
+    comps = np.stack([renderer.cast(p)[0].copy() for p in (poses[25], *exposure)])
+    moving = np.any(comps != comps[0], axis=0)  # pixels that change hands during the exposure or at its middle
+    near_moving = cv2.dilate(moving.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    near_body = cv2.dilate(np.any(comps >= 0, axis=0).astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    difference = np.abs(blurred - sharp).max(axis=2)
+    assert moving.sum() > 50 and difference[moving].max() > 40  # the kick does blur
+    assert np.all(difference[~near_body] == 0)  # far from the body nothing changes
+    assert difference[~near_moving].max() <= 12  # inside the body: only the shading as parts turn a little
+
+
+def test_default_render_is_bit_identical_to_before(tmp_path):
+    """Hashes of a tiny render made by the code before Staging existed: the default options take the old path."""
+    rig = _rig(tmp_path)
+    expected = {
+        ("procedural", 4, 0, 2, 1): "928dbc9e7a2a8d654070833354f8b131167314ab0885f8b4f1b281cd155f9c1d",
+        (f"bvh:{CMU}", 3, 10, 4, 2): "80c82098089de97957d09417225aa8bee13f8199f4ce0c9d15da5b154e38811b",
+    }
+    for (motion, frames, start, stride, seed), digest in expected.items():
+        out = tmp_path / motion[:3]
+        synth.synthesize(
+            MODEL,
+            rig,
+            out,
+            motion=motion,
+            frames=frames,
+            start=start,
+            stride=stride,
+            seed=seed,
+            codec="png",
+            progress=False,
+        )
+        h = hashlib.sha256()
+        for cam in ("a", "b"):
+            for path in sorted((out / cam).glob("*.png")):
+                h.update(cv2.imread(str(path), cv2.IMREAD_UNCHANGED).tobytes())
+        with np.load(out / "truth.npz") as truth:
+            for key in sorted(truth.files):
+                h.update(key.encode())
+                h.update(np.ascontiguousarray(truth[key]).tobytes())
+        h.update((out / "init.toml").read_bytes())
+        assert h.hexdigest() == digest, motion
+
+
+def test_athletic_motion_is_fast_airborne_turning_and_seeded(human):
+    poses = clips.athletic_motion(human, 120, fps=30.0, seed=0)
+    assert joint_gap(human, poses) < 1e-9
+    low = clips.lowest_points(human, poses)
+    assert abs(float(np.median(low))) < 1e-9 and low.max() > 0.1  # on the floor, and in the air at times
+    assert np.ptp(np.unwrap(np.arctan2(poses[:, 0, 1, 0], poses[:, 0, 0, 0]))) > np.pi  # a spin
+    speed = np.linalg.norm(np.diff(joint_centres(poses), axis=0), axis=2).max() * 30.0
+    calm = np.linalg.norm(np.diff(joint_centres(clips.procedural_motion(human, 120, 30.0, 0)), axis=0), axis=2)
+    assert speed > 4.0 and speed > 2.0 * calm.max() * 30.0
+    kinds = {move for move, *_ in clips.athletic_schedule(4.0, seed=0)}
+    assert kinds == set(clips.ATHLETIC_MOVES)
+    np.testing.assert_array_equal(clips.athletic_motion(human, 10, 30.0, seed=0), poses[:10])
+    assert not np.allclose(clips.athletic_motion(human, 10, 30.0, seed=1), poses[:10])
+
+
+def test_moved_rig_zooms_and_backs_off():
+    rig = synth.demo3_rig()
+    zoomed = synth.moved_rig(rig, zoom=2.0)
+    far = synth.moved_rig(rig, distance=2.5)
+    centre = synth.SCENE_CENTRE[None]
+    for camera, z, d in zip(rig, zoomed, far):
+        np.testing.assert_allclose(z.matrix[[0, 1], [0, 1]], 2.0 * camera.matrix[[0, 1], [0, 1]])
+        np.testing.assert_allclose(z.matrix[0:2, 2], camera.matrix[0:2, 2])
+        np.testing.assert_array_equal(d.rotation, camera.rotation)
+        np.testing.assert_allclose(
+            np.cross(d.center - camera.center, camera.rotation[2]), 0.0, atol=1e-12
+        )  # on its axis
+        depth = lambda cam: float(cam.rotation[2] @ centre[0] + cam.translation[2])  # noqa: E731
+        assert depth(d) == pytest.approx(2.5 * depth(camera))
+        span = lambda cam: np.linalg.norm(np.diff(cam.project(centre + [[0, 0, -0.4], [0, 0, 0.4]]), axis=0))  # noqa: E731
+        assert span(d) == pytest.approx(span(camera) / 2.5, rel=0.05)  # a body 2.5 times smaller
+
+
+def test_synth_options_on_the_command_line(tmp_path, capsys):
+    out = tmp_path / "rec"
+    args = ["synth", "--model", str(MODEL), "--calib", str(_rig(tmp_path)), "--motion", "athletic", "--out", str(out)]
+    extra = ["--frames", "2", "--fps", "8", "--texture", "mixed", "--body", "capsules", "--table", "a", "--quiet"]
+    assert main(args + extra + ["--zoom", "1.2", "--distance", "1.5", "--motion-blur", "3", "--no-init"]) == 0
+    assert (out / "truth_init.toml").is_file() and not (out / "init.toml").exists()
+    written, given = load_calibration(out / "calibration.toml"), load_calibration(tmp_path / "rig.toml")
+    assert [c.matrix[0, 0] for c in written] == pytest.approx([1.2 * 140.0, 1.2 * 140.0])
+    depth = [float(c.rotation[2] @ synth.SCENE_CENTRE + c.translation[2]) for c in (*written, *given)]
+    assert depth[:2] == pytest.approx([1.5 * d for d in depth[2:]])
+    with np.load(out / "truth.npz") as truth:
+        assert truth["joints"].shape == (2, 15, 3)
+    assert main(args + ["--frames", "1", "--table", "cam9", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cam9" in err[0]

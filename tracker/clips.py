@@ -301,3 +301,146 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
         out[f] = model.coerce(poses)
     out[:, :, 2, 3] -= np.median(lowest_points(model, out))
     return out
+
+
+def _bump(v):
+    """sin^2(pi v) on [0, 1], 0 elsewhere: a smooth rise and fall with zero slope at both ends."""
+    return float(np.sin(np.pi * v) ** 2) if 0.0 <= v <= 1.0 else 0.0
+
+
+def _arc(v):
+    """sin(pi v) on [0, 1], 0 elsewhere: a flight's height profile (a parabola's close cousin)."""
+    return float(np.sin(np.pi * v)) if 0.0 <= v <= 1.0 else 0.0
+
+
+def _ease(v):
+    """3 v^2 - 2 v^3 clipped to [0, 1]: from 0 to 1 with zero slope at both ends."""
+    v = min(max(v, 0.0), 1.0)
+    return v * v * (3.0 - 2.0 * v)
+
+
+ATHLETIC_MOVES = ("hop", "kick", "spin")
+
+
+def athletic_schedule(seconds: float, seed: int = 0) -> list[tuple[str, float, float, float]]:
+    """Moves covering ``seconds``: (move, start s, duration s, parameter) in a seeded order.
+
+    Every three moves are a permutation of :data:`ATHLETIC_MOVES`; a hop lasts 0.9-1.2 s, a kick
+    0.8-1.0 s (parameter: +1 the left leg, -1 the right, alternating), a spin 1.0-1.3 s (parameter:
+    the turn, +-pi..2 pi radians).
+    """
+    rng = np.random.default_rng([seed, 11])
+    schedule: list[tuple[str, float, float, float]] = []
+    start, side = 0.0, float(rng.choice([-1.0, 1.0]))
+    while start < seconds:
+        for move in rng.permutation(ATHLETIC_MOVES):
+            if move == "hop":
+                duration, parameter = rng.uniform(0.9, 1.2), 0.0
+            elif move == "kick":
+                duration, parameter, side = rng.uniform(0.8, 1.0), side, -side
+            else:
+                duration, parameter = (
+                    rng.uniform(1.0, 1.3),
+                    float(rng.choice([-1.0, 1.0]) * rng.uniform(np.pi, 2 * np.pi)),
+                )
+            schedule.append((str(move), start, float(duration), float(parameter)))
+            start += float(duration)
+    return schedule
+
+
+def athletic_motion(model: Model, frames: int, fps: float = 30.0, seed: int = 0) -> np.ndarray:
+    """Fast model poses (frames, N, 4, 4): hops, front kicks and jump spins (:func:`athletic_schedule`).
+
+    With u in [0, 1] the progress through a move and b(v) = sin^2(pi v) on [0, 1]:
+    a hop crouches (knees 0.55 b(u / 0.3)), flies 0.28 m high for 0.35 of the move, lands
+    (0.45 b((u - 0.65) / 0.35)) with both arms swung forward and up; a kick lifts one thigh by
+    1.35 b(u) rad with the knee chambered and snapped straight at u = 0.5, the torso leaning back and
+    the arms countering; a spin crouches, turns by its angle in the air (eased over u in 0.2..0.75)
+    and lands with the arms out. The heading carries over from one spin to the next move, and the body
+    sways a little about the origin. Built by forward kinematics like :func:`procedural_motion`, then
+    ``Model.coerce``; the feet stand on z = 0 when on the ground. Needs the human model's component names.
+    """
+    missing = [n for n in RETARGET_MAP if n not in model.names]
+    if missing:
+        raise TrackerInputError(
+            f"model {model.name!r}: athletic motion needs the components {', '.join(missing)}; use models/human.toml"
+        )
+    rng = np.random.default_rng([seed, 13])
+    idx = {name: model.index(name) for name in model.names}
+    thigh = float(np.linalg.norm(model.rest[idx["shin_l"], 0:3, 3]))
+    shin = float(np.linalg.norm(model.rest[idx["foot_l"], 0:3, 3]))
+    foot_low = -float(lowest_points(model, rest_poses(model, np.eye(4))[None])[0])
+    heading0, sway = rng.uniform(0.0, 2.0 * np.pi), rng.uniform(0.0, 2.0 * np.pi, 2)
+    schedule = athletic_schedule(frames / fps, seed)
+    out = np.empty((frames, model.size, 4, 4))
+    for f in range(frames):
+        t = f / fps
+        heading = heading0 + sum(p for move, s, d, p in schedule if move == "spin" and s + d <= t)
+        move, begin, duration, parameter = next(m for m in schedule if m[1] <= t < m[1] + m[2])
+        u = (t - begin) / duration
+        bend = height = turn = hip = knee = lean = 0.0
+        arm_forward = arm_side = 0.0
+        if move == "hop":
+            bend = 0.55 * _bump(u / 0.3) + 0.45 * _bump((u - 0.65) / 0.35)
+            height = 0.28 * _arc((u - 0.3) / 0.35)
+            arm_forward = 2.0 * _bump((u - 0.15) / 0.7)
+        elif move == "kick":
+            hip = 1.35 * _bump(u)
+            knee = 1.5 * _bump(u) * (1.0 - 0.92 * np.exp(-(((u - 0.5) / 0.12) ** 2)))
+            bend = 0.12 * _bump(u)
+            lean = 0.3 * _bump(u)
+        else:
+            bend = 0.4 * _bump(u / 0.25) + 0.35 * _bump((u - 0.7) / 0.3)
+            height = 0.15 * _arc((u - 0.3) / 0.4)
+            turn = parameter * _ease((u - 0.2) / 0.55)
+            arm_side = 0.3 + 0.9 * _bump(u)
+        local = {name: np.eye(3) for name in model.names}
+        local["pelvis"] = _rz(heading + turn) @ _rx(0.15 * bend)
+        local["torso"] = _rx(-lean - 0.1 * bend)
+        local["head"] = _rx(0.2 * lean) @ _rz(0.2 * np.sin(2.0 * np.pi * 0.4 * t))
+        for side, sign in (("l", 1.0), ("r", -1.0)):
+            kicking = move == "kick" and parameter == sign
+            local[f"thigh_{side}"] = _rx(-(hip if kicking else 1.15 * bend))
+            local[f"shin_{side}"] = _rx(knee if kicking else 2.0 * bend)
+            local[f"foot_{side}"] = _rx(0.3 * hip if kicking else -bend)
+            counter = move == "kick" and parameter != sign  # the arm opposite the kicking leg swings forward
+            swing = arm_forward + (0.9 * _bump(u) if counter else -0.4 * _bump(u) if move == "kick" else 0.0)
+            local[f"upperarm_{side}"] = _rx(-swing) @ _ry(-sign * arm_side)
+            local[f"forearm_{side}"] = _rx(-(0.3 + 0.8 * _bump(u) if move == "kick" else 0.3 + 0.4 * arm_forward))
+        poses = np.empty((model.size, 4, 4))
+        for i, name in enumerate(model.names):
+            pose = np.eye(4)
+            pose[0:3, 0:3] = local[name]
+            poses[i] = pose if model.parent[i] < 0 else poses[model.parent[i]] @ model.rest[i] @ pose
+        poses[:, 0, 3] += 0.15 * np.sin(0.5 * t + sway[0])
+        poses[:, 1, 3] += 0.15 * np.sin(0.4 * t + sway[1])
+        poses[:, 2, 3] += (thigh + shin) * np.cos(bend) + foot_low + height
+        out[f] = model.coerce(poses)
+    out[:, :, 2, 3] -= np.median(lowest_points(model, out))
+    return out
+
+
+def exposure_poses(model: Model, poses: np.ndarray, samples: int, shutter: float) -> np.ndarray:
+    """Sub-frame poses (F, S, N, 4, 4) of an exposure of ``shutter`` frame intervals centred on each frame.
+
+    Sub-frame k of frame f is at time f + shutter (k / (S - 1) - 1/2) (f alone when S = 1), between the
+    frame and its neighbour on that side (extrapolated past the first and last frames): with s the
+    fraction of the way from pose a to pose b, every component turns by R_a exp(s log(R_a^T R_b)), the
+    root moves along the straight line, and the others hang on their parents' joints.
+    """
+    frames = len(poses)
+    offsets = np.zeros(1) if samples == 1 else shutter * (np.arange(samples) / (samples - 1) - 0.5)
+    out = np.empty((frames, len(offsets), *poses.shape[1:]))
+    for f in range(frames):
+        for k, offset in enumerate(offsets):
+            if frames == 1 or offset == 0.0:
+                out[f, k] = poses[f]
+                continue
+            a = min(max(f - 1 if offset < 0 else f, 0), frames - 2)
+            s = f + offset - a
+            relative = np.einsum("nba,nbc->nac", poses[a, :, 0:3, 0:3], poses[a + 1, :, 0:3, 0:3])
+            turn = se3.exp_so3_many(s * se3.log_so3_many(np.ascontiguousarray(relative)))
+            rotations = np.einsum("nab,nbc->nac", poses[a, :, 0:3, 0:3], turn)
+            root = (1.0 - s) * poses[a, 0, 0:3, 3] + s * poses[a + 1, 0, 0:3, 3]
+            out[f, k] = poses_from_rotations(model, root, rotations)
+    return out

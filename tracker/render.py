@@ -4,7 +4,9 @@ One ray per pixel (exact lens distortion: the rays go through the undistorted
 pixel centres) is intersected with every clipped quadric (no conics), so a
 disagreement between this renderer and :mod:`tracker.outline` points at a bug
 in one of them.  :class:`Renderer` shades the hits, softens the edges and
-composites the body over a background photo with sensor noise.
+composites the body over a background photo with sensor noise; optionally it paints
+clothes on the body (:mod:`tracker.texture`), stands opaque props such as a table in
+the scene (:mod:`tracker.props`) and averages sub-frame poses into motion blur.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from numba import njit, prange
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.model import Model
+from tracker.props import Box, backdrop
+from tracker.texture import Texture, paint
 
 BACKGROUNDS = Path(__file__).resolve().parent / "data" / "backgrounds"
 """Folder of the background photos shipped with the package (OpenCV samples, licence in its README.md)."""
@@ -294,7 +298,11 @@ def load_backgrounds(cameras: list[Camera], paths=None, seed: int = 0) -> tuple[
 
 
 class Renderer:
-    """Renders one camera: pixel rays precomputed once, then :meth:`render` per frame."""
+    """Renders one camera: pixel rays precomputed once, then :meth:`render` per frame.
+
+    ``texture`` paints the body's colours (None: the plain :func:`albedos`); ``props`` are drawn
+    into the background once, and their depth hides the body behind them.
+    """
 
     def __init__(
         self,
@@ -307,6 +315,9 @@ class Renderer:
         fill: float = 0.3,
         blur: float = 0.7,
         noise: float = 3.0,
+        *,
+        texture: Texture | None = None,
+        props: tuple[Box, ...] = (),
     ):
         self.model, self.camera = model, camera
         self.rays = pixel_rays(camera)
@@ -316,12 +327,26 @@ class Renderer:
             raise ValueError(
                 f"background shape {self.background.shape} does not match camera {camera.name} ({h}, {w}, 3)"
             )
-        self._background_f32 = self.background.astype(np.float32)
         light = np.asarray(light, dtype=np.float64)
         self.light_world = light / np.linalg.norm(light)
         self.ambient, self.key, self.fill = ambient, key, fill
         self.blur, self.noise = blur, noise
+        self.props_depth: np.ndarray | None = None  # depth (H, W) of the props, inf where there are none
+        if props:
+            self.background, self.props_depth = backdrop(
+                list(props),
+                camera,
+                self.rays,
+                self.background,
+                self.light_world,
+                ambient=ambient,
+                key=key,
+                fill=fill,
+                blur=blur,
+            )
+        self._background_f32 = self.background.astype(np.float32)
         self.albedo = albedos(model).astype(np.float32) * 255.0
+        self.texture = texture
         self.comp = np.empty((h, w), np.int64)
         self.shade = np.empty((h, w), np.float64)
         self.depth = np.empty((h, w), np.float64)
@@ -350,29 +375,72 @@ class Renderer:
     def render(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         """BGR uint8 image of the body at ``poses`` over the background, soft edges, sensor noise.
 
-        The body layer (albedo x shade) and its coverage are blurred with a Gaussian
-        of ``blur`` px (premultiplied alpha, so edges mix body and background like a
-        lens does), composited over the background, then Gaussian noise of ``noise``
-        grey levels (the same in the three channels) is added.
+        ``poses`` (N, 4, 4), or (S, N, 4, 4) for an exposure: the body layers of the S sub-frame poses
+        are averaged (motion blur). The body layer (albedo, or the texture's colour, x shade) and its
+        coverage are blurred with a Gaussian of ``blur`` px (premultiplied alpha, so edges mix body and
+        background like a lens does), composited over the background (props included, which hide the
+        body behind them), then Gaussian noise of ``noise`` grey levels (the same in the three channels)
+        is added.
         """
-        comp, shade, _ = self.cast(poses)
+        exposure = poses[None] if poses.ndim == 3 else poses
+        layers = [layer for layer in (self._layer(p) for p in exposure) if layer is not None]
         image = self._background_f32.copy()
-        rows = np.flatnonzero((comp >= 0).any(axis=1))
-        if len(rows):
-            cols = np.flatnonzero((comp[rows[0] : rows[-1] + 1] >= 0).any(axis=0))
-            pad = int(np.ceil(4.0 * self.blur)) + 1
-            h, w = comp.shape
-            y0, y1 = max(rows[0] - pad, 0), min(rows[-1] + pad + 1, h)
-            x0, x1 = max(cols[0] - pad, 0), min(cols[-1] + pad + 1, w)
-            c = comp[y0:y1, x0:x1]
-            mask: np.ndarray = (c >= 0).astype(np.float32)
-            body = self.albedo[np.maximum(c, 0)] * (shade[y0:y1, x0:x1].astype(np.float32) * mask)[..., None]
+        if layers:
+            y0, x0 = min(layer[0] for layer in layers), min(layer[1] for layer in layers)
+            y1, x1 = (
+                max(layer[0] + layer[3].shape[0] for layer in layers),
+                max(layer[1] + layer[3].shape[1] for layer in layers),
+            )
+            body = np.zeros((y1 - y0, x1 - x0, 3), np.float32)
+            mask = np.zeros((y1 - y0, x1 - x0), np.float32)
+            for top, left, colour, coverage in layers:
+                rows, cols = (
+                    slice(top - y0, top - y0 + coverage.shape[0]),
+                    slice(left - x0, left - x0 + coverage.shape[1]),
+                )
+                body[rows, cols] += colour
+                mask[rows, cols] += coverage
+            if len(exposure) > 1:
+                body /= np.float32(len(exposure))
+                mask /= np.float32(len(exposure))
             if self.blur > 0:
                 body = cv2.GaussianBlur(body, (0, 0), self.blur, borderType=cv2.BORDER_REPLICATE)
                 mask = cv2.GaussianBlur(mask, (0, 0), self.blur, borderType=cv2.BORDER_REPLICATE)
             image[y0:y1, x0:x1] = body + (1.0 - mask)[..., None] * image[y0:y1, x0:x1]
         if self.noise > 0:
             rng = np.random.default_rng() if rng is None else rng
-            image += (rng.standard_normal(comp.shape, dtype=np.float32) * np.float32(self.noise))[..., None]
+            image += (rng.standard_normal(image.shape[:2], dtype=np.float32) * np.float32(self.noise))[..., None]
         np.clip(image, 0.0, 255.0, out=image)
         return (image + 0.5).astype(np.uint8)
+
+    def _layer(self, poses: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+        """The body at ``poses`` (N, 4, 4) in the box around it padded for the blur: its top row, left
+        column, premultiplied colour (h, w, 3) float32 and coverage (h, w) float32; None when unseen."""
+        comp, shade, depth = self.cast(poses)
+        if self.props_depth is not None:
+            comp = np.where(depth < self.props_depth, comp, -1)
+        rows = np.flatnonzero((comp >= 0).any(axis=1))
+        if not len(rows):
+            return None
+        cols = np.flatnonzero((comp[rows[0] : rows[-1] + 1] >= 0).any(axis=0))
+        pad = int(np.ceil(4.0 * self.blur)) + 1
+        h, w = comp.shape
+        y0, y1 = max(rows[0] - pad, 0), min(rows[-1] + pad + 1, h)
+        x0, x1 = max(cols[0] - pad, 0), min(cols[-1] + pad + 1, w)
+        c = comp[y0:y1, x0:x1]
+        mask: np.ndarray = (c >= 0).astype(np.float32)
+        if self.texture is None:
+            albedo = self.albedo[np.maximum(c, 0)]
+        else:
+            albedo = np.zeros((*c.shape, 3), np.float32)
+            seen = c >= 0
+            points = self._surface_points(poses, c[seen], depth[y0:y1, x0:x1][seen], self.rays[y0:y1, x0:x1][seen])
+            albedo[seen] = 255.0 * paint(self.texture, c[seen], points)
+        body = albedo * (shade[y0:y1, x0:x1].astype(np.float32) * mask)[..., None]
+        return int(y0), int(x0), body, mask
+
+    def _surface_points(self, poses: np.ndarray, comp: np.ndarray, depth: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        """Hit points (M, 3) in their components' frames: component_from_camera (depth (x, y, 1))."""
+        component_from_camera = np.linalg.inv(self.camera.camera_from_world @ poses)[comp]
+        hits = depth[:, None] * np.concatenate([rays, np.ones((len(rays), 1))], axis=1)
+        return np.einsum("mab,mb->ma", component_from_camera[:, 0:3, 0:3], hits) + component_from_camera[:, 0:3, 3]

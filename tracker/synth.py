@@ -2,32 +2,42 @@
 
 Pipeline of :func:`synthesize`::
 
-    motion (BVH clip | procedural)  -> model poses (F, N, 4, 4)          (tracker.clips)
-    per frame and camera            -> ray-cast body over a background   (tracker.render)
-    writers                         -> <cam>.avi (MJPG), calibration.toml, model.toml, init.toml, truth.npz
+    motion (BVH clip | procedural | athletic) -> model poses (F, N, 4, 4)        (tracker.clips)
+    staging: the body that plays them         -> the model itself, or capsules  (tracker.actor)
+    per frame and camera                      -> ray-cast body over a background, props, texture,
+                                                 motion blur                     (tracker.render)
+    writers -> <cam>.avi (MJPG), calibration.toml, model.toml, init.toml, truth.npz
 
-and the camera rigs of ``calib/``.
+and the camera rigs of ``calib/``. :class:`Staging` holds what makes a render unlike the tracking
+model (docs/suite.md); its defaults give the plain render of the model itself.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from tracker import texture as textures
+from tracker.actor import actor_poses, capsule_body
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, save_calibration
-from tracker.clips import procedural_motion, retarget, surface_samples
+from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, surface_samples
 from tracker.errors import TrackerInputError
+from tracker.geometry import se3
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file
-from tracker.model import Model, joint_centres, load_model
-from tracker.render import Renderer, load_backgrounds
+from tracker.model import Model, joint_centres, load_model, model_from_dict
+from tracker.props import Box, cast_boxes
+from tracker.render import Renderer, albedos, load_backgrounds
+from tracker.tomlfile import read_toml
 
 # ---------------------------------------------------------------------------------------------
 # Cameras
@@ -85,13 +95,110 @@ def ring4_rig() -> list[Camera]:
     ]
 
 
+def corner3_rig() -> list[Camera]:
+    """calib/corner3.toml: three 800x600 cameras mounted high (2.4-2.7 m) in the corners of a room, looking
+    down at the body; wider lenses (f = 470-520) with stronger barrel distortion."""
+    return [
+        look_at_camera("cam0", (-3.2, -3.4, 2.6), (0.0, 0.0, 0.8), (800, 600), 500.0, (-0.14, 0.035, 0.0, 0.0)),
+        look_at_camera("cam1", (3.5, -2.9, 2.4), (0.0, 0.0, 0.8), (800, 600), 470.0, (-0.12, 0.03, 0.0, 0.0)),
+        look_at_camera("cam2", (0.6, 4.1, 2.7), (0.0, 0.0, 0.8), (800, 600), 520.0, (-0.15, 0.04, 0.0, 0.0)),
+    ]
+
+
+RIGS = {"demo3": demo3_rig, "ring4": ring4_rig, "corner3": corner3_rig}
+"""The rigs of ``calib/``: file stem -> the function that makes it."""
+
+
 def write_rigs(folder: str | os.PathLike = Path(__file__).resolve().parents[1] / "calib") -> list[Path]:
-    """Write calib/demo3.toml and calib/ring4.toml from :func:`demo3_rig` and :func:`ring4_rig`."""
+    """Write calib/<name>.toml for every rig of :data:`RIGS` (demo3, ring4, corner3)."""
     folder = Path(folder)
-    paths = [folder / "demo3.toml", folder / "ring4.toml"]
-    save_calibration(demo3_rig(), paths[0])
-    save_calibration(ring4_rig(), paths[1])
+    paths = []
+    for name, rig in RIGS.items():
+        paths.append(folder / f"{name}.toml")
+        save_calibration(rig(), paths[-1])
     return paths
+
+
+SCENE_CENTRE = np.array([0.0, 0.0, 0.9])
+"""Where the rigs look and the motions play: the body's middle when it stands at the origin."""
+
+
+def moved_rig(cameras: list[Camera], *, zoom: float = 1.0, distance: float = 1.0) -> list[Camera]:
+    """The cameras with focal lengths x ``zoom`` and each moved back along its optical axis so that its
+    depth d = f . (c_s - c) to :data:`SCENE_CENTRE` c_s becomes ``distance`` d (the body looks ``distance``
+    times smaller); orientation, principal point and distortion unchanged."""
+    out = []
+    for camera in cameras:
+        forward = camera.rotation[2]
+        eye = camera.center - (distance - 1.0) * float(forward @ (SCENE_CENTRE - camera.center)) * forward
+        matrix = camera.matrix.copy()
+        matrix[0:2, 0:2] *= zoom
+        out.append(dataclasses.replace(camera, matrix=matrix, translation=-camera.rotation @ eye))
+    return out
+
+
+TABLE_SIZE = (1.4, 0.6, 0.78)
+"""Width, depth and height of a table, metres."""
+
+
+def table_before(camera: Camera, gap: float = 0.75) -> Box:
+    """A table standing on the floor between ``camera`` and the scene centre, its middle ``gap`` metres
+    from the centre towards the camera (over the floor), its long side across the camera's view."""
+    towards = camera.center[0:2] - SCENE_CENTRE[0:2]
+    towards /= np.linalg.norm(towards)
+    width, depth, height = TABLE_SIZE
+    world_from_box = se3.from_rotvec(
+        (0.0, 0.0, np.arctan2(-towards[0], towards[1])), (*(SCENE_CENTRE[0:2] + gap * towards), height / 2)
+    )
+    return Box(world_from_box, 0.5 * np.array([width, depth, height]))
+
+
+@dataclass(frozen=True)
+class Staging:
+    """What makes a render unlike the tracking model (docs/suite.md); the defaults render the model itself.
+
+    ``texture``: clothing pattern (:data:`tracker.texture.CHOICES`); ``body``: ``model`` or ``capsules``
+    (:mod:`tracker.actor`, sizes within +-``jitter``); ``tables``: camera names (or ``all``) with a table
+    between them and the body; ``zoom`` and ``distance``: :func:`moved_rig`; ``motion_blur``: sub-frames
+    averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.clips.exposure_poses`).
+    """
+
+    texture: str = "none"
+    body: str = "model"
+    jitter: float = 0.1
+    tables: tuple[str, ...] = ()
+    zoom: float = 1.0
+    distance: float = 1.0
+    motion_blur: int = 1
+    shutter: float = 0.5
+
+    def check(self, cameras: list[Camera]) -> None:
+        """Raise TrackerInputError naming the first value out of range, or a table's unknown camera."""
+        names = [c.name for c in cameras]
+        problems = [
+            (self.texture not in textures.CHOICES, f"texture {self.texture!r}: use {', '.join(textures.CHOICES)}"),
+            (self.body not in BODIES, f"body {self.body!r}: use {', '.join(BODIES)}"),
+            (not 0.0 <= self.jitter < 0.5, f"jitter {self.jitter}: give a share in [0, 0.5)"),
+            (not self.zoom > 0.0, f"zoom {self.zoom}: give a positive factor"),
+            (not self.distance > 0.0, f"distance {self.distance}: give a positive factor"),
+            (self.motion_blur < 1, f"motion blur {self.motion_blur}: give at least 1 sub-frame"),
+            (not 0.0 < self.shutter <= 2.0, f"shutter {self.shutter}: give frame intervals in (0, 2]"),
+        ]
+        problems += [
+            (name != "all" and name not in names, f"table before {name!r}: the rig has {', '.join(names)} (or all)")
+            for name in self.tables
+        ]
+        for bad, message in problems:
+            if bad:
+                raise TrackerInputError(f"{message}; fix the synth option")
+
+    def table_cameras(self, cameras: list[Camera]) -> list[Camera]:
+        """The cameras that have a table before them."""
+        return [c for c in cameras if "all" in self.tables or c.name in self.tables]
+
+
+BODIES = ("model", "capsules")
+"""The values of ``tracker synth --body``."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -108,7 +215,7 @@ def motion_poses(
     """Poses (F, N, 4, 4), frame rate and the BVH path (or None) for a motion spec.
 
     ``motion`` is ``"bvh:PATH"`` (retargeted frames start, start + stride, ...;
-    rate = BVH rate / stride) or ``"procedural"`` (at ``fps``).
+    rate = BVH rate / stride), ``"procedural"`` or ``"athletic"`` (at ``fps``, varied by ``seed``).
     """
     if motion.startswith("bvh:"):
         path = Path(motion[4:])
@@ -118,18 +225,34 @@ def motion_poses(
         return poses, float(round(rate)) if abs(rate - round(rate)) < 0.01 else rate, path
     if motion == "procedural":
         return procedural_motion(model, frames, fps, seed), float(fps), None
-    raise TrackerInputError(f"motion {motion!r} is not known; use --motion bvh:PATH/TO/CLIP.bvh or --motion procedural")
+    if motion == "athletic":
+        return athletic_motion(model, frames, fps, seed), float(fps), None
+    raise TrackerInputError(
+        f"motion {motion!r} is not known; use --motion bvh:PATH/TO/CLIP.bvh, procedural or athletic"
+    )
 
 
-def write_truth(path: str | os.PathLike, model: Model, poses: np.ndarray, frame: np.ndarray | None = None) -> None:
-    """truth.npz (formats.md): frame, component_names, poses, joint_names, joints; unicode strings, atomic."""
+def write_truth(
+    path: str | os.PathLike,
+    model: Model,
+    poses: np.ndarray,
+    frame: np.ndarray | None = None,
+    seen: np.ndarray | None = None,
+) -> None:
+    """truth.npz (formats.md): frame, component_names, poses, joint_names, joints; unicode strings, atomic.
+
+    ``seen`` (F, J) bool: joints that no camera sees (False) are written NaN in ``joints``.
+    """
     frame = np.arange(len(poses)) if frame is None else np.asarray(frame)
+    joints = joint_centres(np.asarray(poses, dtype=np.float64))
+    if seen is not None:
+        joints[~seen] = np.nan
     arrays: dict[str, Any] = {  # Any: numpy's savez stub types **kwds like allow_pickle
         "frame": frame.astype(np.int64),
         "component_names": np.array(model.names, dtype=str),
         "poses": np.asarray(poses, dtype=np.float64),
         "joint_names": np.array(model.joint_names, dtype=str),
-        "joints": joint_centres(np.asarray(poses, dtype=np.float64)),
+        "joints": joints,
     }
     atomic_write(path, lambda file: np.savez(file, **arrays))
 
@@ -145,6 +268,8 @@ def _readme(
     model_path: Path,
     start: int,
     stride: int,
+    staging: Staging,
+    seed: int,
 ) -> str:
     lines = [
         f"# Synthetic recording `{name}`",
@@ -160,6 +285,7 @@ def _readme(
         else f"- motion: `{bvh.name}` frames {start}, {start + stride}, ... {start + stride * (frames - 1)} "
         f"(every {stride}),"
         " retargeted onto the model",
+        *_staging_lines(staging, cameras, seed),
         "",
         "## Credits and licences",
         "",
@@ -181,6 +307,32 @@ def _readme(
     return "\n".join(lines)
 
 
+def _staging_lines(staging: Staging, cameras: list[Camera], seed: int) -> list[str]:
+    """The README's lines on what departs from the plain render (none for the default staging)."""
+    lines = []
+    if staging.body == "capsules":
+        lines.append(
+            f"- body: capsules with lengths and radii within +-{100 * staging.jitter:g} % of the model's;"
+            " `truth.npz` holds the rendered body's joints, `model.toml` is the unperturbed model"
+        )
+    if staging.texture != "none":
+        lines.append(f"- clothing texture: {staging.texture}")
+    if staging.tables:
+        names = ", ".join(c.name for c in staging.table_cameras(cameras))
+        lines.append(f"- a table ({' x '.join(f'{v:g}' for v in TABLE_SIZE)} m) before {names}, hiding the legs")
+    if staging.zoom != 1.0:
+        lines.append(f"- rig: focal lengths x {staging.zoom:g} (`calibration.toml` holds the zoomed rig)")
+    if staging.distance != 1.0:
+        lines.append(f"- rig: cameras {staging.distance:g} times as far (`calibration.toml` holds the moved rig)")
+    if staging.motion_blur > 1:
+        lines.append(f"- motion blur: {staging.motion_blur} sub-frames over {staging.shutter:g} frame intervals")
+    if lines:
+        lines.append(
+            f"- seed {seed}; joints that no camera sees (behind a table, outside every image) are NaN in `truth.npz`"
+        )
+    return lines
+
+
 def synthesize(
     model_path: str | os.PathLike,
     calib_path: str | os.PathLike,
@@ -197,23 +349,30 @@ def synthesize(
     noise: float = 3.0,
     blur: float = 0.7,
     progress: bool = True,
+    *,
+    staging: Staging = Staging(),
+    write_init: bool = True,
 ) -> dict:
     """Render a recording folder with ground truth (formats.md, "Recording folder").
 
     Writes ``calibration.toml``, one video per camera ``<cam>.avi`` (``codec``
     MJPG at ``quality``; ``"png"`` writes ``<cam>/000000.png ...`` instead),
-    ``model.toml``, ``init.toml`` (the first frame's truth), ``truth.npz`` and a
-    ``README.md`` with credits.  ``motion``: ``"bvh:PATH"`` (frames start,
-    start + stride, ... of the clip, at the clip's rate / stride) or
-    ``"procedural"`` (at ``fps``, varied by ``seed``).  ``quality`` applies to
+    ``model.toml``, ``init.toml`` (the first frame's truth; ``truth_init.toml``
+    instead when not ``write_init``, so that a tracker must find the start), ``truth.npz``
+    (joints no camera sees are NaN) and a ``README.md`` with credits.  ``motion``:
+    ``"bvh:PATH"`` (frames start, start + stride, ... of the clip, at the clip's rate / stride),
+    ``"procedural"`` or ``"athletic"`` (at ``fps``, varied by ``seed``).  ``quality`` applies to
     MJPG (libjpeg quality, 4:2:0); other OpenCV fourccs (``mp4v``, ``XVID``,
     ``FFV1``) go through ``cv2.VideoWriter``.  ``backgrounds``: image paths (see
     :func:`load_backgrounds`); ``noise`` sigma in grey levels; ``blur`` edge
-    sigma in pixels.  Returns a summary dict: out, frames, fps, cameras, files
-    (name -> bytes), seconds (render, total), render_ms_per_image and in_view
-    (camera -> fraction of frames with the whole body inside the image).
+    sigma in pixels; ``staging``: what departs from the plain render of the model (:class:`Staging`;
+    ``calibration.toml`` holds the rig moved by its zoom and distance, ``model.toml`` is always the
+    model given).  Returns a summary dict: out, frames, fps, cameras, files
+    (name -> bytes), seconds (render, total), render_ms_per_image, in_view
+    (camera -> fraction of frames with the whole body inside the image) and unseen (the share of
+    truth joints no camera sees).
     Raises TrackerInputError for bad inputs (missing BVH or joints, unreadable
-    files, unwritable folder).
+    files, unwritable folder, staging values out of range).
     """
     from tqdm import tqdm
 
@@ -225,10 +384,27 @@ def synthesize(
         raise TrackerInputError(f"frames = {frames}: render at least one frame")
     model = load_model(model_path)
     cameras = load_calibration(calib_path)
+    staging.check(cameras)
+    if staging.zoom != 1.0 or staging.distance != 1.0:
+        cameras = moved_rig(cameras, zoom=staging.zoom, distance=staging.distance)
     poses, rate, bvh_path = motion_poses(model, motion, frames, start, stride, fps, seed)
+    body, shown = model, poses  # the body rendered and its poses
+    if staging.body == "capsules":
+        body = model_from_dict(
+            capsule_body(read_toml(model_path, "model", "pass --model"), staging.jitter, seed), model_path
+        )
+        shown = actor_poses(body, model, poses)
+    props = tuple(table_before(camera) for camera in staging.table_cameras(cameras))
+    texture = (
+        None if staging.texture == "none" else textures.make_texture(staging.texture, body.names, albedos(body), seed)
+    )
+    exposures = exposure_poses(body, shown, staging.motion_blur, staging.shutter) if staging.motion_blur > 1 else None
     ensure_writable_folder(out)
     photos, used = load_backgrounds(cameras, backgrounds, seed)
-    renderers = [Renderer(model, cam, bg, noise=noise, blur=blur) for cam, bg in zip(cameras, photos)]
+    renderers = [
+        Renderer(body, cam, bg, noise=noise, blur=blur, texture=texture, props=props)
+        for cam, bg in zip(cameras, photos)
+    ]
     rng = np.random.default_rng(seed)
 
     writers: list[Path | MjpegAviWriter | cv2.VideoWriter] = []  # a PNG folder or a video writer per camera
@@ -258,7 +434,7 @@ def synthesize(
         for f in tqdm(range(frames), desc=f"synth {out.name}", unit="frame", disable=not progress):
             for renderer, writer in zip(renderers, writers):
                 tick = time.perf_counter()
-                image = renderer.render(poses[f], rng)
+                image = renderer.render(shown[f] if exposures is None else exposures[f], rng)
                 render_seconds += time.perf_counter() - tick
                 if codec == "png":
                     assert isinstance(writer, Path)
@@ -283,13 +459,16 @@ def synthesize(
     model_bytes = model_path.read_bytes()
 
     atomic_write(out / "model.toml", lambda file: file.write(model_bytes))
-    save_pose_file(out / "init.toml", model, poses[0])
-    write_truth(out / "truth.npz", model, poses)
-    text = _readme(out.name, motion, bvh_path, used, frames, rate, cameras, model_path, start, stride).encode()
+    save_pose_file(out / ("init.toml" if write_init else "truth_init.toml"), model, shown[0])
+    seen = seen_joints(joint_centres(shown), cameras, props)
+    write_truth(out / "truth.npz", model, shown, seen=seen)
+    text = _readme(
+        out.name, motion, bvh_path, used, frames, rate, cameras, model_path, start, stride, staging, seed
+    ).encode()
 
     atomic_write(out / "README.md", lambda file: file.write(text))
     files = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file() and not p.name.startswith(".")}
-    in_view = visibility(model, poses, cameras).mean(axis=0)
+    in_view = visibility(body, shown, cameras).mean(axis=0)
     return {
         "out": out,
         "frames": frames,
@@ -299,7 +478,26 @@ def synthesize(
         "seconds": {"render": render_seconds, "total": time.perf_counter() - started},
         "render_ms_per_image": 1e3 * render_seconds / (frames * len(cameras)),
         "in_view": {cam.name: float(v) for cam, v in zip(cameras, in_view)},
+        "unseen": float(1.0 - seen.mean()),
     }
+
+
+def seen_joints(joints: np.ndarray, cameras: list[Camera], props: tuple[Box, ...] = ()) -> np.ndarray:
+    """(F, J) bool: some camera sees joint j in frame f, in front of it, inside its image and not behind a prop."""
+    flat = joints.reshape(-1, 3)
+    seen = np.zeros(len(flat), dtype=bool)
+    for camera in cameras:
+        depth = flat @ camera.rotation[2] + camera.translation[2]
+        ahead = depth > 1e-6
+        inside = np.zeros(len(flat), dtype=bool)
+        pixels = camera.project(flat[ahead])
+        w, h = camera.size
+        inside[ahead] = np.all((pixels >= -0.5) & (pixels <= np.array([w - 0.5, h - 0.5])), axis=1)
+        if props and inside.any():
+            xy = (flat[inside] @ camera.rotation[0:2].T + camera.translation[0:2]) / depth[inside, None]
+            inside[inside] = depth[inside] < cast_boxes(list(props), camera, xy)[0]
+        seen |= inside
+    return seen.reshape(joints.shape[:-1])
 
 
 def visibility(model: Model, poses: np.ndarray, cameras: list[Camera], margin: float = 2.0) -> np.ndarray:

@@ -4,27 +4,78 @@ from __future__ import annotations
 
 import argparse
 
-from tracker.commands.options import positive_int
+from tracker.commands.options import camera_names, positive_float, positive_int
 
 HELP = "render a recording with ground truth from a model, a rig and a motion"
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
-    """The options of ``tracker synth``."""
+    """The options of ``tracker synth``: what to render, and how the render departs from the plain model."""
+    from tracker.texture import CHOICES  # numpy only: cheap at start-up, unlike tracker.synth
+
     parser.add_argument("--model", required=True, help="body model TOML")
     parser.add_argument("--calib", required=True, help="camera rig calibration.toml")
-    parser.add_argument("--motion", required=True, help="bvh:PATH (a BVH clip, retargeted) or procedural")
+    parser.add_argument(
+        "--motion", required=True, help="bvh:PATH (a BVH clip, retargeted), procedural or athletic (hops, kicks, spins)"
+    )
     parser.add_argument("--out", required=True, help="recording folder to write")
     parser.add_argument("--frames", type=positive_int, default=160, help="frames to render (default 160)")
     parser.add_argument("--start", type=int, default=0, help="first BVH frame (default 0)")
     parser.add_argument("--stride", type=positive_int, default=2, help="BVH frames per rendered frame (default 2)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed for noise and backgrounds")
+    parser.add_argument(
+        "--fps", type=positive_float, default=60.0, help="frame rate of procedural and athletic motion (default 60)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed for noise, backgrounds, motion, body, texture")
+    parser.add_argument(
+        "--texture", choices=CHOICES, default="none", help="clothing pattern on the body (default none)"
+    )
+    parser.add_argument(
+        "--body",
+        choices=("model", "capsules"),
+        default="model",
+        help="model: the tracking model itself; capsules: capsule parts of perturbed sizes, the truth then being "
+        "their joints (default model)",
+    )
+    parser.add_argument(
+        "--jitter", type=float, default=0.1, help="capsules: lengths and radii within +-this share (default 0.1)"
+    )
+    parser.add_argument(
+        "--table", metavar="CAMERAS", help="comma-separated cameras (or all) with a table before them hiding the legs"
+    )
+    parser.add_argument(
+        "--zoom", type=positive_float, default=1.0, help="focal lengths x this (> 1 cuts the body at the borders)"
+    )
+    parser.add_argument(
+        "--distance", type=positive_float, default=1.0, help="cameras moved back, this many times as far (default 1)"
+    )
+    parser.add_argument(
+        "--motion-blur", type=positive_int, default=1, help="sub-frame renders averaged per frame (default 1: none)"
+    )
+    parser.add_argument(
+        "--shutter", type=positive_float, default=0.5, help="motion blur's exposure in frame intervals (default 0.5)"
+    )
+    parser.add_argument(
+        "--no-init",
+        action="store_true",
+        help="write the first true pose as truth_init.toml, not init.toml, so that tracking needs --init",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
     """Render the recording folder and say where it is."""
-    from tracker.synth import synthesize
+    from tracker.synth import Staging, synthesize
 
+    staging = Staging(
+        texture=args.texture,
+        body=args.body,
+        jitter=args.jitter,
+        tables=tuple(camera_names(args.table) or ()),
+        zoom=args.zoom,
+        distance=args.distance,
+        motion_blur=args.motion_blur,
+        shutter=args.shutter,
+    )
     synthesize(
         args.model,
         args.calib,
@@ -34,6 +85,10 @@ def run(args: argparse.Namespace) -> int:
         start=args.start,
         stride=args.stride,
         seed=args.seed,
+        fps=args.fps,
+        progress=not args.quiet,
+        staging=staging,
+        write_init=not args.no_init,
     )
     print(f"wrote recording {args.out}")
     return 0

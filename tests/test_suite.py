@@ -1,0 +1,127 @@
+"""The hard suite: its definition covers every hardship, and make / run / score work end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SHARED_DATA, needs_shared
+
+from tracker import suite
+from tracker.cli import main
+from tracker.io.poses import PosesWriter, load_poses
+from tracker.texture import KINDS
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = "turn-6fps-table"  # procedural, ring4 at 640x480: the cheapest render to make in a test
+
+
+def hardships(render: suite.Render) -> set[str]:
+    """What the render departs from a plain 60 fps render of the model by."""
+    staging = render.staging
+    found = {staging.texture} - {"none"}
+    found |= {"capsules"} if staging.body == "capsules" else set()
+    found |= {"table"} if staging.tables else set()
+    found |= {"border"} if staging.zoom > 1.0 else set()
+    found |= {"far"} if staging.distance > 1.0 else set()
+    found |= {"motion blur"} if staging.motion_blur > 1 else set()
+    found |= {"30 fps"} if render.rate == 30.0 else {"low fps"} if 6.0 <= render.rate <= 10.0 else set()
+    found |= {"athletic"} if render.motion == "athletic" else set()
+    return found
+
+
+def test_the_suite_covers_clips_motions_rigs_and_every_hardship():
+    renders = suite.SUITE
+    assert len(renders) >= 8 and len({r.name for r in renders}) == len(renders)
+    assert {r.motion for r in renders} == {"131_01.bvh", "131_02.bvh", "procedural", "athletic"}
+    assert {r.rig for r in renders} == {"demo3", "ring4", "corner3"}
+    assert all((ROOT / "calib" / f"{r.rig}.toml").is_file() for r in renders)
+    every = {*KINDS, "mixed", "capsules", "table", "border", "far", "motion blur", "30 fps", "low fps", "athletic"}
+    assert set().union(*map(hardships, renders)) == every
+    assert all(len(hardships(r)) >= 2 for r in renders)  # each combines a few
+    assert all(60 <= r.frames <= 120 for r in renders)
+    clips = [r for r in renders if r.motion in suite.CLIPS]
+    assert all(r.start + r.stride * (r.frames - 1) < {"131_01.bvh": 994, "131_02.bvh": 1247}[r.motion] for r in clips)
+
+
+def _write_poses(path: Path, truth: dict, shift: float) -> None:
+    """A poses.npz of the true poses with every joint moved ``shift`` metres along x."""
+    with PosesWriter(path, list(truth["component_names"]), list(truth["joint_names"]), 6.0) as writer:
+        for frame, poses in zip(truth["frame"], truth["poses"]):
+            joints = poses[:, 0:3, 3] + [shift, 0.0, 0.0]
+            writer.append(int(frame), poses, joints, 0, 0.5)
+
+
+def test_make_then_score_known_errors(tmp_path, capsys):
+    out, results = tmp_path / "suite", tmp_path / "results"
+    assert main(["suite", "make", str(out), "--only", SMALL, "--frames", "3", "--quiet"]) == 0
+    folder = out / SMALL
+    assert {"calibration.toml", "model.toml", "truth.npz", "truth_init.toml", "README.md"} <= {
+        p.name for p in folder.iterdir()
+    }
+    assert not (folder / "init.toml").exists()  # the tracker must find the start itself
+    assert sorted(p.name for p in folder.glob("*.avi")) == ["cam0.avi", "cam1.avi", "cam2.avi", "cam3.avi"]
+    truth = load_poses(folder / "truth.npz")
+    assert len(truth["frame"]) == 3
+    capsys.readouterr()
+    for shift, mpjpe, pck in ((0.0, 0.0, 1.0), (0.03, 30.0, 1.0), (0.07, 70.0, 0.0)):
+        _write_poses(results / SMALL / "poses.npz", truth, shift)
+        assert main(["suite", "score", str(out), str(results), "--json"]) == 0
+        scores = json.loads(capsys.readouterr().out)
+        row = scores["renders"][0]
+        assert row["name"] == SMALL and row["frames"] == 3 and row["lost_frames"] == 0 and row["fps"] == 6.0
+        assert row["mpjpe_mm"] == pytest.approx(mpjpe, abs=1e-3)
+        assert row["pa_mpjpe_mm"] == pytest.approx(0.0, abs=1e-3)  # a shift, aligned away
+        assert row["pck"] == pck and scores["worst_pck"] == pck and scores["mean_mpjpe_mm"] == row["mpjpe_mm"]
+    assert main(["suite", "score", str(out), str(results)]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[1].split()[:5] == [SMALL, "ring4", "6", "70.0", "0.0"]
+
+
+def test_run_tracks_with_the_options_given(tmp_path, capsys):
+    out, results = tmp_path / "suite", tmp_path / "results"
+    assert main(["suite", "make", str(out), "--only", SMALL, "--frames", "2", "--quiet"]) == 0
+    # no init.toml: tracker track refuses, and run says so in one line naming the log
+    assert main(["suite", "run", "--quiet", str(out), str(tmp_path / "refused")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--init" in err[0] and "track.log" in err[0]
+    assert "no init.toml" in (tmp_path / "refused" / SMALL / "track.log").read_text()
+    assert (
+        main(["suite", "run", "--quiet", "--json", str(out), str(results), "--", "--init", "{rec}/truth_init.toml"])
+        == 0
+    )
+    row = json.loads(capsys.readouterr().out)["renders"][0]
+    assert row["frames"] == 2 and row["lost_frames"] == 0 and row["mpjpe_mm"] < 50.0  # from the true start
+    assert len(load_poses(results / SMALL / "poses.npz")["frame"]) == 2
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["suite", "score", "{out}", "{tmp}/no-results"],  # results folder missing
+        ["suite", "score", "{tmp}/no-suite", "{tmp}"],  # suite folder missing
+        ["suite", "score", "{out}", "{tmp}", "--only", "kick-spin-blur"],  # a render not made
+        ["suite", "make", "{tmp}/x", "--only", "no-such-render"],
+        ["suite", "make", "{tmp}/x", "--only", "far-walk"],  # a CMU render without --clips
+        ["suite", "run", "{out}", "{tmp}/r", "--json", "--", "--init", "x"],  # suite option after RESULTS
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv):
+    out = tmp_path / "suite"
+    (out / SMALL).mkdir(parents=True)
+    np.savez(out / SMALL / "truth.npz", joint_names=np.array(["pelvis"]), joints=np.zeros((1, 1, 3)))
+    (tmp_path / "empty").mkdir()
+    words = [w.replace("{out}", str(out)).replace("{tmp}", str(tmp_path)) for w in argv]
+    assert main(words) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tracker: error: ") and "Traceback" not in err[0]
+
+
+@needs_shared("cmu-mocap", "131_01.bvh")
+def test_cmu_renders_make_from_the_clips(tmp_path):
+    names = ["webcam-8fps", "walk-capsules-stripes"]
+    summaries = suite.make(tmp_path, suite.select(names), clips=SHARED_DATA / "cmu-mocap", frames=2, progress=False)
+    assert [s["fps"] for s in summaries] == [30.0, 8.0]  # in suite order
+    assert [len(load_poses(tmp_path / name / "truth.npz")["frame"]) for name in names] == [2, 2]

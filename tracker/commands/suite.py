@@ -1,0 +1,111 @@
+"""``tracker suite``: make the hard suite of renders, track it, and score it (docs/suite.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from tracker.commands import options
+from tracker.errors import TrackerInputError
+
+HELP = "make, track and score the hard suite of renders unlike the model"
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The actions of ``tracker suite``: make, score and run."""
+    actions = parser.add_subparsers(dest="action", required=True)
+    make = actions.add_parser("make", help="render every render of the suite into OUT/<name>/")
+    make.add_argument("out", help="folder for the renders")
+    _only(make)
+    make.add_argument("--clips", metavar="DIR", help="folder holding the CMU clips 131_01.bvh and 131_02.bvh")
+    make.add_argument("--frames", type=options.positive_int, help="render only the first N frames of each")
+    make.add_argument("--quiet", action="store_true", help="no progress bar")
+    score = actions.add_parser("score", help="score RESULTS/<name>/poses.npz against OUT/<name>/truth.npz")
+    score.add_argument("out", help="folder of the renders")
+    score.add_argument("results", help="folder of the tracked results, RESULTS/<name>/poses.npz")
+    _only(score)
+    score.add_argument("--json", action="store_true", help="print the scores as JSON")
+    run = actions.add_parser(
+        "run",
+        help="track every render (tracker track OUT/<name> --out RESULTS/<name> TRACK OPTIONS), then score",
+        usage="tracker suite run [--only NAMES] [--json] [--quiet] OUT RESULTS [-- TRACK OPTIONS]",
+    )
+    _only(run)
+    run.add_argument("--json", action="store_true", help="print the scores as JSON")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("out", help="folder of the renders")
+    run.add_argument("results", help="folder for the tracked results")
+    run.add_argument(
+        "track",
+        nargs=argparse.REMAINDER,
+        help="after --: options for tracker track; {rec} is replaced by OUT/<name> "
+        "(e.g. -- --init {rec}/truth_init.toml)",
+    )
+
+
+def _only(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--only", metavar="NAMES", help="comma-separated renders of the suite (default: all)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Do the action."""
+    return {"make": _make, "score": _score, "run": _run}[args.action](args)
+
+
+def _make(args: argparse.Namespace) -> int:
+    from tracker.suite import make, select
+
+    renders = select(options.camera_names(args.only))
+    started = time.perf_counter()
+    summaries = make(args.out, renders, clips=args.clips, frames=args.frames, progress=not args.quiet)
+    for render, done in zip(renders, summaries):
+        print(
+            f"{render.name}: {render.rig}, {done['frames']} frames at {done['fps']:g} fps, "
+            f"{done['seconds']['total']:.0f} s; {render.hard}"
+        )
+    print(f"wrote {len(renders)} renders into {args.out} in {time.perf_counter() - started:.0f} s")
+    return 0
+
+
+def _score(args: argparse.Namespace) -> int:
+    from tracker.suite import format_summary, made, score, summary
+
+    data = summary(score(args.out, args.results, made(args.out, options.camera_names(args.only))))
+    print(json.dumps(data, indent=2) if args.json else format_summary(data))
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    from tracker.suite import format_summary, made, score, summary
+
+    extra = list(args.track)  # argparse drops the "--" right after RESULTS; one further on follows misplaced options
+    if "--" in extra:
+        misplaced = " ".join(extra[: extra.index("--")])
+        raise TrackerInputError(f"{misplaced}: give the suite's options before OUT, and tracker track's after --")
+    renders = made(args.out, options.camera_names(args.only))
+    for render in options.bar(args, "suite run", "render", leave=True)(renders):
+        _track(Path(args.out) / render.name, Path(args.results) / render.name, extra)
+    data = summary(score(args.out, args.results, renders))
+    print(json.dumps(data, indent=2) if args.json else format_summary(data))
+    return 0
+
+
+def _track(recording: Path, results: Path, extra: list[str]) -> None:
+    """Run ``tracker track recording --out results --quiet extra`` ({rec} in ``extra`` -> ``recording``) in a
+    child process, its output kept in results/track.log; a failure is a one-line error naming the log."""
+    from tracker.atomic import atomic_write
+
+    results.mkdir(parents=True, exist_ok=True)
+    command = [sys.executable, "-m", "tracker.cli", "track", str(recording), "--out", str(results), "--quiet"]
+    command += [word.replace("{rec}", str(recording)) for word in extra]
+    done = subprocess.run(command, capture_output=True, text=True)
+    log = results / "track.log"
+    text = f"$ {' '.join(command)}\n{done.stdout}{done.stderr}".encode()
+    atomic_write(log, lambda file: file.write(text))
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise TrackerInputError(f"{recording.name}: tracker track exited with {done.returncode} ({last}); see {log}")
