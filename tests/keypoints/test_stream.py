@@ -3,6 +3,7 @@ reused, and a cache of another recording is refused; `tracker track --keypoints`
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -51,9 +52,13 @@ def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
     recording = open_recording(DEMO)
     cache = tmp_path / "keypoints.npz"
     keypoints = detect_recording(recording, 0, 1)[0]
-    save_keypoints(cache, keypoints.__class__(**{**keypoints.__dict__, "recording": "cam0=1:0 cam1=1:0 cam2=1:0"}))
+    save_keypoints(cache, dataclasses.replace(keypoints, recording="cam0=1:0 cam1=1:0 cam2=1:0"))
     message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache))
     assert str(cache) in message and "another recording" in message and "delete it" in message
+    other = dataclasses.replace(keypoints, detector="mediapipe 0.9 pose_landmark_lite")
+    save_keypoints(cache, other)
+    message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache))
+    assert "made by another detector (mediapipe 0.9 pose_landmark_lite" in message and "delete it" in message
 
 
 def test_track_fuses_the_keypoints_and_reuses_them(tmp_path, capsys):
