@@ -63,7 +63,7 @@ def demo_frame():
     return model, rig, component, point, pairs, poses, pixels
 
 
-def _add(model, rig, component, point, pairs, poses, pixels, confidence, tolerance=0.0):
+def _add(model, rig, component, point, pairs, poses, pixels, confidence, tolerance=0.0, reach=np.inf):
     information = np.zeros((model.size, 6, 6))
     eta = np.zeros((model.size, 6))
     counts = keypoint_kernel(
@@ -79,9 +79,11 @@ def _add(model, rig, component, point, pairs, poses, pixels, confidence, toleran
         0.5,
         2.0,
         1.0,
-        tolerance,
+        np.full(len(LANDMARKS), tolerance),
+        reach,
         information,
         eta,
+        np.zeros(pixels.shape[:2]),
     )
     return counts, information, eta
 
@@ -127,6 +129,10 @@ def test_landmarks_within_the_detector_noise_are_not_used_and_further_ones_pull_
     w = (2.0 / 3.0) / (2.0 + 2.0 * radius)
     np.testing.assert_allclose(information[shin], w * jacobian.T @ jacobian, rtol=1e-9)
     np.testing.assert_allclose(eta[shin], w * jacobian.T @ np.array([3.0 * radius, 0.0]), rtol=1e-9, atol=1e-12)
+    # beyond the reach the pull fades: the same landmark with reach 0.05 of the body's size
+    (used, _), faded, _ = _add(model, rig, component, point, pairs, poses, far, confidence, 0.03, 0.05)
+    fade = 1.0 + (2.0 * radius / (0.05 * extent[0])) ** 2
+    np.testing.assert_allclose(faded[shin], w / fade * jacobian.T @ jacobian, rtol=1e-9)
 
 
 def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
@@ -169,3 +175,14 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
     alone, fused = mpjpe(False), mpjpe(True)
     assert alone[:10].mean() > 100.0
     assert fused[10:].max() < 10.0 and fused[:10].mean() < 50.0, fused.round(1)
+
+
+def test_each_landmark_zone_is_learnt_from_its_misfits():
+    from tracker.keypoint_cue import learnt_tolerance
+
+    history = np.full((30, 4), np.nan)
+    history[:10, 0] = 0.01  # a close landmark: the floor
+    history[:10, 1] = np.linspace(0.04, 0.06, 10)  # median 0.05: twice that
+    history[:10, 2] = 0.5  # far off: the ceiling
+    history[:3, 3] = 0.1  # seen too rarely: the floor
+    np.testing.assert_allclose(learnt_tolerance(history, 0.03, 2.0, 0.15, 5), [0.03, 0.10, 0.15, 0.03])

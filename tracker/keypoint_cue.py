@@ -9,13 +9,15 @@ component's body twist, the same chain as an outline sample's row (docs/method-t
 
 the residual ``r = d - u`` adds, per component, summed over landmarks and cameras,
 
-    C_i += w J^T J,   eta_i += w J^T r,   w = s q (e / |r|) / (c + e),   e = |r| - t
+    C_i += w J^T J,   eta_i += w J^T r,   w = s q (e / |r|) / ((c + e) (1 + (e / a)^2)),   e = |r| - t
 
 where ``q`` is the detection's confidence, ``c`` the robust constant (IRLS, as the edges), ``s``
 the cue's weight against the edges and ``t`` the detector's noise in that image (a share of the
 predicted body's size there): a landmark within ``t`` of its prediction is not used (e <= 0), so a
-detector's few pixels of scatter and bias never pull against the edges, while a body that has
-drifted off is pulled back by the excess.  So one tree solve fuses both cues.  Left/right swaps are
+detector's scatter and bias never pull against the edges, while a body that has drifted off is
+pulled back by the excess.  So one tree solve fuses both cues.  The noise is learnt per landmark
+(:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
+edges hold it, for this detector on this subject.  Left/right swaps are
 rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
 predicted images better the other way round (summed distance), neither is used in that camera.
 """
@@ -93,6 +95,18 @@ def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarra
     return component, np.zeros((len(landmarks), 3)), np.array(pairs, np.int64).reshape(-1, 2)
 
 
+def learnt_tolerance(history: np.ndarray, floor: float, multiple: float, ceiling: float, least: int) -> np.ndarray:
+    """Each landmark's noise zone (K,), a share of the body's image size: ``multiple`` times the median of its
+    recent misfits ``history`` (W, K) (NaN: not seen), between ``floor`` and ``ceiling``; ``floor`` for a
+    landmark seen fewer than ``least`` times."""
+    seen = np.isfinite(history).sum(axis=0)
+    typical = np.full(history.shape[1], floor)
+    known = seen >= least
+    if known.any():
+        typical[known] = multiple * np.nanmedian(history[:, known], axis=0)
+    return np.clip(typical, floor, ceiling)
+
+
 @njit(cache=True)
 def project_point(k_mat, dist, camera_from_component, point):
     """Recorded pixel (2,) of ``point`` (3,) of a component and its Jacobian (2, 6) with respect to the
@@ -133,19 +147,24 @@ def keypoint_kernel(
     robust_c,
     scale,
     tolerance,
+    reach,
     information,
     eta,
+    misfit,
 ):
     """Add every usable landmark's w J^T J and w J^T r to ``information`` (N, 6, 6) and ``eta`` (N, 6).
 
     ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's detections; a landmark is used when
     its component is >= 0, its confidence at least ``min_confidence``, its pixel finite, and it is not
     half of a left/right pair of ``pairs`` (P, 2) that fits better swapped.  Each residual is shrunk by
-    the detector's noise, ``tolerance`` times the predicted body's size in that image (the diagonal of
-    its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
-    excess e = |r| - radius, w = s q (e / |r|) / (c + e), so its pull grows from zero at the zone's
-    edge.  Returns (landmarks used, pairs rejected)."""
+    the detector's noise, ``tolerance`` (K,) times the predicted body's size in that image (the diagonal
+    of its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
+    excess e = |r| - radius, w = s q (e / |r|) / ((c + e) (1 + (e / (reach size))^2)), so its pull grows
+    from zero at the zone's edge and fades again beyond ``reach`` times the body's size (a wrong
+    detection, or a body that far off, is left to the recovery).  ``misfit`` (C, K) receives |r| over the
+    body's size for every usable landmark, NaN for the others.  Returns (landmarks used, pairs rejected)."""
     cameras, count = pixels.shape[0], pixels.shape[1]
+    misfit[:] = np.nan
     used = 0
     rejected = 0
     predicted = np.full((count, 2), np.nan)
@@ -171,7 +190,7 @@ def keypoint_kernel(
                 and np.isfinite(pixels[k, j, 1])
                 and np.isfinite(predicted[j, 0])
             )
-        radius = tolerance * np.sqrt(((high - low) ** 2).sum()) if high[0] >= low[0] else 0.0
+        size = np.sqrt(((high - low) ** 2).sum()) if high[0] >= low[0] else 0.0
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
             if usable[a] and usable[b]:
@@ -185,11 +204,15 @@ def keypoint_kernel(
                 continue
             r = pixels[k, j] - predicted[j]
             length = np.sqrt(r[0] * r[0] + r[1] * r[1])
+            if size > 0.0:
+                misfit[k, j] = length / size
+            radius = tolerance[j] * size
             excess = length - radius
             if radius > 0.0 and excess <= 0.0:
                 continue
             share = excess / length if radius > 0.0 else 1.0
-            w = scale * confidence[k, j] * share / (robust_c + excess)
+            fade = excess / (reach * size) if size > 0.0 else 0.0
+            w = scale * confidence[k, j] * share / ((robust_c + excess) * (1.0 + fade * fade))
             jac = jacobians[j]
             information[component[j]] += w * (jac.T @ jac)
             eta[component[j]] += w * (jac.T @ r)

@@ -31,7 +31,7 @@ from numba import njit
 from tracker import motion_prior
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
-from tracker.keypoint_cue import LANDMARKS, keypoint_kernel, landmark_points
+from tracker.keypoint_cue import LANDMARKS, keypoint_kernel, landmark_points, learnt_tolerance
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
 from tracker.outline import Placed, Rig, Samples, sample_outlines
@@ -39,6 +39,8 @@ from tracker.ownership import Ownership
 from tracker.status import LOST, TRACKED, UNCERTAIN
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
+NOISE_WINDOW = 30  # tracked frames whose landmark misfits set the keypoints' noise zones
+NOISE_LEAST = 5  # misfits a landmark needs before its zone is learnt
 
 
 @dataclass(frozen=True)
@@ -75,9 +77,12 @@ class Settings:
     ownership: bool = True  # cut each search half way to the next predicted edge of another boundary
     reference_size: int = 480  # the pixel settings above are for images this many pixels on their short side
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
-    keypoint_weight: float = 1.0  # s: a landmark's weight against an edge sample's (tracker.keypoint_cue)
+    keypoint_weight: float = 3.0  # s: a landmark's weight against an edge sample's (tracker.keypoint_cue)
     keypoint_confidence: float = 0.5  # landmarks less confident than this are not used
     keypoint_tolerance: float = 0.03  # detector noise, a share of the body's image size: closer landmarks unused
+    keypoint_noise_multiple: float = 2.0  # each landmark's zone grows to this many times its median misfit (0: fixed)
+    keypoint_tolerance_max: float = 0.15  # ... but no further: a body that far off is pulled back
+    keypoint_reach: float = 0.1  # a landmark's pull fades beyond this share of the body's size past its zone
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
 
 
@@ -268,14 +273,21 @@ class Tracker:
         self.times = StageTimes()
         self.landmarks = landmark_points(model, LANDMARKS)
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
+        self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
+        self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark
+        self.misfit_row = 0
+        self.tolerance = np.full(len(LANDMARKS), settings.keypoint_tolerance)
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
         settings, from the current poses, with the previous frame's poses (constant velocity) and the motion
-        filter's state and noise scales (kalman); buffers and timings start afresh."""
+        filter's state and noise scales (kalman) and the keypoints' learnt noise; buffers and timings start
+        afresh."""
         other = Tracker(self.model, cameras, self.poses, self.settings)
         other.previous = self.previous
         other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
+        other.landmarks, other.misfits, other.misfit_row = self.landmarks, self.misfits.copy(), self.misfit_row
+        other.tolerance = self.tolerance.copy()
         return other
 
     def restart(self, poses: np.ndarray) -> None:
@@ -455,9 +467,11 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
-            st.keypoint_tolerance,
+            self.tolerance,
+            st.keypoint_reach,
             self.information,
             self.eta,
+            self.misfit,
         )
 
     def step(
@@ -491,7 +505,27 @@ class Tracker:
             self.correct_kalman(inverse)
         self.previous = current
         share = stats.found / stats.visible if stats.visible else 0.0
-        return FrameResult(self.poses.copy(), self.status(share, stats.residual), stats.residual, share, stats.visible)
+        status = self.status(share, stats.residual)
+        if self.keypoints is not None and status == TRACKED:
+            self.learn_keypoint_noise()
+        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
+
+    def learn_keypoint_noise(self) -> None:
+        """Add the frame's landmark misfits (the median over the cameras) to the recent ones and set each
+        landmark's noise zone from them (:func:`tracker.keypoint_cue.learnt_tolerance`); called for frames
+        whose edges held the body."""
+        st = self.settings
+        if st.keypoint_noise_multiple <= 0:
+            return
+        seen = np.isfinite(self.misfit)
+        frame = np.full(self.misfit.shape[1], np.nan)
+        for j in np.flatnonzero(seen.any(axis=0)):
+            frame[j] = np.median(self.misfit[seen[:, j], j])
+        self.misfits[self.misfit_row % NOISE_WINDOW] = frame
+        self.misfit_row += 1
+        self.tolerance = learnt_tolerance(
+            self.misfits, st.keypoint_tolerance, st.keypoint_noise_multiple, st.keypoint_tolerance_max, NOISE_LEAST
+        )
 
     def predict_kalman(self, dt: float) -> np.ndarray:
         """Predict every component ``dt`` ahead independently (:func:`tracker.motion_prior.predict`), coerce the
