@@ -1,0 +1,265 @@
+"""World points of the landmarks over a recording's first frames, with left and right told by the body
+(docs/keypoints.md, "Automatic first pose").
+
+Per frame, each landmark, and each left/right pair with every view free to read it either way round, is
+triangulated from the views that agree (:func:`tracker.keypoints.consistency.readings`).  Two views alone
+cannot always tell a swap: when the pair lies along their epipolar lines, both readings triangulate, to
+points at different depths.  Of the readings that most detections agree with, the one whose distances
+to the landmarks already placed fit the model's (:func:`tracker.keypoints.anchors.rigid_distances`: the
+shoulders' width, an upper arm's length) is kept: first the pairs that lie across the body (hips,
+shoulders, ears, eyes) and the single landmarks, then each limb's pairs from the trunk outwards.  The
+pairs across the body are labelled by the person's left (:func:`body_left`); a limb's pair is labelled
+with the distances to the pair it hangs on.  Per landmark, the median over the frames is its point: the
+body moves little in a few frames, while one frame's detections may be swapped or missing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tracker.camera import Camera
+from tracker.keypoint_cue import LANDMARKS, left_right_pairs
+from tracker.keypoints.anchors import reach, rigid_distances
+from tracker.keypoints.consistency import GATE, Reading, readings, undistorted
+from tracker.keypoints.store import Keypoints
+from tracker.model import Model
+
+LATERAL = ("hip", "shoulder", "ear", "eye_inner", "eye", "eye_outer")
+"""Pairs that lie across the body, labelled by the side they lie on."""
+
+LIMB = {
+    "elbow": "shoulder",
+    "wrist": "elbow",
+    "pinky": "wrist",
+    "index": "wrist",
+    "thumb": "wrist",
+    "knee": "hip",
+    "ankle": "knee",
+    "heel": "ankle",
+    "foot_index": "ankle",
+}
+"""A limb's pairs (parents first) and the pair each hangs on."""
+
+
+PERSON_SHARE = 0.5
+"""A view whose detections agree with the other views' less often than this follows someone else in that
+frame: none of its detections is used."""
+
+REACH_SCALE, REACH_SLACK = 1.2, 0.1
+"""Two landmarks may lie up to 1.2 times the model's reach between them, plus 10 cm, apart: the person may be
+larger than the model, and two views' points a few centimetres off."""
+
+
+@dataclass(frozen=True)
+class Triangulated:
+    """World points of the landmarks: ``points`` (33, 3) metres (NaN where no two views agreed in any frame
+    used), ``views`` (33,) int, the median number of views that agreed on each, ``frames`` (F,), the keypoint
+    frames used, and which detections ``agree`` (F, C, 33) bool with that frame's points (:func:`agreeing`)."""
+
+    points: np.ndarray
+    views: np.ndarray
+    frames: np.ndarray
+    agree: np.ndarray
+
+
+def triangulated(
+    keypoints: Keypoints,
+    cameras: list[Camera],
+    model: Model,
+    *,
+    frames: int,
+    min_confidence: float = 0.5,
+    gate: float = GATE,
+) -> Triangulated:
+    """The landmarks' world points over the first ``frames`` frames of ``keypoints`` (in ``cameras``) that show
+    a person in two views or more (detections at least ``min_confidence``), views agreeing within ``gate`` of
+    the image's short side; a swap told by the distances of ``model``."""
+    usable = (keypoints.confidence[:frames] >= min_confidence) & np.isfinite(keypoints.pixels[:frames]).all(axis=3)
+    rows = np.flatnonzero(usable.any(axis=2).sum(axis=1) >= 2)
+    pixels = np.where(usable[rows, ..., None], keypoints.pixels[rows], np.nan)
+    normalised = undistorted(pixels, cameras)
+    limits = np.array([gate * min(camera.size) for camera in cameras])
+    distances, farthest = rigid_distances(model), REACH_SCALE * reach(model) + REACH_SLACK
+    points = np.full((len(rows), len(LANDMARKS), 3), np.nan)
+    views = np.zeros((len(rows), len(LANDMARKS)), np.int64)
+    agree = np.zeros(pixels.shape[:3], bool)
+    for row in range(len(rows)):
+        points[row], views[row] = frame_points(cameras, pixels[row], normalised[row], limits, distances, farthest)
+        points[row] = within_reach(points[row], farthest)
+        views[row][np.isnan(points[row]).any(axis=1)] = 0
+        agree[row] = agreeing(cameras, pixels[row], points[row], limits)
+    points = aligned(points)
+    seen = np.isfinite(points).all(axis=2)
+    median = np.full((len(LANDMARKS), 3), np.nan)
+    support = np.zeros(len(LANDMARKS), np.int64)
+    for j in np.flatnonzero(seen.any(axis=0)):
+        median[j] = np.median(points[seen[:, j], j], axis=0)
+        support[j] = round(float(np.median(views[seen[:, j], j])))
+    return Triangulated(median, support, keypoints.frame[rows], agree)
+
+
+def agreeing(cameras: list[Camera], pixels: np.ndarray, points: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """Which detections (C, 33) bool of one frame, ``pixels`` (C, 33, 2), lie within ``limits`` (C,) pixels of
+    the image of their landmark's world point, or of its left/right partner's (a view may read a pair
+    swapped), among ``points`` (33, 3)."""
+    partner = np.arange(len(LANDMARKS))
+    pairs = left_right_pairs(LANDMARKS)
+    partner[pairs[:, 0]], partner[pairs[:, 1]] = pairs[:, 1], pairs[:, 0]
+    known = np.isfinite(points).all(axis=1)
+    out = np.zeros(pixels.shape[:2], bool)
+    for k, camera in enumerate(cameras):
+        projected = np.full((len(LANDMARKS), 2), np.nan)
+        projected[known] = camera.project(points[known])
+        distance = np.fmin(
+            np.linalg.norm(pixels[k] - projected, axis=1), np.linalg.norm(pixels[k] - projected[partner], axis=1)
+        )
+        out[k] = distance < limits[k]
+    return out
+
+
+def aligned(points: np.ndarray) -> np.ndarray:
+    """World points (F, 33, 3) of F frames with each left/right pair labelled as in the frames before: swapped in
+    a frame where the other labelling lies nearer (summed distance) to the pair's first known points."""
+    out = points.copy()
+    for pair in left_right_pairs(LANDMARKS):
+        reference = np.full((2, 3), np.nan)
+        for frame in out:
+            straight = np.linalg.norm(frame[pair] - reference, axis=1)
+            crossed = np.linalg.norm(frame[pair[::-1]] - reference, axis=1)
+            if np.nansum(crossed) < np.nansum(straight):
+                frame[pair] = frame[pair[::-1]]
+            reference = np.where(np.isnan(reference), frame[pair], reference)
+    return out
+
+
+def _index(name: str) -> int:
+    return LANDMARKS.index(name)
+
+
+def _pair(part: str) -> list[int]:
+    return [_index(f"left_{part}"), _index(f"right_{part}")]
+
+
+def frame_points(
+    cameras: list[Camera],
+    pixels: np.ndarray,
+    normalised: np.ndarray,
+    limits: np.ndarray,
+    distances: np.ndarray,
+    farthest: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's world points (33, 3) of the landmarks (NaN: fewer than two views agree) and how many views
+    agreed on each (33,), from ``pixels`` (C, 33, 2) (NaN: not usable), the same ``normalised``, agreement
+    ``limits`` (C,) pixels, the model's rigid ``distances`` (33, 33) and the ``farthest`` two landmarks may
+    lie apart (33, 33) (module docstring)."""
+    paired = left_right_pairs(LANDMARKS)
+    lateral = [_pair(part) for part in LATERAL]
+    limbs = [_pair(part) for part in LIMB]
+    singles = [[j] for j in range(len(LANDMARKS)) if j not in paired]
+    found = {
+        tuple(group): readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
+        for group in lateral + limbs + singles
+    }
+    agreeing = sum((options[0].agree.sum(axis=1) for options in found.values() if options), np.zeros(len(cameras)))
+    stray = agreeing < PERSON_SHARE * np.isfinite(pixels).all(axis=2).sum(axis=1)
+    if stray.any():
+        pixels, normalised = pixels.copy(), normalised.copy()
+        pixels[stray], normalised[stray] = np.nan, np.nan
+        found = {
+            group: readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
+            for group in found
+        }
+    points = np.full((len(LANDMARKS), 3), np.nan)
+    views = np.zeros(len(LANDMARKS), np.int64)
+
+    def place(group: list[int], swaps: bool) -> None:
+        if found[tuple(group)]:
+            chosen = _choose(found[tuple(group)], distances, farthest, points, group, swaps=swaps)
+            points[group], views[group] = chosen.points, chosen.agree.sum(axis=0)
+
+    for group in lateral + singles:
+        place(group, swaps=False)
+    first = np.full((len(LANDMARKS), 3), np.nan)
+    for group, options in found.items():
+        if options:
+            first[list(group)] = options[0].points
+    left = body_left(np.where(np.isfinite(points), points, first))
+    for group in lateral:
+        if left is not None and (points[group[0]] - points[group[1]]) @ left < 0:
+            points[group], views[group] = points[group[::-1]], views[group[::-1]]
+    for group in limbs:
+        place(group, swaps=True)
+        if left is not None and (points[group[0]] - points[group[1]]) @ left < 0:
+            points[group], views[group] = points[group[::-1]], views[group[::-1]]
+    return points, views
+
+
+def _choose(
+    found: list[Reading],
+    distances: np.ndarray,
+    farthest: np.ndarray,
+    points: np.ndarray,
+    group: list[int],
+    *,
+    swaps: bool,
+) -> Reading:
+    """Of the readings ``found`` of landmarks ``group`` that most detections agree with (and, with ``swaps``, of
+    each labelled either way round), the one whose distances to each other and to the ``points`` placed so far
+    fit the body best: the least sum of squared differences from the rigid ``distances`` and of squared
+    excesses over the ``farthest`` apart they can lie (the first among equals)."""
+    most = int(found[0].agree.sum())
+    options = [reading for reading in found if int(reading.agree.sum()) == most]
+    if swaps:
+        options += [Reading(r.points[::-1], ~r.swapped, r.agree[:, ::-1], r.distance) for r in options]
+    placed = points.copy()
+
+    def misfit(reading: Reading) -> float:
+        placed[group] = reading.points
+        apart = np.linalg.norm(placed[group, None] - placed[None], axis=2)
+        return float(
+            np.nansum((apart - distances[group]) ** 2) + np.nansum(np.maximum(apart - farthest[group], 0) ** 2)
+        )
+
+    return min(options, key=misfit)
+
+
+def within_reach(points: np.ndarray, farthest: np.ndarray) -> np.ndarray:
+    """World points (33, 3) without the landmarks that lie farther from others than ``farthest`` (33, 33)
+    allows: from the hips outwards (in the order of ``farthest`` from the nearer hip), each known point is kept
+    when it lies within reach of every one kept before it, else becomes NaN."""
+    out = np.full_like(points, np.nan)
+    order = np.argsort(farthest[_pair("hip")].min(axis=0), kind="stable")
+    for j in order:
+        kept = np.isfinite(out).all(axis=1)
+        if np.all(np.linalg.norm(out[kept] - points[j], axis=1) <= farthest[j, kept]):
+            out[j] = points[j]
+    return out
+
+
+def _middle(points: np.ndarray, part: str) -> np.ndarray:
+    """The midpoint (3,) of the left and right ``part`` (NaN unless both are known)."""
+    return points[_pair(part)].mean(axis=0)
+
+
+def body_left(points: np.ndarray) -> np.ndarray | None:
+    """The person's left (3,), a unit vector ``up x forward`` from world points (33, 3) of the landmarks, or None
+    when they do not tell: up from the hips' midpoint to the shoulders', forward (across up) from the heels'
+    midpoint to the toes' and from the ears' to the nose; all of these whichever way the pairs are labelled."""
+    up = _middle(points, "shoulder") - _middle(points, "hip")
+    if not np.isfinite(up).all() or np.linalg.norm(up) < 1e-6:
+        return None
+    up /= np.linalg.norm(up)
+    forward = np.zeros(3)
+    for cue in (
+        _middle(points, "foot_index") - _middle(points, "heel"),
+        points[_index("nose")] - _middle(points, "ear"),
+    ):
+        across = cue - (cue @ up) * up
+        if np.isfinite(across).all() and np.linalg.norm(across) > 1e-6:
+            forward += across / np.linalg.norm(across)
+    if np.linalg.norm(forward) < 1e-6:
+        return None
+    left = np.cross(up, forward)
+    return left / np.linalg.norm(left)
