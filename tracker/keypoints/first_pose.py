@@ -35,6 +35,10 @@ one frame's detection may be swapped or missing."""
 SNAP = Settings(dynamics="none", iterations=10)
 """The edge snap's tracker settings: no motion model, ten IRLS iterations a round."""
 
+SNAP_ROUNDS = 10
+"""Rounds of the edge snap: a round costs a few milliseconds, and a start some ten centimetres off takes several
+to settle."""
+
 
 def snap_to_edges(
     model: Model,
@@ -44,7 +48,7 @@ def snap_to_edges(
     *,
     keypoints: tuple[np.ndarray, np.ndarray] | None = None,
     settings: Settings = SNAP,
-    rounds: int = 3,
+    rounds: int = SNAP_ROUNDS,
     smoothed: bool = False,
 ) -> FrameResult:
     """The tracker's result on one frame, ``images`` (one grey (H, W) uint8 per camera, :meth:`Tracker.smooth`-ed
@@ -60,13 +64,21 @@ def snap_to_edges(
 
 
 def first_pose(
-    recording: Recording, model: Model, keypoints: Keypoints, *, settings: Settings = Settings(), frames: int = FRAMES
+    recording: Recording,
+    model: Model,
+    keypoints: Keypoints,
+    *,
+    settings: Settings = Settings(),
+    frames: int = FRAMES,
+    images: list[np.ndarray] | None = None,
 ) -> np.ndarray:
     """World poses (N, 4, 4) of ``model`` at the first frame of ``keypoints`` (the detector's landmarks in every
     camera of ``recording``, from that frame on; module docstring): the landmarks' points over its first
     ``frames`` frames, the model fitted to them and then to their detections, snapped to that frame's edges
-    with its landmarks checked across the views (:func:`tracker.keypoints.consistency.consistent`);
-    ``settings`` tune the snap (its motion model and iterations are :data:`SNAP`'s)."""
+    with its landmarks checked across the views (:func:`tracker.keypoints.consistency.consistent`).
+    ``settings`` tune the snap (its motion model and iterations are :data:`SNAP`'s); ``images`` are that
+    frame's images as the tracker reads them (one (H, W) uint8 per camera, e.g. differences from the empty
+    scene), by default its grey frames."""
     names = tuple(camera.name for camera in recording.cameras)
     if keypoints.camera_names != names:
         raise TrackerInputError(
@@ -87,20 +99,10 @@ def first_pose(
     rows = np.searchsorted(keypoints.frame, found.frames)
     agreeing = np.where(found.agree, keypoints.confidence[rows], 0.0)
     poses = fit_to_views(model, fit_pose(model, found.points), recording.cameras, keypoints.pixels[rows], agreeing)
-    first = int(keypoints.frame[0])
-    [images] = [images for _, images in frames_of(recording, first, first + 1)]
-    checked = consistent(_rows(keypoints, slice(0, 1)), recording.cameras)[0]
+    if images is None:
+        first = int(keypoints.frame[0])
+        [images] = [grey for _, grey in frames_of(recording, first, first + 1)]
+    checked = consistent(keypoints.rows(slice(0, 1)), recording.cameras)[0]
     snap = dataclasses.replace(settings, iterations=SNAP.iterations)
     landmarks = (checked.pixels[0], checked.confidence[0])
     return snap_to_edges(model, recording.cameras, poses, images, keypoints=landmarks, settings=snap).poses
-
-
-def _rows(keypoints: Keypoints, rows: slice) -> Keypoints:
-    """The keypoints of frames ``rows`` only."""
-    return dataclasses.replace(
-        keypoints,
-        frame=keypoints.frame[rows],
-        pixels=keypoints.pixels[rows],
-        confidence=keypoints.confidence[rows],
-        world=keypoints.world[rows],
-    )

@@ -31,13 +31,15 @@ from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.keypoint_cue import LANDMARKS, left_right_pairs
 from tracker.keypoints.anchors import anchors
+from tracker.keypoints.triangulation import middle
 from tracker.model import Model
 
 ROBUST = 0.03
 """Misfit (metres, per coordinate) beyond which a world point's pull grows linearly (soft L1)."""
 
-PIXEL_ROBUST = 8.0
-"""Misfit (pixels, per coordinate) beyond which a detection's pull fades (Cauchy)."""
+PIXEL_ROBUST = 0.015
+"""Misfit (per coordinate, a share of the image's short side: 7 pixels in 480) beyond which a detection's pull
+fades (Cauchy)."""
 
 REST_WEIGHT = 0.001
 """Metres of misfit that one radian (or metre) of a joint away from rest costs: holds the joints that no
@@ -53,18 +55,13 @@ HINGE_START = 0.2
 """A hinge's starting angle (radians, within its limits): a straight limb's twist would not move the landmarks."""
 
 
-def _middle(points: np.ndarray, part: str) -> np.ndarray:
-    """The midpoint (3,) of the left and right ``part`` (NaN unless both are known)."""
-    return 0.5 * (points[LANDMARKS.index(f"left_{part}")] + points[LANDMARKS.index(f"right_{part}")])
-
-
 def root_from_landmarks(model: Model, points: np.ndarray) -> np.ndarray:
     """The root's world pose (4, 4) from the landmarks' world points (33, 3): its left (x) from the right hip to
     the left, up (z) towards the shoulders' midpoint, y = z x x; its origin where the model's hip joints
     (the thighs' origins at rest) then fall on the hips' midpoint."""
-    hips = _middle(points, "hip")
+    hips = middle(points, "hip")
     left = points[LANDMARKS.index("left_hip")] - points[LANDMARKS.index("right_hip")]
-    up = _middle(points, "shoulder") - hips
+    up = middle(points, "shoulder") - hips
     if not (np.isfinite(left).all() and np.isfinite(up).all()) or np.linalg.norm(np.cross(left, up)) < 1e-6:
         raise TrackerInputError(
             "the keypoints do not show both hips and both shoulders in two views, which place the body; pass --init"
@@ -238,7 +235,7 @@ def fit_to_views(
 ) -> np.ndarray:
     """``poses`` (N, 4, 4) refined so that the model's landmark points project onto their detections, ``pixels``
     (F, C, 33, 2) with ``confidence`` (F, C, 33) in ``cameras`` over F frames (the body taken as still over
-    them): residuals in pixels under a Cauchy loss of scale :data:`PIXEL_ROBUST`, beside the joints'
+    them): residuals in pixels under a Cauchy loss of scale :data:`PIXEL_ROBUST` of the image, beside the joints'
     :meth:`Body.penalties` in pixels at the body's distance; each view's pairs relabelled as the fit goes per
     frame (module docstring); the result coerced."""
     body, root = Body.of(model), poses[0]
@@ -246,6 +243,7 @@ def fit_to_views(
     seen = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=3) & (body.component >= 0)
     detections = np.where(seen[..., None], pixels, np.nan)
     per_metre = np.median([camera.matrix[0, 0] / np.linalg.norm(camera.center - root[:3, 3]) for camera in cameras])
+    scale = PIXEL_ROBUST * np.median([min(camera.size) for camera in cameras])
 
     def model_pixels(parameters: np.ndarray) -> np.ndarray:
         world = body.landmark_points(body.posed(root, parameters))
@@ -261,5 +259,5 @@ def fit_to_views(
         return np.concatenate([misfit[np.isfinite(observed).all(axis=3)].ravel(), held])
 
     bounds = (body.lower, body.upper)
-    result = _relabelled_fit(residuals, start, bounds, detections, model_pixels, "cauchy", PIXEL_ROBUST)
+    result = _relabelled_fit(residuals, start, bounds, detections, model_pixels, "cauchy", scale)
     return model.coerce(body.posed(root, result.x))

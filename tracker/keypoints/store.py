@@ -41,6 +41,17 @@ class Keypoints:
     world: np.ndarray
     detector: str = DETECTOR
 
+    def rows(self, index) -> Keypoints:
+        """The keypoints of the frames at ``index`` (a slice or an array of row numbers) only."""
+        return Keypoints(
+            self.frame[index],
+            self.camera_names,
+            self.pixels[index],
+            self.confidence[index],
+            self.world[index],
+            self.detector,
+        )
+
 
 def save_keypoints(path: str | os.PathLike, keypoints: Keypoints) -> None:
     """Write ``keypoints`` to ``path`` (keypoints.npz), atomically."""

@@ -155,44 +155,45 @@ def frame_points(
     ``limits`` (C,) pixels, the model's rigid ``distances`` (33, 33) and the ``farthest`` two landmarks may
     lie apart (33, 33) (module docstring)."""
     paired = left_right_pairs(LANDMARKS)
-    lateral = [_pair(part) for part in LATERAL]
-    limbs = [_pair(part) for part in LIMB]
-    singles = [[j] for j in range(len(LANDMARKS)) if j not in paired]
-    found = {
-        tuple(group): readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
-        for group in lateral + limbs + singles
-    }
+    lateral = [tuple(_pair(part)) for part in LATERAL]
+    limbs = [tuple(_pair(part)) for part in LIMB]
+    singles = [(j,) for j in range(len(LANDMARKS)) if j not in paired]
+
+    def read(pixels: np.ndarray, normalised: np.ndarray) -> dict[tuple[int, ...], list[Reading]]:
+        return {
+            group: readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
+            for group in lateral + limbs + singles
+        }
+
+    found = read(pixels, normalised)
     agreeing = sum((options[0].agree.sum(axis=1) for options in found.values() if options), np.zeros(len(cameras)))
     stray = agreeing < PERSON_SHARE * np.isfinite(pixels).all(axis=2).sum(axis=1)
     if stray.any():
-        pixels, normalised = pixels.copy(), normalised.copy()
-        pixels[stray], normalised[stray] = np.nan, np.nan
-        found = {
-            group: readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
-            for group in found
-        }
+        found = read(np.where(stray[:, None, None], np.nan, pixels), np.where(stray[:, None, None], np.nan, normalised))
     points = np.full((len(LANDMARKS), 3), np.nan)
     views = np.zeros(len(LANDMARKS), np.int64)
 
-    def place(group: list[int], swaps: bool) -> None:
-        if found[tuple(group)]:
-            chosen = _choose(found[tuple(group)], distances, farthest, points, group, swaps=swaps)
-            points[group], views[group] = chosen.points, chosen.agree.sum(axis=0)
+    def place(group: tuple[int, ...], swaps: bool) -> None:
+        if found[group]:
+            chosen = _choose(found[group], distances, farthest, points, list(group), swaps=swaps)
+            points[list(group)], views[list(group)] = chosen.points, chosen.agree.sum(axis=0)
+
+    def label(group: tuple[int, ...]) -> None:
+        if left is not None and (points[group[0]] - points[group[1]]) @ left < 0:
+            points[list(group)], views[list(group)] = points[list(group[::-1])], views[list(group[::-1])]
 
     for group in lateral + singles:
         place(group, swaps=False)
-    first = np.full((len(LANDMARKS), 3), np.nan)
+    best = np.full((len(LANDMARKS), 3), np.nan)
     for group, options in found.items():
         if options:
-            first[list(group)] = options[0].points
-    left = body_left(np.where(np.isfinite(points), points, first))
+            best[list(group)] = options[0].points
+    left = body_left(np.where(np.isfinite(points), points, best))
     for group in lateral:
-        if left is not None and (points[group[0]] - points[group[1]]) @ left < 0:
-            points[group], views[group] = points[group[::-1]], views[group[::-1]]
+        label(group)
     for group in limbs:
         place(group, swaps=True)
-        if left is not None and (points[group[0]] - points[group[1]]) @ left < 0:
-            points[group], views[group] = points[group[::-1]], views[group[::-1]]
+        label(group)
     return points, views
 
 
@@ -238,7 +239,7 @@ def within_reach(points: np.ndarray, farthest: np.ndarray) -> np.ndarray:
     return out
 
 
-def _middle(points: np.ndarray, part: str) -> np.ndarray:
+def middle(points: np.ndarray, part: str) -> np.ndarray:
     """The midpoint (3,) of the left and right ``part`` (NaN unless both are known)."""
     return points[_pair(part)].mean(axis=0)
 
@@ -247,14 +248,14 @@ def body_left(points: np.ndarray) -> np.ndarray | None:
     """The person's left (3,), a unit vector ``up x forward`` from world points (33, 3) of the landmarks, or None
     when they do not tell: up from the hips' midpoint to the shoulders', forward (across up) from the heels'
     midpoint to the toes' and from the ears' to the nose; all of these whichever way the pairs are labelled."""
-    up = _middle(points, "shoulder") - _middle(points, "hip")
+    up = middle(points, "shoulder") - middle(points, "hip")
     if not np.isfinite(up).all() or np.linalg.norm(up) < 1e-6:
         return None
     up /= np.linalg.norm(up)
     forward = np.zeros(3)
     for cue in (
-        _middle(points, "foot_index") - _middle(points, "heel"),
-        points[_index("nose")] - _middle(points, "ear"),
+        middle(points, "foot_index") - middle(points, "heel"),
+        points[_index("nose")] - middle(points, "ear"),
     ):
         across = cue - (cue @ up) * up
         if np.isfinite(across).all() and np.linalg.norm(across) > 1e-6:
