@@ -55,22 +55,28 @@ class Reading:
 
 
 def readings(
-    cameras: list[Camera], pixels: np.ndarray, normalised: np.ndarray, limits: np.ndarray, *, swaps: bool = False
+    cameras: list[Camera],
+    pixels: np.ndarray,
+    normalised: np.ndarray,
+    limits: np.ndarray,
+    *,
+    swaps: bool = False,
+    among: np.ndarray | None = None,
 ) -> list[Reading]:
     """Every pair of views' explanation of one landmark or left/right pair, the most agreeing detections first
     (then the smallest summed distance; the first pair of views first among equals).
 
     ``pixels`` (V, G, 2) are the recorded pixels in the V ``cameras`` (NaN where not usable), ``normalised``
-    the same undistorted, ``limits`` (V,) each view's agreement distance in pixels.  A pair of views is
-    triangulated (with ``swaps``, also with the second reading the pair the other way round); each view reads
-    the pair the way its detections reach the points best (most within its limit, then the smallest summed
-    distance).  The points are then triangulated again from all the detections that agree, and the order
-    that most agreeing views read is called straight."""
+    the same undistorted, ``limits`` (V,) each view's agreement distance in pixels.  A pair of views (of those
+    ``among`` (V,) bool, default all) is triangulated (with ``swaps``, also with the second reading the pair
+    the other way round); each view reads the pair the way its detections reach the points best (most within
+    its limit, then the smallest summed distance).  The points are then triangulated again from all the
+    detections that agree, and the order that most agreeing views read is called straight."""
     views, count = pixels.shape[:2]
     orders = [np.arange(count)] + ([np.arange(count)[::-1]] if swaps and count == 2 else [])
     seen = np.isfinite(pixels).all(axis=2)
     found = []
-    for a, b in itertools.combinations(range(views), 2):
+    for a, b in itertools.combinations(np.flatnonzero(np.ones(views, bool) if among is None else among), 2):
         for order in orders:
             points = np.full((count, 3), np.nan)
             for g in range(count):

@@ -15,6 +15,7 @@ body moves little in a few frames, while one frame's detections may be swapped o
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,8 +45,8 @@ LIMB = {
 
 
 PERSON_SHARE = 0.5
-"""A view whose detections agree with the other views' less often than this follows someone else in that
-frame: none of its detections is used."""
+"""A view whose detections agree less often than this with the points the other views triangulate follows
+someone else in that frame: none of its detections is used (:func:`strays`)."""
 
 REACH_SCALE, REACH_SLACK = 1.2, 0.1
 """Two landmarks may lie up to 1.2 times the model's reach between them, plus 10 cm, apart: the person may be
@@ -56,7 +57,8 @@ larger than the model, and two views' points a few centimetres off."""
 class Triangulated:
     """World points of the landmarks: ``points`` (33, 3) metres (NaN where no two views agreed in any frame
     used), ``views`` (33,) int, the median number of views that agreed on each, ``frames`` (F,), the keypoint
-    frames used, and which detections ``agree`` (F, C, 33) bool with that frame's points (:func:`agreeing`)."""
+    frames used, and which detections ``agree`` (F, C, 33) bool with that frame's points, as a view read them
+    (maybe swapped)."""
 
     points: np.ndarray
     views: np.ndarray
@@ -86,10 +88,13 @@ def triangulated(
     views = np.zeros((len(rows), len(LANDMARKS)), np.int64)
     agree = np.zeros(pixels.shape[:3], bool)
     for row in range(len(rows)):
-        points[row], views[row] = frame_points(cameras, pixels[row], normalised[row], limits, distances, farthest)
+        points[row], views[row], read_as = frame_points(
+            cameras, pixels[row], normalised[row], limits, distances, farthest
+        )
         points[row] = within_reach(points[row], farthest)
-        views[row][np.isnan(points[row]).any(axis=1)] = 0
-        agree[row] = agreeing(cameras, pixels[row], points[row], limits)
+        kept = np.isfinite(points[row]).all(axis=1)
+        views[row][~kept] = 0
+        agree[row] = (read_as >= 0) & kept[read_as]
     points = aligned(points)
     seen = np.isfinite(points).all(axis=2)
     median = np.full((len(LANDMARKS), 3), np.nan)
@@ -98,25 +103,6 @@ def triangulated(
         median[j] = np.median(points[seen[:, j], j], axis=0)
         support[j] = round(float(np.median(views[seen[:, j], j])))
     return Triangulated(median, support, keypoints.frame[rows], agree)
-
-
-def agreeing(cameras: list[Camera], pixels: np.ndarray, points: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """Which detections (C, 33) bool of one frame, ``pixels`` (C, 33, 2), lie within ``limits`` (C,) pixels of
-    the image of their landmark's world point, or of its left/right partner's (a view may read a pair
-    swapped), among ``points`` (33, 3)."""
-    partner = np.arange(len(LANDMARKS))
-    pairs = left_right_pairs(LANDMARKS)
-    partner[pairs[:, 0]], partner[pairs[:, 1]] = pairs[:, 1], pairs[:, 0]
-    known = np.isfinite(points).all(axis=1)
-    out = np.zeros(pixels.shape[:2], bool)
-    for k, camera in enumerate(cameras):
-        projected = np.full((len(LANDMARKS), 2), np.nan)
-        projected[known] = camera.project(points[known])
-        distance = np.fmin(
-            np.linalg.norm(pixels[k] - projected, axis=1), np.linalg.norm(pixels[k] - projected[partner], axis=1)
-        )
-        out[k] = distance < limits[k]
-    return out
 
 
 def aligned(points: np.ndarray) -> np.ndarray:
@@ -149,38 +135,41 @@ def frame_points(
     limits: np.ndarray,
     distances: np.ndarray,
     farthest: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One frame's world points (33, 3) of the landmarks (NaN: fewer than two views agree) and how many views
-    agreed on each (33,), from ``pixels`` (C, 33, 2) (NaN: not usable), the same ``normalised``, agreement
-    ``limits`` (C,) pixels, the model's rigid ``distances`` (33, 33) and the ``farthest`` two landmarks may
-    lie apart (33, 33) (module docstring)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One frame's world points (33, 3) of the landmarks (NaN: fewer than two views agree), how many views
+    agreed on each (33,), and the point each detection agrees with as its view reads it (C, 33) int (-1:
+    none), from ``pixels`` (C, 33, 2) (NaN: not usable), the same ``normalised``, agreement ``limits`` (C,)
+    pixels, the model's rigid ``distances`` (33, 33) and the ``farthest`` two landmarks may lie apart
+    (33, 33) (module docstring)."""
     paired = left_right_pairs(LANDMARKS)
     lateral = [tuple(_pair(part)) for part in LATERAL]
     limbs = [tuple(_pair(part)) for part in LIMB]
-    singles = [(j,) for j in range(len(LANDMARKS)) if j not in paired]
+    singles: list[tuple[int, ...]] = [(j,) for j in range(len(LANDMARKS)) if j not in paired]
 
-    def read(pixels: np.ndarray, normalised: np.ndarray) -> dict[tuple[int, ...], list[Reading]]:
+    def read(pixels: np.ndarray, normalised: np.ndarray) -> dict[tuple[int, ...], list[Reading]]:  # every group
         return {
             group: readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
             for group in lateral + limbs + singles
         }
 
-    found = read(pixels, normalised)
-    agreeing = sum((options[0].agree.sum(axis=1) for options in found.values() if options), np.zeros(len(cameras)))
-    stray = agreeing < PERSON_SHARE * np.isfinite(pixels).all(axis=2).sum(axis=1)
-    if stray.any():
-        found = read(np.where(stray[:, None, None], np.nan, pixels), np.where(stray[:, None, None], np.nan, normalised))
+    stray = strays(cameras, pixels, normalised, limits, lateral + limbs + singles)
+    found = read(np.where(stray[:, None, None], np.nan, pixels), np.where(stray[:, None, None], np.nan, normalised))
     points = np.full((len(LANDMARKS), 3), np.nan)
     views = np.zeros(len(LANDMARKS), np.int64)
+    read_as = np.full(pixels.shape[:2], -1)
 
     def place(group: tuple[int, ...], swaps: bool) -> None:
         if found[group]:
             chosen = _choose(found[group], distances, farthest, points, list(group), swaps=swaps)
             points[list(group)], views[list(group)] = chosen.points, chosen.agree.sum(axis=0)
+            for k, g in zip(*np.nonzero(chosen.agree)):
+                read_as[k, group[len(group) - 1 - g if chosen.swapped[k] else g]] = group[g]
 
     def label(group: tuple[int, ...]) -> None:
         if left is not None and (points[group[0]] - points[group[1]]) @ left < 0:
             points[list(group)], views[list(group)] = points[list(group[::-1])], views[list(group[::-1])]
+            for k, d in zip(*np.nonzero(np.isin(read_as, group))):
+                read_as[k, d] = group[1] if read_as[k, d] == group[0] else group[0]
 
     for group in lateral + singles:
         place(group, swaps=False)
@@ -194,7 +183,35 @@ def frame_points(
     for group in limbs:
         place(group, swaps=True)
         label(group)
-    return points, views
+    return points, views, read_as
+
+
+def strays(
+    cameras: list[Camera],
+    pixels: np.ndarray,
+    normalised: np.ndarray,
+    limits: np.ndarray,
+    groups: list[tuple[int, ...]],
+) -> np.ndarray:
+    """The views (C,) bool that follow someone else in this frame.  Each pair of views triangulates every
+    landmark ``group`` (a pair either way round) alone, and every view's detections (``pixels`` (C, 33, 2),
+    NaN: not usable) are checked against those points; of the pairs whose points the most detections agree
+    with, the first is taken for the person, and a view with less than :data:`PERSON_SHARE` of its detections
+    agreeing follows someone else.  (Two views alone hardly tell: two people standing apart give rays that
+    nearly meet when the cameras stand at one height.)"""
+    seen = np.isfinite(pixels).all(axis=2)
+    best = np.zeros(len(cameras))
+    for a, b in itertools.combinations(np.flatnonzero(seen.any(axis=1)), 2):
+        among = np.isin(np.arange(len(cameras)), (a, b))
+        agreeing = np.zeros(len(cameras))
+        for group in groups:
+            found = readings(
+                cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2, among=among
+            )
+            agreeing += found[0].agree.sum(axis=1) if found else 0
+        if agreeing.sum() > best.sum():
+            best = agreeing
+    return best < PERSON_SHARE * seen.sum(axis=1)
 
 
 def _choose(
