@@ -8,16 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tracker.cli import main
+from tracker.commands.init import keypoint_pose
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.keypoint_cue import LANDMARKS, left_right_pairs
+from tracker.keypoints import detector
 from tracker.keypoints.anchors import anchors, reach, rigid_distances
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.first_pose import first_pose
 from tracker.keypoints.fit import Body, fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
-from tracker.model import joint_centres, load_model
+from tracker.model import joint_centres, load_model, rest_poses
+from tracker.viewer.placement import in_view
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
@@ -183,10 +187,31 @@ def test_no_person_is_a_one_line_error(demo, one_line_error):
     assert "frames 0..4" in message and str(DEMO) in message and "--start" in message
 
 
-def test_first_pose_from_the_detector_on_the_demo(demo):
-    """The detector's landmarks in the demo's frames 0-4: cam1 follows a basketball player in the background
-    photo and cam0 reads the shoulders and wrists swapped in frame 0; the snapped pose is within a centimetre
-    of the true first pose (measured: docs/keypoints.md, "Automatic first pose")."""
+def test_tracker_init_starts_from_the_fit_to_the_detector(demo, tmp_path, monkeypatch, capsys):
+    """``tracker init`` without an init file: the detector's landmarks in the demo's frames 0-4 (cam1 follows a
+    basketball player in the background photo, cam0 reads the shoulders and wrists swapped in frame 0),
+    cached in out/demo/keypoints.npz; the snapped pose is within a centimetre of the true first pose
+    (measured: docs/keypoints.md, "Automatic first pose").  The cache serves any frames it holds."""
     recording, model, truth = demo
-    keypoints, _ = detect_recording(recording, 0, 5)
-    assert mean_error(first_pose(recording, model, keypoints), truth["poses"][0]) < 0.01
+    monkeypatch.chdir(tmp_path)
+    poses = keypoint_pose(recording, model, 0)
+    assert mean_error(poses, truth["poses"][0]) < 0.01
+    assert "frames 0..4" in capsys.readouterr().out
+    some, reused = detect_recording(recording, 1, 3, cache=tmp_path / "out" / "demo" / "keypoints.npz")
+    assert reused and list(some.frame) == [1, 2]
+
+
+def test_tracker_init_without_the_detector_starts_at_rest(demo, monkeypatch, capsys):
+    """Without the detector's package ``tracker init`` starts from the rest pose where the cameras look, and
+    says why."""
+    recording, model, truth = demo
+    monkeypatch.setattr(detector, "missing", lambda: "the keypoint detector is not installed (test)")
+    poses = keypoint_pose(recording, model, 0)
+    np.testing.assert_allclose(poses, rest_poses(model, in_view(recording.cameras)))
+    assert "not installed (test)" in capsys.readouterr().out
+
+
+def test_tracker_init_start_outside_the_recording_is_a_one_line_error(tmp_path, capsys):
+    assert main(["init", str(DEMO), "--out", str(tmp_path / "init.toml"), "--start", "500"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--start 500 is outside its frames 0..159" in lines[0]

@@ -1,16 +1,18 @@
 """World points of the landmarks over a recording's first frames, with left and right told by the body
 (docs/keypoints.md, "Automatic first pose").
 
-Per frame, each landmark, and each left/right pair with every view free to read it either way round, is
-triangulated from the views that agree (:func:`tracker.keypoints.consistency.readings`).  Two views alone
-cannot always tell a swap: when the pair lies along their epipolar lines, both readings triangulate, to
-points at different depths.  Of the readings that most detections agree with, the one whose distances
-to the landmarks already placed fit the model's (:func:`tracker.keypoints.anchors.rigid_distances`: the
-shoulders' width, an upper arm's length) is kept: first the pairs that lie across the body (hips,
-shoulders, ears, eyes) and the single landmarks, then each limb's pairs from the trunk outwards.  The
-pairs across the body are labelled by the person's left (:func:`body_left`); a limb's pair is labelled
-with the distances to the pair it hangs on.  Per landmark, the median over the frames is its point: the
-body moves little in a few frames, while one frame's detections may be swapped or missing.
+Per frame (:func:`frame_points`): the views that follow someone else are left out (:func:`strays`); each
+landmark, and each left/right pair with every view free to read it either way round, is triangulated from
+the views that agree (:func:`tracker.keypoints.consistency.readings`).  Two views alone cannot always tell
+a swap: when the pair lies along their epipolar lines, both readings triangulate, to points at different
+depths.  Of the readings that most detections agree with, the one whose distances to the landmarks already
+placed fit the model's is kept (:func:`tracker.keypoints.anchors.rigid_distances`, the shoulders' width, an
+upper arm's length; and :func:`tracker.keypoints.anchors.reach`): first the pairs that lie across the body
+(hips, shoulders, ears, eyes) and the single landmarks, then the limbs' pairs from the trunk outwards.
+Every pair is labelled by the person's left (:func:`body_left`) where that is known (a limb's pair,
+otherwise, by those distances); a point out of reach of the others is dropped (:func:`within_reach`).
+Then the frames' labels are aligned (:func:`aligned`) and, per landmark, the median over the frames is its
+point: the body moves little in a few frames, while one frame's detections may be swapped or missing.
 """
 
 from __future__ import annotations
@@ -30,23 +32,12 @@ from tracker.model import Model
 LATERAL = ("hip", "shoulder", "ear", "eye_inner", "eye", "eye_outer")
 """Pairs that lie across the body, labelled by the side they lie on."""
 
-LIMB = {
-    "elbow": "shoulder",
-    "wrist": "elbow",
-    "pinky": "wrist",
-    "index": "wrist",
-    "thumb": "wrist",
-    "knee": "hip",
-    "ankle": "knee",
-    "heel": "ankle",
-    "foot_index": "ankle",
-}
-"""A limb's pairs (parents first) and the pair each hangs on."""
-
+LIMB = ("elbow", "wrist", "pinky", "index", "thumb", "knee", "ankle", "heel", "foot_index")
+"""The limbs' pairs, each after the one it hangs on."""
 
 PERSON_SHARE = 0.5
-"""A view whose detections agree less often than this with the points the other views triangulate follows
-someone else in that frame: none of its detections is used (:func:`strays`)."""
+"""A view of which a smaller share of detections agrees with the person's points follows someone else in that
+frame: none of its detections is used (:func:`strays`)."""
 
 REACH_SCALE, REACH_SLACK = 1.2, 0.1
 """Two landmarks may lie up to 1.2 times the model's reach between them, plus 10 cm, apart: the person may be
@@ -77,7 +68,7 @@ def triangulated(
 ) -> Triangulated:
     """The landmarks' world points over the first ``frames`` frames of ``keypoints`` (in ``cameras``) that show
     a person in two views or more (detections at least ``min_confidence``), views agreeing within ``gate`` of
-    the image's short side; a swap told by the distances of ``model``."""
+    the image's short side, the distances those of ``model`` (module docstring)."""
     usable = (keypoints.confidence[:frames] >= min_confidence) & np.isfinite(keypoints.pixels[:frames]).all(axis=3)
     rows = np.flatnonzero(usable.any(axis=2).sum(axis=1) >= 2)
     pixels = np.where(usable[rows, ..., None], keypoints.pixels[rows], np.nan)
@@ -146,7 +137,7 @@ def frame_points(
     limbs = [tuple(_pair(part)) for part in LIMB]
     singles: list[tuple[int, ...]] = [(j,) for j in range(len(LANDMARKS)) if j not in paired]
 
-    def read(pixels: np.ndarray, normalised: np.ndarray) -> dict[tuple[int, ...], list[Reading]]:  # every group
+    def read(pixels: np.ndarray, normalised: np.ndarray) -> dict[tuple[int, ...], list[Reading]]:
         return {
             group: readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
             for group in lateral + limbs + singles
