@@ -187,6 +187,15 @@ def test_no_person_is_a_one_line_error(demo, one_line_error):
     assert "frames 0..4" in message and str(DEMO) in message and "--start" in message
 
 
+def test_no_hips_is_a_one_line_error(demo, one_line_error):
+    """The detector sees the person but never the hips, which place the body."""
+    recording, model, truth = demo
+    keypoints = perfect(recording, model, truth)
+    keypoints.confidence[..., [LANDMARKS.index("left_hip"), LANDMARKS.index("right_hip")]] = 0.0
+    message = one_line_error(lambda: first_pose(recording, model, keypoints))
+    assert "frames 0..4" in message and "both hips" in message and "--init" in message
+
+
 def test_tracker_init_starts_from_the_fit_to_the_detector(demo, tmp_path, monkeypatch, capsys):
     """``tracker init`` without an init file: the detector's landmarks in the demo's frames 0-4 (cam1 follows a
     basketball player in the background photo, cam0 reads the shoulders and wrists swapped in frame 0),

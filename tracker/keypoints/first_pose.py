@@ -90,15 +90,19 @@ def first_pose(
             f"{recording.path}: the keypoints place the first pose from two cameras or more, it has one; pass --init"
         )
     found = triangulated(keypoints, recording.cameras, model, frames=frames)
+    first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
     if len(found.frames) == 0:
-        first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
         raise TrackerInputError(
             f"no person found by the keypoint detector in two views in frames {first}..{last} of {recording.path}; "
             "pass --init or start later with --start"
         )
+    try:
+        fitted = fit_pose(model, found.points)
+    except TrackerInputError as error:
+        raise TrackerInputError(f"frames {first}..{last} of {recording.path}: {error}") from None
     rows = np.searchsorted(keypoints.frame, found.frames)
     agreeing = np.where(found.agree, keypoints.confidence[rows], 0.0)
-    poses = fit_to_views(model, fit_pose(model, found.points), recording.cameras, keypoints.pixels[rows], agreeing)
+    poses = fit_to_views(model, fitted, recording.cameras, keypoints.pixels[rows], agreeing)
     if images is None:
         first = int(keypoints.frame[0])
         [images] = [grey for _, grey in frames_of(recording, first, first + 1)]
