@@ -87,12 +87,17 @@ def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarra
         side, _, part = name.partition("_")
         if side in ("left", "right") and part in SIDES and f"{SIDES[part]}_{side[0]}" in model.names:
             component[index] = model.names.index(f"{SIDES[part]}_{side[0]}")
+    return component, np.zeros((len(landmarks), 3)), left_right_pairs(landmarks)
+
+
+def left_right_pairs(landmarks: tuple[str, ...]) -> np.ndarray:
+    """The (P, 2) indices of ``left_<part>`` and ``right_<part>`` for every part named both ways in ``landmarks``."""
     pairs = [
         (index, landmarks.index("right_" + name[5:]))
         for index, name in enumerate(landmarks)
         if name.startswith("left_") and "right_" + name[5:] in landmarks
     ]
-    return component, np.zeros((len(landmarks), 3)), np.array(pairs, np.int64).reshape(-1, 2)
+    return np.array(pairs, np.int64).reshape(-1, 2)
 
 
 def learnt_tolerance(history: np.ndarray, floor: float, multiple: float, ceiling: float, least: int) -> np.ndarray:

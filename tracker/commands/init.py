@@ -5,8 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from tracker.commands import options
 from tracker.commands.viewing import scene, serve
+from tracker.errors import TrackerInputError
 
 HELP = "place the first pose by hand in the browser viewer and save init.toml"
 
@@ -16,7 +19,11 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", help="recording folder")
     parser.add_argument("--out", required=True, help="init.toml to write")
     parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    parser.add_argument("--init", help="pose to start from (default: the recording's init.toml, else the rest pose)")
+    parser.add_argument(
+        "--init",
+        help="pose to start from (default: the recording's init.toml, else the pose fitted to the keypoints)",
+    )
+    parser.add_argument("--start", type=int, default=0, help="the frame to place the pose in (default 0)")
     options.add_recording_options(parser)
     options.add_viewer_options(parser, record=False)
 
@@ -24,13 +31,38 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Serve the placement until Ctrl-C (its save button writes ``--out``)."""
     from tracker.io.posefile import load_pose_file
-    from tracker.model import rest_poses
     from tracker.track import Settings
-    from tracker.viewer.placement import Placement, in_view
+    from tracker.viewer.placement import Placement
 
     rec, model = options.opened(args)
+    if not 0 <= args.start < rec.frame_count:
+        raise TrackerInputError(
+            f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
+        )
     start = Path(args.init) if args.init else rec.init_path
-    poses = load_pose_file(start, model) if start is not None else rest_poses(model, in_view(rec.cameras))
+    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start)
     out = Path(args.out)
-    Placement(scene(args, rec, model, Settings()), rec, model, poses, out)
-    return serve(f"placing the first pose of {rec.path}; save writes {out}")
+    Placement(scene(args, rec, model, Settings()), rec, model, poses, out, frame=args.start)
+    return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
+
+
+def keypoint_pose(rec, model, start: int) -> np.ndarray:
+    """The pose fitted to the keypoints of the frames from ``start`` (docs/keypoints.md, "Automatic first pose"),
+    their detections cached in out/<recording name>/keypoints.npz; the rest pose where the cameras look when
+    the detector is not installed."""
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detect import detect_recording
+    from tracker.keypoints.detector import missing
+    from tracker.keypoints.first_pose import FRAMES, first_pose
+    from tracker.model import rest_poses
+    from tracker.viewer.placement import in_view
+
+    reason = missing()
+    if reason is not None:
+        print(f"starting from the rest pose: {reason}")
+        return rest_poses(model, in_view(rec.cameras))
+    stop = min(rec.frame_count, start + FRAMES)
+    cache = ensure_writable_folder(Path("out") / rec.path.resolve().name) / "keypoints.npz"
+    keypoints, _ = detect_recording(rec, start, stop, cache=cache)
+    print(f"starting from the pose fitted to the keypoints of frames {start}..{stop - 1} ({cache})")
+    return first_pose(rec, model, keypoints)

@@ -63,7 +63,7 @@ def holding(keypoints: Keypoints | None, wanted: np.ndarray) -> Keypoints | None
     """``keypoints`` cut to the frames ``wanted`` if it holds every one of them, else None."""
     if keypoints is None or not np.isin(wanted, keypoints.frame).all():
         return None
-    return keypoints.rows(wanted)
+    return keypoints.at_frames(wanted)
 
 
 def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:

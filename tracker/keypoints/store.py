@@ -43,16 +43,19 @@ class Keypoints:
     detector: str = DETECTOR
     recording: str = ""
 
-    def rows(self, frames: np.ndarray) -> Keypoints:
-        """The same keypoints for ``frames`` only (each must be held), in that order."""
+    def at_frames(self, frames: np.ndarray) -> Keypoints:
+        """The same keypoints for the frame numbers ``frames`` only (each must be held), in that order."""
         index = {int(frame): row for row, frame in enumerate(self.frame)}
-        rows = np.array([index[int(frame)] for frame in frames], np.int64)
+        return self.rows(np.array([index[int(frame)] for frame in frames], np.int64))
+
+    def rows(self, index) -> Keypoints:
+        """The keypoints of the frames at ``index`` (a slice or an array of row numbers) only."""
         return Keypoints(
-            np.asarray(frames, np.int64),
+            self.frame[index],
             self.camera_names,
-            self.pixels[rows],
-            self.confidence[rows],
-            self.world[rows],
+            self.pixels[index],
+            self.confidence[index],
+            self.world[index],
             self.detector,
             self.recording,
         )

@@ -68,7 +68,7 @@ class KeypointStream:
         self.reused = holding(self.old, self.wanted)
         if self.reused is not None:
             checked = consistent(self.reused, recording.cameras)[0]
-            self.checked = {int(frame): checked.rows(np.array([frame])) for frame in self.wanted}
+            self.checked = {int(frame): checked.at_frames(np.array([frame])) for frame in self.wanted}
             return
         require_detector()
         context = multiprocessing.get_context("spawn")

@@ -1,11 +1,12 @@
 """Placing the first pose by hand (``tracker init``), the paper's coarse manual start.
 
-The viewer opens on frame 0 with a transform gizmo on the root (move and turn
-the whole body) and a rotation gizmo on every joint (turn that component and
-everything hanging from it).  After each drag the joints are coerced exact and
-within their limits, so a hinge follows only the part of a turn about its axis.
-"Snap to the images" runs tracking iterations on frame 0 from the current
-placement (no motion model), pulling a rough placement onto the edges;
+The viewer opens on the first frame (frame 0, or the one ``--start`` names) with a
+transform gizmo on the root (move and turn the whole body) and a rotation gizmo on
+every joint (turn that component and everything hanging from it).  After each drag
+the joints are coerced exact and within their limits, so a hinge follows only the
+part of a turn about its axis.  "Snap to the images" runs tracking iterations on
+that frame from the current placement (no motion model), pulling a rough placement
+onto the edges;
 "Save" writes ``init.toml`` (formats.md), which ``tracker track --init`` takes.
 """
 
@@ -21,6 +22,7 @@ from tracker.geometry.se3 import inverse
 from tracker.io.posefile import save_pose_file
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
+from tracker.keypoints.first_pose import snap_to_edges
 from tracker.model import Model
 from tracker.track import Settings, Tracker
 from tracker.viewer.scene import Frame, Scene
@@ -52,19 +54,26 @@ def in_view(cameras, height: float = 1.0) -> np.ndarray:
 
 
 class Placement:
-    """Gizmos, snap and save for the first frame of a recording."""
+    """Gizmos, snap and save for the first tracked frame, ``frame``, of a recording."""
 
     def __init__(
-        self, scene: Scene, recording: Recording, model: Model, poses: np.ndarray, out: Path, snap_iterations: int = 10
+        self,
+        scene: Scene,
+        recording: Recording,
+        model: Model,
+        poses: np.ndarray,
+        out: Path,
+        snap_iterations: int = 10,
+        frame: int = 0,
     ):
-        self.scene, self.recording, self.model, self.out = scene, recording, model, Path(out)
+        self.scene, self.recording, self.model, self.out, self.frame = scene, recording, model, Path(out), frame
         seekers = [FrameSeeker(source) for source in recording.sources]
-        self.images = [seeker.read(0) for seeker in seekers]
+        self.images = [seeker.read(frame) for seeker in seekers]
         for seeker in seekers:
             seeker.close()
         self.settings = Settings(dynamics="none", iterations=snap_iterations)
         self.inspector = Tracker(model, recording.cameras, poses, self.settings)
-        self.smoothed = [self.inspector.smooth(image) for image in self.images]  # frame 0 never changes:
+        self.smoothed = [self.inspector.smooth(image) for image in self.images]  # the frame never changes:
         self.inspector.load_images(self.smoothed, smoothed=True)  # smoothed and loaded once for every redraw
         self.poses = model.coerce(poses)
         self.lock = threading.RLock()
@@ -106,12 +115,18 @@ class Placement:
             self.refresh()
 
     def snap(self, rounds: int = 3) -> None:
-        """Track frame 0 from the current placement, ``rounds`` times ``snap_iterations`` IRLS iterations
+        """Track the frame from the current placement, ``rounds`` times ``snap_iterations`` IRLS iterations
         without a motion model; each round re-centres the prior on where the last one ended."""
         with self.lock:
-            tracker = Tracker(self.model, self.recording.cameras, self.poses, self.settings)
-            for _ in range(rounds):
-                result = tracker.step(self.smoothed, smoothed=True)
+            result = snap_to_edges(
+                self.model,
+                self.recording.cameras,
+                self.poses,
+                self.smoothed,
+                settings=self.settings,
+                rounds=rounds,
+                smoothed=True,
+            )
             self.poses = result.poses
             self.message.content = (
                 f"Snapped: residual {result.residual:.2f} px, {100 * result.share:.0f} % of the samples found an edge."
@@ -130,4 +145,4 @@ class Placement:
             gizmo.wxyz = vtf.SO3.from_matrix(pose[0:3, 0:3]).wxyz
             gizmo.position = pose[0:3, 3]
         inspection = self.inspector.inspect(poses=self.poses)
-        self.scene.show(Frame(self.poses, self.images, inspection, label="frame 0"))
+        self.scene.show(Frame(self.poses, self.images, inspection, label=f"frame {self.frame}"))

@@ -1,0 +1,112 @@
+"""The first pose without an init file: the body model fitted to the landmarks of the first frames, snapped to
+the edges (docs/keypoints.md, "Automatic first pose").
+
+1. :func:`tracker.keypoints.triangulation.triangulated`: the landmarks' world points over the first few
+   frames, left and right told by the body.
+2. :func:`tracker.keypoints.fit.fit_pose`: the model's pose whose landmark points lie nearest those points.
+3. :func:`tracker.keypoints.fit.fit_to_views`: that pose refined against the detections of the same frames.
+4. :func:`snap_to_edges`: the tracker on the first frame's images, without a motion model, the frame's
+   landmarks fused with the edges (docs/method-tracking.md, sections 3 and 6).
+
+Poses are world_from_component (N, 4, 4).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from tracker.camera import Camera
+from tracker.errors import TrackerInputError
+from tracker.io.recording import Recording
+from tracker.io.recording import frames as frames_of
+from tracker.keypoints.consistency import consistent
+from tracker.keypoints.fit import fit_pose, fit_to_views
+from tracker.keypoints.store import Keypoints
+from tracker.keypoints.triangulation import triangulated
+from tracker.model import Model
+from tracker.track import FrameResult, Settings, Tracker
+
+FRAMES = 5
+"""Frames, from the first, whose landmarks are triangulated: the body moves a few millimetres in them, while
+one frame's detection may be swapped or missing."""
+
+SNAP = Settings(dynamics="none", iterations=10)
+"""The edge snap's tracker settings: no motion model, ten IRLS iterations a round."""
+
+SNAP_ROUNDS = 10
+"""Rounds of the edge snap: a round costs a few milliseconds, and a start some ten centimetres off takes several
+to settle."""
+
+
+def snap_to_edges(
+    model: Model,
+    cameras: list[Camera],
+    poses: np.ndarray,
+    images: list[np.ndarray],
+    *,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
+    settings: Settings = SNAP,
+    rounds: int = SNAP_ROUNDS,
+    smoothed: bool = False,
+) -> FrameResult:
+    """The tracker's result on one frame, ``images`` (one grey (H, W) uint8 per camera, :meth:`Tracker.smooth`-ed
+    when ``smoothed``), from ``poses``: ``rounds`` tracking steps of ``settings.iterations`` IRLS iterations
+    on the same frame without a motion model, each round's prior centred where the last ended, the frame's
+    ``keypoints`` (pixels (C, 33, 2), confidence (C, 33)) fused with the edges (docs/method-tracking.md,
+    section 6)."""
+    tracker = Tracker(model, cameras, poses, dataclasses.replace(settings, dynamics="none"))
+    result = tracker.step(images, smoothed=smoothed, keypoints=keypoints)
+    for _ in range(rounds - 1):
+        result = tracker.step(images, smoothed=smoothed, keypoints=keypoints)
+    return result
+
+
+def first_pose(
+    recording: Recording,
+    model: Model,
+    keypoints: Keypoints,
+    *,
+    settings: Settings = Settings(),
+    frames: int = FRAMES,
+    images: list[np.ndarray] | None = None,
+) -> np.ndarray:
+    """World poses (N, 4, 4) of ``model`` at the first frame of ``keypoints`` (the detector's landmarks in every
+    camera of ``recording``, from that frame on; module docstring): the landmarks' points over its first
+    ``frames`` frames, the model fitted to them and then to their detections, snapped to that frame's edges
+    with its landmarks checked across the views (:func:`tracker.keypoints.consistency.consistent`).
+    ``settings`` tune the snap (its motion model and iterations are :data:`SNAP`'s); ``images`` are that
+    frame's images as the tracker reads them (one (H, W) uint8 per camera, e.g. differences from the empty
+    scene), by default its grey frames."""
+    names = tuple(camera.name for camera in recording.cameras)
+    if keypoints.camera_names != names:
+        raise TrackerInputError(
+            f"{recording.path}: the keypoints are of cameras {', '.join(keypoints.camera_names)}, the recording's "
+            f"are {', '.join(names)}; detect them again with tracker keypoints"
+        )
+    if len(names) < 2:
+        raise TrackerInputError(
+            f"{recording.path}: the keypoints place the first pose from two cameras or more, it has one; pass --init"
+        )
+    found = triangulated(keypoints, recording.cameras, model, frames=frames)
+    first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
+    if len(found.frames) == 0:
+        raise TrackerInputError(
+            f"no person found by the keypoint detector in two views in frames {first}..{last} of {recording.path}; "
+            "pass --init or start later with --start"
+        )
+    try:
+        fitted = fit_pose(model, found.points)
+    except TrackerInputError as error:
+        raise TrackerInputError(f"frames {first}..{last} of {recording.path}: {error}") from None
+    rows = np.searchsorted(keypoints.frame, found.frames)
+    agreeing = np.where(found.agree, keypoints.confidence[rows], 0.0)
+    poses = fit_to_views(model, fitted, recording.cameras, keypoints.pixels[rows], agreeing)
+    if images is None:
+        first = int(keypoints.frame[0])
+        [images] = [grey for _, grey in frames_of(recording, first, first + 1)]
+    checked = consistent(keypoints.rows(slice(0, 1)), recording.cameras)[0]
+    snap = dataclasses.replace(settings, iterations=SNAP.iterations)
+    landmarks = (checked.pixels[0], checked.confidence[0])
+    return snap_to_edges(model, recording.cameras, poses, images, keypoints=landmarks, settings=snap).poses
