@@ -79,6 +79,63 @@ SIDES = {
 of models/human.toml (``<part>_l`` / ``<part>_r`` for the person's left and right)."""
 
 
+SURFACE = {
+    "nose": ("head", (0.0, -1.0, 0.0)),
+    "left_ear": ("head", (1.0, 0.0, 0.0)),
+    "right_ear": ("head", (-1.0, 0.0, 0.0)),
+    "left_index": ("hand_l", (0.0, -1.0, 0.0)),
+    "right_index": ("hand_r", (0.0, -1.0, 0.0)),
+    "left_pinky": ("hand_l", (0.0, 1.0, 0.0)),
+    "right_pinky": ("hand_r", (0.0, 1.0, 0.0)),
+    "left_heel": ("foot_l", (0.0, 1.0, 0.0)),
+    "right_heel": ("foot_r", (0.0, 1.0, 0.0)),
+    "left_foot_index": ("foot_l", (0.0, -1.0, 0.0)),
+    "right_foot_index": ("foot_r", (0.0, -1.0, 0.0)),
+}
+"""Landmark -> (component, direction d): the nose in front of the head, the ears at its sides, the index
+knuckle at the front of the hand and the little finger's at its back (the palm faces the thigh at rest),
+the heel behind the foot and the toes in front."""
+
+
+def anchors(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """Each landmark's component (33,) int (-1 when the model has none) and its point (33, 3) in that
+    component's frame: the joint centres of :data:`tracker.keypoint_cue.SIDES` and the :data:`SURFACE`
+    points (where the component's first quadric is an ellipsoid or a sphere).
+
+    A shoulder, elbow, wrist, hip, knee or ankle marks the joint centre of a :data:`SIDES` component (its
+    origin).  The nose and ears, the index and little-finger knuckles, the heel and the toes mark points on
+    the surface of the head, hand and foot: ``c + d * r`` on the component's first ellipsoid (centre c,
+    radii r) in the direction d of :data:`SURFACE`, with the component frames of models/human.toml (x to
+    the body's left, y backwards, z up at rest)."""
+    component, point, _ = landmark_points(model, LANDMARKS)
+    for name, (part, direction) in SURFACE.items():
+        if part not in model.names:
+            continue
+        index = model.index(part)
+        owned = np.flatnonzero(model.quadric_component == index)
+        if len(owned) == 0 or model.quadric_shape[owned[0]] not in ("ellipsoid", "sphere"):
+            continue
+        params = model.quadric_params[owned[0]]
+        radii = np.asarray(params["radii"] if "radii" in params else [params["radius"]] * 3, float)
+        centre = np.asarray(params.get("center", [0.0, 0.0, 0.0]), float)
+        component[LANDMARKS.index(name)] = index
+        point[LANDMARKS.index(name)] = centre + np.multiply(direction, radii)
+    return component, point
+
+
+KNUCKLES = ("left_pinky", "right_pinky", "left_index", "right_index")
+"""Landmarks the tracker's cue leaves out: BlazePose places the knuckles from the body's image alone, and
+they stray far more than the wrist that already marks the hand (on the demo they cost the right hand
+70 mm over its last 30 frames); the first pose's fit still uses them to turn the hand."""
+
+
+def cue_points(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`anchors` without the :data:`KNUCKLES` (component -1): the landmarks the tracker fuses."""
+    component, point = anchors(model)
+    component[[LANDMARKS.index(name) for name in KNUCKLES]] = -1
+    return component, point
+
+
 def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each of ``landmarks``: its component (K,) int (-1 when the model has none) and its point (K, 3)
     in that component's frame (the joint centre), and the left/right pairs (P, 2) of landmark indices."""

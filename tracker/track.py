@@ -31,7 +31,7 @@ from numba import njit
 from tracker import motion_prior
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
-from tracker.keypoint_cue import LANDMARKS, keypoint_kernel, landmark_points, learnt_tolerance
+from tracker.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, learnt_tolerance, left_right_pairs
 from tracker.measure import Statistics, measure_kernel
 from tracker.model import Model
 from tracker.outline import Placed, Rig, Samples, sample_outlines
@@ -271,7 +271,7 @@ class Tracker:
         self.lo: np.ndarray | None = None  # each sample's search limits, set by sample()
         self.hi: np.ndarray | None = None
         self.times = StageTimes()
-        self.landmarks = landmark_points(model, LANDMARKS)
+        self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
         self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark

@@ -19,7 +19,11 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker track``."""
     parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
     parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    parser.add_argument("--init", help="pose at the first frame (default: the recording's init.toml)")
+    parser.add_argument(
+        "--init",
+        help="pose at the first frame (default: the recording's init.toml, else fitted to the keypoints of the "
+        "first frames)",
+    )
     parser.add_argument("--out", help="output folder (default: out/<recording name>)")
     options.add_recording_options(parser)
     parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
@@ -50,11 +54,10 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from tracker.evaluate import evaluate, format_report
-    from tracker.io.posefile import load_pose_file
     from tracker.io.poses import PosesWriter, load_poses
     from tracker.io.recording import capture_times, frames
     from tracker.io.stepwrite import step_and_write
-    from tracker.status import LOST, TRACKED, UNCERTAIN
+    from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.track import Tracker
 
     if args.record and not args.view:
@@ -64,17 +67,22 @@ def run(args: argparse.Namespace) -> int:
         raise TrackerInputError(
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
-    init = load_pose_file(options.choose(args.init, rec.init_path, "init.toml", "--init", rec.path), model)
     settings = options.settings_from(args, rec.fps)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     background = _background(args, rec, out)
+    init = _first_pose(args, rec, model, stop, out, settings)
     print(
         f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
     stream = _keypoints(args, rec, stop, out)  # the detector starts up while the kernels load
+    recovery = None
+    if stream is not None:
+        from tracker.keypoints.recovery import Recovery
+
+        recovery = Recovery(model, rec.cameras)
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
@@ -93,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
 
         measured = preparers(background, tracker.smooth)
         prepare = [keeping_grey(camera) for camera in measured] if overlay is not None else list(measured)
-    counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0}
+    counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
     residuals = []
     interrupted = False
     times, last = capture_times(rec), None  # a live recording's capture times: its frames' time and time steps
@@ -110,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
                 at = None if times is None else float(times[index])
                 keypoints = None if stream is None else stream.get(index)
                 result, spent = step_and_write(
-                    tracker, writer, index, images, at=at, previous=last, keypoints=keypoints
+                    tracker, writer, index, images, at=at, previous=last, keypoints=keypoints, check=recovery
                 )
                 last = at
                 if live is not None:
@@ -137,7 +145,8 @@ def run(args: argparse.Namespace) -> int:
     fps = done / elapsed if elapsed > 0 else float("inf")
     print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
     print(f"mean residual: {np.nanmean(residuals) if np.isfinite(residuals).any() else float('nan'):.2f} px")
-    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost")
+    reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints" if recovery is not None else ""
+    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
     results = load_poses(out / "poses.npz") if truth is not None or live is not None else None
     if truth is not None:
         assert results is not None  # loaded when there is a truth
@@ -150,6 +159,34 @@ def run(args: argparse.Namespace) -> int:
         review.show(done - 1)
         return serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
+
+
+def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, settings):
+    """The pose at the first frame: ``--init``, else the recording's init.toml, else fitted to the keypoints
+    of the first frames (:func:`tracker.keypoints.first_pose.first_pose`, detections cached in
+    OUT/keypoints.npz)."""
+    from tracker.io.posefile import load_pose_file
+
+    given = args.init or rec.init_path
+    if given is not None:
+        return load_pose_file(given, model)
+    if not args.keypoints:
+        raise TrackerInputError(
+            f"{rec.path}: no init.toml in the recording folder and --keypoints off; pass --init, or let the "
+            "keypoint detector find the first pose (--keypoints every or N)"
+        )
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detect import detect_recording
+    from tracker.keypoints.first_pose import FRAMES, first_pose
+
+    last = min(stop, args.start + FRAMES)
+    print(
+        f"first pose: no init.toml, fitting the body to the keypoints of frames {args.start}..{last - 1}",
+        file=sys.stderr,
+    )
+    cache = ensure_writable_folder(out) / "keypoints.npz"
+    keypoints, _ = detect_recording(rec, args.start, last, cache=cache)
+    return first_pose(rec, model, keypoints, settings=settings)
 
 
 def _keypoints(args: argparse.Namespace, rec, stop: int, out: Path):

@@ -8,7 +8,7 @@ Arrays (formats.md), F frames, N components, J joints:
     poses (F, N, 4, 4) float64  world_from_component
     joint_names (J,) str
     joints (F, J, 3) float64    joint centres in world, metres
-    status (F,) int8            0 tracked, 1 uncertain, 2 lost
+    status (F,) int8            0 tracked, 1 uncertain, 2 lost, 3 re-seeded from the keypoints
     residual (F,) float64       robust mean edge distance, pixels (tracker points: the RMS
                                 marker-to-node distance, mm)
 
@@ -32,7 +32,7 @@ import numpy as np
 
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.errors import TrackerInputError
-from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
 _INITIAL_CAPACITY = 64
 
@@ -95,7 +95,7 @@ class PosesWriter:
         elapsed: float = np.nan,
         time: float | None = None,
     ) -> None:
-        """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0/1/2, residual px,
+        """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0-3, residual px,
         the seconds the tracker spent on it (NaN if unknown) and, for frames taken at measured times (live
         capture), its time in seconds; without times, time = (frame - first frame) / fps."""
         if self._closed:
@@ -116,8 +116,8 @@ class PosesWriter:
         for key, value in row.items():
             if np.shape(value) != self._columns[key].shape[1:]:
                 raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._columns[key].shape[1:]}")
-        if status not in (TRACKED, UNCERTAIN, LOST):
-            raise ValueError(f"status must be 0, 1 or 2, got {status}")
+        if status not in (TRACKED, UNCERTAIN, LOST, RESEEDED):
+            raise ValueError(f"status must be 0, 1, 2 or 3, got {status}")
         if self._count == len(self._columns["frame"]):
             self._columns = {
                 key: np.concatenate([column, np.empty_like(column)]) for key, column in self._columns.items()
@@ -234,8 +234,8 @@ def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarra
     out.setdefault("frame", np.arange(frames, dtype=np.int64))
     if len(np.unique(out["frame"])) != frames:
         raise fail("'frame' repeats a frame index")
-    if "status" in out and not np.isin(out["status"], (TRACKED, UNCERTAIN, LOST)).all():
-        raise fail("'status' holds values other than 0, 1, 2")
+    if "status" in out and not np.isin(out["status"], (TRACKED, UNCERTAIN, LOST, RESEEDED)).all():
+        raise fail("'status' holds values other than 0, 1, 2, 3")
     if "component_names" in arrays:
         out["component_names"] = names("component_names")
     if "poses" in arrays:

@@ -1,11 +1,6 @@
-"""Where BlazePose's landmarks sit on a body model: a component and a point in its frame, and the distances
-between landmarks that no pose changes (docs/keypoints.md, "Automatic first pose").
-
-A shoulder, elbow, wrist, hip, knee or ankle marks the joint centre of a :data:`tracker.keypoint_cue.SIDES`
-component (its origin).  The nose and ears, the index and little-finger knuckles, the heel and the toes
-mark points on the surface of the head, hand and foot: ``c + d * r`` on the component's first ellipsoid
-(centre c, radii r) in the direction d of :data:`SURFACE`, with the component frames of models/human.toml
-(x to the body's left, y backwards, z up at rest).
+"""The distances between BlazePose's landmarks that no pose of a body model changes, and how far apart a
+pose can put them (docs/keypoints.md, "Automatic first pose"); the landmarks sit on the model where
+:func:`tracker.keypoint_cue.anchors` puts them.
 """
 
 from __future__ import annotations
@@ -13,45 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from tracker.chain import BALL, FIXED, HINGE
-from tracker.keypoint_cue import LANDMARKS, landmark_points
+from tracker.keypoint_cue import LANDMARKS, anchors
 from tracker.model import Model
-
-SURFACE = {
-    "nose": ("head", (0.0, -1.0, 0.0)),
-    "left_ear": ("head", (1.0, 0.0, 0.0)),
-    "right_ear": ("head", (-1.0, 0.0, 0.0)),
-    "left_index": ("hand_l", (0.0, -1.0, 0.0)),
-    "right_index": ("hand_r", (0.0, -1.0, 0.0)),
-    "left_pinky": ("hand_l", (0.0, 1.0, 0.0)),
-    "right_pinky": ("hand_r", (0.0, 1.0, 0.0)),
-    "left_heel": ("foot_l", (0.0, 1.0, 0.0)),
-    "right_heel": ("foot_r", (0.0, 1.0, 0.0)),
-    "left_foot_index": ("foot_l", (0.0, -1.0, 0.0)),
-    "right_foot_index": ("foot_r", (0.0, -1.0, 0.0)),
-}
-"""Landmark -> (component, direction d): the nose in front of the head, the ears at its sides, the index
-knuckle at the front of the hand and the little finger's at its back (the palm faces the thigh at rest),
-the heel behind the foot and the toes in front."""
-
-
-def anchors(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """Each landmark's component (33,) int (-1 when the model has none) and its point (33, 3) in that
-    component's frame: the joint centres of :data:`tracker.keypoint_cue.SIDES` and the :data:`SURFACE`
-    points (where the component's first quadric is an ellipsoid or a sphere)."""
-    component, point, _ = landmark_points(model, LANDMARKS)
-    for name, (part, direction) in SURFACE.items():
-        if part not in model.names:
-            continue
-        index = model.index(part)
-        owned = np.flatnonzero(model.quadric_component == index)
-        if len(owned) == 0 or model.quadric_shape[owned[0]] not in ("ellipsoid", "sphere"):
-            continue
-        params = model.quadric_params[owned[0]]
-        radii = np.asarray(params["radii"] if "radii" in params else [params["radius"]] * 3, float)
-        centre = np.asarray(params.get("center", [0.0, 0.0, 0.0]), float)
-        component[LANDMARKS.index(name)] = index
-        point[LANDMARKS.index(name)] = centre + np.multiply(direction, radii)
-    return component, point
 
 
 def _fixed_points(model: Model) -> list[list[tuple[int, np.ndarray]]]:

@@ -29,8 +29,7 @@ from tracker.camera import Camera
 from tracker.chain import BALL, FREE, HINGE, SLIDE
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.keypoint_cue import LANDMARKS, left_right_pairs
-from tracker.keypoints.anchors import anchors
+from tracker.keypoint_cue import LANDMARKS, anchors, left_right_pairs
 from tracker.keypoints.triangulation import middle
 from tracker.model import Model
 

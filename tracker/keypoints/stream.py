@@ -12,7 +12,9 @@ holds it far better than one in every fourth.
 
 A cache (``keypoints.npz``, :mod:`tracker.keypoints.detect`) that already holds the scheduled
 frames is used instead of the worker; otherwise what the worker detected is added to it when the
-stream closes, also after Ctrl-C.
+stream closes, also after Ctrl-C.  Frames the cache holds are always taken from it, not from the
+worker (a landmarker in video mode reads a frame a little differently after other frames), so a
+second run over the same output folder gives the same result as the first.
 """
 
 from __future__ import annotations
@@ -39,8 +41,9 @@ _POLL = 0.5
 
 
 def schedule(start: int, stop: int, step: int) -> np.ndarray:
-    """The frames the detector sees: start, start + step, ... before stop."""
-    return np.arange(start, stop, step)
+    """The frames the detector sees: start, start + step, ... before stop, and the last one (so that every
+    frame lies between two detected ones)."""
+    return np.unique(np.r_[np.arange(start, stop, step), stop - 1])
 
 
 def _work(recording: Recording, start: int, stop: int, step: int, results) -> None:
@@ -48,8 +51,10 @@ def _work(recording: Recording, start: int, stop: int, step: int, results) -> No
     None; an error is put instead and ends it.  Ctrl-C is the parent's to handle."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        for _, raw in detections(recording, start, stop, step):
-            results.put((raw, consistent(raw, recording.cameras)[0]))
+        runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
+        for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
+            for _, raw in detections(recording, first, last, every):
+                results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
@@ -66,9 +71,12 @@ class KeypointStream:
         self.checked: dict[int, Keypoints] = {}
         self.worker: multiprocessing.process.BaseProcess | None = None
         self.reused = holding(self.old, self.wanted)
+        held = self.wanted[np.isin(self.wanted, self.old.frame)] if self.old is not None else self.wanted[:0]
+        if len(held):  # the cache's rows win over a new detection of the same frame: a re-run gives the same
+            assert self.old is not None
+            checked = consistent(self.old.at_frames(held), recording.cameras)[0]
+            self.checked = {int(frame): checked.at_frames(np.array([frame])) for frame in held}
         if self.reused is not None:
-            checked = consistent(self.reused, recording.cameras)[0]
-            self.checked = {int(frame): checked.at_frames(np.array([frame])) for frame in self.wanted}
             return
         require_detector()
         context = multiprocessing.get_context("spawn")
@@ -121,7 +129,7 @@ class KeypointStream:
         elif isinstance(item, BaseException):
             self.finished = True
             raise item
-        else:
+        elif int(item[0].frame[0]) not in self.checked:
             raw, checked = item
             self.raw.append(raw)
             self.checked[int(raw.frame[0])] = checked
