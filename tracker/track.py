@@ -80,7 +80,7 @@ class Settings:
     keypoint_weight: float = 3.0  # s: a landmark's weight against an edge sample's (tracker.keypoint_cue)
     keypoint_confidence: float = 0.5  # landmarks less confident than this are not used
     keypoint_tolerance: float = 0.03  # detector noise, a share of the body's image size: closer landmarks unused
-    keypoint_noise_multiple: float = 2.0  # each landmark's zone grows to this many times its median misfit (0: fixed)
+    keypoint_noise_multiple: float = 1.5  # each landmark's zone grows to this many times its median misfit (0: fixed)
     keypoint_tolerance_max: float = 0.15  # ... but no further: a body that far off is pulled back
     keypoint_reach: float = 0.1  # a landmark's pull fades beyond this share of the body's size past its zone
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion

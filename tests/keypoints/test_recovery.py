@@ -1,0 +1,102 @@
+"""Never stay lost: `tracker track` starts without a first pose, and a body lost to black frames or started
+far off is seeded again from the keypoints (on the rendered demo, with its truth)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tracker.camera import load_calibration
+from tracker.cli import main
+from tracker.geometry import se3
+from tracker.io.posefile import load_pose_file, save_pose_file
+from tracker.io.poses import load_poses
+from tracker.io.recording import frames, open_recording
+from tracker.keypoints.recovery import Recovery
+from tracker.model import load_model
+from tracker.status import RESEEDED
+
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+COUNT = 70
+
+
+def _errors(out: Path) -> np.ndarray:
+    """Per frame, the mean distance (m) of the tracked joints from the truth."""
+    poses, truth = load_poses(out / "poses.npz"), load_poses(DEMO / "truth.npz")
+    return np.linalg.norm(poses["joints"] - truth["joints"][poses["frame"]], axis=2).mean(axis=1)
+
+
+def _demo_copy(folder: Path, black: range = range(0)) -> Path:
+    """The demo's first COUNT frames as PNG folders, the frames of ``black`` all black in every camera."""
+    recording = open_recording(DEMO)
+    folder.mkdir()
+    for name in ("calibration.toml", "model.toml", "truth.npz"):
+        shutil.copy(DEMO / name, folder / name)
+    for camera in recording.cameras:
+        (folder / camera.name).mkdir()
+    for index, images in frames(recording, 0, COUNT, colour=True):
+        for camera, image in zip(recording.cameras, images):
+            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image * (index not in black))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def demo_pngs(tmp_path_factory) -> Path:
+    return _demo_copy(tmp_path_factory.mktemp("demo") / "rec")
+
+
+def test_track_without_a_first_pose_fits_one_to_the_keypoints(demo_pngs, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 0
+    assert "first pose: no init.toml, fitting the body to the keypoints of frames 0..4" in capsys.readouterr().err
+    error = _errors(out)
+    assert np.median(error) < 0.02 and error.max() < 0.06, error.round(3)
+
+
+def test_without_a_first_pose_or_keypoints_the_error_says_what_to_pass(demo_pngs, tmp_path, capsys):
+    assert main(["track", str(demo_pngs), "--out", str(tmp_path), "--keypoints", "off", "--quiet"]) == 2
+    message = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "no init.toml" in message and "pass --init" in message and "--keypoints" in message
+
+
+def test_a_first_pose_30_cm_and_45_degrees_off_is_seeded_again_from_the_keypoints(demo_pngs, tmp_path):
+    """From a first pose 30 cm and 45 degrees off, the edges alone stay lost; with the keypoints the first
+    frame is seeded again (status 3) and the body is held from there."""
+    model = load_model(DEMO / "model.toml")
+    true = load_pose_file(DEMO / "init.toml", model)
+    turn = se3.exp(np.r_[0.0, 0.0, 0.0, 0.0, 0.0, np.radians(45)])
+    off = np.eye(4)
+    off[:3, :3] = turn[:3, :3]
+    root = true[0, :3, 3]
+    off[:3, 3] = root - turn[:3, :3] @ root + np.array([0.3, 0.0, 0.0])
+    save_pose_file(tmp_path / "off.toml", model, off @ true)
+    args = ["track", str(demo_pngs), "--init", str(tmp_path / "off.toml"), "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "edges"), "--keypoints", "off"]) == 0
+    assert main([*args, "--out", str(tmp_path / "out")]) == 0
+    alone, fused = _errors(tmp_path / "edges"), _errors(tmp_path / "out")
+    assert load_poses(tmp_path / "out" / "poses.npz")["status"][0] == RESEEDED
+    assert np.median(alone[10:]) > 0.15
+    assert np.median(fused[10:]) < 0.05 and fused[-20:].max() < 0.02, fused.round(3)
+
+
+def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance():
+    """At the demo's true pose with perfect landmarks nothing strays; moved 30 cm, it has."""
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")["poses"][0]
+    recovery = Recovery(model, load_calibration(DEMO / "calibration.toml"))
+    pixels = np.full((3, 33, 2), np.nan)
+    for k, camera in enumerate(recovery.cameras):
+        known = recovery.component >= 0
+        world = np.einsum("kij,kj->ki", truth[recovery.component[known], :3, :3], recovery.point[known])
+        pixels[k, known] = camera.project(world + truth[recovery.component[known], :3, 3])
+    confidence = np.isfinite(pixels[..., 0]).astype(float)
+    assert not recovery.strayed(truth, pixels, confidence)
+    moved = truth.copy()
+    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
+    assert recovery.strayed(moved, pixels, confidence)
+    assert not recovery.strayed(moved, pixels, np.zeros_like(confidence))  # no landmark: no judgement
