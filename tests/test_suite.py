@@ -83,17 +83,20 @@ def test_make_then_score_known_errors(tmp_path, capsys):
 def test_run_tracks_with_the_options_given(tmp_path, capsys):
     out, results = tmp_path / "suite", tmp_path / "results"
     assert main(["suite", "make", str(out), "--only", SMALL, "--frames", "2", "--quiet"]) == 0
-    # no init.toml: tracker track refuses, and run says so in one line naming the log
-    assert main(["suite", "run", "--quiet", str(out), str(tmp_path / "refused")]) == 2
+    # no init.toml and no keypoints to fit a first pose to: tracker track refuses, and run says so in one line
+    assert main(["suite", "run", "--quiet", str(out), str(tmp_path / "refused"), "--", "--keypoints", "off"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--init" in err[0] and "track.log" in err[0]
     assert "no init.toml" in (tmp_path / "refused" / SMALL / "track.log").read_text()
     assert (
-        main(["suite", "run", "--quiet", "--json", str(out), str(results), "--", "--init", "{rec}/truth_init.toml"])
+        main(
+            ["suite", "run", "--quiet", "--json", str(out), str(results)]
+            + ["--", "--init", "{rec}/truth_init.toml", "--keypoints", "off"]
+        )
         == 0
     )
     row = json.loads(capsys.readouterr().out)["renders"][0]
-    assert row["frames"] == 2 and row["lost_frames"] == 0 and row["mpjpe_mm"] < 50.0  # from the true start
+    assert row["frames"] == 2 and row["lost_frames"] == 0 and row["mpjpe_mm"] < 50.0  # edges from the true start
     assert len(load_poses(results / SMALL / "poses.npz")["frame"]) == 2
 
 

@@ -27,6 +27,7 @@ import dataclasses
 import numpy as np
 
 from tracker.camera import Camera
+from tracker.errors import TrackerInputError
 from tracker.keypoint_cue import cue_points
 from tracker.keypoints.consistency import triangulate_many
 from tracker.keypoints.first_pose import snap_to_edges
@@ -100,12 +101,16 @@ class Recovery:
 
     def fitted(self, start: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray | None:
         """The model fitted to the landmarks (to their world points, then to the detections), or None when too
-        few are seen; with one view, ``start`` refined against the detections."""
+        few are seen or they cannot place the body (no hips and shoulders); with one view, ``start`` refined
+        against the detections."""
         if len(self.cameras) >= 2:
             points = world_points(self.cameras, pixels, confidence, self.min_confidence)
             if np.isfinite(points).all(axis=1).sum() < MIN_LANDMARKS:
                 return None
-            start = fit_pose(self.model, points)
+            try:
+                start = fit_pose(self.model, points)
+            except TrackerInputError:  # the landmarks cannot place the body: go on as tracked
+                return None
         elif ((confidence[0] >= self.min_confidence) & np.isfinite(pixels[0]).all(axis=1)).sum() < MIN_LANDMARKS:
             return None
         return fit_to_views(self.model, start, self.cameras, pixels[None], confidence[None])
