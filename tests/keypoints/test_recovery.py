@@ -57,6 +57,19 @@ def test_track_without_a_first_pose_fits_one_to_the_keypoints(demo_pngs, tmp_pat
     assert np.median(error) < 0.02 and error.max() < 0.06, error.round(3)
 
 
+def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path, capsys):
+    """The first 8 frames black: nobody to fit, so the detector tries a second later and tracking starts there."""
+    folder = _demo_copy(tmp_path / "rec", black=range(8))
+    later = round(open_recording(folder).fps)  # an image folder's rate
+    out = tmp_path / "out"
+    assert main(["track", str(folder), "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "no person found by the keypoint detector in two views in frames 0..4" in err and "trying again" in err
+    assert f"fitting the body to the keypoints of frames {later}..{later + 4}" in err
+    assert list(load_poses(out / "poses.npz")["frame"]) == list(range(later, COUNT))
+    assert _errors(out).max() < 0.05
+
+
 def test_without_a_first_pose_or_keypoints_the_error_says_what_to_pass(demo_pngs, tmp_path, capsys):
     assert main(["track", str(demo_pngs), "--out", str(tmp_path), "--keypoints", "off", "--quiet"]) == 2
     message = capsys.readouterr().err.strip().splitlines()[-1]

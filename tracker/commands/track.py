@@ -71,13 +71,13 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     background = _background(args, rec, out)
-    init = _first_pose(args, rec, model, stop, out, settings)
+    init, begin = _first_pose(args, rec, model, stop, out, settings)
     print(
-        f"tracking {rec.path} frames {args.start}..{stop - 1} with {len(rec.cameras)} camera(s) "
+        f"tracking {rec.path} frames {begin}..{stop - 1} with {len(rec.cameras)} camera(s) "
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
-    stream = _keypoints(args, rec, stop, out)  # the detector starts up while the kernels load
+    stream = _keypoints(args, rec, begin, stop, out)  # the detector starts up while the kernels load
     recovery = None
     if stream is not None:
         from tracker.keypoints.recovery import Recovery
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
             for index, images in progress(
-                frames(rec, args.start, stop, prepare=prepare, colour=background is not None), total=stop - args.start
+                frames(rec, begin, stop, prepare=prepare, colour=background is not None), total=stop - begin
             ):
                 shown = images
                 if background is not None and overlay is not None:
@@ -162,14 +162,15 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, settings):
-    """The pose at the first frame: ``--init``, else the recording's init.toml, else fitted to the keypoints
-    of the first frames (:func:`tracker.keypoints.first_pose.first_pose`, detections cached in
-    OUT/keypoints.npz)."""
+    """The pose at the first frame and that frame: ``--init``, else the recording's init.toml, else fitted to the
+    keypoints of the first frames (:func:`tracker.keypoints.first_pose.first_pose`, detections cached in
+    OUT/keypoints.npz).  When they show nobody, the detector keeps trying a second of frames later, and
+    tracking starts where it first finds the person."""
     from tracker.io.posefile import load_pose_file
 
     given = args.init or rec.init_path
     if given is not None:
-        return load_pose_file(given, model)
+        return load_pose_file(given, model), args.start
     if not args.keypoints:
         raise TrackerInputError(
             f"{rec.path}: no init.toml in the recording folder and --keypoints off; pass --init, or let the "
@@ -179,24 +180,32 @@ def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, sett
     from tracker.keypoints.detect import detect_recording
     from tracker.keypoints.first_pose import FRAMES, first_pose
 
-    last = min(stop, args.start + FRAMES)
-    print(
-        f"first pose: no init.toml, fitting the body to the keypoints of frames {args.start}..{last - 1}",
-        file=sys.stderr,
-    )
     cache = ensure_writable_folder(out) / "keypoints.npz"
-    keypoints, _ = detect_recording(rec, args.start, last, cache=cache)
-    return first_pose(rec, model, keypoints, settings=settings)
+    tries = range(args.start, max(args.start + 1, stop - FRAMES + 1), max(1, round(rec.fps)))
+    for attempt, begin in enumerate(tries):
+        last = min(stop, begin + FRAMES)
+        print(
+            f"first pose: no init.toml, fitting the body to the keypoints of frames {begin}..{last - 1}",
+            file=sys.stderr,
+        )
+        keypoints, _ = detect_recording(rec, begin, last, cache=cache)
+        try:
+            return first_pose(rec, model, keypoints, settings=settings), begin
+        except TrackerInputError as error:
+            if len(rec.cameras) < 2 or attempt == len(tries) - 1:
+                raise
+            print(f"first pose: {error}; trying again a second later", file=sys.stderr)
+    raise AssertionError("unreachable: the last attempt returns or raises")
 
 
-def _keypoints(args: argparse.Namespace, rec, stop: int, out: Path):
+def _keypoints(args: argparse.Namespace, rec, begin: int, stop: int, out: Path):
     """The detector's stream of every ``--keypoints``-th frame (cached in OUT/keypoints.npz), or None (off)."""
     if not args.keypoints:
         return None
     from tracker.atomic import ensure_writable_folder
     from tracker.keypoints.stream import KeypointStream
 
-    stream = KeypointStream(rec, args.start, stop, args.keypoints, ensure_writable_folder(out) / "keypoints.npz")
+    stream = KeypointStream(rec, begin, stop, args.keypoints, ensure_writable_folder(out) / "keypoints.npz")
     every = "every frame" if args.keypoints == 1 else f"every {args.keypoints}th frame"
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
     print(f"keypoints: {every}, {source}", file=sys.stderr)
