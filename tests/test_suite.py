@@ -29,6 +29,7 @@ def hardships(render: suite.Render) -> set[str]:
     found |= {"motion blur"} if staging.motion_blur > 1 else set()
     found |= {"30 fps"} if render.rate == 30.0 else {"low fps"} if 6.0 <= render.rate <= 10.0 else set()
     found |= {"athletic"} if render.motion == "athletic" else set()
+    found |= {"bystanders"} if staging.backdrop == "photos" else set()
     return found
 
 
@@ -39,7 +40,9 @@ def test_the_suite_covers_clips_motions_rigs_and_every_hardship():
     assert {r.rig for r in renders} == {"demo3", "ring4", "corner3"}
     assert all((ROOT / "calib" / f"{r.rig}.toml").is_file() for r in renders)
     every = {*KINDS, "mixed", "capsules", "table", "border", "far", "motion blur", "30 fps", "low fps", "athletic"}
-    assert set().union(*map(hardships, renders)) == every
+    assert set().union(*map(hardships, renders)) == every | {"bystanders"}
+    assert all(r.staging.face for r in renders)  # a detector can tell each body's front from its back
+    assert [r.name for r in renders if r.staging.backdrop == "photos"] == ["dance-print-bystanders"]  # else a room
     assert all(len(hardships(r)) >= 2 for r in renders)  # each combines a few
     assert all(60 <= r.frames <= 120 for r in renders)
     clips = [r for r in renders if r.motion in suite.CLIPS]
