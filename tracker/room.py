@@ -9,7 +9,8 @@ a room it starts in through the face it crosses first,
 the floor, the ceiling or one of four walls. Wall w is painted in its own coordinates (s metres along
 it, z up; :func:`wall_frame`): a base coat (paint, plaster, wallpaper stripes or bricks), a skirting
 board, and decorations, rectangles of (s, z): one door, a window or two (showing the light outside
-instead of reflecting the room's) and framed posters. The floor is planks or tiles, with a rug at times.
+instead of reflecting the room's) and framed posters. The floor is planks or tiles, with a rug beside the
+capture area at times.
 
 Furniture is built of boxes (:class:`tracker.props.Box`, ray-cast by :func:`tracker.props.cast_boxes`)
 with a finish painted in each box's frame (wood grain, book spines, drawer fronts, fabric, cardboard):
@@ -160,10 +161,13 @@ def make_room(cameras: list[Camera], clear_low, clear_high, seed: int = 0) -> Ro
     wood = _WOODS[int(rng.integers(len(_WOODS)))]
     floor_albedo = np.array([wood, wood * 0.8]) if floor == "planks" else np.array([[0.75, 0.74, 0.72], [0.35] * 3])
     rug = np.zeros(0)
-    if rng.uniform() < 0.6:
-        centre = 0.5 * (clear_low[0:2] + clear_high[0:2]) + rng.uniform(-0.6, 0.6, 2)
-        half = rng.uniform([0.8, 0.6], [1.3, 0.9])
-        rug = np.concatenate([centre - half, centre + half])
+    clear = np.concatenate([clear_low[0:2], clear_high[0:2]])
+    for _ in range(20 if rng.uniform() < 0.7 else 0):  # a rug beside the capture area, not under the body
+        half = rng.uniform([0.7, 0.5], [1.2, 0.8])
+        centre = rng.uniform(low[0:2] + half + 0.2, np.maximum(high[0:2] - half - 0.2, low[0:2] + half + 0.21))
+        if not _overlap(np.concatenate([centre - half, centre + half]), clear, 0.2):
+            rug = np.concatenate([centre - half, centre + half])
+            break
     room = Room(
         low=low,
         high=high,
