@@ -25,6 +25,8 @@ LAYERS = (
         "tracker.render",
         "tracker.texture",
         "tracker.props",
+        "tracker.room",
+        "tracker.face",
     ),
     ("tracker.track",),
     (

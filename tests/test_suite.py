@@ -10,8 +10,12 @@ import pytest
 from conftest import SHARED_DATA, needs_shared
 
 from tracker import suite
+from tracker.camera import load_calibration
 from tracker.cli import main
 from tracker.io.poses import PosesWriter, load_poses
+from tracker.keypoint_cue import LANDMARKS, landmark_points
+from tracker.keypoints.store import Keypoints, save_keypoints
+from tracker.model import load_model
 from tracker.texture import KINDS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,6 +33,7 @@ def hardships(render: suite.Render) -> set[str]:
     found |= {"motion blur"} if staging.motion_blur > 1 else set()
     found |= {"30 fps"} if render.rate == 30.0 else {"low fps"} if 6.0 <= render.rate <= 10.0 else set()
     found |= {"athletic"} if render.motion == "athletic" else set()
+    found |= {"bystanders"} if staging.backdrop == "photos" else set()
     return found
 
 
@@ -39,7 +44,9 @@ def test_the_suite_covers_clips_motions_rigs_and_every_hardship():
     assert {r.rig for r in renders} == {"demo3", "ring4", "corner3"}
     assert all((ROOT / "calib" / f"{r.rig}.toml").is_file() for r in renders)
     every = {*KINDS, "mixed", "capsules", "table", "border", "far", "motion blur", "30 fps", "low fps", "athletic"}
-    assert set().union(*map(hardships, renders)) == every
+    assert set().union(*map(hardships, renders)) == every | {"bystanders"}
+    assert all(r.staging.face for r in renders)  # a detector can tell each body's front from its back
+    assert [r.name for r in renders if r.staging.backdrop == "photos"] == ["dance-print-bystanders"]  # else a room
     assert all(len(hardships(r)) >= 2 for r in renders)  # each combines a few
     assert all(60 <= r.frames <= 120 for r in renders)
     clips = [r for r in renders if r.motion in suite.CLIPS]
@@ -78,6 +85,21 @@ def test_make_then_score_known_errors(tmp_path, capsys):
     assert main(["suite", "score", str(out), str(results)]) == 0
     table = capsys.readouterr().out.splitlines()
     assert table[1].split()[:5] == [SMALL, "ring4", "6", "70.0", "0.0"]
+    # the detector's landmarks scored against the truth: landmarks at the true joints' images score zero
+    cameras = load_calibration(folder / "calibration.toml")
+    component = landmark_points(load_model(folder / "model.toml"), LANDMARKS)[0]
+    pixels = np.full((3, len(cameras), len(LANDMARKS), 2), np.nan)
+    for k, camera in enumerate(cameras):
+        for j in np.flatnonzero(component >= 0):
+            pixels[:, k, j] = camera.project(truth["poses"][:, component[j], 0:3, 3])
+    found = Keypoints(
+        truth["frame"], tuple(c.name for c in cameras), pixels, np.ones(pixels.shape[:3]), np.zeros((3, 4, 33, 3))
+    )
+    save_keypoints(tmp_path / "kp" / SMALL / "keypoints.npz", found)
+    assert main(["suite", "landmarks", str(out), str(tmp_path / "kp"), "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)[0]
+    assert row["name"] == SMALL and row["median"] == 0.0 and row["wrong"] == 0.0 and row["swapped"] == 0.0
+    assert row["views"] == row["found"] == row["on_body"] == 12 and 12 * 9 <= row["scored"] < 12 * 12  # cam0's table
 
 
 def test_run_tracks_with_the_options_given(tmp_path, capsys):
@@ -109,6 +131,7 @@ def test_run_tracks_with_the_options_given(tmp_path, capsys):
         ["suite", "make", "{tmp}/x", "--only", "no-such-render"],
         ["suite", "make", "{tmp}/x", "--only", "far-walk"],  # a CMU render without --clips
         ["suite", "run", "{out}", "{tmp}/r", "--json", "--", "--init", "x"],  # suite option after RESULTS
+        ["suite", "landmarks", "{out}", "{tmp}/no-keypoints"],
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv):

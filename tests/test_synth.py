@@ -589,7 +589,8 @@ def test_synth_options_on_the_command_line(tmp_path, capsys):
     out = tmp_path / "rec"
     args = ["synth", "--model", str(MODEL), "--calib", str(_rig(tmp_path)), "--motion", "athletic", "--out", str(out)]
     extra = ["--frames", "2", "--fps", "8", "--texture", "mixed", "--body", "capsules", "--table", "a", "--quiet"]
-    assert main(args + extra + ["--zoom", "1.2", "--distance", "1.5", "--motion-blur", "3", "--no-init"]) == 0
+    staging = ["--zoom", "1.2", "--distance", "1.5", "--motion-blur", "3", "--backdrop", "room", "--face"]
+    assert main(args + extra + staging + ["--no-init"]) == 0
     assert (out / "truth_init.toml").is_file() and not (out / "init.toml").exists()
     written, given = load_calibration(out / "calibration.toml"), load_calibration(tmp_path / "rig.toml")
     assert [c.matrix[0, 0] for c in written] == pytest.approx([1.2 * 140.0, 1.2 * 140.0])

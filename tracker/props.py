@@ -33,6 +33,12 @@ class Box:
     albedo: tuple[float, float, float] = TABLE_ALBEDO
 
 
+def box_corners(box: Box) -> np.ndarray:
+    """The eight corners (8, 3) of ``box`` in world."""
+    signs = np.array(np.meshgrid([-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], indexing="ij")).reshape(3, -1).T
+    return (signs * box.half) @ box.world_from_box[0:3, 0:3].T + box.world_from_box[0:3, 3]
+
+
 def cast_boxes(boxes: list[Box], camera: Camera, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nearest box hit along the rays of normalised coordinates ``xy`` (M, 2): depth z (M,) (inf: none),
     the box's index (M,) (-1: none) and the unit face normal (M, 3) in the camera frame, towards the camera."""

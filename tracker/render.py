@@ -4,9 +4,10 @@ One ray per pixel (exact lens distortion: the rays go through the undistorted
 pixel centres) is intersected with every clipped quadric (no conics), so a
 disagreement between this renderer and :mod:`tracker.outline` points at a bug
 in one of them.  :class:`Renderer` shades the hits, softens the edges and
-composites the body over a background photo with sensor noise; optionally it paints
-clothes on the body (:mod:`tracker.texture`), stands opaque props such as a table in
-the scene (:mod:`tracker.props`) and averages sub-frame poses into motion blur.
+composites the body over a background (a photo, or a rendered room: :mod:`tracker.room`) with
+sensor noise; optionally it paints clothes on the body (:mod:`tracker.texture`) and a face on its
+head (:mod:`tracker.face`), stands opaque props such as a table in the scene (:mod:`tracker.props`)
+and averages sub-frame poses into motion blur.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from numba import njit, prange
 
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
+from tracker.face import Face, paint_face
 from tracker.model import Model
 from tracker.props import Box, backdrop
 from tracker.texture import Texture, paint
@@ -300,8 +302,9 @@ def load_backgrounds(cameras: list[Camera], paths=None, seed: int = 0) -> tuple[
 class Renderer:
     """Renders one camera: pixel rays precomputed once, then :meth:`render` per frame.
 
-    ``texture`` paints the body's colours (None: the plain :func:`albedos`); ``props`` are drawn
-    into the background once, and their depth hides the body behind them.
+    ``texture`` paints the body's colours (None: the plain :func:`albedos`), ``face`` a face and hair
+    on its head over them; ``props`` are drawn into the background once, and their depth hides the
+    body behind them.
     """
 
     def __init__(
@@ -317,6 +320,7 @@ class Renderer:
         noise: float = 3.0,
         *,
         texture: Texture | None = None,
+        face: Face | None = None,
         props: tuple[Box, ...] = (),
     ):
         self.model, self.camera = model, camera
@@ -346,7 +350,7 @@ class Renderer:
             )
         self._background_f32 = self.background.astype(np.float32)
         self.albedo = albedos(model).astype(np.float32) * 255.0
-        self.texture = texture
+        self.texture, self.face = texture, face
         self.comp = np.empty((h, w), np.int64)
         self.shade = np.empty((h, w), np.float64)
         self.depth = np.empty((h, w), np.float64)
@@ -429,13 +433,17 @@ class Renderer:
         x0, x1 = max(cols[0] - pad, 0), min(cols[-1] + pad + 1, w)
         c = comp[y0:y1, x0:x1]
         mask: np.ndarray = (c >= 0).astype(np.float32)
-        if self.texture is None:
+        if self.texture is None and self.face is None:
             albedo = self.albedo[np.maximum(c, 0)]
         else:
             albedo = np.zeros((*c.shape, 3), np.float32)
             seen = c >= 0
             points = self._surface_points(poses, c[seen], depth[y0:y1, x0:x1][seen], self.rays[y0:y1, x0:x1][seen])
-            albedo[seen] = 255.0 * paint(self.texture, c[seen], points)
+            colours = albedos(self.model)[c[seen]] if self.texture is None else paint(self.texture, c[seen], points)
+            if self.face is not None:
+                head = c[seen] == self.face.component
+                colours[head] = paint_face(self.face, points[head])
+            albedo[seen] = 255.0 * colours
         body = albedo * (shade[y0:y1, x0:x1].astype(np.float32) * mask)[..., None]
         return int(y0), int(x0), body, mask
 

@@ -3,7 +3,9 @@
 :data:`SUITE` lists the renders as data: a rig of ``calib/``, a motion (a CMU clip, the procedural
 turn or the athletic hops, kicks and spins) at some frame rate, and a :class:`tracker.synth.Staging`
 combining a few hardships: clothing textures, capsule bodies of perturbed sizes, tables hiding the
-legs, bodies cut by the image border or far away, motion blur, low frame rates. :func:`make` renders
+legs, bodies cut by the image border or far away, motion blur, low frame rates. Every body has a
+face; every render but one stands in an empty furnished room (:mod:`tracker.room`), and that one
+over the background photos, whose people are larger than the body (bystanders). :func:`make` renders
 them into OUT/<name>/ as normal recording folders without an ``init.toml`` (the true first pose is
 ``truth_init.toml``), and :func:`score` reads RESULTS/<name>/poses.npz against each truth.npz.
 """
@@ -64,18 +66,18 @@ SUITE = (
         start=200,
         stride=4,
         seed=1,
-        staging=Staging(texture="stripes", body="capsules"),
+        staging=Staging(texture="stripes", body="capsules", backdrop="room", face=True),
     ),
     Render(
-        "dance-print-30fps",
-        "crouching dance in a printed costume at 30 fps",
+        "dance-print-bystanders",
+        "crouching dance in a printed costume at 30 fps over photos of people larger than the body",
         "ring4",
         "131_01.bvh",
         120,
         start=300,
         stride=4,
         seed=2,
-        staging=Staging(texture="print"),
+        staging=Staging(texture="print", face=True),
     ),
     Render(
         "table-booth",
@@ -85,7 +87,7 @@ SUITE = (
         120,
         fps=30.0,
         seed=3,
-        staging=Staging(texture="noise", tables=("all",)),
+        staging=Staging(texture="noise", tables=("all",), backdrop="room", face=True),
     ),
     Render(
         "far-walk",
@@ -96,7 +98,7 @@ SUITE = (
         start=500,
         stride=2,
         seed=4,
-        staging=Staging(body="capsules", distance=2.5),
+        staging=Staging(body="capsules", distance=2.5, backdrop="room", face=True),
     ),
     Render(
         "webcam-8fps",
@@ -107,7 +109,7 @@ SUITE = (
         start=40,
         stride=15,
         seed=5,
-        staging=Staging(texture="noise", motion_blur=6, shutter=0.5),
+        staging=Staging(texture="noise", motion_blur=6, shutter=0.5, backdrop="room", face=True),
     ),
     Render(
         "border-cut",
@@ -118,7 +120,7 @@ SUITE = (
         start=560,
         stride=4,
         seed=6,
-        staging=Staging(texture="stripes", zoom=2.8),
+        staging=Staging(texture="stripes", zoom=2.8, backdrop="room", face=True),
     ),
     Render(
         "kick-spin-blur",
@@ -128,7 +130,7 @@ SUITE = (
         120,
         fps=30.0,
         seed=7,
-        staging=Staging(texture="print", motion_blur=8, shutter=0.5),
+        staging=Staging(texture="print", motion_blur=8, shutter=0.5, backdrop="room", face=True),
     ),
     Render(
         "athletic-capsules",
@@ -138,7 +140,7 @@ SUITE = (
         120,
         fps=30.0,
         seed=8,
-        staging=Staging(texture="mixed", body="capsules"),
+        staging=Staging(texture="mixed", body="capsules", backdrop="room", face=True),
     ),
     Render(
         "athletic-10fps",
@@ -148,7 +150,7 @@ SUITE = (
         90,
         fps=10.0,
         seed=9,
-        staging=Staging(texture="stripes"),
+        staging=Staging(texture="stripes", backdrop="room", face=True),
     ),
     Render(
         "turn-6fps-table",
@@ -158,7 +160,7 @@ SUITE = (
         72,
         fps=6.0,
         seed=10,
-        staging=Staging(texture="mixed", tables=("cam0",)),
+        staging=Staging(texture="mixed", tables=("cam0",), backdrop="room", face=True),
     ),
 )
 """The suite, in the order it is made and scored."""

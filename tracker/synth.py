@@ -4,8 +4,9 @@ Pipeline of :func:`synthesize`::
 
     motion (BVH clip | procedural | athletic) -> model poses (F, N, 4, 4)        (tracker.clips)
     staging: the body that plays them         -> the model itself, or capsules  (tracker.actor)
-    per frame and camera                      -> ray-cast body over a background, props, texture,
-                                                 motion blur                     (tracker.render)
+    per camera, once                          -> the backdrop: photos, or a room (tracker.room)
+    per frame and camera                      -> ray-cast body over the backdrop, props, texture,
+                                                 face, motion blur               (tracker.render)
     writers -> <cam>.avi (MJPG), calibration.toml, model.toml, init.toml, truth.npz
 
 and the camera rigs of ``calib/``. :class:`Staging` holds what makes a render unlike the tracking
@@ -30,13 +31,15 @@ from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, surface_samples
 from tracker.errors import TrackerInputError
+from tracker.face import HAIR, Face
 from tracker.geometry import se3
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file
 from tracker.model import Model, joint_centres, load_model, model_from_dict
-from tracker.props import Box, cast_boxes
+from tracker.props import Box, box_corners, cast_boxes
 from tracker.render import Renderer, albedos, load_backgrounds
+from tracker.room import make_room, room_backdrop
 from tracker.tomlfile import read_toml
 
 # ---------------------------------------------------------------------------------------------
@@ -160,7 +163,10 @@ class Staging:
     ``texture``: clothing pattern (:data:`tracker.texture.CHOICES`); ``body``: ``model`` or ``capsules``
     (:mod:`tracker.actor`, sizes within +-``jitter``); ``tables``: camera names (or ``all``) with a table
     between them and the body; ``zoom`` and ``distance``: :func:`moved_rig`; ``motion_blur``: sub-frames
-    averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.clips.exposure_poses`).
+    averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.clips.exposure_poses`);
+    ``backdrop``: ``photos`` (the background photos, people in them) or ``room`` (an empty furnished room
+    rendered from the rig, :func:`room_backdrops`); ``face``: paint a face and hair on the head
+    (:func:`head_face`).
     """
 
     texture: str = "none"
@@ -171,6 +177,8 @@ class Staging:
     distance: float = 1.0
     motion_blur: int = 1
     shutter: float = 0.5
+    backdrop: str = "photos"
+    face: bool = False
 
     def check(self, cameras: list[Camera]) -> None:
         """Raise TrackerInputError naming the first value out of range, or a table's unknown camera."""
@@ -183,6 +191,7 @@ class Staging:
             (not self.distance > 0.0, f"distance {self.distance}: give a positive factor"),
             (self.motion_blur < 1, f"motion blur {self.motion_blur}: give at least 1 sub-frame"),
             (not 0.0 < self.shutter <= 2.0, f"shutter {self.shutter}: give frame intervals in (0, 2]"),
+            (self.backdrop not in BACKDROPS, f"backdrop {self.backdrop!r}: use {', '.join(BACKDROPS)}"),
         ]
         problems += [
             (name != "all" and name not in names, f"table before {name!r}: the rig has {', '.join(names)} (or all)")
@@ -199,6 +208,38 @@ class Staging:
 
 BODIES = ("model", "capsules")
 """The values of ``tracker synth --body``."""
+
+BACKDROPS = ("photos", "room")
+"""The values of ``tracker synth --backdrop``."""
+
+
+def room_backdrops(
+    cameras: list[Camera], joints: np.ndarray, props: tuple[Box, ...] = (), *, seed: int = 0, blur: float = 0.7
+) -> list[np.ndarray]:
+    """Per camera the image (H, W, 3) uint8 of one seeded room (:mod:`tracker.room`) whose furniture keeps
+    clear of the volume the body's joints ``joints`` (..., 3) and the props take (0.5 m wider, 0.4 m higher)."""
+    points = np.concatenate([np.asarray(joints, float).reshape(-1, 3), *(box_corners(box) for box in props)])
+    low = np.array([*(points[:, 0:2].min(axis=0) - 0.5), 0.0])
+    high = np.array([*(points[:, 0:2].max(axis=0) + 0.5), points[:, 2].max() + 0.4])
+    room = make_room(cameras, low, high, seed)
+    return [room_backdrop(room, camera, blur=blur) for camera in cameras]
+
+
+def head_face(body: Model) -> Face:
+    """The face for ``body``'s component ``head``, fitted to the bounding box of its surfaces: its albedo as the
+    skin, dark brown hair."""
+    if "head" not in body.names:
+        raise TrackerInputError("the model has no component named head to paint a face on; render without --face")
+    head = body.index("head")
+    points = np.concatenate(
+        [
+            surface_samples(shape, params)
+            for shape, params, component in zip(body.quadric_shape, body.quadric_params, body.quadric_component)
+            if component == head
+        ]
+    )
+    low, high = points.min(axis=0), points.max(axis=0)
+    return Face(head, 0.5 * (low + high), 0.5 * (high - low), albedos(body)[head], HAIR)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -275,7 +316,8 @@ def _readme(
         f"# Synthetic recording `{name}`",
         "",
         "Rendered by `tracker.synth` (ray-cast clipped quadrics of the body model, composited over",
-        "background photos, Gaussian edge blur and sensor noise). Ground truth in `truth.npz`.",
+        f"{'background photos' if staging.backdrop == 'photos' else 'a rendered room'}, Gaussian edge blur and"
+        " sensor noise). Ground truth in `truth.npz`.",
         "",
         f"- model: `{model_path.name}` (copied as `model.toml`)",
         f"- cameras: {', '.join(c.name for c in cameras)} (`calibration.toml`)",
@@ -317,6 +359,10 @@ def _staging_lines(staging: Staging, cameras: list[Camera], seed: int) -> list[s
         )
     if staging.texture != "none":
         lines.append(f"- clothing texture: {staging.texture}")
+    if staging.face:
+        lines.append("- a face (eyes, eyebrows, nose, mouth) on the front of the head, hair on its back and top")
+    if staging.backdrop == "room":
+        lines.append("- backdrop: an empty furnished room ray-cast from every camera (no people in it)")
     if staging.tables:
         names = ", ".join(c.name for c in staging.table_cameras(cameras))
         lines.append(f"- a table ({' x '.join(f'{v:g}' for v in TABLE_SIZE)} m) before {names}, hiding the legs")
@@ -398,11 +444,18 @@ def synthesize(
     texture = (
         None if staging.texture == "none" else textures.make_texture(staging.texture, body.names, albedos(body), seed)
     )
+    face = head_face(body) if staging.face else None
     exposures = exposure_poses(body, shown, staging.motion_blur, staging.shutter) if staging.motion_blur > 1 else None
+    if staging.backdrop == "room" and backgrounds is not None:
+        raise TrackerInputError("background photos and the room backdrop exclude each other; give only one")
     ensure_writable_folder(out)
-    photos, used = load_backgrounds(cameras, backgrounds, seed)
+    used: list[Path] = []  # the photos composited
+    if staging.backdrop == "room":
+        photos = room_backdrops(cameras, joint_centres(shown), props, seed=seed, blur=blur)
+    else:
+        photos, used = load_backgrounds(cameras, backgrounds, seed)
     renderers = [
-        Renderer(body, cam, bg, noise=noise, blur=blur, texture=texture, props=props)
+        Renderer(body, cam, bg, noise=noise, blur=blur, texture=texture, face=face, props=props)
         for cam, bg in zip(cameras, photos)
     ]
     rng = np.random.default_rng(seed)

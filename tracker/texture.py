@@ -94,14 +94,14 @@ def paint(texture: Texture, component: np.ndarray, points: np.ndarray) -> np.nda
         elif name == "print":
             mix[sel] = _spots(x / texture.cell[c, None], texture.salt[c])
         else:
-            fine = _value_noise(2.5 * x / texture.cell[c, None], texture.salt[c] ^ np.uint64(0x5BD1E995))
-            value = (_value_noise(x / texture.cell[c, None], texture.salt[c]) + 0.5 * fine) / 1.5
+            fine = value_noise(2.5 * x / texture.cell[c, None], texture.salt[c] ^ np.uint64(0x5BD1E995))
+            value = (value_noise(x / texture.cell[c, None], texture.salt[c]) + 0.5 * fine) / 1.5
             mix[sel] = np.clip(0.5 + 3.0 * (value - 0.5), 0.0, 1.0)
     mix = mix[:, None]
     return (1.0 - mix) * texture.albedo[component] + mix * texture.contrast[component]
 
 
-def _hash(cells: np.ndarray, salt: np.ndarray, lane: int = 0) -> np.ndarray:
+def lattice_hash(cells: np.ndarray, salt: np.ndarray, lane: int = 0) -> np.ndarray:
     """Uniform numbers in [0, 1) (M,) from integer lattice cells (M, 3) and per-point salts (M,): a
     multiply-xorshift mix of the 64-bit words (SplitMix64's finaliser)."""
     words = cells.astype(np.int64).view(np.uint64)
@@ -118,13 +118,13 @@ def _spots(x: np.ndarray, salt: np.ndarray) -> np.ndarray:
     """Coverage (M,) of one ball per unit cell of the lattice at the points x (M, 3) in cell units: radius
     0.18..0.35, its centre placed so that the ball stays inside its cell; a ramp 0.05 cells wide at the rim."""
     cells = np.floor(x)
-    radius = 0.18 + 0.17 * _hash(cells, salt, 0)
-    centre = np.stack([radius + (1.0 - 2.0 * radius) * _hash(cells, salt, lane) for lane in (1, 2, 3)], axis=1)
+    radius = 0.18 + 0.17 * lattice_hash(cells, salt, 0)
+    centre = np.stack([radius + (1.0 - 2.0 * radius) * lattice_hash(cells, salt, lane) for lane in (1, 2, 3)], axis=1)
     distance = np.linalg.norm(x - cells - centre, axis=1)
     return np.clip(0.5 + (radius - distance) / 0.05, 0.0, 1.0)
 
 
-def _value_noise(x: np.ndarray, salt: np.ndarray) -> np.ndarray:
+def value_noise(x: np.ndarray, salt: np.ndarray) -> np.ndarray:
     """Smooth noise in [0, 1] (M,) at points x (M, 3) in lattice units: random values at the lattice
     corners, blended with the weights 3 u^2 - 2 u^3 of the point's place u in its cell."""
     base = np.floor(x)
@@ -134,5 +134,5 @@ def _value_noise(x: np.ndarray, salt: np.ndarray) -> np.ndarray:
     for corner in np.ndindex(2, 2, 2):
         offset = np.array(corner, dtype=np.float64)
         weight = np.prod(np.where(offset == 1.0, w, 1.0 - w), axis=1)
-        out += weight * _hash(base + offset, salt)
+        out += weight * lattice_hash(base + offset, salt)
     return out

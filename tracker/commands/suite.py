@@ -16,7 +16,7 @@ HELP = "make, track and score the hard suite of renders unlike the model"
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
-    """The actions of ``tracker suite``: make, score and run."""
+    """The actions of ``tracker suite``: make, score, run and landmarks."""
     actions = parser.add_subparsers(dest="action", required=True)
     make = actions.add_parser("make", help="render every render of the suite into OUT/<name>/")
     make.add_argument("out", help="folder for the renders")
@@ -45,6 +45,13 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="after --: options for tracker track; {rec} is replaced by OUT/<name> "
         "(e.g. -- --init {rec}/truth_init.toml)",
     )
+    landmarks = actions.add_parser(
+        "landmarks", help="score the detector's landmarks KP/<name>/keypoints.npz against OUT/<name>/truth.npz"
+    )
+    landmarks.add_argument("out", help="folder of the renders")
+    landmarks.add_argument("keypoints", help="folder of the detections, KP/<name>/keypoints.npz (tracker keypoints)")
+    _only(landmarks)
+    landmarks.add_argument("--json", action="store_true", help="print the scores as JSON")
 
 
 def _only(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +60,7 @@ def _only(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Do the action."""
-    return {"make": _make, "score": _score, "run": _run}[args.action](args)
+    return {"make": _make, "score": _score, "run": _run, "landmarks": _landmarks}[args.action](args)
 
 
 def _make(args: argparse.Namespace) -> int:
@@ -91,6 +98,15 @@ def _run(args: argparse.Namespace) -> int:
         _track(Path(args.out) / render.name, Path(args.results) / render.name, extra)
     data = summary(score(args.out, args.results, renders))
     print(json.dumps(data, indent=2) if args.json else format_summary(data))
+    return 0
+
+
+def _landmarks(args: argparse.Namespace) -> int:
+    from tracker.keypoints.accuracy import accuracy_rows, format_accuracy, suite_accuracy
+    from tracker.suite import made
+
+    scores = suite_accuracy(args.out, args.keypoints, made(args.out, options.camera_names(args.only)))
+    print(json.dumps(accuracy_rows(scores), indent=2) if args.json else format_accuracy(scores))
     return 0
 
 

@@ -55,6 +55,16 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "--shutter", type=positive_float, default=0.5, help="motion blur's exposure in frame intervals (default 0.5)"
     )
     parser.add_argument(
+        "--backdrop",
+        choices=("photos", "room"),
+        default="photos",
+        help="photos: the background photos (with people in them); room: an empty furnished room rendered from "
+        "the rig (default photos)",
+    )
+    parser.add_argument(
+        "--face", action="store_true", help="paint a face on the front of the head and hair on its back and top"
+    )
+    parser.add_argument(
         "--no-init",
         action="store_true",
         help="write the first true pose as truth_init.toml, not init.toml, so that tracking needs --init",
@@ -75,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
         distance=args.distance,
         motion_blur=args.motion_blur,
         shutter=args.shutter,
+        backdrop=args.backdrop,
+        face=args.face,
     )
     synthesize(
         args.model,
