@@ -167,8 +167,6 @@ def test_track_against_the_empty_scene(tiny_recording, tmp_path, capsys):
                 "--keypoints",  # the edges of the difference image alone, as the grey ones are compared
                 "off",
                 "--quiet",
-                "--keypoints",
-                "off",
             ]
         )
         == 0
