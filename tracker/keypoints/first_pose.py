@@ -63,6 +63,30 @@ def snap_to_edges(
     return result
 
 
+def fitted_to_frames(
+    model: Model, cameras: list[Camera], keypoints: Keypoints, *, frames: int = FRAMES, source: object = "the recording"
+) -> np.ndarray:
+    """World poses (N, 4, 4) of ``model`` fitted to the landmarks of the first ``frames`` frames of ``keypoints``
+    (in ``cameras``): their triangulated points, then their detections (steps 1-3 of the module docstring),
+    unsnapped; a one-line error naming the frames of ``source`` when they show nobody or cannot place the
+    body."""
+    found = triangulated(keypoints, cameras, model, frames=frames)
+    first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
+    if len(found.frames) == 0:
+        raise TrackerInputError(
+            f"no person found by the keypoint detector in two views in frames {first}..{last} of {source}; "
+            "pass --init or start later with --start"
+        )
+    try:
+        fitted = fit_pose(model, found.points)
+    except TrackerInputError as error:
+        raise TrackerInputError(f"frames {first}..{last} of {source}: {error}") from None
+    row_of = {int(frame): row for row, frame in enumerate(keypoints.frame)}
+    rows = np.array([row_of[int(frame)] for frame in found.frames], np.int64)
+    agreeing = np.where(found.agree, keypoints.confidence[rows], 0.0)
+    return fit_to_views(model, fitted, cameras, keypoints.pixels[rows], agreeing)
+
+
 def first_pose(
     recording: Recording,
     model: Model,
@@ -89,20 +113,7 @@ def first_pose(
         raise TrackerInputError(
             f"{recording.path}: the keypoints place the first pose from two cameras or more, it has one; pass --init"
         )
-    found = triangulated(keypoints, recording.cameras, model, frames=frames)
-    first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
-    if len(found.frames) == 0:
-        raise TrackerInputError(
-            f"no person found by the keypoint detector in two views in frames {first}..{last} of {recording.path}; "
-            "pass --init or start later with --start"
-        )
-    try:
-        fitted = fit_pose(model, found.points)
-    except TrackerInputError as error:
-        raise TrackerInputError(f"frames {first}..{last} of {recording.path}: {error}") from None
-    rows = np.searchsorted(keypoints.frame, found.frames)
-    agreeing = np.where(found.agree, keypoints.confidence[rows], 0.0)
-    poses = fit_to_views(model, fitted, recording.cameras, keypoints.pixels[rows], agreeing)
+    poses = fitted_to_frames(model, recording.cameras, keypoints, frames=frames, source=recording.path)
     if images is None:
         first = int(keypoints.frame[0])
         [images] = [grey for _, grey in frames_of(recording, first, first + 1)]

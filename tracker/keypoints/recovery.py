@@ -5,9 +5,11 @@ After each frame tracked with landmarks (checked across the views,
 (:func:`tracker.keypoint_cue.cue_points`) are projected into every view that has six or more of
 them, and the median image distance to their detections is taken as a share of the body's size
 there.  When the mean over the views exceeds :data:`STRAYED` (:data:`DOUBTED` when the edges too
-found the frame uncertain), or the frame is lost, the tracker
-starts again from the model fitted to the landmarks' triangulated points and then to the detections
-(:mod:`tracker.keypoints.fit`; with one view, from the tracked pose fitted to its detections),
+found the frame uncertain), or the frame is lost, and the last :data:`WINDOW` frames all had
+landmarks, the tracker
+starts again from the model fitted to those frames' landmarks, their triangulated points and then their
+detections (:mod:`tracker.keypoints.fit`; with one view, from the tracked pose fitted to the newest
+frame's detections),
 snapped to the frame's edges as the first pose is (:func:`tracker.keypoints.first_pose.snap_to_edges`):
 its status says so (:data:`tracker.status.RESEEDED`).
 
@@ -29,9 +31,9 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.keypoint_cue import cue_points
-from tracker.keypoints.consistency import triangulate_many
-from tracker.keypoints.first_pose import snap_to_edges
-from tracker.keypoints.fit import fit_pose, fit_to_views
+from tracker.keypoints.first_pose import fitted_to_frames, snap_to_edges
+from tracker.keypoints.fit import fit_to_views
+from tracker.keypoints.store import Keypoints
 from tracker.model import Model
 from tracker.status import LOST, RESEEDED, UNCERTAIN
 from tracker.track import FrameResult, Tracker
@@ -47,18 +49,9 @@ both say the pose is off."""
 MIN_LANDMARKS = 6
 """Landmarks needed to judge a pose, or to fit one."""
 
-
-def world_points(
-    cameras: list[Camera], pixels: np.ndarray, confidence: np.ndarray, min_confidence: float = 0.5
-) -> np.ndarray:
-    """The landmarks' world points (K, 3), triangulated from the views that see them (``pixels`` (C, K, 2),
-    ``confidence`` (C, K)); NaN where fewer than two views do."""
-    seen = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)  # (C, K)
-    normalised = np.full(pixels.shape, np.nan)
-    for k, camera in enumerate(cameras):
-        normalised[k, seen[k]] = camera.undistort_pixels(pixels[k, seen[k]])
-    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
-    return triangulate_many(projections, normalised.transpose(1, 0, 2), seen.T)
+WINDOW = 3
+"""Frames of landmarks, the newest first and with none missing between, that a re-seed is fitted to: one frame's
+detections may be swapped or wrong, and the body moves little in a few frames."""
 
 
 def landmark_world(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
@@ -80,6 +73,7 @@ class Recovery:
     cameras: list[Camera]
     min_confidence: float = 0.5
     reseeded: int = 0
+    recent: list = dataclasses.field(default_factory=list)  # the last frames' (pixels, confidence), newest first
 
     def __post_init__(self) -> None:
         self.component, self.point = cue_points(self.model)
@@ -99,21 +93,25 @@ class Recovery:
             shares.append(float(np.median(np.linalg.norm(projected - seen_pixels[usable], axis=1))) / size)
         return bool(shares) and float(np.mean(shares)) > limit
 
-    def fitted(self, start: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray | None:
-        """The model fitted to the landmarks (to their world points, then to the detections), or None when too
-        few are seen or they cannot place the body (no hips and shoulders); with one view, ``start`` refined
-        against the detections."""
-        if len(self.cameras) >= 2:
-            points = world_points(self.cameras, pixels, confidence, self.min_confidence)
-            if np.isfinite(points).all(axis=1).sum() < MIN_LANDMARKS:
+    def fitted(self, start: np.ndarray) -> np.ndarray | None:
+        """The model fitted to the landmarks of the :data:`WINDOW` recent frames (to their triangulated points,
+        then to the detections, :func:`tracker.keypoints.first_pose.fitted_to_frames`), or None when they cannot
+        place the body; with one view, ``start`` refined against the newest frame's detections."""
+        pixels = np.stack([frame_pixels for frame_pixels, _ in self.recent])
+        confidence = np.stack([frame_confidence for _, frame_confidence in self.recent])
+        if len(self.cameras) < 2:
+            if (
+                (confidence[0, 0] >= self.min_confidence) & np.isfinite(pixels[0, 0]).all(axis=1)
+            ).sum() < MIN_LANDMARKS:
                 return None
-            try:
-                start = fit_pose(self.model, points)
-            except TrackerInputError:  # the landmarks cannot place the body: go on as tracked
-                return None
-        elif ((confidence[0] >= self.min_confidence) & np.isfinite(pixels[0]).all(axis=1)).sum() < MIN_LANDMARKS:
+            return fit_to_views(self.model, start, self.cameras, pixels[:1], confidence[:1])
+        names = tuple(camera.name for camera in self.cameras)
+        frames = np.arange(len(self.recent))  # row numbers: the newest is row 0
+        recent = Keypoints(frames, names, pixels, confidence, np.full((*pixels.shape[:3], 3), np.nan))
+        try:
+            return fitted_to_frames(self.model, self.cameras, recent, frames=len(self.recent))
+        except TrackerInputError:  # the landmarks cannot place the body: go on as tracked
             return None
-        return fit_to_views(self.model, start, self.cameras, pixels[None], confidence[None])
 
     def __call__(
         self, tracker: Tracker, images, keypoints: tuple[np.ndarray, np.ndarray] | None, result: FrameResult
@@ -121,12 +119,16 @@ class Recovery:
         """``result`` of the frame just tracked in ``images`` (smoothed), or, when the pose strayed from
         ``keypoints`` or was lost, the frame tracked again from the pose fitted to them (status RESEEDED)."""
         if keypoints is None:
+            self.recent.clear()
             return result
         pixels, confidence = keypoints
+        self.recent = [keypoints, *self.recent[: WINDOW - 1]]
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
         if result.status != LOST and not self.strayed(result.poses, pixels, confidence, limit):
             return result
-        seed = self.fitted(result.poses, pixels, confidence)
+        if len(self.recent) < WINDOW and len(self.cameras) >= 2:
+            return result  # not yet enough frames to fit to
+        seed = self.fitted(result.poses)
         if seed is None:
             return result
         snapped = snap_to_edges(
