@@ -182,7 +182,7 @@ def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, sett
 
     cache = ensure_writable_folder(out) / "keypoints.npz"
     tries = range(args.start, max(args.start + 1, stop - FRAMES + 1), max(1, round(rec.fps)))
-    for attempt, begin in enumerate(tries):
+    for begin in tries:
         last = min(stop, begin + FRAMES)
         print(
             f"first pose: no init.toml, fitting the body to the keypoints of frames {begin}..{last - 1}",
@@ -192,10 +192,10 @@ def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, sett
         try:
             return first_pose(rec, model, keypoints, settings=settings), begin
         except TrackerInputError as error:
-            if len(rec.cameras) < 2 or attempt == len(tries) - 1:
+            if len(rec.cameras) < 2 or begin == tries[-1]:
                 raise
             print(f"first pose: {error}; trying again a second later", file=sys.stderr)
-    raise AssertionError("unreachable: the last attempt returns or raises")
+    raise TrackerInputError(f"{rec.path}: no frames to fit a first pose to; pass --init")
 
 
 def _keypoints(args: argparse.Namespace, rec, begin: int, stop: int, out: Path):
