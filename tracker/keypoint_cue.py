@@ -136,6 +136,16 @@ def cue_points(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return component, point
 
 
+def landmark_world(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """World points (K, 3) of the landmarks' model points ``point`` (K, 3), fixed in components ``component``
+    (K,), at ``poses`` (N, 4, 4); NaN for landmarks without a component (-1)."""
+    out = np.full((len(component), 3), np.nan)
+    marked = component >= 0
+    out[marked] = np.einsum("kij,kj->ki", poses[component[marked], :3, :3], point[marked])
+    out[marked] += poses[component[marked], :3, 3]
+    return out
+
+
 def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each of ``landmarks``: its component (K,) int (-1 when the model has none) and its point (K, 3)
     in that component's frame (the joint centre), and the left/right pairs (P, 2) of landmark indices."""

@@ -29,7 +29,7 @@ from tracker.camera import Camera
 from tracker.chain import BALL, FREE, HINGE, SLIDE
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.keypoint_cue import LANDMARKS, anchors, left_right_pairs
+from tracker.keypoint_cue import LANDMARKS, anchors, landmark_world, left_right_pairs
 from tracker.keypoints.triangulation import middle
 from tracker.model import Model
 
@@ -152,11 +152,7 @@ class Body:
 
     def landmark_points(self, poses: np.ndarray) -> np.ndarray:
         """World points (33, 3) of the landmarks' model points at ``poses`` (NaN where the model has none)."""
-        out = np.full((len(LANDMARKS), 3), np.nan)
-        marked = self.component >= 0
-        out[marked] = np.einsum("kab,kb->ka", poses[self.component[marked], :3, :3], self.anchor[marked])
-        out[marked] += poses[self.component[marked], :3, 3]
-        return out
+        return landmark_world(poses, self.component, self.anchor)
 
 
 def _nearer(observed: np.ndarray, model_points: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from tracker.camera import Camera
-from tracker.keypoint_cue import LANDMARKS
+from tracker.keypoint_cue import LANDMARKS, landmark_world
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detector import Detector, require_detector
 from tracker.keypoints.store import Keypoints
@@ -126,9 +126,8 @@ def transferred(
     (``point`` (K, 3) in component ``component`` (K,), -1 for none: not moved) moved between the two."""
     moved = pixels.copy()
     marked = np.flatnonzero(component >= 0)
-    homogeneous = np.c_[point[marked], np.ones(len(marked))]
-    then_world = np.einsum("kij,kj->ki", then[component[marked]], homogeneous)[:, :3]
-    now_world = np.einsum("kij,kj->ki", now[component[marked]], homogeneous)[:, :3]
+    then_world = landmark_world(then, component, point)[marked]
+    now_world = landmark_world(now, component, point)[marked]
     for camera_index, camera in enumerate(cameras):
         moved[camera_index, marked] += camera.project(now_world) - camera.project(then_world)
     return moved

@@ -30,7 +30,7 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.keypoint_cue import cue_points
+from tracker.keypoint_cue import cue_points, landmark_world
 from tracker.keypoints.first_pose import fitted_to_frames, snap_to_edges
 from tracker.keypoints.fit import fit_to_views
 from tracker.keypoints.store import Keypoints
@@ -52,16 +52,6 @@ MIN_LANDMARKS = 6
 WINDOW = 3
 """Frames of landmarks, the newest first and with none missing between, that a re-seed is fitted to: one frame's
 detections may be swapped or wrong, and the body moves little in a few frames."""
-
-
-def landmark_world(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
-    """World points (K, 3) of the landmarks' model points at ``poses``; NaN for landmarks without a component."""
-    out = np.full((len(component), 3), np.nan)
-    marked = component >= 0
-    out[marked] = (
-        np.einsum("kij,kj->ki", poses[component[marked], :3, :3], point[marked]) + poses[component[marked], :3, 3]
-    )
-    return out
 
 
 @dataclasses.dataclass
