@@ -16,6 +16,7 @@ from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file, save_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
+from tracker.keypoint_cue import LANDMARKS
 from tracker.keypoints.recovery import WINDOW, Recovery
 from tracker.model import load_model
 from tracker.status import RESEEDED
@@ -158,3 +159,61 @@ def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance():
     moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
     assert recovery.strayed(moved, pixels, confidence)
     assert not recovery.strayed(moved, pixels, np.zeros_like(confidence))  # no landmark: no judgement
+
+
+def test_one_limb_off_in_two_views_has_strayed_though_the_median_landmark_holds():
+    """The demo's true pose with its right hand and forearm swung 40 cm off: the median landmark is still on the
+    body in every view, but the wrist and elbow are off by more than STRAYED in the views that see them; with
+    those two landmarks in one view only, nothing is judged from them."""
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")["poses"][0]
+    recovery = Recovery(model, load_calibration(DEMO / "calibration.toml"))
+    known = recovery.component >= 0
+    world = np.einsum("kij,kj->ki", truth[recovery.component[known], :3, :3], recovery.point[known])
+    world += truth[recovery.component[known], :3, 3]
+    pixels = np.full((3, 33, 2), np.nan)
+    for k, camera in enumerate(recovery.cameras):
+        pixels[k, known] = camera.project(world)
+    confidence = np.isfinite(pixels[..., 0]).astype(float)
+    swung = truth.copy()
+    for name in ("forearm_r", "hand_r"):
+        swung[model.index(name), :3, 3] += np.array([0.0, -0.4, 0.0])
+    assert not recovery.strayed(truth, pixels, confidence)
+    assert recovery.strayed(swung, pixels, confidence)
+    arm = [LANDMARKS.index(f"right_{part}") for part in ("elbow", "wrist", "pinky", "index", "thumb")]
+    once = confidence.copy()
+    once[1:, arm] = 0.0
+    assert not recovery.strayed(swung, pixels, once)
+
+
+@pytest.mark.parametrize(("snapped_share", "kept"), [(0.5, True), (0.9, False)])
+def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapped_share, kept):
+    """A strayed frame's re-seed is taken only when its outlines find at least the tracked pose's share of edges:
+    the tracked pose (share 0.8) stays against a re-seed finding 0.5, and gives way to one finding 0.9."""
+    import tracker.keypoints.recovery as recovery_module
+    from tracker.track import FrameResult, Tracker
+
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")["poses"][0]
+    cameras = load_calibration(DEMO / "calibration.toml")
+    recovery = Recovery(model, cameras)
+    known = recovery.component >= 0
+    world = np.einsum("kij,kj->ki", truth[recovery.component[known], :3, :3], recovery.point[known])
+    world += truth[recovery.component[known], :3, 3]
+    pixels = np.full((3, 33, 2), np.nan)
+    for k, camera in enumerate(cameras):
+        pixels[k, known] = camera.project(world)
+    keypoints = (pixels, np.isfinite(pixels[..., 0]).astype(float))
+    moved = truth.copy()
+    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
+    snapped = FrameResult(truth, 0, 1.0, snapped_share, 1000)
+    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
+    tracker = Tracker(model, cameras, moved)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    for _ in range(WINDOW):
+        result = recovery(tracker, None, keypoints, tracked)
+    assert (result is tracked) == kept
+    assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
+    assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)

@@ -145,7 +145,9 @@ def run(args: argparse.Namespace) -> int:
     fps = done / elapsed if elapsed > 0 else float("inf")
     print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
     print(f"mean residual: {np.nanmean(residuals) if np.isfinite(residuals).any() else float('nan'):.2f} px")
-    reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints" if recovery is not None else ""
+    reseeded = ""
+    if recovery is not None:
+        reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({recovery.declined} declined by the edges)"
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
     results = load_poses(out / "poses.npz") if truth is not None or live is not None else None
     if truth is not None:

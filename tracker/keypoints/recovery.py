@@ -3,15 +3,22 @@
 After each frame tracked with landmarks (checked across the views,
 :mod:`tracker.keypoints.consistency`), the tracked pose's landmark points
 (:func:`tracker.keypoint_cue.cue_points`) are projected into every view that has six or more of
-them, and the median image distance to their detections is taken as a share of the body's size
-there.  When the mean over the views exceeds :data:`STRAYED` (:data:`DOUBTED` when the edges too
-found the frame uncertain), or the frame is lost, and the last :data:`WINDOW` frames all had
-landmarks, the tracker
-starts again from the model fitted to those frames' landmarks, their triangulated points and then their
-detections (:mod:`tracker.keypoints.fit`; with one view, from the tracked pose fitted to the newest
-frame's detections),
-snapped to the frame's edges as the first pose is (:func:`tracker.keypoints.first_pose.snap_to_edges`):
-its status says so (:data:`tracker.status.RESEEDED`).
+them, and their image distances to the detections are taken as shares of the body's size there.
+The pose has strayed when the mean over the views of the median distance exceeds :data:`STRAYED`
+(:data:`DOUBTED` when the edges too found the frame uncertain), or when a single landmark seen in
+two views or more lies beyond :data:`STRAYED` in the mean over them: a lost arm or leg moves too
+few landmarks to shift the median, and its edges, found on the clutter it strayed to, hold it
+there against the cue. When it has strayed, or the frame is lost, and the last :data:`WINDOW`
+frames all had landmarks, the model is fitted to those frames' landmarks, their triangulated
+points and then their detections (:mod:`tracker.keypoints.fit`; with one view, from the tracked
+pose fitted to the newest frame's detections), and snapped to the frame's edges as the first
+pose is (:func:`tracker.keypoints.first_pose.snap_to_edges`).
+
+The edges then arbitrate: the tracker starts again from the snapped pose, its status saying so
+(:data:`tracker.status.RESEEDED`), unless its outlines find a smaller share of edges than the
+tracked pose's did (a frame that is not lost). Landmarks that two views agree on can still be
+wrong, the detector following a bystander or reading an arm the other way round; a re-seed fitted
+to them lands off the body's outlines, and the tracked pose is kept (``declined`` counts these).
 
 Image distances, not triangulated ones: two views triangulate a detector's few pixels of noise into
 centimetres of depth, while the share of the body's size reads the same in any view; the mean over
@@ -63,25 +70,34 @@ class Recovery:
     cameras: list[Camera]
     min_confidence: float = 0.5
     reseeded: int = 0
+    declined: int = 0
     recent: list = dataclasses.field(default_factory=list)  # the last frames' (pixels, confidence), newest first
 
     def __post_init__(self) -> None:
         self.component, self.point = cue_points(self.model)
 
     def strayed(self, poses: np.ndarray, pixels: np.ndarray, confidence: np.ndarray, limit: float = STRAYED) -> bool:
-        """Whether ``poses`` lie off the landmarks by more than ``limit`` (module docstring); False when no view
-        has enough of them."""
+        """Whether ``poses`` lie off the landmarks (module docstring): the mean over the views of the median
+        landmark's image distance beyond ``limit``, or one landmark's mean distance over the views that see it,
+        two or more, beyond :data:`STRAYED`; both as shares of the body's size in each view.  False when no view
+        has :data:`MIN_LANDMARKS` of them."""
         tracked = landmark_world(poses, self.component, self.point)
-        shares = []
-        for camera, seen_pixels, seen_confidence in zip(self.cameras, pixels, confidence):
+        distances = np.full((len(self.cameras), len(tracked)), np.nan)
+        for k, (camera, seen_pixels, seen_confidence) in enumerate(zip(self.cameras, pixels, confidence)):
             usable = (seen_confidence >= self.min_confidence) & np.isfinite(seen_pixels).all(axis=1)
             usable &= np.isfinite(tracked).all(axis=1)
             if usable.sum() < MIN_LANDMARKS:
                 continue
             projected = camera.project(tracked[usable])
             size = max(float(np.linalg.norm(np.ptp(projected, axis=0))), 1.0)
-            shares.append(float(np.median(np.linalg.norm(projected - seen_pixels[usable], axis=1))) / size)
-        return bool(shares) and float(np.mean(shares)) > limit
+            distances[k, usable] = np.linalg.norm(projected - seen_pixels[usable], axis=1) / size
+        judged = np.isfinite(distances).any(axis=1)
+        if not judged.any():
+            return False
+        if float(np.mean(np.nanmedian(distances[judged], axis=1))) > limit:
+            return True
+        seen_twice = np.isfinite(distances).sum(axis=0) >= 2
+        return bool(seen_twice.any() and (np.nanmean(distances[:, seen_twice], axis=0) > STRAYED).any())
 
     def fitted(self, start: np.ndarray) -> np.ndarray | None:
         """The model fitted to the landmarks of the :data:`WINDOW` recent frames (to their triangulated points,
@@ -124,6 +140,9 @@ class Recovery:
         snapped = snap_to_edges(
             self.model, self.cameras, seed, images, keypoints=keypoints, settings=tracker.settings, smoothed=True
         )
+        if result.status != LOST and snapped.share < result.share:
+            self.declined += 1
+            return result  # the edges side with the tracked pose (module docstring)
         tracker.restart(snapped.poses)
         self.reseeded += 1
         return dataclasses.replace(snapped, status=RESEEDED)
