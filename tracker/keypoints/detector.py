@@ -19,16 +19,19 @@ and NaN pixels and world positions, confidence 0, when no person was found.
 
 The plain pass on the whole image misses a body that fills little of it (far away, seen from high
 up, cut by the border or behind a table: BlazePose's person detector sees the image shrunk to
-224x224).  Only when it finds nobody, more passes run on crops (:mod:`tracker.keypoints.region`):
+224x224).  When it finds nobody, more passes run on crops (:mod:`tracker.keypoints.region`), and
+once they have found the body they go first in the next image (the whole image is read again when
+they lose it), so that a body the plain pass misses costs one pass per image while it is followed:
 
 1. **follow**: the square around the landmarks this camera's detector gave last, cut out and resized
    to the landmark model's 256x256, read by a landmarker of its own in video mode (which then follows
    the body from crop to crop by its landmarks, without its person detector), the landmarks mapped
    back to the full image;
 2. **search**, when there is nothing to follow or the body was not there: the whole image shrunk into
-   a square twice its long side, then its tiles (half its short side), in order, each read alone by a
-   third landmarker; the first square with a person gives a square around its landmarks, read again
-   the same way, and the first such reading that finds the person is the detection.
+   a square twice its long side, then its tiles (half its short side), in order, read by the same
+   landmarker (which, having lost the body, runs its person detector on each); the first square with a
+   person gives a square around its landmarks, read again (so that the follower goes on from there),
+   and the first such reading that finds the person is the detection.
 
 Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
 "Small, high-seen and cut bodies".
@@ -121,6 +124,20 @@ def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
     return Detection(to_image(found.pixels, region), found.confidence, found.world)
 
 
+def _in_squares(crops, rgb: np.ndarray) -> Detection:
+    """The person in the first of the search's squares of an RGB image that the video-mode landmarker
+    ``crops`` finds one in, read again in the square around its landmarks (twice if need be: the first
+    reading may follow the glimpse's landmarks into a crop they do not fit, and fail); or nobody."""
+    for square in search(rgb.shape[1], rgb.shape[0]):
+        glimpse = _in(crops, rgb, square)
+        if glimpse.found and (region := around(glimpse.pixels)) is not None:
+            for _ in range(2):
+                found = _in(crops, rgb, region)
+                if found.found:
+                    return found
+    return Detection.none()
+
+
 class Detector:
     """BlazePose for one camera's stream of images (video mode: each call is the next frame), with the
     crops that follow and search for a body the whole image does not show it in (see the module)."""
@@ -130,37 +147,41 @@ class Detector:
         require_detector()
         self._min_confidence = min_confidence
         self._pose = _landmarker(min_confidence, video=True)
-        self._follower = None  # the crops' landmarkers (video mode, and image by image), made when first needed
-        self._reader = None
+        self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
+        self._following = False  # the last landmarks came from the crops: follow them there first
 
     def __call__(self, image: np.ndarray) -> Detection:
         """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image."""
         rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
-        found = _read(self._pose, rgb)
-        if not found.found and self._last is not None:
-            if self._follower is None:
-                self._follower = _landmarker(self._min_confidence, video=True)
-            found = _in(self._follower, rgb, self._last)
-        if not found.found:
-            found = self._search(rgb)
+        first, second = (self._follow, self._plain) if self._following else (self._plain, self._follow)
+        for run in (first, second, self._search):
+            found = run(rgb)
+            if found.found:
+                break
+        self._following = found.found and run != self._plain
         self._last = around(found.pixels)
         return found
 
+    def _plain(self, rgb: np.ndarray) -> Detection:
+        """The landmarks the whole image shows."""
+        return _read(self._pose, rgb)
+
+    def _follow(self, rgb: np.ndarray) -> Detection:
+        """The landmarks the crops' landmarker finds in the square around the last ones (none without them)."""
+        return Detection.none() if self._last is None else _in(self._cropper(), rgb, self._last)
+
     def _search(self, rgb: np.ndarray) -> Detection:
-        """The person in the first of the search's squares to show one, read again in the square around its
-        landmarks; or nobody."""
-        if self._reader is None:
-            self._reader = _landmarker(self._min_confidence, video=False)
-        for square in search(rgb.shape[1], rgb.shape[0]):
-            glimpse = _in(self._reader, rgb, square)
-            if glimpse.found and (region := around(glimpse.pixels)) is not None:
-                found = _in(self._reader, rgb, region)
-                if found.found:
-                    return found
-        return Detection.none()
+        """The landmarks found in the search's squares (:func:`_in_squares`)."""
+        return _in_squares(self._cropper(), rgb)
+
+    def _cropper(self):
+        """The crops' landmarker (video mode), made when first needed."""
+        if self._crops is None:
+            self._crops = _landmarker(self._min_confidence, video=True)
+        return self._crops
 
     def close(self) -> None:
-        for landmarker in (self._pose, self._follower, self._reader):
-            if landmarker is not None:
-                landmarker.close()
+        self._pose.close()
+        if self._crops is not None:
+            self._crops.close()
