@@ -102,13 +102,13 @@ def _read(pose, rgb: np.ndarray) -> Detection:
     return Detection(pixels, confidence, world)
 
 
-def _landmarker(min_confidence: float, *, video: bool):
-    """MediaPipe's pose landmarker with the "full" model: in video mode each call is the next image and it
-    follows its person by the last landmarks, else each image is read alone."""
+def _landmarker(min_confidence: float):
+    """MediaPipe's pose landmarker with the "full" model in video mode: each call is the next image, and
+    after finding a person it follows them by their last landmarks, without its person detector."""
     from mediapipe.python.solutions import pose
 
     return pose.Pose(
-        static_image_mode=not video,
+        static_image_mode=False,
         model_complexity=1,
         smooth_landmarks=False,
         min_detection_confidence=min_confidence,
@@ -151,7 +151,7 @@ class Detector:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
         require_detector()
         self._min_confidence = min_confidence
-        self._pose = _landmarker(min_confidence, video=True)
+        self._pose = _landmarker(min_confidence)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
         self._following = False  # the last landmarks came from the crops: follow them there first
@@ -183,7 +183,7 @@ class Detector:
     def _cropper(self):
         """The crops' landmarker (video mode), made when first needed."""
         if self._crops is None:
-            self._crops = _landmarker(self._min_confidence, video=True)
+            self._crops = _landmarker(self._min_confidence)
         return self._crops
 
     def close(self) -> None:
