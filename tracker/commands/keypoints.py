@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import time
 from pathlib import Path
 
 from tracker.commands import options
@@ -23,7 +24,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Detect (or reuse OUT/keypoints.npz when it holds the same frames, cameras and detector) and print
-    how often a person was found per camera."""
+    the time it took per view and how often a person was found per camera."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording
     from tracker.keypoints.detect import detect_recording
@@ -36,10 +37,15 @@ def run(args: argparse.Namespace) -> int:
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     out = ensure_writable_folder(Path(args.out) if args.out else Path("out") / rec.path.resolve().name)
     path = out / "keypoints.npz"
+    started = time.perf_counter()
     keypoints, reused = detect_recording(
         rec, args.start, stop, cache=path, progress=options.bar(args, "detecting", "frame")
     )
-    print(f"{'reused' if reused else 'wrote'} {path} (frames {args.start}..{stop - 1}, {len(rec.cameras)} cameras)")
+    views = (stop - args.start) * len(rec.cameras)
+    spent = "" if reused else f", {1e3 * (time.perf_counter() - started) / views:.1f} ms per view with decoding"
+    print(
+        f"{'reused' if reused else 'wrote'} {path} (frames {args.start}..{stop - 1}, {len(rec.cameras)} cameras{spent})"
+    )
     found = (keypoints.confidence.max(axis=2) > 0).mean(axis=0)
     for name, share in zip(keypoints.camera_names, found):
         print(f"  {name}: a person in {100 * share:.1f} % of the frames")

