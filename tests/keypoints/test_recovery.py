@@ -17,7 +17,7 @@ from tracker.io.posefile import load_pose_file, save_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.keypoint_cue import LANDMARKS
-from tracker.keypoints.recovery import LANDMARK_STRAYED, WINDOW, Recovery
+from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, WINDOW, Recovery
 from tracker.model import load_model
 from tracker.status import RESEEDED
 
@@ -198,8 +198,9 @@ def test_one_limb_off_is_seen_in_its_landmarks_though_the_median_holds():
     assert np.isnan(recovery.misfit(_swung_arm(model, truth), pixels, once)[1][arm]).all()
 
 
-def test_a_limb_off_for_window_frames_in_a_row_is_seeded_again(monkeypatch):
-    """The swung arm's frames: no re-seed is tried until the landmarks have lain off for WINDOW frames in a row."""
+def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch):
+    """The swung arm's frames: no re-seed is tried until the landmarks have lain off for PERSISTENCE frames in a
+    row."""
     import tracker.keypoints.recovery as recovery_module
     from tracker.track import FrameResult, Tracker
 
@@ -216,10 +217,10 @@ def test_a_limb_off_for_window_frames_in_a_row_is_seeded_again(monkeypatch):
     tracker = Tracker(model, cameras, swung)
     tracked = FrameResult(swung, 0, 1.0, 0.8, 1000)
     counts = []
-    for _ in range(WINDOW + 1):
+    for _ in range(PERSISTENCE + 1):
         recovery(tracker, None, keypoints, tracked)
         counts.append(len(tries))
-    assert counts == [0] * (WINDOW - 1) + [1, 1]
+    assert counts == [0] * (PERSISTENCE - 1) + [1, 1]
     assert recovery.reseeded == 1 and np.allclose(tracker.poses, truth, atol=1e-6)
 
 

@@ -7,7 +7,7 @@ them, and their image distances to the detections are taken as shares of the bod
 The pose has strayed when the mean over the views of the median distance exceeds :data:`STRAYED`
 (:data:`DOUBTED` when the edges too found the frame uncertain), or when a single landmark seen in
 two views or more has lain, in the mean over them, :data:`LANDMARK_STRAYED` beyond its learnt noise
-zone for :data:`WINDOW` frames in a row: a lost arm or leg moves too few landmarks to shift the
+zone for :data:`PERSISTENCE` frames in a row: a lost arm or leg moves too few landmarks to shift the
 median, and its edges, found on the clutter it strayed to, hold it there against the cue. When it
 has strayed, or the frame is lost, and the last :data:`WINDOW` frames all had landmarks, the model
 is fitted to those frames' landmarks, their triangulated points and then their detections
@@ -60,9 +60,10 @@ both say the pose is off."""
 LANDMARK_STRAYED = 0.2
 """Mean image distance of one landmark from its detections over the views that see it (two or more), as a share of
 the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.track.Tracker.tolerance`), that says its
-limb has strayed when it lasts :data:`WINDOW` frames in a row.  At the demo's tracked poses (4.9 mm from the truth),
-the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in 15 %, and
-a re-seed costs the tracker about a second: this share and the persistence keep such frames from trying one."""
+limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from the
+truth), the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in
+15 %, and a re-seed costs the tracker about a second: this share and the persistence keep such frames from trying
+one."""
 
 BACKOFF = 5
 """Re-seeds declined in a row after which the wait before the next try stops doubling: :data:`WINDOW` frames after
@@ -74,6 +75,11 @@ MIN_LANDMARKS = 6
 WINDOW = 3
 """Frames of landmarks, the newest first and with none missing between, that a re-seed is fitted to: one frame's
 detections may be swapped or wrong, and the body moves little in a few frames."""
+
+PERSISTENCE = 2 * WINDOW
+"""Frames in a row a landmark must lie :data:`LANDMARK_STRAYED` off before its limb counts as strayed: a limb lost
+on clutter stays lost for tens of frames, while the demo's faceless wrists stray for at most 3 at its tracked
+poses."""
 
 
 @dataclasses.dataclass
@@ -155,7 +161,7 @@ class Recovery:
         body, each = self.misfit(result.poses, pixels, confidence)
         self.streak = np.where(each > LANDMARK_STRAYED + tracker.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
-        strayed = body > limit or bool((self.streak >= WINDOW).any())
+        strayed = body > limit or bool((self.streak >= PERSISTENCE).any())
         if result.status != LOST and (self.wait > 0 or not strayed):
             self.wait = max(self.wait - 1, 0)
             return result
