@@ -16,7 +16,7 @@ from tracker.io.recording import open_recording
 from tracker.keypoint_cue import LANDMARKS
 from tracker.keypoints import detect
 from tracker.keypoints.detect import detect_recording
-from tracker.keypoints.detector import Detector
+from tracker.keypoints.detector import Detection, Detector, detect_views
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
@@ -138,3 +138,32 @@ def test_triangulation_of_exact_rays_is_exact():
     point = np.array([0.2, -0.1, 1.1])
     normalised = np.array([camera.undistort_pixels(camera.project(point))[0] for camera in cameras])
     np.testing.assert_allclose(triangulate(cameras, normalised), point, atol=1e-9)
+
+
+class _Scripted:
+    """A stand-in detector whose whole-image pass finds a person or not, as scripted, and which counts its crops."""
+
+    def __init__(self, sees: bool) -> None:
+        self.sees, self.crops = sees, 0
+
+    def whole(self, image) -> Detection:
+        return Detection(np.zeros((33, 2)), np.ones(33), np.zeros((33, 3))) if self.sees else Detection.none()
+
+    def cropped(self) -> Detection:
+        self.crops += 1
+        return Detection(np.ones((33, 2)), np.ones(33), np.zeros((33, 3)))
+
+
+@pytest.mark.parametrize(
+    ("sees", "images", "crops"),
+    [
+        ((True, True, False), (1, 1, 1), (0, 0, 0)),  # two whole images place the body: no crop
+        ((True, False, False), (1, 1, 1), (0, 1, 1)),  # one: the others are cropped
+        ((False, False, False), (1, None, 1), (1, 0, 1)),  # none; a view without an image is not
+    ],
+)
+def test_crops_run_only_where_fewer_than_two_whole_images_show_someone(sees, images, crops):
+    detectors = [_Scripted(seen) for seen in sees]
+    found = detect_views(detectors, [None if image is None else np.zeros((4, 4, 3), np.uint8) for image in images])
+    assert tuple(detector.crops for detector in detectors) == crops
+    assert [detection.found for detection in found] == [seen or cropped > 0 for seen, cropped in zip(sees, crops)]

