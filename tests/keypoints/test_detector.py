@@ -149,7 +149,7 @@ class _Scripted:
     def whole(self, image) -> Detection:
         return Detection(np.zeros((33, 2)), np.ones(33), np.zeros((33, 3))) if self.sees else Detection.none()
 
-    def cropped(self) -> Detection:
+    def cropped(self, image) -> Detection:
         self.crops += 1
         return Detection(np.ones((33, 2)), np.ones(33), np.zeros((33, 3)))
 

@@ -17,7 +17,7 @@ from tracker.io.posefile import load_pose_file, save_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.keypoint_cue import LANDMARKS
-from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, WINDOW, Recovery
+from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, STRAYED, WINDOW, Recovery
 from tracker.model import load_model
 from tracker.status import RESEEDED
 
@@ -142,23 +142,12 @@ def test_a_body_lost_to_half_a_second_of_black_is_found_again(tmp_path):
     assert np.median(fused[60:]) < 0.05, fused.round(3)
 
 
-def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance():
-    """At the demo's true pose with perfect landmarks nothing strays; moved 30 cm, it has."""
+def _at_truth():
+    """The demo's model, its true poses at frame 0 and a Recovery on its cameras."""
     recording = open_recording(DEMO)
     model = load_model(recording.model_path)
     truth = load_poses(DEMO / "truth.npz")["poses"][0]
-    recovery = Recovery(model, load_calibration(DEMO / "calibration.toml"))
-    pixels = np.full((3, 33, 2), np.nan)
-    for k, camera in enumerate(recovery.cameras):
-        known = recovery.component >= 0
-        world = np.einsum("kij,kj->ki", truth[recovery.component[known], :3, :3], recovery.point[known])
-        pixels[k, known] = camera.project(world + truth[recovery.component[known], :3, 3])
-    confidence = np.isfinite(pixels[..., 0]).astype(float)
-    assert not recovery.strayed(truth, pixels, confidence)
-    moved = truth.copy()
-    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
-    assert recovery.strayed(moved, pixels, confidence)
-    assert not recovery.strayed(moved, pixels, np.zeros_like(confidence))  # no landmark: no judgement
+    return model, truth, Recovery(model, load_calibration(DEMO / "calibration.toml"))
 
 
 def _true_landmarks(recovery: Recovery, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -172,6 +161,13 @@ def _true_landmarks(recovery: Recovery, truth: np.ndarray) -> tuple[np.ndarray, 
     return pixels, np.isfinite(pixels[..., 0]).astype(float)
 
 
+def _moved(truth: np.ndarray) -> np.ndarray:
+    """``truth`` moved 30 cm sideways and 30 cm forwards."""
+    moved = truth.copy()
+    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
+    return moved
+
+
 def _swung_arm(model, truth: np.ndarray) -> np.ndarray:
     """``truth`` with the right forearm and hand moved 80 cm forwards."""
     swung = truth.copy()
@@ -180,14 +176,21 @@ def _swung_arm(model, truth: np.ndarray) -> np.ndarray:
     return swung
 
 
+def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance():
+    """At the demo's true pose with perfect landmarks nothing strays; moved 30 cm, it has."""
+    _, truth, recovery = _at_truth()
+    pixels, confidence = _true_landmarks(recovery, truth)
+    assert not recovery.misfit(truth, pixels, confidence)[0] > STRAYED
+    assert recovery.misfit(_moved(truth), pixels, confidence)[0] > STRAYED
+    no_landmark = recovery.misfit(_moved(truth), pixels, np.zeros_like(confidence))[0]
+    assert not no_landmark > STRAYED  # no landmark: no judgement
+
+
 def test_one_limb_off_is_seen_in_its_landmarks_though_the_median_holds():
     """The demo's true pose with its right arm swung 80 cm off: the median landmark is still on the body, but the
     wrist and elbow lie beyond LANDMARK_STRAYED in the mean over the views; seen by one view only, they are not
     judged."""
-    recording = open_recording(DEMO)
-    model = load_model(recording.model_path)
-    truth = load_poses(DEMO / "truth.npz")["poses"][0]
-    recovery = Recovery(model, load_calibration(DEMO / "calibration.toml"))
+    model, truth, recovery = _at_truth()
     pixels, confidence = _true_landmarks(recovery, truth)
     body, each = recovery.misfit(_swung_arm(model, truth), pixels, confidence)
     arm = [LANDMARKS.index(f"right_{part}") for part in ("elbow", "wrist")]
@@ -204,17 +207,13 @@ def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch)
     import tracker.keypoints.recovery as recovery_module
     from tracker.track import FrameResult, Tracker
 
-    recording = open_recording(DEMO)
-    model = load_model(recording.model_path)
-    truth = load_poses(DEMO / "truth.npz")["poses"][0]
-    cameras = load_calibration(DEMO / "calibration.toml")
-    recovery = Recovery(model, cameras)
+    model, truth, recovery = _at_truth()
     keypoints = _true_landmarks(recovery, truth)
     tries = []
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
     snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
     swung = _swung_arm(model, truth)
-    tracker = Tracker(model, cameras, swung)
+    tracker = Tracker(model, recovery.cameras, swung)
     tracked = FrameResult(swung, 0, 1.0, 0.8, 1000)
     counts = []
     for _ in range(PERSISTENCE + 1):
@@ -231,23 +230,12 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     import tracker.keypoints.recovery as recovery_module
     from tracker.track import FrameResult, Tracker
 
-    recording = open_recording(DEMO)
-    model = load_model(recording.model_path)
-    truth = load_poses(DEMO / "truth.npz")["poses"][0]
-    cameras = load_calibration(DEMO / "calibration.toml")
-    recovery = Recovery(model, cameras)
-    known = recovery.component >= 0
-    world = np.einsum("kij,kj->ki", truth[recovery.component[known], :3, :3], recovery.point[known])
-    world += truth[recovery.component[known], :3, 3]
-    pixels = np.full((3, 33, 2), np.nan)
-    for k, camera in enumerate(cameras):
-        pixels[k, known] = camera.project(world)
-    keypoints = (pixels, np.isfinite(pixels[..., 0]).astype(float))
-    moved = truth.copy()
-    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
+    model, truth, recovery = _at_truth()
+    keypoints = _true_landmarks(recovery, truth)
+    moved = _moved(truth)
     snapped = FrameResult(truth, 0, 1.0, snapped_share, 1000)
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
-    tracker = Tracker(model, cameras, moved)
+    tracker = Tracker(model, recovery.cameras, moved)
     tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
     for _ in range(WINDOW):
         result = recovery(tracker, None, keypoints, tracked)

@@ -91,6 +91,11 @@ class Detection:
         return bool(np.isfinite(self.pixels).all())
 
 
+def _rgb(image: np.ndarray) -> np.ndarray:
+    """The RGB (H, W, 3) uint8 of a BGR (H, W, 3) or grey (H, W) uint8 image."""
+    return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
+
+
 def _read(pose, rgb: np.ndarray) -> Detection:
     """The landmarks a MediaPipe ``pose`` finds in an RGB (H, W, 3) uint8 image, in its pixels."""
     found = pose.process(rgb)
@@ -156,26 +161,25 @@ class Detector:
         self._pose = _landmarker(min_confidence)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
-        self._rgb: np.ndarray = np.zeros((1, 1, 3), np.uint8)  # the image last given to whole()
 
     def __call__(self, image: np.ndarray) -> Detection:
         """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image: the whole image's, else the crops'."""
         found = self.whole(image)
-        return found if found.found else self.cropped()
+        return found if found.found else self.cropped(image)
 
     def whole(self, image: np.ndarray) -> Detection:
         """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows."""
-        self._rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
-        found = _read(self._pose, self._rgb)
+        found = _read(self._pose, _rgb(image))
         if found.found:
             self._last = around(found.pixels)
         return found
 
-    def cropped(self) -> Detection:
-        """The landmarks the crops find in the image last given to :meth:`whole`: followed around the last
+    def cropped(self, image: np.ndarray) -> Detection:
+        """The landmarks the crops find in the image just given to :meth:`whole`: followed around the last
         landmarks, else searched for."""
+        rgb = _rgb(image)
         for run in (self._follow, self._search):
-            found = run(self._rgb)
+            found = run(rgb)
             if found.found:
                 break
         self._last = around(found.pixels)
@@ -209,7 +213,7 @@ def detect_views(detectors: list[Detector], images: list[np.ndarray | None]) -> 
     found = [Detection.none() if image is None else detector.whole(image) for detector, image in zip(detectors, images)]
     if sum(detection.found for detection in found) < 2:
         found = [
-            detection if detection.found or image is None else detector.cropped()
+            detection if detection.found or image is None else detector.cropped(image)
             for detector, image, detection in zip(detectors, images, found)
         ]
     return found

@@ -122,11 +122,6 @@ class Recovery:
         each[seen_twice] = np.nanmean(distances[:, seen_twice], axis=0)
         return body, each
 
-    def strayed(self, poses: np.ndarray, pixels: np.ndarray, confidence: np.ndarray, limit: float = STRAYED) -> bool:
-        """Whether the whole body lies off the landmarks: their median distance (:meth:`misfit`) beyond ``limit``;
-        False when no view has enough of them."""
-        return bool(self.misfit(poses, pixels, confidence)[0] > limit)
-
     def fitted(self, start: np.ndarray) -> np.ndarray | None:
         """The model fitted to the landmarks of the :data:`WINDOW` recent frames (to their triangulated points,
         then to the detections, :func:`tracker.keypoints.first_pose.fitted_to_frames`), or None when they cannot
