@@ -38,7 +38,7 @@ from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.detector import Detector
-from tracker.keypoints.stream import DEFAULT_STEP, KeypointStream
+from tracker.keypoints.stream import KeypointStream, default_step
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
@@ -124,12 +124,12 @@ def track_run(recording: Recording, model: Model, settings: Settings, out: Path,
     return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
 
 
-def run(
-    path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3, keypoint_step: int = DEFAULT_STEP
-) -> dict:
+def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3, keypoint_step: int | None = None) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
-    cue's at ``keypoint_step`` (0: not timed)."""
+    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate)."""
     every = open_recording(path)
+    if keypoint_step is None:
+        keypoint_step = default_step(every.fps)
     first = open_recording(path, [every.cameras[0].name])
     if every.model_path is None or every.init_path is None:
         missing = "model.toml" if every.model_path is None else "init.toml"
@@ -210,8 +210,8 @@ def format_table(result: dict) -> str:
     if result["keypoint_step"]:
         lines += [
             "",
-            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on every "
-            f"{result['keypoint_step']}th frame beside the tracker (a worker process, its start-up included), "
+            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on one frame "
+            f"in {result['keypoint_step']} beside the tracker (a worker process, its start-up included), "
             f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
         ]
     return "\n".join(lines)

@@ -15,7 +15,7 @@ from tracker.io.recording import open_recording
 from tracker.keypoints import stream as stream_module
 from tracker.keypoints.detect import detect_recording, fingerprint
 from tracker.keypoints.store import load_keypoints, save_keypoints
-from tracker.keypoints.stream import KeypointStream
+from tracker.keypoints.stream import KeypointStream, default_step
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
@@ -61,16 +61,31 @@ def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
     assert "made by another detector (mediapipe 0.9 pose_landmark_lite" in message and "delete it" in message
 
 
+def test_the_default_step_keeps_the_detector_near_fifteen_frames_a_second():
+    assert [default_step(fps) for fps in (120.0, 60.0, 50.0, 30.0, 25.0, 15.0, 10.0, 8.0, 6.0)] == [
+        8,
+        4,
+        3,
+        2,
+        2,
+        1,
+        1,
+        1,
+        1,
+    ]
+    assert default_step(0.0) == default_step(float("nan")) == 1  # a rate nobody knows: every frame
+
+
 def test_track_fuses_the_keypoints_and_reuses_them(tmp_path, capsys):
     out = tmp_path / "out"
-    args = ["track", str(DEMO), "--frames", "9", "--out", str(out), "--quiet", "--keypoints", "4"]
+    args = ["track", str(DEMO), "--frames", "9", "--out", str(out), "--quiet"]
     assert main(args) == 0
-    assert "keypoints: every 4th frame, detected beside the tracker" in capsys.readouterr().err
+    assert "keypoints: one frame in 4, detected beside the tracker" in capsys.readouterr().err  # 60 fps: the default
     assert list(load_keypoints(out / "keypoints.npz").frame) == [0, 4, 8]
     assert main(args) == 0
     assert "reused from" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_info:
-        main([*args[:-1], "sometimes"])
+        main([*args, "--keypoints", "sometimes"])
     assert exit_info.value.code == 2
     assert "every, off or a whole number" in capsys.readouterr().err
 

@@ -113,10 +113,11 @@ def run(args: argparse.Namespace) -> int:
             )
             stack.callback(view.close)
         detector = None
-        if args.keypoints:
+        step = options.keypoint_step_at(args, capture.fps)
+        if step:
             from tracker.keypoints.live import LiveDetector
 
-            detector = LiveDetector(cameras, args.keypoints)
+            detector = LiveDetector(cameras, step)
             stack.callback(detector.close)
         summary = track_live(capture, cameras, model, init, settings, out, recorder, view, detector)
     counts = summary.counts

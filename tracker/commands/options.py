@@ -62,10 +62,18 @@ def keypoint_step(text: str) -> int:
     return value
 
 
+def keypoint_step_at(args: argparse.Namespace, fps: float) -> int:
+    """``--keypoints`` as a step (0: off) for footage of ``fps`` frames a second: the given one, or by default
+    :func:`tracker.keypoints.stream.default_step`."""
+    from tracker.keypoints.stream import default_step
+
+    return default_step(fps) if args.keypoints is None else args.keypoints
+
+
 def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = None) -> None:
     """``--keypoints``: how often the 2-D keypoint detector runs beside the tracker (``what``: the help's
     first words, if not tracking's)."""
-    from tracker.keypoints.stream import DEFAULT_STEP
+    from tracker.keypoints.stream import RATE
 
     what = what or (
         "run the 2-D keypoint detector (BlazePose) on every N-th frame beside the tracker and fuse its "
@@ -74,9 +82,10 @@ def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = Non
     parser.add_argument(
         "--keypoints",
         type=keypoint_step,
-        default=DEFAULT_STEP,
+        default=None,
         metavar="every|N|off",
-        help=f"{what} (default {DEFAULT_STEP})",
+        help=f"{what} (default: the N nearest to {RATE:g} frames a second, 4 at 60 fps, every frame at {RATE:g} fps or "
+        "fewer)",
     )
 
 

@@ -71,13 +71,14 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     background = _background(args, rec, out)
-    init, begin = _first_pose(args, rec, model, stop, out, settings)
+    step = options.keypoint_step_at(args, rec.fps)
+    init, begin = _first_pose(args, rec, model, stop, out, settings, step)
     print(
         f"tracking {rec.path} frames {begin}..{stop - 1} with {len(rec.cameras)} camera(s) "
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
-    stream = _keypoints(args, rec, begin, stop, out)  # the detector starts up while the kernels load
+    stream = _keypoints(rec, begin, stop, out, step)  # the detector starts up while the kernels load
     recovery = None
     if stream is not None:
         from tracker.keypoints.recovery import Recovery
@@ -163,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, settings):
+def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, settings, step: int):
     """The pose at the first frame and that frame: ``--init``, else the recording's init.toml, else fitted to the
     keypoints of the first frames (:func:`tracker.keypoints.first_pose.first_pose`, detections cached in
     OUT/keypoints.npz).  When they show nobody, the detector keeps trying a second of frames later, and
@@ -173,7 +174,7 @@ def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, sett
     given = args.init or rec.init_path
     if given is not None:
         return load_pose_file(given, model), args.start
-    if not args.keypoints:
+    if not step:
         raise TrackerInputError(
             f"{rec.path}: no init.toml in the recording folder and --keypoints off; pass --init, or let the "
             "keypoint detector find the first pose (--keypoints every or N)"
@@ -200,15 +201,16 @@ def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, sett
     raise TrackerInputError(f"{rec.path}: no frames to fit a first pose to; pass --init")
 
 
-def _keypoints(args: argparse.Namespace, rec, begin: int, stop: int, out: Path):
-    """The detector's stream of every ``--keypoints``-th frame (cached in OUT/keypoints.npz), or None (off)."""
-    if not args.keypoints:
+def _keypoints(rec, begin: int, stop: int, out: Path, step: int):
+    """The detector's stream of every ``step``-th frame (``--keypoints``; cached in OUT/keypoints.npz), or None
+    (off)."""
+    if not step:
         return None
     from tracker.atomic import ensure_writable_folder
     from tracker.keypoints.stream import KeypointStream
 
-    stream = KeypointStream(rec, begin, stop, args.keypoints, ensure_writable_folder(out) / "keypoints.npz")
-    every = "every frame" if args.keypoints == 1 else f"every {args.keypoints}th frame"
+    stream = KeypointStream(rec, begin, stop, step, ensure_writable_folder(out) / "keypoints.npz")
+    every = "every frame" if step == 1 else f"one frame in {step}"
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
     print(f"keypoints: {every}, {source}", file=sys.stderr)
     return stream

@@ -33,8 +33,16 @@ from tracker.keypoints.detect import cached, detections, holding, merged, stacke
 from tracker.keypoints.detector import require_detector
 from tracker.keypoints.store import Keypoints, save_keypoints
 
-DEFAULT_STEP = 4
-"""The detector sees every 4th frame by default (``--keypoints``; docs/keypoints.md: its cost and what it buys)."""
+RATE = 15.0
+"""Frames a second the detector sees by default (``--keypoints``; docs/keypoints.md: its cost and what it buys):
+every 4th frame at 60 fps, every 2nd at 30, every frame at 15 or fewer."""
+
+
+def default_step(fps: float) -> int:
+    """The detector's default step for a recording or camera of ``fps`` frames a second: the whole number of frames
+    nearest to one :data:`RATE`-th of a second, at least 1."""
+    return max(1, round(fps / RATE)) if fps > 0 and np.isfinite(fps) else 1
+
 
 _POLL = 0.5
 """Seconds between checks that the worker is still alive while waiting for it."""
