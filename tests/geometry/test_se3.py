@@ -116,3 +116,25 @@ def test_from_rotation_builds_transforms():
         stack.shape == (2, 4, 4) and np.array_equal(stack[1, :3, :3], r.T) and np.array_equal(stack[1, 3], [0, 0, 0, 1])
     )
     assert np.array_equal(se3.from_rotation(r), se3.from_rotation(r, np.zeros(3)))
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-6, 0.4, 2.5])
+def test_right_jacobian_matches_finite_differences(angle):
+    rng = np.random.default_rng(7)
+    axis = rng.normal(size=3)
+    w = angle * axis / np.linalg.norm(axis)
+    jacobian = se3.right_jacobian_so3(w)
+    h = 1e-6
+    for k in range(3):
+        step = np.eye(3)[k] * h
+        # exp(w)^T exp(w + d) = exp(J_r d): its rotation vector over h is J_r's column
+        column = (
+            se3.log_so3(se3.exp_so3(w).T @ se3.exp_so3(w + step))
+            - se3.log_so3(se3.exp_so3(w).T @ se3.exp_so3(w - step))
+        ) / (2 * h)
+        np.testing.assert_allclose(column, jacobian[:, k], atol=1e-8)
+        left = (
+            se3.log_so3(se3.exp_so3(w + step) @ se3.exp_so3(w).T)
+            - se3.log_so3(se3.exp_so3(w - step) @ se3.exp_so3(w).T)
+        ) / (2 * h)
+        np.testing.assert_allclose(left, jacobian.T[:, k], atol=1e-8)

@@ -3,13 +3,16 @@ follow someone else, the model fitted to them, snapped to the edges; its errors;
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tracker.chain import FREE, SLIDE
 from tracker.cli import main
 from tracker.commands.init import keypoint_pose
+from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.keypoint_cue import LANDMARKS, left_right_pairs
@@ -20,7 +23,7 @@ from tracker.keypoints.first_pose import first_pose
 from tracker.keypoints.fit import Body, fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
-from tracker.model import joint_centres, load_model, rest_poses
+from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
 from tracker.viewer.placement import in_view
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -95,6 +98,41 @@ def test_joint_space_round_trip(name):
     poses = body.posed(root, parameters)
     np.testing.assert_allclose(body.parameters_of(root, poses), parameters, atol=1e-9)
     np.testing.assert_allclose(model.coerce(poses), poses, atol=1e-9)
+
+
+def _every_joint_kind():
+    """models/human.toml with the head on a free joint and the left forearm on a slide: every kind of joint."""
+    data = tomllib.loads((ROOT / "models" / "human.toml").read_text())
+    for component in data["component"]:
+        if component["name"] == "head":
+            component["joint"] = "free"
+            component.pop("max_angle", None)
+        if component["name"] == "forearm_l":
+            component["joint"], component["limits"] = "slide", [-0.1, 0.2]
+    model = model_from_dict(data)
+    assert {FREE, SLIDE} <= set(model.joint_type[1:].tolist())
+    return model
+
+
+@pytest.mark.parametrize("model", [load_model(ROOT / "models" / "pose2sim_man.toml"), _every_joint_kind()])
+def test_fit_jacobians_match_finite_differences(model):
+    """The landmarks' and the penalties' analytic Jacobians (Body.landmark_jacobian, penalty_jacobian) against
+    central differences of posed, at random parameters with balls turned past their limits."""
+    body = Body.of(model)
+    rng = np.random.default_rng(5)
+    parameters = np.clip(rng.normal(0.0, 1.0, body.offsets[-1]), body.lower, body.upper)
+    root = se3.from_rotvec([0.2, -0.4, 1.1], [0.3, -0.2, 0.9])
+    landmarks = body.landmark_jacobian(parameters, body.posed(root, parameters))
+    penalties = body.penalty_jacobian(parameters)
+    assert (np.abs(penalties[len(parameters) - 6 :]).sum(axis=1) > 0).any()  # some ball beyond its limit
+    h = 1e-6
+    for q in range(len(parameters)):
+        step = np.eye(len(parameters))[q] * h
+        ahead, back = body.posed(root, parameters + step), body.posed(root, parameters - step)
+        difference = (body.landmark_points(ahead) - body.landmark_points(back)) / (2 * h)
+        np.testing.assert_allclose(landmarks[:, :, q], np.nan_to_num(difference), atol=1e-7)
+        difference = (body.penalties(parameters + step) - body.penalties(parameters - step)) / (2 * h)
+        np.testing.assert_allclose(penalties[:, q], difference, atol=1e-7)
 
 
 def test_perfect_keypoints_give_the_true_joint_centres(demo):

@@ -97,6 +97,16 @@ def exp_so3(w):
 
 
 @njit(cache=True)
+def right_jacobian_so3(w):
+    """J_r(w) = I - B W + Cc W^2 with W = [w]x: exp_so3(w + d) = exp_so3(w) exp_so3(J_r(w) d) to first order in d;
+    the left Jacobian, exp_so3(w + d) = exp_so3(J_l(w) d) exp_so3(w), is J_r(w)^T."""
+    theta = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    _, b, c = _exp_coefficients(theta)
+    big_w = skew(w)
+    return np.eye(3) - b * big_w + c * (big_w @ big_w)
+
+
+@njit(cache=True)
 def exp(alpha):
     """exp(hat(alpha)): R as in ``exp_so3``, t = V v with V = I + B W + Cc W^2,
     so t = v + B (w x v) + Cc (w x (w x v))."""

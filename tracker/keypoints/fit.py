@@ -78,8 +78,10 @@ def root_from_landmarks(model: Model, points: np.ndarray) -> np.ndarray:
 class Body:
     """A model's joint space, once: where each component's parameters start (N + 1,) (6 for the root and for a
     free joint, 3 for a ball, 1 for a hinge or slide, 0 when fixed), their ``lower`` and ``upper`` bounds (a
-    hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation, and the
-    landmarks' ``component`` (33,) and ``anchor`` (33, 3) points (:func:`tracker.keypoints.anchors.anchors`)."""
+    hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation, the landmarks'
+    ``component`` (33,) and ``anchor`` (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the
+    Jacobians each parameter's ``owner`` (P,), the component whose joint it turns or slides, and ``moves``
+    (N, N), whether a joint's motion moves a component (itself and the components below it)."""
 
     model: Model
     offsets: np.ndarray
@@ -88,16 +90,25 @@ class Body:
     balls: np.ndarray
     component: np.ndarray
     anchor: np.ndarray
+    owner: np.ndarray
+    moves: np.ndarray
 
     @staticmethod
     def of(model: Model) -> Body:
         sizes = {FREE: 6, BALL: 3, HINGE: 1, SLIDE: 1}
-        offsets = np.concatenate([[0], np.cumsum([sizes.get(int(kind), 0) for kind in model.joint_type])])
+        counts = [sizes.get(int(kind), 0) for kind in model.joint_type]
+        offsets = np.concatenate([[0], np.cumsum(counts)])
         lower, upper = np.full(offsets[-1], -np.inf), np.full(offsets[-1], np.inf)
         for i in np.flatnonzero(np.isin(model.joint_type, (HINGE, SLIDE))):
             lower[offsets[i]], upper[offsets[i]] = model.lower[i], model.upper[i]
         balls = np.flatnonzero((model.joint_type == BALL) & np.isfinite(model.upper))
-        return Body(model, offsets, lower, upper, balls, *anchors(model))
+        moves = np.eye(model.size, dtype=bool)
+        for i in range(model.size):
+            j = model.parent[i]
+            while j >= 0:
+                moves[j, i], j = True, model.parent[j]
+        owner = np.repeat(np.arange(model.size), counts)
+        return Body(model, offsets, lower, upper, balls, *anchors(model), owner, moves)
 
     def posed(self, root: np.ndarray, parameters: np.ndarray) -> np.ndarray:
         """World poses (N, 4, 4) of joint-space ``parameters``: the root at ``root`` moved by (dt, dr),
@@ -154,6 +165,61 @@ class Body:
         """World points (33, 3) of the landmarks' model points at ``poses`` (NaN where the model has none)."""
         return landmark_world(poses, self.component, self.anchor)
 
+    def twists(self, parameters: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """Each parameter's world twist (P, 6), (omega, v): a world point p fixed in a component that the parameter
+        moves goes at omega x p + v per unit of it, at ``poses`` = :meth:`posed` of ``parameters``.  A turn about an
+        axis a through a point c is (a, c x a): the root's dr about its origin, with axes the columns of the left
+        Jacobian J_l(dr) (exp(dr + d) = exp(J_l d) exp(dr)); a ball's or free joint's w about the component's
+        origin, axes R J_r(w) (exp(w + d) = exp(w) exp(J_r d)); a hinge's angle about R axis.  A slide along R axis,
+        the root's dt and a free joint's translation along the frame before its turn are (0, direction)."""
+        model, offsets = self.model, self.offsets
+        out = np.zeros((offsets[-1], 6))
+        out[0:3, 3:6] = np.eye(3)
+        axes = se3.right_jacobian_so3(parameters[3:6]).T  # its columns: J_l(dr) = J_r(dr)^T
+        out[3:6, 0:3] = axes.T
+        out[3:6, 3:6] = np.cross(poses[0, :3, 3], axes.T)
+        for i in range(1, model.size):
+            at, kind = offsets[i], model.joint_type[i]
+            rotation, centre = poses[i, :3, :3], poses[i, :3, 3]
+            if kind == SLIDE:
+                out[at, 3:6] = rotation @ model.axis[i]
+                continue
+            if kind == BALL:
+                rows, axes = slice(at, at + 3), rotation @ se3.right_jacobian_so3(parameters[at : at + 3])
+            elif kind == HINGE:
+                rows, axes = slice(at, at + 1), (rotation @ model.axis[i])[:, None]
+            elif kind == FREE:
+                before = (poses[model.parent[i]] @ model.rest[i])[:3, :3]
+                out[at : at + 3, 3:6] = before.T
+                rows, axes = slice(at + 3, at + 6), rotation @ se3.right_jacobian_so3(parameters[at + 3 : at + 6])
+            else:
+                continue
+            out[rows, 0:3] = axes.T
+            out[rows, 3:6] = np.cross(centre, axes.T)
+        return out
+
+    def landmark_jacobian(self, parameters: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """d(landmark world points)/d(parameters) (33, 3, P) at ``poses`` = :meth:`posed` of ``parameters``; zero
+        for landmarks the model has no point for."""
+        twists = self.twists(parameters, poses)
+        points = np.nan_to_num(self.landmark_points(poses))
+        moved = self.moves[self.owner][:, np.maximum(self.component, 0)].T & (self.component >= 0)[:, None]  # (33, P)
+        velocity = np.cross(twists[None, :, 0:3], points[:, None, :]) + twists[None, :, 3:6]  # (33, P, 3)
+        return np.where(moved[..., None], velocity, 0.0).transpose(0, 2, 1)
+
+    def penalty_jacobian(self, parameters: np.ndarray) -> np.ndarray:
+        """d(:meth:`penalties`)/d(parameters) (R, P)."""
+        offsets, upper = self.offsets, self.model.upper
+        rest = np.zeros((offsets[-1] - 6, offsets[-1]))
+        rest[:, 6:] = REST_WEIGHT * np.eye(offsets[-1] - 6)
+        limits = np.zeros((len(self.balls), offsets[-1]))
+        for row, i in enumerate(self.balls):
+            value = parameters[offsets[i] : offsets[i + 1]]
+            size = float(np.linalg.norm(value))
+            if size > upper[i]:
+                limits[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * value / size
+        return np.concatenate([rest, limits])
+
 
 def _nearer(observed: np.ndarray, model_points: np.ndarray) -> np.ndarray:
     """``observed`` (..., 33, D) with each left/right pair swapped where the other way round lies nearer
@@ -168,17 +234,34 @@ def _nearer(observed: np.ndarray, model_points: np.ndarray) -> np.ndarray:
     return out
 
 
-def _relabelled_fit(residuals, parameters, bounds, observed, model_points, loss: str, scale: float):
-    """Fit, relabel ``observed`` nearer the fitted model (``model_points(parameters)``), fit again, until no
-    label changes or :data:`RELABEL_ROUNDS`; returns the final least-squares result."""
+def _relabelled_fit(residuals, jacobian, parameters, bounds, observed, model_points, loss: str, scale: float):
+    """Fit (``residuals`` and their ``jacobian``, both of the parameters and ``observed``), relabel ``observed``
+    nearer the fitted model (``model_points(parameters)``), fit again, until no label changes or
+    :data:`RELABEL_ROUNDS`; returns the final least-squares result."""
     for _ in range(RELABEL_ROUNDS):
-        result = least_squares(residuals, parameters, bounds=bounds, loss=loss, f_scale=scale, args=(observed,))
+        result = least_squares(
+            residuals, parameters, jac=jacobian, bounds=bounds, loss=loss, f_scale=scale, args=(observed,)
+        )
         parameters = result.x
         relabelled = _nearer(observed, model_points(parameters))
         if np.array_equal(relabelled, observed, equal_nan=True):
             break
         observed = relabelled
     return result
+
+
+PROJECTION_STEP = 1e-5
+"""Metres a world point is moved each way to take its pixels' derivatives (:func:`_projection_jacobian`)."""
+
+
+def _projection_jacobian(camera: Camera, points: np.ndarray) -> np.ndarray:
+    """d(pixels)/d(world point) (M, 2, 3) of ``points`` (M, 3) in ``camera``, lens included: central differences
+    of :meth:`tracker.camera.Camera.project` over :data:`PROJECTION_STEP`."""
+    columns = [
+        camera.project(points + PROJECTION_STEP * axis) - camera.project(points - PROJECTION_STEP * axis)
+        for axis in np.eye(3)
+    ]
+    return np.stack(columns, axis=2) / (2 * PROJECTION_STEP)
 
 
 def fit_pose(model: Model, points: np.ndarray) -> np.ndarray:
@@ -215,7 +298,14 @@ def fitted(model: Model, points: np.ndarray) -> tuple[np.ndarray, float]:
         misfit = model_points(parameters) - targets
         return np.concatenate([misfit[np.isfinite(misfit).all(axis=1)].ravel(), body.penalties(parameters)])
 
-    result = _relabelled_fit(residuals, start, (body.lower, body.upper), points, model_points, "soft_l1", ROBUST)
+    def jacobian(parameters: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        poses = body.posed(root, parameters)
+        known = np.isfinite(body.landmark_points(poses) - targets).all(axis=1)
+        rows = body.landmark_jacobian(parameters, poses)[known].reshape(-1, len(parameters))
+        return np.concatenate([rows, body.penalty_jacobian(parameters)])
+
+    bounds = (body.lower, body.upper)
+    result = _relabelled_fit(residuals, jacobian, start, bounds, points, model_points, "soft_l1", ROBUST)
     return model.coerce(body.posed(root, result.x)), float(result.cost)
 
 
@@ -253,6 +343,18 @@ def fit_to_views(
         held = per_metre * body.penalties(parameters)
         return np.concatenate([misfit[np.isfinite(observed).all(axis=3)].ravel(), held])
 
+    def jacobian(parameters: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        poses = body.posed(root, parameters)
+        world = body.landmark_points(poses)
+        known = np.isfinite(world).all(axis=1)
+        moved = body.landmark_jacobian(parameters, poses)  # (33, 3, P)
+        rows = np.zeros((len(cameras), len(LANDMARKS), 2, len(parameters)))
+        for k, camera in enumerate(cameras):
+            rows[k, known] = np.einsum("kij,kjp->kip", _projection_jacobian(camera, world[known]), moved[known])
+        rows = np.broadcast_to(rows, (*detections.shape, len(parameters)))
+        held = per_metre * body.penalty_jacobian(parameters)
+        return np.concatenate([rows[np.isfinite(observed).all(axis=3)].reshape(-1, len(parameters)), held])
+
     bounds = (body.lower, body.upper)
-    result = _relabelled_fit(residuals, start, bounds, detections, model_pixels, "cauchy", scale)
+    result = _relabelled_fit(residuals, jacobian, start, bounds, detections, model_pixels, "cauchy", scale)
     return model.coerce(body.posed(root, result.x))
