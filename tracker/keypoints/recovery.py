@@ -20,7 +20,7 @@ The edges then arbitrate: the tracker starts again from the snapped pose, its st
 tracked pose's did (a frame that is not lost). Landmarks that two views agree on can still be
 wrong, the detector following a bystander or reading an arm the other way round; a re-seed fitted
 to them lands off the body's outlines, and the tracked pose is kept (``declined`` counts these). A
-try costs about a second (the fit), so after a declined one the recovery waits :data:`WINDOW`
+try costs about half a second (the fit and the snap), so after a declined one the recovery waits :data:`WINDOW`
 frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost frame
 is always tried.
 
@@ -62,8 +62,8 @@ LANDMARK_STRAYED = 0.2
 the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.track.Tracker.tolerance`), that says its
 limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from the
 truth), the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in
-15 %, and a re-seed costs the tracker about a second: this share and the persistence keep such frames from trying
-one."""
+15 %, and a try costs the tracker about half a second (the fit and the snap): this share and the persistence keep
+such frames from trying one."""
 
 BACKOFF = 5
 """Re-seeds declined in a row after which the wait before the next try stops doubling: :data:`WINDOW` frames after
