@@ -38,7 +38,7 @@ from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.detector import Detector
-from tracker.keypoints.stream import KeypointStream, default_step
+from tracker.keypoints.stream import KeypointStream, default_step, schedule_words
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
@@ -210,8 +210,8 @@ def format_table(result: dict) -> str:
     if result["keypoint_step"]:
         lines += [
             "",
-            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on one frame "
-            f"in {result['keypoint_step']} beside the tracker (a worker process, its start-up included), "
+            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on "
+            f"{schedule_words(result['keypoint_step'])} beside the tracker (a worker process, its start-up included), "
             f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
         ]
     return "\n".join(lines)

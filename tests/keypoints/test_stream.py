@@ -62,18 +62,9 @@ def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
 
 
 def test_the_default_step_keeps_the_detector_near_fifteen_frames_a_second():
-    assert [default_step(fps) for fps in (120.0, 60.0, 50.0, 30.0, 25.0, 15.0, 10.0, 8.0, 6.0)] == [
-        8,
-        4,
-        3,
-        2,
-        2,
-        1,
-        1,
-        1,
-        1,
-    ]
-    assert default_step(0.0) == default_step(float("nan")) == 1  # a rate nobody knows: every frame
+    steps = {120.0: 8, 60.0: 4, 52.5: 4, 50.0: 3, 37.5: 3, 30.0: 2, 25.0: 2, 22.5: 2, 20.0: 1, 15.0: 1, 6.0: 1}
+    assert {fps: default_step(fps) for fps in steps} == steps  # halves round up
+    assert default_step(0.0) == default_step(float("nan")) == default_step(float("inf")) == 1  # no rate: every frame
 
 
 def test_track_fuses_the_keypoints_and_reuses_them(tmp_path, capsys):

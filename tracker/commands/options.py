@@ -84,8 +84,8 @@ def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = Non
         type=keypoint_step,
         default=None,
         metavar="every|N|off",
-        help=f"{what} (default: the N nearest to {RATE:g} frames a second, 4 at 60 fps, every frame at {RATE:g} fps or "
-        "fewer)",
+        help=f"{what} (default: the footage's frame rate / {RATE:g} rounded, about {RATE:g} detections a second: 4 at "
+        "60 fps, every frame below 22.5 fps)",
     )
 
 

@@ -207,10 +207,10 @@ def _keypoints(rec, begin: int, stop: int, out: Path, step: int):
     if not step:
         return None
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.stream import KeypointStream
+    from tracker.keypoints.stream import KeypointStream, schedule_words
 
     stream = KeypointStream(rec, begin, stop, step, ensure_writable_folder(out) / "keypoints.npz")
-    every = "every frame" if step == 1 else f"one frame in {step}"
+    every = schedule_words(step)
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
     print(f"keypoints: {every}, {source}", file=sys.stderr)
     return stream

@@ -53,6 +53,9 @@ RELABEL_ROUNDS = 5
 HINGE_START = 0.2
 """A hinge's starting angle (radians, within its limits): a straight limb's twist would not move the landmarks."""
 
+PROJECTION_STEP = 1e-5
+"""Metres a world point is moved each way to take its pixels' derivatives (:func:`_projection_jacobian`)."""
+
 
 def root_from_landmarks(model: Model, points: np.ndarray) -> np.ndarray:
     """The root's world pose (4, 4) from the landmarks' world points (33, 3): its left (x) from the right hip to
@@ -81,7 +84,7 @@ class Body:
     hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation, the landmarks'
     ``component`` (33,) and ``anchor`` (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the
     Jacobians each parameter's ``owner`` (P,), the component whose joint it turns or slides, and ``moves``
-    (N, N), whether a joint's motion moves a component (itself and the components below it)."""
+    (N, N), ``moves[j, i]`` whether component j's joint moves component i (itself and the components below it)."""
 
     model: Model
     offsets: np.ndarray
@@ -175,7 +178,7 @@ class Body:
         model, offsets = self.model, self.offsets
         out = np.zeros((offsets[-1], 6))
         out[0:3, 3:6] = np.eye(3)
-        axes = se3.right_jacobian_so3(parameters[3:6]).T  # its columns: J_l(dr) = J_r(dr)^T
+        axes = se3.right_jacobian_so3(-parameters[3:6])  # its columns: J_l(dr) = J_r(-dr)
         out[3:6, 0:3] = axes.T
         out[3:6, 3:6] = np.cross(poses[0, :3, 3], axes.T)
         for i in range(1, model.size):
@@ -248,10 +251,6 @@ def _relabelled_fit(residuals, jacobian, parameters, bounds, observed, model_poi
             break
         observed = relabelled
     return result
-
-
-PROJECTION_STEP = 1e-5
-"""Metres a world point is moved each way to take its pixels' derivatives (:func:`_projection_jacobian`)."""
 
 
 def _projection_jacobian(camera: Camera, points: np.ndarray) -> np.ndarray:

@@ -35,13 +35,18 @@ from tracker.keypoints.store import Keypoints, save_keypoints
 
 RATE = 15.0
 """Frames a second the detector sees by default (``--keypoints``; docs/keypoints.md: its cost and what it buys):
-every 4th frame at 60 fps, every 2nd at 30, every frame at 15 or fewer."""
+every 4th frame at 60 fps, every 2nd at 30, every frame below 22.5."""
 
 
 def default_step(fps: float) -> int:
-    """The detector's default step for a recording or camera of ``fps`` frames a second: the whole number of frames
-    nearest to one :data:`RATE`-th of a second, at least 1."""
-    return max(1, round(fps / RATE)) if fps > 0 and np.isfinite(fps) else 1
+    """The detector's default step for a recording or camera of ``fps`` frames a second: ``fps / RATE`` rounded (halves
+    up), at least 1; every frame for a rate that is not a positive finite number."""
+    return max(1, int(fps / RATE + 0.5)) if fps > 0 and np.isfinite(fps) else 1
+
+
+def schedule_words(step: int) -> str:
+    """How often a ``step`` sees frames, in words: "every frame" or "one frame in N"."""
+    return "every frame" if step == 1 else f"one frame in {step}"
 
 
 _POLL = 0.5
