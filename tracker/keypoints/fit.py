@@ -106,10 +106,10 @@ class Body:
             lower[offsets[i]], upper[offsets[i]] = model.lower[i], model.upper[i]
         balls = np.flatnonzero((model.joint_type == BALL) & np.isfinite(model.upper))
         moves = np.eye(model.size, dtype=bool)
-        for i in range(model.size):
-            j = model.parent[i]
+        for below in range(model.size):
+            j = int(model.parent[below])
             while j >= 0:
-                moves[j, i], j = True, model.parent[j]
+                moves[j, below], j = True, int(model.parent[j])
         owner = np.repeat(np.arange(model.size), counts)
         return Body(model, offsets, lower, upper, balls, *anchors(model), owner, moves)
 
