@@ -62,7 +62,7 @@ def test_landmarks_sit_on_the_demo_body(demo_keypoints):
 def test_an_empty_image_has_no_person():
     detector = Detector()
     try:
-        found = detector(np.full((240, 320), 128, np.uint8))
+        [found] = detect_views([detector], [np.full((240, 320), 128, np.uint8)])
     finally:
         detector.close()
     assert np.isnan(found.pixels).all() and np.isnan(found.world).all() and not found.confidence.any()

@@ -162,11 +162,6 @@ class Detector:
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
 
-    def __call__(self, image: np.ndarray) -> Detection:
-        """The landmarks of a BGR (H, W, 3) or grey (H, W) uint8 image: the whole image's, else the crops'."""
-        found = self.whole(image)
-        return found if found.found else self.cropped(image)
-
     def whole(self, image: np.ndarray) -> Detection:
         """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows."""
         found = _read(self._pose, _rgb(image))
