@@ -83,8 +83,8 @@ class Body:
     free joint, 3 for a ball, 1 for a hinge or slide, 0 when fixed), their ``lower`` and ``upper`` bounds (a
     hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation, the landmarks'
     ``component`` (33,) and ``anchor`` (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the
-    Jacobians each parameter's ``owner`` (P,), the component whose joint it turns or slides, and ``moves``
-    (N, N), ``moves[j, i]`` whether component j's joint moves component i (itself and the components below it)."""
+    Jacobians ``drives`` (33, P), whether a parameter moves a landmark: it turns or slides the joint of the
+    landmark's component or of one above it."""
 
     model: Model
     offsets: np.ndarray
@@ -93,8 +93,7 @@ class Body:
     balls: np.ndarray
     component: np.ndarray
     anchor: np.ndarray
-    owner: np.ndarray
-    moves: np.ndarray
+    drives: np.ndarray
 
     @staticmethod
     def of(model: Model) -> Body:
@@ -105,13 +104,15 @@ class Body:
         for i in np.flatnonzero(np.isin(model.joint_type, (HINGE, SLIDE))):
             lower[offsets[i]], upper[offsets[i]] = model.lower[i], model.upper[i]
         balls = np.flatnonzero((model.joint_type == BALL) & np.isfinite(model.upper))
-        moves = np.eye(model.size, dtype=bool)
+        moves = np.eye(model.size, dtype=bool)  # moves[j, i]: component j's joint moves component i
         for below in range(model.size):
             j = int(model.parent[below])
             while j >= 0:
                 moves[j, below], j = True, int(model.parent[j])
-        owner = np.repeat(np.arange(model.size), counts)
-        return Body(model, offsets, lower, upper, balls, *anchors(model), owner, moves)
+        component, anchor = anchors(model)
+        owner = np.repeat(np.arange(model.size), counts)  # the component whose joint each parameter moves
+        drives = moves[owner][:, np.maximum(component, 0)].T & (component >= 0)[:, None]
+        return Body(model, offsets, lower, upper, balls, component, anchor, drives)
 
     def posed(self, root: np.ndarray, parameters: np.ndarray) -> np.ndarray:
         """World poses (N, 4, 4) of joint-space ``parameters``: the root at ``root`` moved by (dt, dr),
@@ -206,9 +207,8 @@ class Body:
         for landmarks the model has no point for."""
         twists = self.twists(parameters, poses)
         points = np.nan_to_num(self.landmark_points(poses))
-        moved = self.moves[self.owner][:, np.maximum(self.component, 0)].T & (self.component >= 0)[:, None]  # (33, P)
         velocity = np.cross(twists[None, :, 0:3], points[:, None, :]) + twists[None, :, 3:6]  # (33, P, 3)
-        return np.where(moved[..., None], velocity, 0.0).transpose(0, 2, 1)
+        return np.where(self.drives[..., None], velocity, 0.0).transpose(0, 2, 1)
 
     def penalty_jacobian(self, parameters: np.ndarray) -> np.ndarray:
         """d(:meth:`penalties`)/d(parameters) (R, P)."""
