@@ -11,7 +11,7 @@ import pytest
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoint_cue import LANDMARKS, keypoint_kernel, landmark_points, project_point
+from tracker.keypoint_cue import LANDMARKS, anchors, keypoint_kernel, landmark_points, placers, project_point
 from tracker.model import load_model
 from tracker.outline import Rig
 
@@ -80,12 +80,22 @@ def _add(model, rig, component, point, pairs, poses, pixels, confidence, toleran
         2.0,
         1.0,
         np.full(len(LANDMARKS), tolerance),
-        reach,
+        np.full(len(LANDMARKS), reach),
         information,
         eta,
         np.zeros(pixels.shape[:2]),
     )
     return counts, information, eta
+
+
+def test_a_joint_landmark_is_placed_by_the_parent_component():
+    model = load_model(ROOT / "models" / "human.toml")
+    component, point = anchors(model)
+    placer = placers(model, component, point)
+    for landmark, part in [("left_wrist", "forearm_l"), ("right_elbow", "upperarm_r"), ("left_knee", "thigh_l")]:
+        assert placer[LANDMARKS.index(landmark)] == model.index(part)
+    for landmark in ("nose", "right_heel", "left_index", "mouth_left"):
+        assert placer[LANDMARKS.index(landmark)] == -1
 
 
 def test_perfect_landmarks_at_the_truth_add_information_and_no_pull(demo_frame):
@@ -186,3 +196,40 @@ def test_each_landmark_zone_is_learnt_from_its_misfits():
     history[:10, 2] = 0.5  # far off: the ceiling
     history[:3, 3] = 0.1  # seen too rarely: the floor
     np.testing.assert_allclose(learnt_tolerance(history, 0.03, 2.0, 0.15, 5), [0.03, 0.10, 0.15, 0.03])
+
+
+def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zone_without_fading(demo_frame):
+    """A wrist detection far off its predicted image (beyond the fade) barely pulls while the forearm's
+    edges fit; when they fit worse than ``keypoint_edge_misfit``, it pulls at full strength."""
+    import itertools
+
+    from tracker.io.recording import frames
+    from tracker.track import Tracker
+
+    model, rig, component, point, pairs, poses, pixels = demo_frame
+    recording = open_recording(DEMO)
+    tracker = Tracker(model, recording.cameras, poses)
+    images = next(itertools.islice(frames(recording), 1))[1]
+    tracker.step(images)  # the demo's frame 0 from its true pose: every visible component's edges fit
+    forearm, hand, wrist = model.index("forearm_l"), model.index("hand_l"), LANDMARKS.index("left_wrist")
+    assert tracker.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit
+    tracker.poses = poses
+    far = np.full_like(pixels, np.nan)
+    extent = np.linalg.norm(np.ptp(pixels[0][component >= 0], axis=0))
+    far[0, wrist] = pixels[0, wrist] + [0.4 * extent, 0.0]
+    confidence = np.ones(pixels.shape[:2])
+
+    def pull() -> float:
+        tracker.information[:] = 0.0
+        tracker.eta[:] = 0.0
+        assert tracker.add_keypoints(far, confidence) == (1, 0)
+        return float(np.linalg.norm(tracker.eta[hand]))
+
+    held = pull()
+    tracker.edge_misfit[forearm] = 2.0 * tracker.settings.keypoint_edge_misfit
+    loose = pull()
+    st = tracker.settings
+    assert tracker.tolerance[wrist] == st.keypoint_tolerance  # nothing learnt yet: both at the floor zone
+    excess = tracker.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
+    assert excess > 2 * st.keypoint_reach
+    np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoint_reach) ** 2) * held, rtol=1e-9)  # no fade

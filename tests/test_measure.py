@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.measure import edge_offset, measure_kernel
+from tracker.measure import component_misfits, edge_offset, measure_kernel
 
 W, H = 80, 60
 LO, HI = 40.0, 200.0
@@ -315,3 +315,17 @@ def test_measure_kernel_searches_from_the_linearly_moved_sample():
     for s, start in enumerate((x0 - 3.5, x0 + 2.5)):  # the same as a fresh sample at the moved position
         alone = offset(images[0], np.array([start, pixels[s, 1]]), normals[s])
         assert alone == o_offset[s]
+
+
+def test_component_misfits_are_the_median_offset_of_each_components_found_samples():
+    rng = np.random.default_rng(3)
+    count, components = 500, 4
+    component = rng.integers(0, components - 1, size=count + 20)  # the last component has no sample
+    offset = rng.normal(scale=2.0, size=count + 20)
+    offset[rng.random(count + 20) < 0.2] = np.nan  # searches that found nothing
+    component[:5], offset[:5] = 2, np.nan  # ... and all of component 2's first ones
+    got = component_misfits(offset, component, count, components)
+    for i in range(components - 1):
+        found = offset[:count][(component[:count] == i) & ~np.isnan(offset[:count])]
+        assert got[i] == np.median(np.abs(found))  # rows past count are not read
+    assert got[components - 1] == np.inf

@@ -17,7 +17,11 @@ predicted body's size there): a landmark within ``t`` of its prediction is not u
 detector's scatter and bias never pull against the edges, while a body that has drifted off is
 pulled back by the excess.  So one tree solve fuses both cues.  The noise is learnt per landmark
 (:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
-edges hold it, for this detector on this subject.  Left/right swaps are
+edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the
+component that places a landmark fits its outline's edges worse than a pixel after the last frame's
+solve, :func:`tracker.measure.component_misfits`: it follows clutter, or nothing), its landmarks pull
+from the floor zone, with no fade, until they bring it back (docs/keypoints.md, "Fusion with the
+edges").  Left/right swaps are
 rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
 predicted images better the other way round (summed distance), neither is used in that camera.
 """
@@ -136,6 +140,16 @@ def cue_points(model: Model) -> tuple[np.ndarray, np.ndarray]:
     return component, point
 
 
+def placers(model: Model, component: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """The component (K,) whose pose places each joint landmark: the parent of ``component`` for a landmark at
+    its joint centre (``point`` zero; a wrist is where the forearm ends); -1 for the others, on the surface of
+    the head, hands and feet (small parts whose outlines fit the edges worse even where tracked right, the
+    feet against the floor's), and for a landmark without a component."""
+    parent = model.parent[np.maximum(component, 0)]
+    centre = (component >= 0) & ~np.any(point, axis=1) & (parent >= 0)
+    return np.where(centre, parent, -1)
+
+
 def landmark_world(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
     """World points (K, 3) of the landmarks' model points ``point`` (K, 3), fixed in components ``component``
     (K,), at ``poses`` (N, 4, 4); NaN for landmarks without a component (-1)."""
@@ -232,8 +246,8 @@ def keypoint_kernel(
     the detector's noise, ``tolerance`` (K,) times the predicted body's size in that image (the diagonal
     of its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
     excess e = |r| - radius, w = s q (e / |r|) / ((c + e) (1 + (e / (reach size))^2)), so its pull grows
-    from zero at the zone's edge and fades again beyond ``reach`` times the body's size (a wrong
-    detection, or a body that far off, is left to the recovery).  ``misfit`` (C, K) receives |r| over the
+    from zero at the zone's edge and fades again beyond ``reach`` (K,) times the body's size (a wrong
+    detection, or a body that far off, is left to the recovery; inf: no fade).  ``misfit`` (C, K) receives |r| over the
     body's size for every usable landmark, NaN for the others.  Returns (landmarks used, pairs rejected)."""
     cameras, count = pixels.shape[0], pixels.shape[1]
     misfit[:] = np.nan
@@ -283,7 +297,7 @@ def keypoint_kernel(
             if radius > 0.0 and excess <= 0.0:
                 continue
             share = excess / length if radius > 0.0 else 1.0
-            fade = excess / (reach * size) if size > 0.0 else 0.0
+            fade = excess / (reach[j] * size) if size > 0.0 else 0.0
             w = scale * confidence[k, j] * share / ((robust_c + excess) * (1.0 + fade * fade))
             jac = jacobians[j]
             information[component[j]] += w * (jac.T @ jac)

@@ -169,3 +169,29 @@ def measure_kernel(
             for b in range(a + 1, 6):
                 information[i, b, a] = information[i, a, b]
     return count, found, sum_wm, sum_w
+
+
+@njit(cache=True)
+def component_misfits(offset, component, count, n_components):
+    """Each component's median |m| (pixels, (n_components,)) over its first ``count`` samples that found an
+    edge (``offset`` not NaN): how closely its outline fits the image's edges after a solve; inf for a
+    component with no such sample (hidden, or nothing found), whose pose the edges do not hold."""
+    out = np.full(n_components, np.inf)
+    found = np.zeros(n_components, np.int64)
+    for s in range(count):
+        if not np.isnan(offset[s]):
+            found[component[s]] += 1
+    start = np.zeros(n_components + 1, np.int64)
+    for i in range(n_components):
+        start[i + 1] = start[i] + found[i]
+    values = np.empty(start[n_components])
+    filled = start[:n_components].copy()
+    for s in range(count):
+        if not np.isnan(offset[s]):
+            i = component[s]
+            values[filled[i]] = abs(offset[s])
+            filled[i] += 1
+    for i in range(n_components):
+        if found[i] > 0:
+            out[i] = np.median(values[start[i] : start[i + 1]])
+    return out

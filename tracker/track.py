@@ -31,8 +31,8 @@ from numba import njit
 from tracker import motion_prior
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
-from tracker.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, learnt_tolerance, left_right_pairs
-from tracker.measure import Statistics, measure_kernel
+from tracker.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, learnt_tolerance, left_right_pairs, placers
+from tracker.measure import Statistics, component_misfits, measure_kernel
 from tracker.model import Model
 from tracker.outline import Placed, Rig, Samples, sample_outlines
 from tracker.ownership import Ownership
@@ -83,6 +83,8 @@ class Settings:
     keypoint_noise_multiple: float = 1.5  # each landmark's zone grows to this many times its median misfit (0: fixed)
     keypoint_tolerance_max: float = 0.15  # ... but no further: a body that far off is pulled back
     keypoint_reach: float = 0.1  # a landmark's pull fades beyond this share of the body's size past its zone
+    keypoint_edge_misfit: float = 0.8  # px: a component whose edges fit worse (median |m|) is not held by them: its
+    # landmarks pull from the floor zone (keypoint_tolerance) with no fade
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
 
 
@@ -100,6 +102,7 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         final_search_range=round(settings.final_search_range * k),
         blur_sigma=settings.blur_sigma * k,
         threshold=settings.threshold / k,
+        keypoint_edge_misfit=settings.keypoint_edge_misfit * k,
         reference_size=short_side,
     )
 
@@ -272,6 +275,8 @@ class Tracker:
         self.hi: np.ndarray | None = None
         self.times = StageTimes()
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
+        self.placer = placers(model, *self.landmarks[:2])
+        self.edge_misfit = np.zeros(n)  # per component, px, after the last frame's solve (measure.component_misfits)
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
         self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark
@@ -288,6 +293,7 @@ class Tracker:
         other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
         other.landmarks, other.misfits, other.misfit_row = self.landmarks, self.misfits.copy(), self.misfit_row
         other.tolerance = self.tolerance.copy()
+        other.edge_misfit = self.edge_misfit.copy()
         return other
 
     def restart(self, poses: np.ndarray) -> None:
@@ -450,10 +456,13 @@ class Tracker:
 
     def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:
         """Add the landmarks' information to the edges' (:func:`tracker.keypoint_cue.keypoint_kernel`):
-        ``pixels`` (C, 33, 2) and ``confidence`` (C, 33) float64, one row per camera of the rig.  Returns
-        (landmarks used, left/right pairs rejected)."""
+        ``pixels`` (C, 33, 2) and ``confidence`` (C, 33) float64, one row per camera of the rig.  A landmark
+        whose placing component the edges did not hold in the last frame (:attr:`edge_misfit` above
+        ``keypoint_edge_misfit``) pulls from the floor zone with no fade.  Returns (landmarks used,
+        left/right pairs rejected)."""
         st = self.settings
         component, point, pairs = self.landmarks
+        held = self.held()
         return keypoint_kernel(
             self.poses,
             self.rig.camera_from_world,
@@ -467,8 +476,8 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
-            self.tolerance,
-            st.keypoint_reach,
+            np.where(held, self.tolerance, st.keypoint_tolerance),
+            np.where(held, st.keypoint_reach, np.inf),
             self.information,
             self.eta,
             self.misfit,
@@ -504,16 +513,24 @@ class Tracker:
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
         self.previous = current
+        self.edge_misfit = component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
         if self.keypoints is not None and status == TRACKED:
             self.learn_keypoint_noise()
         return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
 
+    def held(self) -> np.ndarray:
+        """Whether the edges hold each landmark's placing component (:func:`tracker.keypoint_cue.placers`; every
+        landmark not at a joint does): its outline fitted them within ``keypoint_edge_misfit`` in the last
+        solve (:attr:`edge_misfit`, the median |m| of its samples)."""
+        return (self.placer < 0) | (self.edge_misfit[self.placer] <= self.settings.keypoint_edge_misfit)
+
     def learn_keypoint_noise(self) -> None:
         """Add the frame's landmark misfits (the median over the cameras) to the recent ones and set each
         landmark's noise zone from them (:func:`tracker.keypoint_cue.learnt_tolerance`); called for frames
-        whose edges held the body."""
+        whose edges held the body, and only for the landmarks whose limb they held (:meth:`held`): a limb
+        that strays from right detections must not widen their zone."""
         st = self.settings
         if st.keypoint_noise_multiple <= 0:
             return
@@ -521,6 +538,7 @@ class Tracker:
         frame = np.full(self.misfit.shape[1], np.nan)
         for j in np.flatnonzero(seen.any(axis=0)):
             frame[j] = np.median(self.misfit[seen[:, j], j])
+        frame[~self.held()] = np.nan
         self.misfits[self.misfit_row % NOISE_WINDOW] = frame
         self.misfit_row += 1
         self.tolerance = learnt_tolerance(
