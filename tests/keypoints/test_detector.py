@@ -30,6 +30,21 @@ def test_opencv_stays_the_headless_build():
     assert not installed & {"opencv-python", "opencv-contrib-python", "opencv-contrib-python-headless"}
 
 
+def test_the_landmarker_imports_without_mediapipes_drawing_modules():
+    """They import matplotlib's pyplot (most of the detector worker's start-up); a fresh interpreter gets the
+    pose solution without them, and leaves no stand-in behind."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys; from tracker.keypoints.detector import pose_solution; pose = pose_solution(); "
+        "print(hasattr(pose, 'Pose'), 'matplotlib.pyplot' in sys.modules, "
+        "any(name.endswith(('drawing_utils', 'drawing_styles')) for name in sys.modules))"
+    )
+    shown = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert shown.split() == ["True", "False", "False"]
+
+
 @pytest.fixture(scope="module")
 def demo_keypoints() -> Keypoints:
     return detect_recording(open_recording(DEMO), 0, 20)[0]

