@@ -18,10 +18,10 @@ detector's scatter and bias never pull against the edges, while a body that has 
 pulled back by the excess.  So one tree solve fuses both cues.  The noise is learnt per landmark
 (:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
 edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the
-component that places a landmark fits its outline's edges worse than a pixel after the last frame's
-solve, :func:`tracker.measure.component_misfits`: it follows clutter, or nothing), its landmarks pull
-from the floor zone, with no fade, until they bring it back (docs/keypoints.md, "Fusion with the
-edges").  Left/right swaps are
+component that places a joint landmark, :func:`placers`, fitted its outline's edges worse than
+``Settings.keypoint_edge_misfit`` after the last frame's solve, :func:`tracker.measure.component_misfits`:
+it follows clutter, or nothing), its landmarks pull from the floor zone with no fade (``reach`` inf)
+until they bring it back (docs/keypoints.md, "Fusion with the edges").  Left/right swaps are
 rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
 predicted images better the other way round (summed distance), neither is used in that camera.
 """
@@ -247,8 +247,9 @@ def keypoint_kernel(
     of its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
     excess e = |r| - radius, w = s q (e / |r|) / ((c + e) (1 + (e / (reach size))^2)), so its pull grows
     from zero at the zone's edge and fades again beyond ``reach`` (K,) times the body's size (a wrong
-    detection, or a body that far off, is left to the recovery; inf: no fade).  ``misfit`` (C, K) receives |r| over the
-    body's size for every usable landmark, NaN for the others.  Returns (landmarks used, pairs rejected)."""
+    detection, or a body that far off, is left to the recovery; inf: no fade).  ``misfit`` (C, K) receives
+    |r| over the body's size for every usable landmark, NaN for the others.  Returns (landmarks used, pairs
+    rejected)."""
     cameras, count = pixels.shape[0], pixels.shape[1]
     misfit[:] = np.nan
     used = 0

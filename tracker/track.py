@@ -276,7 +276,7 @@ class Tracker:
         self.times = StageTimes()
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
-        self.edge_misfit = np.zeros(n)  # per component, px, after the last frame's solve (measure.component_misfits)
+        self.edge_misfit = np.zeros(n)  # per component, px, after the last frame's solve (0 before any: held)
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
         self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark
