@@ -212,7 +212,7 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     images = next(itertools.islice(frames(recording), 1))[1]
     tracker.step(images)  # the demo's frame 0 from its true pose: every visible component's edges fit
     forearm, hand, wrist = model.index("forearm_l"), model.index("hand_l"), LANDMARKS.index("left_wrist")
-    assert tracker.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit
+    assert 0.0 < tracker.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit  # measured, not the start's 0
     tracker.poses = poses
     far = np.full_like(pixels, np.nan)
     extent = np.linalg.norm(np.ptp(pixels[0][component >= 0], axis=0))
@@ -233,3 +233,15 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     excess = tracker.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
     assert excess > 2 * st.keypoint_reach
     np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoint_reach) ** 2) * held, rtol=1e-9)  # no fade
+    tracker.tolerance[wrist] = 2.0 * tracker.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
+    assert pull() > 0.0  # ... but a limb the edges do not hold is pulled from the floor zone
+    tracker.edge_misfit[forearm] = 0.0
+    tracker.information[:] = 0.0
+    tracker.eta[:] = 0.0
+    tracker.add_keypoints(far, confidence)
+    assert not tracker.eta.any()  # held: the learnt zone stands
+    # and a limb the edges do not hold does not teach its landmark's zone
+    for fit, learnt in ((0.0, True), (2.0 * st.keypoint_edge_misfit, False)):
+        tracker.edge_misfit[forearm] = fit
+        tracker.learn_keypoint_noise()
+        assert np.isfinite(tracker.misfits[(tracker.misfit_row - 1) % len(tracker.misfits), wrist]) == learnt

@@ -19,9 +19,9 @@ pulled back by the excess.  So one tree solve fuses both cues.  The noise is lea
 (:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
 edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the
 component that places a joint landmark, :func:`placers`, fitted its outline's edges worse than
-``Settings.keypoint_edge_misfit`` after the last frame's solve, :func:`tracker.measure.component_misfits`:
-it follows clutter, or nothing), its landmarks pull from the floor zone with no fade (``reach`` inf)
-until they bring it back (docs/keypoints.md, "Fusion with the edges").  Left/right swaps are
+``Settings.keypoint_edge_misfit`` in the last frame's last iteration, :func:`tracker.measure.component_misfits`:
+it follows clutter, or nothing), the landmarks it places pull from the floor zone with no fade (``reach``
+inf) until they bring it back (docs/keypoints.md, "Fusion with the edges").  Left/right swaps are
 rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
 predicted images better the other way round (summed distance), neither is used in that camera.
 """

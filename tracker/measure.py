@@ -174,8 +174,9 @@ def measure_kernel(
 @njit(cache=True)
 def component_misfits(offset, component, count, n_components):
     """Each component's median |m| (pixels, (n_components,)) over its first ``count`` samples that found an
-    edge (``offset`` not NaN): how closely its outline fits the image's edges after a solve; inf for a
-    component with no such sample (hidden, or nothing found), whose pose the edges do not hold."""
+    edge (``offset`` not NaN), as the last measurement left them: how closely its outline fits the image's
+    edges; inf for a component with no such sample (hidden, or nothing found), whose pose the edges do not
+    hold."""
     out = np.full(n_components, np.inf)
     found = np.zeros(n_components, np.int64)
     for s in range(count):

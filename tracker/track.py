@@ -83,8 +83,8 @@ class Settings:
     keypoint_noise_multiple: float = 1.5  # each landmark's zone grows to this many times its median misfit (0: fixed)
     keypoint_tolerance_max: float = 0.15  # ... but no further: a body that far off is pulled back
     keypoint_reach: float = 0.1  # a landmark's pull fades beyond this share of the body's size past its zone
-    keypoint_edge_misfit: float = 0.8  # px: a component whose edges fit worse (median |m|) is not held by them: its
-    # landmarks pull from the floor zone (keypoint_tolerance) with no fade
+    keypoint_edge_misfit: float = 0.8  # px: where a component's edges fit worse (median |m|), the joint landmarks it
+    # places (keypoint_cue.placers) pull from the floor zone (keypoint_tolerance) with no fade
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
 
 
@@ -276,18 +276,18 @@ class Tracker:
         self.times = StageTimes()
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
-        self.edge_misfit = np.zeros(n)  # per component, px, after the last frame's solve (0 before any: held)
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
         self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark
+        self.edge_misfit = np.zeros(n)  # per component, px, in the last frame's last iteration (none yet: held)
         self.misfit_row = 0
         self.tolerance = np.full(len(LANDMARKS), settings.keypoint_tolerance)
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
         settings, from the current poses, with the previous frame's poses (constant velocity) and the motion
-        filter's state and noise scales (kalman) and the keypoints' learnt noise; buffers and timings start
-        afresh."""
+        filter's state and noise scales (kalman) and the keypoints' learnt noise and edge fits (in the old rig's
+        pixels); buffers and timings start afresh."""
         other = Tracker(self.model, cameras, self.poses, self.settings)
         other.previous = self.previous
         other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
@@ -316,6 +316,7 @@ class Tracker:
         constant_velocity(poses, poses, self.settings.damping)
         self.iterate(0)
         self.iterate(1)
+        component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
         self.poses, self.previous, self.anchor = poses, previous, anchor
 
     def smooth(self, image: np.ndarray) -> np.ndarray:
@@ -523,7 +524,7 @@ class Tracker:
     def held(self) -> np.ndarray:
         """Whether the edges hold each landmark's placing component (:func:`tracker.keypoint_cue.placers`; every
         landmark not at a joint does): its outline fitted them within ``keypoint_edge_misfit`` in the last
-        solve (:attr:`edge_misfit`, the median |m| of its samples)."""
+        frame's last iteration (:attr:`edge_misfit`, the median |m| of its samples)."""
         return (self.placer < 0) | (self.edge_misfit[self.placer] <= self.settings.keypoint_edge_misfit)
 
     def learn_keypoint_noise(self) -> None:

@@ -68,9 +68,10 @@ def test_search_zooms_out_then_covers_the_image_with_tiles(width, height, count)
 def _plain_finds(image: np.ndarray) -> bool:
     """Whether BlazePose's whole-image pass alone (a fresh landmarker) finds a person in a BGR image."""
     import cv2
-    from mediapipe.python.solutions import pose
 
-    with pose.Pose(static_image_mode=True, model_complexity=1) as landmarker:
+    from tracker.keypoints.detector import pose_solution
+
+    with pose_solution().Pose(static_image_mode=True, model_complexity=1) as landmarker:
         return landmarker.process(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)).pose_landmarks is not None
 
 
