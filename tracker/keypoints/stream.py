@@ -30,7 +30,7 @@ from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import cached, detections, holding, merged, stacked
-from tracker.keypoints.detector import require_detector
+from tracker.keypoints.detector import native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints, save_keypoints
 
 RATE = 15.0
@@ -64,10 +64,11 @@ def _work(recording: Recording, start: int, stop: int, step: int, results) -> No
     None; an error is put instead and ends it.  Ctrl-C is the parent's to handle."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
-        for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-            for _, raw in detections(recording, first, last, every):
-                results.put((raw, consistent(raw, recording.cameras)[0]))
+        with native_logs_muted():
+            runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
+            for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
+                for _, raw in detections(recording, first, last, every):
+                    results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
