@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = (
     ("tracker.errors", "tracker.status", "tracker.atomic", "tracker.tomlfile", "tracker.geometry"),
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
-    ("tracker.model", "tracker.camera"),
+    ("tracker.model", "tracker.camera", "tracker.proportions"),
     (
         "tracker.outline",
         "tracker.ownership",
@@ -38,7 +38,15 @@ LAYERS = (
         "tracker.evaluate",
         "tracker.foreground",
     ),
-    ("tracker.viewer", "tracker.calibrate", "tracker.physics", "tracker.keypoints", "tracker.bench", "tracker.live"),
+    (
+        "tracker.viewer",
+        "tracker.calibrate",
+        "tracker.physics",
+        "tracker.keypoints",
+        "tracker.shape",
+        "tracker.bench",
+        "tracker.live",
+    ),
     ("tracker.commands", "tracker.cli"),
 )
 """Bottom to top; a module belongs to the layer of the longest name here that it starts with."""

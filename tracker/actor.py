@@ -1,6 +1,6 @@
-"""A rendered body unlike the tracking model: every part a capsule, its sizes perturbed.
+"""A rendered body unlike the tracking model: its sizes perturbed, and every part a capsule or the model's own.
 
-The actor keeps the model's components, joints and limits, so it plays the same motion, but:
+The actor keeps the model's components, joints and limits, so it plays the same motion.  A capsule body:
 
     part        a capsule (a cylinder closed by two spheres) instead of the model's quadric: a cone
                 or cylinder keeps its axis and takes the mean radius; an ellipsoid becomes the
@@ -8,7 +8,9 @@ The actor keeps the model's components, joints and limits, so it plays the same 
     length      the part and the joints of its children (their ``at``) scaled by l in [1 - j, 1 + j]
     radius      the capsule's radius scaled by r in [1 - j, 1 + j]
 
-with l, r drawn from the seed, the same for a left and a right part. The actor's poses take the
+with l, r drawn from the seed, the same for a left and a right part.  A stretched body keeps the model's quadrics,
+each part and its children's joints stretched by l along the part's z (its bone) and by r across it
+(:func:`tracker.proportions.stretched`): the body a fitted model should find.  The actor's poses take the
 model's rotations and root, hang each part on its own (perturbed) joints and lift the body so its
 feet stand where the model's stood; its joint centres are then what motion capture of the rendered
 body would give.
@@ -22,24 +24,41 @@ import numpy as np
 
 from tracker.clips import lowest_points
 from tracker.model import Model, poses_from_rotations
+from tracker.proportions import stretched
+
+
+def part_factors(data: dict, jitter: float = 0.1, seed: int = 0) -> dict[str, np.ndarray]:
+    """Per component of a model TOML document (parsed), its length and radius factors (2,), drawn from ``seed``
+    within [1 - ``jitter``, 1 + ``jitter``], the same for a left and a right part."""
+    rng = np.random.default_rng([seed, 3])
+    names = [str(c["name"]) for c in data["component"]]
+    pairs = sorted({_pair(name) for name in names})
+    factors = {pair: rng.uniform(1.0 - jitter, 1.0 + jitter, 2) for pair in pairs}
+    return {name: factors[_pair(name)] for name in names}
 
 
 def capsule_body(data: dict, jitter: float = 0.1, seed: int = 0) -> dict:
     """A model TOML document (parsed) whose every part is a capsule of perturbed size (see the module)."""
-    rng = np.random.default_rng([seed, 3])
+    factors = part_factors(data, jitter, seed)
     components = copy.deepcopy(data["component"])
-    pairs = sorted({_pair(str(c["name"])) for c in components})
-    factors = {pair: rng.uniform(1.0 - jitter, 1.0 + jitter, 2) for pair in pairs}
-    length = {str(c["name"]): factors[_pair(str(c["name"]))][0] for c in components}
     for component in components:
         parent = str(component.get("parent", ""))
         if parent and "at" in component:
-            component["at"] = [length[parent] * float(v) for v in component["at"]]
-        scale, widen = factors[_pair(str(component["name"]))]
+            component["at"] = [factors[parent][0] * float(v) for v in component["at"]]
+        scale, widen = factors[str(component["name"])]
         component["quadric"] = [
             piece for spec in component.get("quadric", []) for piece in _capsule(spec, scale, widen)
         ]
     return {**data, "name": f"{data.get('name', 'model')}-capsules", "component": components}
+
+
+def stretched_body(data: dict, jitter: float = 0.1, seed: int = 0) -> dict:
+    """A model TOML document (parsed) of the model's own parts, each stretched along its frame's z by its length
+    factor and across it by its radius factor (:func:`part_factors`, :func:`tracker.proportions.stretched`)."""
+    factors = {
+        name: np.array([widen, widen, length]) for name, (length, widen) in part_factors(data, jitter, seed).items()
+    }
+    return stretched(data, factors, name=f"{data.get('name', 'model')}-stretched")
 
 
 def _pair(name: str) -> str:

@@ -15,7 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
+from tracker.atomic import atomic_write
 from tracker.chain import JOINT_TYPES, coerce_kernel, constraint_rows, pack_constraints, row_projectors
 from tracker.errors import TrackerInputError
 from tracker.geometry import quadric, se3
@@ -168,6 +170,14 @@ def load_model(path: str | os.PathLike) -> Model:
     """Load and validate a body model TOML (formats.md, "Body model")."""
     path = Path(path)
     return model_from_dict(read_toml(path, "model", "pass --model with an existing models/*.toml"), path)
+
+
+def save_model(path: str | os.PathLike, document: dict, comment: str = "") -> None:
+    """Write a model TOML document (parsed) to ``path`` atomically, after ``comment`` (lines, each written as a
+    ``#`` comment): an ordinary model file that :func:`load_model` reads back."""
+    header = "".join(f"# {line}\n" if line else "#\n" for line in comment.splitlines())
+    text = (header + ("\n" if header else "") + tomli_w.dumps(document)).encode()
+    atomic_write(path, lambda file: file.write(text))
 
 
 def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:

@@ -24,9 +24,10 @@ from typing import Any
 
 import cv2
 import numpy as np
+import tomli_w
 
 from tracker import texture as textures
-from tracker.actor import actor_poses, capsule_body
+from tracker.actor import actor_poses, capsule_body, stretched_body
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, save_calibration
 from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, surface_samples
@@ -160,8 +161,8 @@ def table_before(camera: Camera, gap: float = 0.75) -> Box:
 class Staging:
     """What makes a render unlike the tracking model (docs/suite.md); the defaults render the model itself.
 
-    ``texture``: clothing pattern (:data:`tracker.texture.CHOICES`); ``body``: ``model`` or ``capsules``
-    (:mod:`tracker.actor`, sizes within +-``jitter``); ``tables``: camera names (or ``all``) with a table
+    ``texture``: clothing pattern (:data:`tracker.texture.CHOICES`); ``body``: ``model``, ``capsules`` or
+    ``stretched`` (:mod:`tracker.actor`, sizes within +-``jitter``); ``tables``: camera names (or ``all``) with a table
     between them and the body; ``zoom`` and ``distance``: :func:`moved_rig`; ``motion_blur``: sub-frames
     averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.clips.exposure_poses`);
     ``backdrop``: ``photos`` (the background photos, people in them) or ``room`` (an empty furnished room
@@ -206,7 +207,7 @@ class Staging:
         return [c for c in cameras if "all" in self.tables or c.name in self.tables]
 
 
-BODIES = ("model", "capsules")
+BODIES = ("model", "capsules", "stretched")
 """The values of ``tracker synth --body``."""
 
 BACKDROPS = ("photos", "room")
@@ -352,10 +353,12 @@ def _readme(
 def _staging_lines(staging: Staging, cameras: list[Camera], seed: int) -> list[str]:
     """The README's lines on what departs from the plain render (none for the default staging)."""
     lines = []
-    if staging.body == "capsules":
+    if staging.body != "model":
+        parts = "capsules" if staging.body == "capsules" else "the model's parts"
         lines.append(
-            f"- body: capsules with lengths and radii within +-{100 * staging.jitter:g} % of the model's;"
-            " `truth.npz` holds the rendered body's joints, `model.toml` is the unperturbed model"
+            f"- body: {parts} with lengths and radii within +-{100 * staging.jitter:g} % of the model's;"
+            " `truth.npz` holds the rendered body's joints and `body.toml` its model,"
+            " `model.toml` is the unperturbed model"
         )
     if staging.texture != "none":
         lines.append(f"- clothing texture: {staging.texture}")
@@ -435,10 +438,11 @@ def synthesize(
         cameras = moved_rig(cameras, zoom=staging.zoom, distance=staging.distance)
     poses, rate, bvh_path = motion_poses(model, motion, frames, start, stride, fps, seed)
     body, shown = model, poses  # the body rendered and its poses
-    if staging.body == "capsules":
-        body = model_from_dict(
-            capsule_body(read_toml(model_path, "model", "pass --model"), staging.jitter, seed), model_path
-        )
+    actor = None  # the rendered body's model TOML document, when it is not the model
+    if staging.body != "model":
+        make = capsule_body if staging.body == "capsules" else stretched_body
+        actor = make(read_toml(model_path, "model", "pass --model"), staging.jitter, seed)
+        body = model_from_dict(actor, model_path)
         shown = actor_poses(body, model, poses)
     props = tuple(table_before(camera) for camera in staging.table_cameras(cameras))
     texture = (
@@ -512,6 +516,8 @@ def synthesize(
     model_bytes = model_path.read_bytes()
 
     atomic_write(out / "model.toml", lambda file: file.write(model_bytes))
+    if actor is not None:
+        atomic_write(out / "body.toml", lambda file: tomli_w.dump(actor, file))
     save_pose_file(out / ("init.toml" if write_init else "truth_init.toml"), model, shown[0])
     seen = seen_joints(joint_centres(shown), cameras, props)
     write_truth(out / "truth.npz", model, shown, seen=seen)

@@ -130,9 +130,10 @@ class FrameResult:
 
 @dataclass(frozen=True)
 class Inspection:
-    """What the edge search saw at one set of poses (for viewers): per sample its camera, component,
-    pixel and normal, the searched interval ``[lo, hi]`` along the normal, the edge offset (NaN if none)
-    and the IRLS weight."""
+    """What the edge search saw at one set of poses (for viewers and the shape fit): per sample its camera,
+    component, pixel and normal, the searched interval ``[lo, hi]`` along the normal, the edge offset (NaN if
+    none) and the IRLS weight, its ``quadric``, its contour ``point`` (3,) in its component's frame and its
+    Jacobian row L (6,) (:class:`tracker.outline.Samples`)."""
 
     camera: np.ndarray
     component: np.ndarray
@@ -142,6 +143,9 @@ class Inspection:
     hi: np.ndarray
     offset: np.ndarray
     weight: np.ndarray
+    quadric: np.ndarray
+    point: np.ndarray
+    jacobian: np.ndarray
 
 
 @njit(cache=True)
@@ -453,6 +457,9 @@ class Tracker:
             self.hi.copy(),
             self.offset[:n].copy(),
             self.weight[:n].copy(),
+            s.quadric[:n].copy(),
+            s.point[:n].copy(),
+            s.jacobian[:n].copy(),
         )
 
     def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:

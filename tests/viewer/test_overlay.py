@@ -15,6 +15,9 @@ def test_search_lines_are_coloured_by_weight_and_missing_edges_grey():
         hi=np.array([8, 8, 8]),
         offset=np.array([0.0, np.nan, 1.0]),
         weight=np.array([0.5, 0.0, 1 / 3]),
+        quadric=np.array([0, 1, 0]),
+        point=np.zeros((3, 3)),
+        jacobian=np.zeros((3, 6)),
     )
     out = draw(image, inspection, 0, 2.0, component_colours(2))
     assert out.shape == (60, 80, 3) and out.dtype == np.uint8

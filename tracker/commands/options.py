@@ -226,13 +226,19 @@ def add_viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> 
         )
 
 
+def recording(args: argparse.Namespace):
+    """The recording a command works on (``--cameras``, ``--calib``)."""
+    from tracker.io.recording import open_recording
+
+    return open_recording(args.recording, camera_names(args.cameras), args.calib)
+
+
 def opened(args: argparse.Namespace):
     """The recording (``--cameras``, ``--calib``) and the body model (``--model``, else the recording's) a
     command works on."""
-    from tracker.io.recording import open_recording
     from tracker.model import load_model
 
-    rec = open_recording(args.recording, camera_names(args.cameras), args.calib)
+    rec = recording(args)
     return rec, load_model(choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
 
 

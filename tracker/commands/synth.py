@@ -31,13 +31,16 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--body",
-        choices=("model", "capsules"),
+        choices=("model", "capsules", "stretched"),
         default="model",
-        help="model: the tracking model itself; capsules: capsule parts of perturbed sizes, the truth then being "
-        "their joints (default model)",
+        help="model: the tracking model itself; capsules: capsule parts of perturbed sizes; stretched: the model's "
+        "parts with perturbed lengths and radii; the truth is then the rendered body's joints (default model)",
     )
     parser.add_argument(
-        "--jitter", type=float, default=0.1, help="capsules: lengths and radii within +-this share (default 0.1)"
+        "--jitter",
+        type=float,
+        default=0.1,
+        help="capsules, stretched: lengths and radii within +-this share (default 0.1)",
     )
     parser.add_argument(
         "--table", metavar="CAMERAS", help="comma-separated cameras (or all) with a table before them hiding the legs"

@@ -18,7 +18,11 @@ HELP = "track a recording folder, write DIR/poses.npz and print a summary"
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker track``."""
     parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
-    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    parser.add_argument(
+        "--model",
+        help="body model TOML (default: the recording's model.toml, else models/human.toml fitted to the person "
+        "and written to OUT/model.toml)",
+    )
     parser.add_argument(
         "--init",
         help="pose at the first frame (default: the recording's init.toml, else fitted to the keypoints of the "
@@ -62,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
-    rec, model = options.opened(args)
+    rec = options.recording(args)
     if not 0 <= args.start < rec.frame_count:
         raise TrackerInputError(
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
@@ -70,8 +74,9 @@ def run(args: argparse.Namespace) -> int:
     settings = options.settings_from(args, rec.fps)
     out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
-    background = _background(args, rec, out)
     step = options.keypoint_step_at(args, rec.fps)
+    model = _model(args, rec, out, step)
+    background = _background(args, rec, out)
     init, begin = _first_pose(args, rec, model, stop, out, settings, step)
     print(
         f"tracking {rec.path} frames {begin}..{stop - 1} with {len(rec.cameras)} camera(s) "
@@ -162,6 +167,39 @@ def run(args: argparse.Namespace) -> int:
         review.show(done - 1)
         return serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
     return 0
+
+
+def _model(args: argparse.Namespace, rec, out: Path, step: int):
+    """The body model: ``--model``, else the recording's model.toml, else models/human.toml fitted to the person
+    (:func:`tracker.shape.fit.fit_and_save`), written to OUT/model.toml."""
+    from tracker.model import load_model
+
+    if args.model or rec.model_path is not None:
+        return load_model(args.model or rec.model_path)
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detector import missing
+    from tracker.shape.fit import GENERIC, fit_and_save
+    from tracker.tomlfile import read_toml
+
+    reason = missing() if step else "--keypoints off"
+    if reason is not None:
+        raise TrackerInputError(
+            f"{rec.path}: no model.toml in the recording folder, and fitting one needs the keypoint detector "
+            f"({reason}); pass --model"
+        )
+    path = ensure_writable_folder(out) / "model.toml"
+    print(f"model: no model.toml, fitting {GENERIC.name} to the person in {rec.path}", file=sys.stderr)
+    fit_and_save(
+        rec,
+        read_toml(GENERIC, "model", "reinstall the tracker: models/human.toml is part of it"),
+        path,
+        source=str(GENERIC),
+        cache=path.parent / "keypoints.npz",
+        progress=options.bar(args, "fitting the model", "step"),
+        say=lambda line: print(line, file=sys.stderr),
+    )
+    print(f"model: wrote {path}; pass it with --model to reuse it", file=sys.stderr)
+    return load_model(path)
 
 
 def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, settings, step: int):

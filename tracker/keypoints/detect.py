@@ -127,18 +127,20 @@ def detect_recording(
     start: int = 0,
     stop: int | None = None,
     *,
+    step: int = 1,
     cache: str | os.PathLike | None = None,
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
 ) -> tuple[Keypoints, bool]:
-    """The landmarks of frames start..stop-1 in every camera of ``recording``, and whether they came from
-    ``cache`` (the recording's keypoints.npz holding those frames); otherwise they are detected and, with
-    ``cache``, written there beside the frames it already held.  ``progress(iterable, total=)`` wraps the
-    frames (e.g. a tqdm bar)."""
+    """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and
+    whether they came from ``cache`` (the recording's keypoints.npz holding those frames); otherwise they are
+    detected and, with ``cache``, written there beside the frames it already held.  ``progress(iterable,
+    total=)`` wraps the frames (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
     old = cached(Path(cache), recording) if cache is not None else None
-    if (reused := holding(old, np.arange(start, stop))) is not None:
+    wanted = np.arange(start, stop, step)
+    if (reused := holding(old, wanted)) is not None:
         return reused, True
-    keypoints = stacked([row for _, row in progress(detections(recording, start, stop), total=stop - start)])
+    keypoints = stacked([row for _, row in progress(detections(recording, start, stop, step), total=len(wanted))])
     if cache is not None:
         save_keypoints(cache, merged(old, keypoints))
     return keypoints, False

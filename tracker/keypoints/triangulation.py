@@ -57,18 +57,32 @@ class Triangulated:
     agree: np.ndarray
 
 
-def triangulated(
+@dataclass(frozen=True)
+class FramePoints:
+    """The landmarks' world points frame by frame: ``rows`` (F,), the rows of the keypoints that show a person in
+    two views or more, their ``points`` (F, 33, 3) metres (NaN where fewer than two views agree), how many
+    ``views`` agreed on each (F, 33) int, and which detections ``agree`` (F, C, 33) bool with that frame's points,
+    as a view read them (maybe swapped).  Each frame's pairs are labelled by the person's left where its points
+    tell it (:func:`body_left`), not aligned with the other frames'."""
+
+    rows: np.ndarray
+    points: np.ndarray
+    views: np.ndarray
+    agree: np.ndarray
+
+
+def frame_by_frame(
     keypoints: Keypoints,
     cameras: list[Camera],
     model: Model,
     *,
-    frames: int,
+    frames: int | None = None,
     min_confidence: float = 0.5,
     gate: float = GATE,
-) -> Triangulated:
-    """The landmarks' world points over the first ``frames`` frames of ``keypoints`` (in ``cameras``) that show
-    a person in two views or more (detections at least ``min_confidence``), views agreeing within ``gate`` of
-    the image's short side, the distances those of ``model`` (module docstring)."""
+) -> FramePoints:
+    """The landmarks' world points in each of the first ``frames`` frames of ``keypoints`` (all by default, in
+    ``cameras``) that show a person in two views or more (detections at least ``min_confidence``), views
+    agreeing within ``gate`` of the image's short side, the distances those of ``model`` (module docstring)."""
     usable = (keypoints.confidence[:frames] >= min_confidence) & np.isfinite(keypoints.pixels[:frames]).all(axis=3)
     rows = np.flatnonzero(usable.any(axis=2).sum(axis=1) >= 2)
     pixels = np.where(usable[rows, ..., None], keypoints.pixels[rows], np.nan)
@@ -86,14 +100,30 @@ def triangulated(
         kept = np.isfinite(points[row]).all(axis=1)
         views[row][~kept] = 0
         agree[row] = (read_as >= 0) & kept[read_as]
-    points = aligned(points)
+    return FramePoints(rows, points, views, agree)
+
+
+def triangulated(
+    keypoints: Keypoints,
+    cameras: list[Camera],
+    model: Model,
+    *,
+    frames: int,
+    min_confidence: float = 0.5,
+    gate: float = GATE,
+) -> Triangulated:
+    """The landmarks' world points over the first ``frames`` frames of ``keypoints`` (in ``cameras``) that show
+    a person in two views or more (:func:`frame_by_frame`), the frames' labels aligned and the median taken
+    (module docstring)."""
+    found = frame_by_frame(keypoints, cameras, model, frames=frames, min_confidence=min_confidence, gate=gate)
+    points = aligned(found.points)
     seen = np.isfinite(points).all(axis=2)
     median = np.full((len(LANDMARKS), 3), np.nan)
     support = np.zeros(len(LANDMARKS), np.int64)
     for j in np.flatnonzero(seen.any(axis=0)):
         median[j] = np.median(points[seen[:, j], j], axis=0)
-        support[j] = round(float(np.median(views[seen[:, j], j])))
-    return Triangulated(median, support, keypoints.frame[rows], agree)
+        support[j] = round(float(np.median(found.views[seen[:, j], j])))
+    return Triangulated(median, support, keypoints.frame[found.rows], found.agree)
 
 
 def aligned(points: np.ndarray) -> np.ndarray:

@@ -1,0 +1,63 @@
+"""``tracker fit-model``: fit a body model's joints and part sizes to the person in a recording."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tracker.commands import options
+
+HELP = "fit a body model's joints and part sizes to the person in a recording, write a model TOML"
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker fit-model``."""
+    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
+    parser.add_argument("--out", required=True, help="model TOML to write")
+    parser.add_argument(
+        "--model",
+        help="model to start from (default: the recording's model.toml, else models/human.toml)",
+    )
+    parser.add_argument(
+        "--frames",
+        type=options.positive_int,
+        default=40,
+        help="frames to fit to, spread over the recording (default 40)",
+    )
+    parser.add_argument(
+        "--asymmetric",
+        action="store_true",
+        help="fit left and right parts apart (default: one size for both)",
+    )
+    options.add_recording_options(parser)
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit, write ``--out`` and print what changed (docs/fit-model.md)."""
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detector import require_detector
+    from tracker.model import model_from_dict
+    from tracker.shape.fit import GENERIC, fit_and_save
+    from tracker.tomlfile import read_toml
+
+    rec = options.recording(args)
+    start = Path(args.model) if args.model else rec.model_path or GENERIC
+    document = read_toml(start, "model", "pass --model with an existing models/*.toml")
+    model_from_dict(document, start)  # a bad model is a one-line error before any detection
+    require_detector()
+    cache = ensure_writable_folder(Path("out") / rec.path.resolve().name) / "keypoints.npz"
+    fit_and_save(
+        rec,
+        document,
+        args.out,
+        source=str(start),
+        frames=args.frames,
+        tie_sides=not args.asymmetric,
+        cache=cache,
+        progress=options.bar(args, "fitting", "step"),
+        say=lambda line: print(line, file=sys.stderr),
+    )
+    print(f"wrote {args.out}")
+    return 0

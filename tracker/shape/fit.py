@@ -1,0 +1,210 @@
+"""A body model fitted to the person in a recording (docs/fit-model.md).
+
+1. The keypoint detector on frames spread over the recording (:data:`FRAMES` by default), its landmarks
+   triangulated frame by frame (:func:`tracker.keypoints.triangulation.frame_by_frame`).
+2. The joints fitted to them, alternating with each frame's pose (:func:`tracker.shape.landmarks.fit_landmarks`).
+3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
+   the frames the edges hold (status tracked) are kept.
+4. One round per search range of :data:`RANGES`: every kept frame's outlines measured at its pose, then one
+   Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tracker.errors import TrackerInputError
+from tracker.io.recording import Recording
+from tracker.io.recording import frames as frames_of
+from tracker.keypoints.consistency import consistent
+from tracker.keypoints.detect import detect_recording
+from tracker.keypoints.first_pose import SNAP, snap_to_edges
+from tracker.keypoints.triangulation import frame_by_frame
+from tracker.model import model_from_dict, save_model
+from tracker.proportions import sizes
+from tracker.shape.edges import bundle_step, frame_rows, moved
+from tracker.shape.landmarks import fit_landmarks
+from tracker.shape.layout import Layout
+from tracker.status import TRACKED
+from tracker.track import Tracker
+
+FRAMES = 40
+"""Frames the fit reads by default, spread evenly over the recording: many poses tell the lengths apart."""
+
+RANGES = (16, 14, 12, 10, 10) + (8,) * 10 + (6,) * 15
+"""Pixels each edge round searches either side of the outline (for 480-pixel images; scaled like the tracker's):
+wide while the shape is far off, then narrower; one round each.  An edge nearer than the outline's true place
+(clutter, texture) shortens each step, so the rounds are many and cheap."""
+
+EDGE_PRIOR = 20.0
+"""The prior's weight towards the given model scaled by the common scale, in pixels of outline offset per metre
+of a joint's place (or per unit of a factor): weak, it only holds what no sample measures."""
+
+SPAN_PRIOR = 1000.0
+"""The prior's weight, in pixels per metre, that keeps each joint where its parent's stretch puts it (a part
+spans its bone, :meth:`tracker.shape.layout.Layout.prior`): an outline does not show where a joint lies inside
+overlapping parts (a shin's end inside the foot, the spine inside the trunk)."""
+
+MEASURED = 100
+"""Samples with an edge, over the frames of the last round, that a component needs to count as measured; the
+others keep the given model's proportions, scaled."""
+
+
+@dataclass(frozen=True)
+class ShapeFit:
+    """A fitted model: its TOML ``document`` (parsed), the ``layout`` and ``x`` of its shape, the ``start`` x
+    from the landmarks, the keypoint frames the landmarks used (``landmark_frames``) and the frames the edges
+    held (``edge_frames``), each edge round's robust mean offset in pixels (``residuals``) and each component's
+    ``samples`` (N,) with an edge in the last round."""
+
+    document: dict
+    layout: Layout
+    x: np.ndarray
+    start: np.ndarray
+    landmark_frames: np.ndarray
+    edge_frames: np.ndarray
+    residuals: tuple[float, ...]
+    samples: np.ndarray
+
+    def measured(self) -> np.ndarray:
+        """Whether the edges measured each component (N,) bool: :data:`MEASURED` samples or more."""
+        return self.samples >= MEASURED
+
+
+def spread(frame_count: int, count: int) -> np.ndarray:
+    """``count`` frame numbers spread evenly over ``frame_count`` frames (all of them when fewer)."""
+    return np.unique(np.linspace(0, frame_count - 1, min(count, frame_count)).round().astype(np.int64))
+
+
+def fit_shape(
+    recording: Recording,
+    document: dict,
+    *,
+    frames: int = FRAMES,
+    tie_sides: bool = True,
+    cache: str | Path | None = None,
+    progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
+    say: Callable[[str], None] = lambda text: None,
+) -> ShapeFit:
+    """The model TOML ``document`` (parsed) fitted to the person in ``recording`` (module docstring), from
+    ``frames`` frames spread over it; detections cached in ``cache``.  ``progress(iterable, total=)`` wraps long
+    loops (e.g. a tqdm bar) and ``say`` reports each stage.  One-line errors when too few frames show the body."""
+    model = model_from_dict(document)
+    layout = Layout.of(model, tie_sides=tie_sides)
+    step = max(1, recording.frame_count // max(frames, 1))
+    say(f"keypoints: detecting the body in every {step}th frame" if step > 1 else "keypoints: detecting the body")
+    keypoints, _ = detect_recording(recording, 0, recording.frame_count, step=step, cache=cache, progress=progress)
+    found = frame_by_frame(keypoints, recording.cameras, model)
+    say(f"landmarks: {len(found.rows)} of {len(keypoints.frame)} frames show the body in two views or more")
+    landmarks = fit_landmarks(layout, document, found.points, keypoints.frame[found.rows], progress=progress)
+    x = landmarks.x
+    model = model_from_dict(layout.document(x, document))
+    rows = np.searchsorted(keypoints.frame, landmarks.frames)
+    images = _images(recording, landmarks.frames, step)
+    poses, held = [], []
+    for k, row in enumerate(progress(rows, total=len(rows))):
+        marks = consistent(keypoints.rows(slice(row, row + 1)), recording.cameras)[0]
+        result = snap_to_edges(
+            model,
+            recording.cameras,
+            landmarks.poses[k],
+            images[k],
+            keypoints=(marks.pixels[0], marks.confidence[0]),
+        )
+        poses.append(result.poses)
+        held.append(result.status == TRACKED)
+    kept = np.flatnonzero(held)
+    if len(kept) < 3:
+        raise TrackerInputError(
+            f"{recording.path}: the edges hold the body in {len(kept)} of {len(rows)} frames, the fit needs 3; "
+            "give more frames (--frames) or a recording with the whole body in view"
+        )
+    say(f"edges: the body is held in {len(kept)} of {len(rows)} frames")
+    poses = [poses[k] for k in kept]
+    images = [images[k] for k in kept]
+    residuals = []
+    prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR)
+    for search in progress(RANGES, total=len(RANGES)):
+        tracker = Tracker(model, recording.cameras, poses[0], dataclasses.replace(SNAP, search_range=search))
+        factors = layout.factors(x)
+        scaled = tracker.settings.search_range  # for the image size
+        seen = [tracker.inspect(frame, poses=pose, search_range=scaled) for pose, frame in zip(poses, images)]
+        rows = [frame_rows(layout, model, factors, pose, frame) for pose, frame in zip(poses, seen)]
+        weight = np.concatenate([frame.weight for frame in rows])
+        offset = np.concatenate([frame.offset for frame in rows])
+        residuals.append(float((weight * np.abs(offset)).sum() / weight.sum()))
+        x, motions = bundle_step(rows, prior, x)
+        model = model_from_dict(layout.document(x, document))
+        poses = [moved(model, pose, motion) for pose, motion in zip(poses, motions)]
+    found = np.concatenate([frame.component[np.isfinite(frame.offset)] for frame in seen])
+    return ShapeFit(
+        layout.document(x, document),
+        layout,
+        x,
+        landmarks.x,
+        landmarks.frames,
+        landmarks.frames[kept],
+        tuple(residuals),
+        np.bincount(found, minlength=model.size),
+    )
+
+
+def _images(recording: Recording, wanted: np.ndarray, step: int) -> list[list[np.ndarray]]:
+    """The grey images (one per camera) of the frames ``wanted`` (every one a multiple of ``step``)."""
+    keep = set(int(frame) for frame in wanted)
+    out = {index: greys for index, greys in frames_of(recording, 0, recording.frame_count, step=step) if index in keep}
+    return [out[int(frame)] for frame in wanted]
+
+
+GENERIC = Path(__file__).resolve().parents[2] / "models" / "human.toml"
+"""The model a fit starts from when none is given: the generic human of ``models/``."""
+
+
+def changes(base: dict, fit: ShapeFit) -> list[str]:
+    """Lines for people: every size of the model ``base`` (parsed) and of the fitted one, in millimetres, and the
+    components the edges did not measure (they keep ``base``'s proportions, scaled)."""
+    lines = [f"{'component':12s} {'size':26s} {'given':>8s} {'fitted':>8s} {'change':>8s}"]
+    for before, after in zip(sizes(base), sizes(fit.document)):
+        change = 100.0 * (after.metres / before.metres - 1.0) if before.metres > 0 else 0.0
+        lines.append(
+            f"{before.component:12s} {before.what:26s} {1e3 * before.metres:6.1f}mm {1e3 * after.metres:6.1f}mm "
+            f"{change:+7.1f}%"
+        )
+    unmeasured = [name for name, seen in zip(fit.layout.names, fit.measured()) if not seen]
+    if unmeasured:
+        lines.append(
+            f"not measured (too few edges seen): {', '.join(unmeasured)}; they keep the given proportions, "
+            f"scaled by {fit.x[-1]:.3f}"
+        )
+    return lines
+
+
+def fit_and_save(
+    recording: Recording,
+    document: dict,
+    path: str | Path,
+    *,
+    source: str,
+    frames: int = FRAMES,
+    tie_sides: bool = True,
+    cache: str | Path | None = None,
+    progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
+    say: Callable[[str], None] = lambda text: None,
+) -> ShapeFit:
+    """:func:`fit_shape`, then the fitted model written to ``path`` (atomically) with a comment naming the
+    recording and the ``source`` model, and its :func:`changes` said."""
+    fit = fit_shape(recording, document, frames=frames, tie_sides=tie_sides, cache=cache, progress=progress, say=say)
+    comment = (
+        f"Fitted by `tracker fit-model` to {recording.path} ({len(fit.edge_frames)} frames held by the edges),\n"
+        f"from {source}; left and right {'tied' if tie_sides else 'apart'}.  An ordinary model file (formats.md)."
+    )
+    name = f"{document.get('name', 'model')}-fitted"
+    save_model(path, {**fit.document, "name": name}, comment)
+    for line in changes(document, fit):
+        say(line)
+    return fit
