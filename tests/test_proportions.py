@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from conftest import HUMAN
 
 from tracker.geometry.quadric import evaluate
 from tracker.model import load_model, model_from_dict, save_model
 from tracker.proportions import reshaped, sizes, stretched
 from tracker.tomlfile import read_toml
-
-from conftest import HUMAN
 
 
 def test_a_stretched_part_maps_its_surface_onto_the_stretched_surface():

@@ -8,8 +8,8 @@ import dataclasses
 import cv2
 import numpy as np
 import pytest
-
 from conftest import HUMAN, ROOT
+
 from tracker.camera import load_calibration
 from tracker.geometry.quadric import evaluate
 from tracker.io.posefile import load_pose_file
@@ -200,7 +200,13 @@ def test_the_step_is_the_dense_least_squares_solution():
     rng = np.random.default_rng(4)
     width, count = 7, 3
     frames = [
-        FrameRows(rng.normal(size=(40, width)), rng.normal(size=(40, 5)), rng.normal(size=40), rng.uniform(0.2, 1, 40))
+        FrameRows(
+            rng.normal(size=(40, width)),
+            rng.normal(size=(40, 5)),
+            rng.normal(size=40),
+            rng.uniform(0.2, 1, 40),
+            np.zeros(40, np.int64),
+        )
         for _ in range(count)
     ]
     prior = rng.normal(size=(4, width))

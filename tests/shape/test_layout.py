@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-
 from conftest import HUMAN
+
 from tracker.model import model_from_dict
 from tracker.proportions import sizes
 from tracker.shape.layout import Layout, partners

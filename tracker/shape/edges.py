@@ -78,13 +78,19 @@ def chain_maps(layout: Layout, model: Model, poses: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class FrameRows:
     """One frame's rows, for the samples that found an edge: ``shape`` (S, width) per unit change of x, ``pose``
-    (S, P) per unit of each joint's motion (:func:`joint_twists`), the measured ``offset`` (S,) and the IRLS
-    ``weight`` (S,)."""
+    (S, P) per unit of each joint's motion (:func:`joint_twists`), the measured ``offset`` (S,), the IRLS
+    ``weight`` (S,) and each sample's ``component`` (S,)."""
 
     shape: np.ndarray
     pose: np.ndarray
     offset: np.ndarray
     weight: np.ndarray
+    component: np.ndarray
+
+    def without(self, components: np.ndarray) -> FrameRows:
+        """These rows less the samples of ``components`` (bool (N,), True to drop)."""
+        keep = ~components[self.component]
+        return FrameRows(self.shape[keep], self.pose[keep], self.offset[keep], self.weight[keep], self.component[keep])
 
 
 def joint_twists(model: Model, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -119,7 +125,7 @@ def frame_rows(
     point = np.einsum("sij,sj->si", rotation, seen.point) + poses[seen.component, :3, 3]
     velocity = np.cross(twists[None, :, 0:3], point[:, None, :]) + twists[None, :, 3:6]
     pose = np.einsum("si,spi->sp", world, velocity) * moves[:, seen.component].T
-    return FrameRows(rows, pose, seen.offset, seen.weight)
+    return FrameRows(rows, pose, seen.offset, seen.weight, seen.component)
 
 
 POSE_DAMPING = 1.0

@@ -27,7 +27,7 @@ from tracker.keypoints.first_pose import SNAP, snap_to_edges
 from tracker.keypoints.triangulation import frame_by_frame
 from tracker.model import model_from_dict, save_model
 from tracker.proportions import sizes
-from tracker.shape.edges import bundle_step, frame_rows, moved
+from tracker.shape.edges import FrameRows, bundle_step, frame_rows, moved
 from tracker.shape.landmarks import fit_landmarks
 from tracker.shape.layout import Layout
 from tracker.status import TRACKED
@@ -49,6 +49,19 @@ SPAN_PRIOR = 1000.0
 """The prior's weight, in pixels per metre, that keeps each joint where its parent's stretch puts it (a part
 spans its bone, :meth:`tracker.shape.layout.Layout.prior`): an outline does not show where a joint lies inside
 overlapping parts (a shin's end inside the foot, the spine inside the trunk)."""
+
+JOINT_STEP = 0.05
+"""Metres a joint may move in one round: a direction the edges barely see cannot jump on noise."""
+
+FACTOR_STEP = 0.15
+"""The most a stretch factor may change in one round."""
+
+FACTORS = (0.6, 1.6)
+"""Every stretch factor stays within these multiples of the common scale: the shape stays human."""
+
+STRAY = 3.0
+"""A component whose outline fits its edges in a frame this many times worse (median |m|) than the median over
+all components and frames is left out of that frame's step."""
 
 MEASURED = 100
 """Samples with an edge, over the frames of the last round, that a component needs to count as measured; the
@@ -134,11 +147,14 @@ def fit_shape(
         factors = layout.factors(x)
         scaled = tracker.settings.search_range  # for the image size
         seen = [tracker.inspect(frame, poses=pose, search_range=scaled) for pose, frame in zip(poses, images)]
-        rows = [frame_rows(layout, model, factors, pose, frame) for pose, frame in zip(poses, seen)]
+        rows = held_rows(
+            [frame_rows(layout, model, factors, pose, frame) for pose, frame in zip(poses, seen)], model.size
+        )
         weight = np.concatenate([frame.weight for frame in rows])
         offset = np.concatenate([frame.offset for frame in rows])
         residuals.append(float((weight * np.abs(offset)).sum() / weight.sum()))
-        x, motions = bundle_step(rows, prior, x)
+        step, motions = bundle_step(rows, prior, x)
+        x, motions = trusted(layout, x, step, motions)
         model = model_from_dict(layout.document(x, document))
         poses = [moved(model, pose, motion) for pose, motion in zip(poses, motions)]
     found = np.concatenate([frame.component[np.isfinite(frame.offset)] for frame in seen])
@@ -152,6 +168,34 @@ def fit_shape(
         tuple(residuals),
         np.bincount(found, minlength=model.size),
     )
+
+
+def trusted(
+    layout: Layout, x: np.ndarray, step: np.ndarray, motions: list[np.ndarray]
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The step from x to ``step`` and the frames' ``motions``, shortened (all by one factor) so that no joint moves
+    more than :data:`JOINT_STEP` and no factor changes by more than :data:`FACTOR_STEP`; then every factor kept
+    within :data:`FACTORS` of the common scale."""
+    change = step - x
+    joints = np.abs(change[: layout.factor.min()]).max(initial=0.0) / JOINT_STEP
+    factors = np.abs(change[layout.factor.min() : -1]).max(initial=0.0) / FACTOR_STEP
+    shrink = 1.0 / max(1.0, joints, factors)
+    out = x + shrink * change
+    low, high = FACTORS[0] * out[-1], FACTORS[1] * out[-1]
+    out[layout.factor.min() : -1] = np.clip(out[layout.factor.min() : -1], low, high)
+    return out, [shrink * motion for motion in motions]
+
+
+def held_rows(frames: list[FrameRows], components: int) -> list[FrameRows]:
+    """The frames' rows without the samples of a component whose outline fits its edges far worse in that frame
+    than the components do in all: its median |m| above :data:`STRAY` times the median of those medians (a
+    limb on clutter, or on another part, in that frame)."""
+    misfit = np.full((len(frames), components), np.nan)
+    for k, frame in enumerate(frames):
+        for c in np.unique(frame.component):
+            misfit[k, c] = np.median(np.abs(frame.offset[frame.component == c]))
+    stray = misfit > STRAY * np.nanmedian(misfit)
+    return [frame.without(stray[k]) for k, frame in enumerate(frames)]
 
 
 def _images(recording: Recording, wanted: np.ndarray, step: int) -> list[list[np.ndarray]]:

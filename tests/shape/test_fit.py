@@ -1,0 +1,145 @@
+"""The model fitted to a recording (tracker.shape.fit, tracker fit-model, tracker track without a model): a
+render of a reshaped body, an empty scene, the detector missing."""
+
+from __future__ import annotations
+
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+from conftest import HUMAN, ROOT
+
+from tracker.cli import main
+from tracker.io.recording import open_recording
+from tracker.proportions import sizes
+from tracker.shape.fit import fit_shape, spread
+from tracker.synth import Staging, synthesize
+from tracker.tomlfile import read_toml
+
+
+def reshaped(folder, frames):
+    """Three views of a body whose every length and radius is up to 15 % off the model's, in clothes of mixed
+    patterns, over a plain procedural backdrop."""
+    synthesize(
+        HUMAN,
+        ROOT / "calib" / "demo3.toml",
+        folder,
+        motion="procedural",
+        frames=frames,
+        seed=21,
+        backgrounds=[],
+        progress=False,
+        staging=Staging(texture="mixed", body="stretched", jitter=0.15, face=True),
+    )
+    return folder
+
+
+@pytest.fixture(scope="module")
+def reshaped_recording(tmp_path_factory):
+    """:func:`reshaped`, two seconds."""
+    return reshaped(tmp_path_factory.mktemp("reshaped") / "rec", 120)
+
+
+@pytest.fixture(scope="module")
+def short_recording(tmp_path_factory):
+    """:func:`reshaped`, a fifth of a second."""
+    return reshaped(tmp_path_factory.mktemp("short") / "rec", 12)
+
+
+def length_errors(document, truth):
+    """Millimetres between each joint distance of ``document`` and ``truth`` (parsed models), left side only."""
+    return np.array(
+        [
+            1e3 * (got.metres - want.metres)
+            for got, want in zip(sizes(document), sizes(truth))
+            if got.what.startswith("length") and not got.what.endswith("_r")
+        ]
+    )
+
+
+def test_spread_frames_cover_the_recording():
+    np.testing.assert_array_equal(spread(10, 4), [0, 3, 6, 9])
+    np.testing.assert_array_equal(spread(3, 40), [0, 1, 2])
+
+
+def test_the_fit_finds_a_reshaped_body_far_closer_than_the_model(reshaped_recording, tmp_path):
+    """From the generic model, over a dozen frames: the lengths come out on average within a centimetre where
+    the model was 2-3 cm off, and the radii closer too."""
+    generic = read_toml(HUMAN, "model", "")
+    truth = read_toml(reshaped_recording / "body.toml", "model", "")
+    fit = fit_shape(open_recording(reshaped_recording), generic, frames=12, cache=tmp_path / "keypoints.npz")
+    before, after = np.abs(length_errors(generic, truth)), np.abs(length_errors(fit.document, truth))
+    assert before.mean() > 20 and after.mean() < 10 and after.mean() < before.mean() / 2.5
+    radii = [
+        (got.metres, want.metres, base.metres)
+        for got, want, base in zip(sizes(fit.document), sizes(truth), sizes(generic))
+        if got.what.startswith("radius")
+    ]
+    fitted_off = np.median([abs(g / w - 1) for g, w, _ in radii])
+    generic_off = np.median([abs(b / w - 1) for _, w, b in radii])
+    assert fitted_off < generic_off / 1.5
+    assert fit.residuals[-1] < fit.residuals[0] and fit.measured().all()
+    assert len(fit.edge_frames) >= 10
+
+
+def test_fit_model_writes_a_model_and_says_what_changed(short_recording, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "fitted.toml"
+    assert main(["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet"]) == 0
+    printed = capsys.readouterr()
+    assert f"wrote {out}" in printed.out and "length to forearm_l" in printed.err
+    document = read_toml(out, "model", "")
+    assert document["name"] == "human-fitted" and out.read_text().startswith("# Fitted by `tracker fit-model`")
+    assert (tmp_path / "out" / "rec" / "keypoints.npz").is_file()  # the detections, for a re-run
+    model = read_toml(HUMAN, "model", "")
+    limits = [c.get("limits") for c in document["component"]]
+    assert limits == [c.get("limits") for c in model["component"]]  # joint limits kept
+
+
+def test_track_without_a_model_fits_one_first(short_recording, tmp_path, capsys):
+    rec = tmp_path / "mine"
+    shutil.copytree(short_recording, rec)
+    for name in ("model.toml", "body.toml", "init.toml"):
+        (rec / name).unlink()
+    code = main(["track", str(rec), "--out", str(tmp_path / "out"), "--frames", "6", "--quiet"])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "fitting human.toml to the person" in err and "wrote" in err
+    fitted = read_toml(tmp_path / "out" / "model.toml", "model", "")
+    generic = read_toml(HUMAN, "model", "")
+    truth = read_toml(short_recording / "body.toml", "model", "")
+    assert np.abs(length_errors(fitted, truth)).mean() < np.abs(length_errors(generic, truth)).mean()
+    assert (tmp_path / "out" / "poses.npz").is_file()
+
+
+def test_an_empty_scene_is_a_one_line_error(tmp_path, capsys, monkeypatch):
+    """No person in any frame: the fit says what is missing and exits 2."""
+    monkeypatch.chdir(tmp_path)
+    rec = tmp_path / "empty"
+    rec.mkdir()
+    shutil.copy(ROOT / "recordings" / "demo" / "calibration.toml", rec / "calibration.toml")
+    for name in ("cam0", "cam1", "cam2"):
+        writer = cv2.VideoWriter(str(rec / f"{name}.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
+        for _ in range(6):
+            writer.write(np.full((480, 640, 3), 120, np.uint8))
+        writer.release()
+    assert main(["fit-model", str(rec), "--out", str(tmp_path / "m.toml"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    last = err[-1]
+    assert last.startswith("tracker: error:") and "0 of" in last and "--frames" in last
+    assert not (tmp_path / "m.toml").exists()
+
+
+def test_without_the_detector_fit_model_says_how_to_install_it(short_recording, tmp_path, capsys, monkeypatch):
+    from tracker.keypoints import detector
+
+    monkeypatch.setattr(detector, "missing", lambda: "the keypoint detector is not installed (test): pip install")
+    assert main(["fit-model", str(short_recording), "--out", str(tmp_path / "m.toml"), "--quiet"]) == 2
+    assert "pip install" in capsys.readouterr().err
+    rec = tmp_path / "mine"
+    shutil.copytree(short_recording, rec)
+    (rec / "model.toml").unlink()
+    assert main(["track", str(rec), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "no model.toml" in line and "pass --model" in line
