@@ -132,11 +132,14 @@ POSE_DAMPING = 1.0
 """Added to the diagonal of each frame's pose block (pixels^2 per unit^2): holds a part that no sample sees."""
 
 
-def bundle_step(frames: list[FrameRows], prior: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+def bundle_step(
+    frames: list[FrameRows], prior: np.ndarray, x: np.ndarray, damping: float = 0.0
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """The shape x + dx and each frame's joint motions dp (P,) that minimise the robust cost of the ``frames``'
     rows with the ``prior`` rows (R, width) (module docstring): one Gauss-Newton step of shape and poses together,
-    each frame's pose block eliminated (a Schur complement per frame) and recovered after."""
-    width = len(x)
+    each frame's pose block eliminated (a Schur complement per frame) and recovered after.  ``damping`` lambda
+    makes it a Levenberg-Marquardt step: every diagonal entry of the normal equations grows by lambda times
+    itself, so the step shortens and turns towards steepest descent."""
     normal = prior.T @ prior
     right = -normal @ x
     blocks = []
@@ -144,13 +147,14 @@ def bundle_step(frames: list[FrameRows], prior: np.ndarray, x: np.ndarray) -> tu
         w = rows.weight
         a, b = rows.shape, rows.pose
         ab = (a * w[:, None]).T @ b
-        bb = (b * w[:, None]).T @ b + POSE_DAMPING * np.eye(b.shape[1])
+        bb = (b * w[:, None]).T @ b
+        bb += np.diag(damping * np.diag(bb) + POSE_DAMPING)
         bm = b.T @ (w * rows.offset)
         eliminate = np.linalg.solve(bb, ab.T).T
         normal += (a * w[:, None]).T @ a - eliminate @ ab.T
         right += a.T @ (w * rows.offset) - eliminate @ bm
         blocks.append((bb, ab, bm))
-    dx = np.linalg.solve(normal + 1e-12 * np.eye(width), right)
+    dx = np.linalg.solve(normal + np.diag(damping * np.diag(normal) + 1e-12), right)
     return x + dx, [np.linalg.solve(bb, bm - ab.T @ dx) for bb, ab, bm in blocks]
 
 

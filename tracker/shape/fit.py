@@ -50,6 +50,11 @@ SPAN_PRIOR = 1000.0
 spans its bone, :meth:`tracker.shape.layout.Layout.prior`): an outline does not show where a joint lies inside
 overlapping parts (a shin's end inside the foot, the spine inside the trunk)."""
 
+DAMPING = (1e-3, 1e3)
+"""The Levenberg-Marquardt damping's least and largest value: a round whose step left the outlines fitting their
+edges worse (robust mean |m|) is undone, and the step taken again ten times more damped; each good one lowers it
+threefold."""
+
 JOINT_STEP = 0.05
 """Metres a joint may move in one round: a direction the edges barely see cannot jump on noise."""
 
@@ -142,21 +147,28 @@ def fit_shape(
     images = [images[k] for k in kept]
     residuals = []
     prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR)
+    damping, kept_state = DAMPING[0], None
     for search in progress(RANGES, total=len(RANGES)):
         tracker = Tracker(model, recording.cameras, poses[0], dataclasses.replace(SNAP, search_range=search))
-        factors = layout.factors(x)
         scaled = tracker.settings.search_range  # for the image size
         seen = [tracker.inspect(frame, poses=pose, search_range=scaled) for pose, frame in zip(poses, images)]
         rows = held_rows(
-            [frame_rows(layout, model, factors, pose, frame) for pose, frame in zip(poses, seen)], model.size
+            [frame_rows(layout, model, layout.factors(x), pose, frame) for pose, frame in zip(poses, seen)], model.size
         )
         weight = np.concatenate([frame.weight for frame in rows])
-        offset = np.concatenate([frame.offset for frame in rows])
-        residuals.append(float((weight * np.abs(offset)).sum() / weight.sum()))
-        step, motions = bundle_step(rows, prior, x)
+        residual = float((weight * np.abs(np.concatenate([frame.offset for frame in rows]))).sum() / weight.sum())
+        if kept_state is not None and residual > kept_state[0]:  # the last step made it worse: back, shorter
+            residual, x, model, poses, rows, seen = kept_state
+            damping = min(10.0 * damping, DAMPING[1])
+        else:
+            kept_state = (residual, x, model, poses, rows, seen)
+            damping = max(damping / 3.0, DAMPING[0])
+        residuals.append(residual)
+        step, motions = bundle_step(rows, prior, x, damping)
         x, motions = trusted(layout, x, step, motions)
         model = model_from_dict(layout.document(x, document))
         poses = [moved(model, pose, motion) for pose, motion in zip(poses, motions)]
+    residual, x, model, poses, rows, seen = kept_state
     found = np.concatenate([frame.component[np.isfinite(frame.offset)] for frame in seen])
     return ShapeFit(
         layout.document(x, document),
