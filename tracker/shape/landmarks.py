@@ -41,7 +41,7 @@ PRIOR = 0.02
 """The prior's weight, in metres of misfit per metre of a joint's place (or per unit of a factor) away from the
 given model scaled by the common scale."""
 
-ROUNDS = 3
+ROUNDS = 1
 """Times the poses and the joints are fitted in turn."""
 
 REWEIGHTS = 8
