@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -280,8 +281,22 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
 
 
 def bar(args: argparse.Namespace, desc: str | None, unit: str, *, leave: bool = False):
-    """A progress bar on stderr (off with --quiet) to wrap an iterable in; it stays on the screen when
-    done only with ``leave``."""
+    """A progress bar on the terminal's standard error (off with --quiet) to wrap an iterable in; it stays on the
+    screen when done only with ``leave``.  It writes to its own copy of file descriptor 2, so it still shows
+    while MediaPipe's native logs are muted (:func:`tracker.keypoints.detector.native_logs_muted`)."""
     from tqdm import tqdm
 
-    return functools.partial(tqdm, desc=desc, unit=unit, disable=args.quiet, file=sys.stderr, leave=leave)
+    file = sys.stderr if args.quiet else _terminal(sys.stderr)
+    return functools.partial(tqdm, desc=desc, unit=unit, disable=args.quiet, file=file, leave=leave)
+
+
+@functools.cache
+def _terminal(stream):
+    """A text stream on a copy of ``stream``'s file descriptor, made once per stream (``stream`` itself when it
+    has none, e.g. when captured)."""
+    try:
+        descriptor = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return stream
+    stream.flush()
+    return os.fdopen(os.dup(descriptor), "w", buffering=1)

@@ -18,7 +18,7 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording, frames
-from tracker.keypoints.detector import DETECTOR, Detector, detect_views
+from tracker.keypoints.detector import DETECTOR, Detector, detect_views, native_logs_muted
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
 _HASHED = 1 << 16
@@ -86,10 +86,13 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
 
 def detections(recording: Recording, start: int, stop: int, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
     """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
-    camera in video mode (so each follows its person from detected frame to detected frame)."""
+    camera in video mode (so each follows its person from detected frame to detected frame).  MediaPipe's
+    native logs are muted the whole time (:func:`tracker.keypoints.detector.native_logs_muted`): a progress bar
+    over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
     names = tuple(camera.name for camera in recording.cameras)
     identity = fingerprint(recording)
     with ExitStack() as stack:
+        stack.enter_context(native_logs_muted())  # the graphs' threads log while they run
         detectors = [Detector() for _ in recording.cameras]
         for detector in detectors:
             stack.callback(detector.close)
