@@ -25,7 +25,7 @@ from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.first_pose import SNAP, snap_to_edges
 from tracker.keypoints.triangulation import frame_by_frame
-from tracker.model import model_from_dict, save_model
+from tracker.model import Model, model_from_dict, save_model
 from tracker.proportions import sizes
 from tracker.shape.edges import FrameRows, bundle_step, frame_rows, moved
 from tracker.shape.landmarks import fit_landmarks
@@ -77,8 +77,8 @@ others keep the given model's proportions, scaled."""
 class ShapeFit:
     """A fitted model: its TOML ``document`` (parsed), the ``layout`` and ``x`` of its shape, the ``start`` x
     from the landmarks, the keypoint frames the landmarks used (``landmark_frames``) and the frames the edges
-    held (``edge_frames``), each edge round's robust mean offset in pixels (``residuals``) and each component's
-    ``samples`` (N,) with an edge in the last round."""
+    held (``edge_frames``), the best robust mean offset in pixels after each edge round (``residuals``) and each
+    component's ``samples`` (N,) with an edge at the best round."""
 
     document: dict
     layout: Layout
@@ -120,66 +120,85 @@ def fit_shape(
     found = frame_by_frame(keypoints, recording.cameras, model)
     say(f"landmarks: {len(found.rows)} of {len(keypoints.frame)} frames show the body in two views or more")
     landmarks = fit_landmarks(layout, document, found.points, keypoints.frame[found.rows], progress=progress)
-    x = landmarks.x
-    model = model_from_dict(layout.document(x, document))
-    rows = np.searchsorted(keypoints.frame, landmarks.frames)
+    model = model_from_dict(layout.document(landmarks.x, document))
     images = _images(recording, landmarks.frames, step)
     poses, held = [], []
-    for k, row in enumerate(progress(rows, total=len(rows))):
+    for k, row in enumerate(progress(np.searchsorted(keypoints.frame, landmarks.frames), total=len(images))):
         marks = consistent(keypoints.rows(slice(row, row + 1)), recording.cameras)[0]
-        result = snap_to_edges(
-            model,
-            recording.cameras,
-            landmarks.poses[k],
-            images[k],
-            keypoints=(marks.pixels[0], marks.confidence[0]),
-        )
+        landmarks_now = (marks.pixels[0], marks.confidence[0])
+        result = snap_to_edges(model, recording.cameras, landmarks.poses[k], images[k], keypoints=landmarks_now)
         poses.append(result.poses)
         held.append(result.status == TRACKED)
     kept = np.flatnonzero(held)
     if len(kept) < 3:
         raise TrackerInputError(
-            f"{recording.path}: the edges hold the body in {len(kept)} of {len(rows)} frames, the fit needs 3; "
+            f"{recording.path}: the edges hold the body in {len(kept)} of {len(images)} frames, the fit needs 3; "
             "give more frames (--frames) or a recording with the whole body in view"
         )
-    say(f"edges: the body is held in {len(kept)} of {len(rows)} frames")
-    poses = [poses[k] for k in kept]
-    images = [images[k] for k in kept]
-    residuals = []
-    prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR)
-    damping, kept_state = DAMPING[0], None
-    for search in progress(RANGES, total=len(RANGES)):
-        tracker = Tracker(model, recording.cameras, poses[0], dataclasses.replace(SNAP, search_range=search))
-        scaled = tracker.settings.search_range  # for the image size
-        seen = [tracker.inspect(frame, poses=pose, search_range=scaled) for pose, frame in zip(poses, images)]
-        rows = held_rows(
-            [frame_rows(layout, model, layout.factors(x), pose, frame) for pose, frame in zip(poses, seen)], model.size
-        )
-        weight = np.concatenate([frame.weight for frame in rows])
-        residual = float((weight * np.abs(np.concatenate([frame.offset for frame in rows]))).sum() / weight.sum())
-        if kept_state is not None and residual > kept_state[0]:  # the last step made it worse: back, shorter
-            residual, x, model, poses, rows, seen = kept_state
-            damping = min(10.0 * damping, DAMPING[1])
-        else:
-            kept_state = (residual, x, model, poses, rows, seen)
-            damping = max(damping / 3.0, DAMPING[0])
-        residuals.append(residual)
-        step, motions = bundle_step(rows, prior, x, damping)
-        x, motions = trusted(layout, x, step, motions)
-        model = model_from_dict(layout.document(x, document))
-        poses = [moved(model, pose, motion) for pose, motion in zip(poses, motions)]
-    residual, x, model, poses, rows, seen = kept_state
-    found = np.concatenate([frame.component[np.isfinite(frame.offset)] for frame in seen])
+    say(f"edges: the body is held in {len(kept)} of {len(images)} frames")
+    start = _State(np.inf, landmarks.x, model, [poses[k] for k in kept], [])
+    best, residuals = _edge_rounds(layout, document, start, [images[k] for k in kept], recording.cameras, progress)
+    measured = np.concatenate([frame.component for frame in best.rows])
     return ShapeFit(
-        layout.document(x, document),
+        layout.document(best.x, document),
         layout,
-        x,
+        best.x,
         landmarks.x,
         landmarks.frames,
         landmarks.frames[kept],
-        tuple(residuals),
-        np.bincount(found, minlength=model.size),
+        residuals,
+        np.bincount(measured, minlength=model.size),
     )
+
+
+@dataclass(frozen=True)
+class _State:
+    """Where the edge rounds stand: the outlines' robust mean offset ``residual`` (pixels) at shape ``x`` (its
+    ``model``) and the frames' ``poses``, and the frames' ``rows`` measured there."""
+
+    residual: float
+    x: np.ndarray
+    model: Model
+    poses: list[np.ndarray]
+    rows: list[FrameRows]
+
+
+def _edge_rounds(
+    layout: Layout,
+    document: dict,
+    start: _State,
+    images: list[list[np.ndarray]],
+    cameras: list,
+    progress: Callable[..., Iterable],
+) -> tuple[_State, tuple[float, ...]]:
+    """The best state of the edge rounds from ``start`` (module docstring, step 4) in the frames' ``images``, and
+    each round's residual."""
+    prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR)
+    damping, best, now, residuals = DAMPING[0], start, start, []
+    for search in progress(RANGES, total=len(RANGES)):
+        tracker = Tracker(now.model, cameras, now.poses[0], dataclasses.replace(SNAP, search_range=search))
+        scaled = tracker.settings.search_range  # for the image size
+        factors = layout.factors(now.x)
+        rows = held_rows(
+            [
+                frame_rows(layout, now.model, factors, pose, tracker.inspect(frame, poses=pose, search_range=scaled))
+                for pose, frame in zip(now.poses, images)
+            ],
+            now.model.size,
+        )
+        weight = np.concatenate([frame.weight for frame in rows])
+        residual = float((weight * np.abs(np.concatenate([frame.offset for frame in rows]))).sum() / weight.sum())
+        if residual > best.residual:  # the last step made it worse: back, and a shorter step
+            damping = min(10.0 * damping, DAMPING[1])
+        else:
+            best = _State(residual, now.x, now.model, now.poses, rows)
+            damping = max(damping / 3.0, DAMPING[0])
+        residuals.append(best.residual)
+        target, motions = bundle_step(best.rows, prior, best.x, damping)
+        x, motions = trusted(layout, best.x, target, motions)
+        model = model_from_dict(layout.document(x, document))
+        now = _State(np.nan, x, model, [moved(model, pose, motion) for pose, motion in zip(best.poses, motions)], [])
+    return best, tuple(residuals)
 
 
 def trusted(

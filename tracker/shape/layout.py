@@ -85,7 +85,7 @@ class Layout:
     def prior(self, joint_weight: float, factor_weight: float, span_weight: float = 0.0) -> np.ndarray:
         """The prior's rows (R, width) (module docstring), each set once."""
         rows, seen = [], set()
-        for i in np.flatnonzero(self.joint >= 0):
+        for i in map(int, np.flatnonzero(self.joint >= 0)):
             if self.joint[i] not in seen:
                 seen.add(self.joint[i])
                 block = joint_weight * self.joint_map(i)
