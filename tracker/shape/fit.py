@@ -4,7 +4,7 @@
    triangulated frame by frame (:func:`tracker.keypoints.triangulation.frame_by_frame`).
 2. The joints fitted to them, alternating with each frame's pose (:func:`tracker.shape.landmarks.fit_landmarks`).
 3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
-   the frames the edges hold (status tracked) are kept.
+   the frames the edges hold (status not lost) are kept.
 4. One round per search range of :data:`RANGES`: every kept frame's outlines measured at its pose, then one
    Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`).
 """
@@ -30,7 +30,7 @@ from tracker.proportions import sizes
 from tracker.shape.edges import FrameRows, bundle_step, frame_rows, moved
 from tracker.shape.landmarks import fit_landmarks
 from tracker.shape.layout import Layout
-from tracker.status import TRACKED
+from tracker.status import LOST
 from tracker.track import Tracker
 
 FRAMES = 40
@@ -128,7 +128,7 @@ def fit_shape(
         landmarks_now = (marks.pixels[0], marks.confidence[0])
         result = snap_to_edges(model, recording.cameras, landmarks.poses[k], images[k], keypoints=landmarks_now)
         poses.append(result.poses)
-        held.append(result.status == TRACKED)
+        held.append(result.status != LOST)
     kept = np.flatnonzero(held)
     if len(kept) < 3:
         raise TrackerInputError(
@@ -265,18 +265,16 @@ def fit_and_save(
     path: str | Path,
     *,
     source: str,
-    frames: int = FRAMES,
-    tie_sides: bool = True,
-    cache: str | Path | None = None,
-    progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
     say: Callable[[str], None] = lambda text: None,
+    **options,
 ) -> ShapeFit:
-    """:func:`fit_shape`, then the fitted model written to ``path`` (atomically) with a comment naming the
-    recording and the ``source`` model, and its :func:`changes` said."""
-    fit = fit_shape(recording, document, frames=frames, tie_sides=tie_sides, cache=cache, progress=progress, say=say)
+    """:func:`fit_shape` (with its keyword ``options``), then the fitted model written to ``path`` (atomically)
+    with a comment naming the recording and the ``source`` model, and its :func:`changes` said."""
+    fit = fit_shape(recording, document, say=say, **options)
+    sides = "tied" if options.get("tie_sides", True) else "apart"
     comment = (
         f"Fitted by `tracker fit-model` to {recording.path} ({len(fit.edge_frames)} frames held by the edges),\n"
-        f"from {source}; left and right {'tied' if tie_sides else 'apart'}.  An ordinary model file (formats.md)."
+        f"from {source}; left and right {sides}.  An ordinary model file (formats.md)."
     )
     name = f"{document.get('name', 'model')}-fitted"
     save_model(path, {**fit.document, "name": name}, comment)
