@@ -136,9 +136,8 @@ def fit_shape(
             "give more frames (--frames) or a recording with the whole body in view"
         )
     say(f"edges: the body is held in {len(kept)} of {len(images)} frames")
-    start = _State(np.inf, landmarks.x, model, [poses[k] for k in kept], [])
+    start = _State(np.inf, landmarks.x, model, [poses[k] for k in kept], [], np.zeros(model.size, np.int64))
     best, residuals = _edge_rounds(layout, document, start, [images[k] for k in kept], recording.cameras, progress)
-    measured = np.concatenate([frame.component for frame in best.rows])
     return ShapeFit(
         layout.document(best.x, document),
         layout,
@@ -147,20 +146,22 @@ def fit_shape(
         landmarks.frames,
         landmarks.frames[kept],
         residuals,
-        np.bincount(measured, minlength=model.size),
+        best.samples,
     )
 
 
 @dataclass(frozen=True)
 class _State:
     """Where the edge rounds stand: the outlines' robust mean offset ``residual`` (pixels) at shape ``x`` (its
-    ``model``) and the frames' ``poses``, and the frames' ``rows`` measured there."""
+    ``model``) and the frames' ``poses``, the frames' ``rows`` measured there (less the strays, :func:`held_rows`)
+    and each component's ``samples`` (N,) that found an edge."""
 
     residual: float
     x: np.ndarray
     model: Model
     poses: list[np.ndarray]
     rows: list[FrameRows]
+    samples: np.ndarray
 
 
 def _edge_rounds(
@@ -179,25 +180,25 @@ def _edge_rounds(
         tracker = Tracker(now.model, cameras, now.poses[0], dataclasses.replace(SNAP, search_range=search))
         scaled = tracker.settings.search_range  # for the image size
         factors = layout.factors(now.x)
-        rows = held_rows(
-            [
-                frame_rows(layout, now.model, factors, pose, tracker.inspect(frame, poses=pose, search_range=scaled))
-                for pose, frame in zip(now.poses, images)
-            ],
-            now.model.size,
-        )
+        measured = [
+            frame_rows(layout, now.model, factors, pose, tracker.inspect(frame, poses=pose, search_range=scaled))
+            for pose, frame in zip(now.poses, images)
+        ]
+        seen = np.bincount(np.concatenate([frame.component for frame in measured]), minlength=now.model.size)
+        rows = held_rows(measured, now.model.size)
         weight = np.concatenate([frame.weight for frame in rows])
         residual = float((weight * np.abs(np.concatenate([frame.offset for frame in rows]))).sum() / weight.sum())
         if residual > best.residual:  # the last step made it worse: back, and a shorter step
             damping = min(10.0 * damping, DAMPING[1])
         else:
-            best = _State(residual, now.x, now.model, now.poses, rows)
+            best = _State(residual, now.x, now.model, now.poses, rows, seen)
             damping = max(damping / 3.0, DAMPING[0])
         residuals.append(best.residual)
         target, motions = bundle_step(best.rows, prior, best.x, damping)
         x, motions = trusted(layout, best.x, target, motions)
         model = model_from_dict(layout.document(x, document))
-        now = _State(np.nan, x, model, [moved(model, pose, motion) for pose, motion in zip(best.poses, motions)], [])
+        poses = [moved(model, pose, motion) for pose, motion in zip(best.poses, motions)]
+        now = _State(np.nan, x, model, poses, [], np.zeros(model.size, np.int64))
     return best, tuple(residuals)
 
 
