@@ -206,6 +206,7 @@ def test_the_step_is_the_dense_least_squares_solution():
             rng.normal(size=40),
             rng.uniform(0.2, 1, 40),
             np.zeros(40, np.int64),
+            np.zeros(40, np.int64),
         )
         for _ in range(count)
     ]

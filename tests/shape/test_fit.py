@@ -144,3 +144,20 @@ def test_without_the_detector_fit_model_says_how_to_install_it(short_recording, 
     assert main(["track", str(rec), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert "no model.toml" in line and "pass --model" in line
+
+
+def test_a_limb_whose_joints_the_detector_does_not_see_is_left_out_of_that_view():
+    """A knee hidden in one view (behind a table): the thigh and the shin it joins are not fitted there; the
+    trunk always is, and every part in the other view."""
+    from tracker.keypoint_cue import LANDMARKS
+    from tracker.model import model_from_dict
+    from tracker.shape.fit import unseen_parts
+
+    model = model_from_dict(read_toml(HUMAN, "model", ""))
+    confidence = np.ones((2, len(LANDMARKS)))
+    confidence[0, LANDMARKS.index("left_knee")] = 0.1
+    confidence[:, LANDMARKS.index("right_shoulder")] = 0.2
+    unseen = unseen_parts(model, confidence)
+    names = lambda row: {model.names[c] for c in np.flatnonzero(row)}  # noqa: E731
+    assert names(unseen[0]) == {"thigh_l", "shin_l", "upperarm_r"}
+    assert names(unseen[1]) == {"upperarm_r"}

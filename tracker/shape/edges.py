@@ -79,18 +79,20 @@ def chain_maps(layout: Layout, model: Model, poses: np.ndarray) -> np.ndarray:
 class FrameRows:
     """One frame's rows, for the samples that found an edge: ``shape`` (S, width) per unit change of x, ``pose``
     (S, P) per unit of each joint's motion (:func:`joint_twists`), the measured ``offset`` (S,), the IRLS
-    ``weight`` (S,) and each sample's ``component`` (S,)."""
+    ``weight`` (S,) and each sample's ``component`` (S,) and ``camera`` (S,)."""
 
     shape: np.ndarray
     pose: np.ndarray
     offset: np.ndarray
     weight: np.ndarray
     component: np.ndarray
+    camera: np.ndarray
 
-    def without(self, components: np.ndarray) -> FrameRows:
-        """These rows less the samples of ``components`` (bool (N,), True to drop)."""
-        keep = ~components[self.component]
-        return FrameRows(self.shape[keep], self.pose[keep], self.offset[keep], self.weight[keep], self.component[keep])
+    def without(self, drop: np.ndarray) -> FrameRows:
+        """These rows less the samples of the components ``drop`` (bool (N,), True to drop) or, given per camera
+        (C, N), of those components in those cameras."""
+        hidden = drop[self.component] if drop.ndim == 1 else drop[self.camera, self.component]
+        return FrameRows(*(getattr(self, field.name)[~hidden] for field in dataclasses.fields(self)))
 
 
 def joint_twists(model: Model, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -125,7 +127,7 @@ def frame_rows(
     point = np.einsum("sij,sj->si", rotation, seen.point) + poses[seen.component, :3, 3]
     velocity = np.cross(twists[None, :, 0:3], point[:, None, :]) + twists[None, :, 3:6]
     pose = np.einsum("si,spi->sp", world, velocity) * moves[:, seen.component].T
-    return FrameRows(rows, pose, seen.offset, seen.weight, seen.component)
+    return FrameRows(rows, pose, seen.offset, seen.weight, seen.component, seen.camera)
 
 
 POSE_DAMPING = 1.0

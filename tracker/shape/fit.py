@@ -6,7 +6,8 @@
 3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
    the frames the edges hold (status not lost) are kept.
 4. One round per search range of :data:`RANGES`: every kept frame's outlines measured at its pose, then one
-   Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`).
+   Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`);
+   a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording
 from tracker.io.recording import frames as frames_of
+from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.first_pose import SNAP, snap_to_edges
@@ -67,6 +69,9 @@ FACTORS = (0.6, 1.6)
 STRAY = 3.0
 """A component whose outline fits its edges in a frame this many times worse (median |m|) than the median over
 all components and frames is left out of that frame's step."""
+
+SEEN = 0.5
+"""A joint landmark's least confidence for the parts at its joint to be fitted in that view."""
 
 MEASURED = 100
 """Samples with an edge, over the frames of the last round, that a component needs to count as measured; the
@@ -137,7 +142,11 @@ def fit_shape(
         )
     say(f"edges: the body is held in {len(kept)} of {len(images)} frames")
     start = _State(np.inf, landmarks.x, model, [poses[k] for k in kept], [], np.zeros(model.size, np.int64))
-    best, residuals = _edge_rounds(layout, document, start, [images[k] for k in kept], recording.cameras, progress)
+    rows = np.searchsorted(keypoints.frame, landmarks.frames[kept])
+    hidden = [unseen_parts(model, keypoints.confidence[row]) for row in rows]
+    best, residuals = _edge_rounds(
+        layout, document, start, [images[k] for k in kept], hidden, recording.cameras, progress
+    )
     return ShapeFit(
         layout.document(best.x, document),
         layout,
@@ -169,11 +178,12 @@ def _edge_rounds(
     document: dict,
     start: _State,
     images: list[list[np.ndarray]],
+    hidden: list[np.ndarray],
     cameras: list,
     progress: Callable[..., Iterable],
 ) -> tuple[_State, tuple[float, ...]]:
-    """The best state of the edge rounds from ``start`` (module docstring, step 4) in the frames' ``images``, and
-    each round's residual."""
+    """The best state of the edge rounds from ``start`` (module docstring, step 4) in the frames' ``images``, the
+    parts ``hidden`` (C, N) in each frame's views left out, and each round's residual."""
     prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR)
     damping, best, now, residuals = DAMPING[0], start, start, []
     for search in progress(RANGES, total=len(RANGES)):
@@ -181,8 +191,10 @@ def _edge_rounds(
         scaled = tracker.settings.search_range  # for the image size
         factors = layout.factors(now.x)
         measured = [
-            frame_rows(layout, now.model, factors, pose, tracker.inspect(frame, poses=pose, search_range=scaled))
-            for pose, frame in zip(now.poses, images)
+            frame_rows(
+                layout, now.model, factors, pose, tracker.inspect(frame, poses=pose, search_range=scaled)
+            ).without(unseen)
+            for pose, frame, unseen in zip(now.poses, images, hidden)
         ]
         seen = np.bincount(np.concatenate([frame.component for frame in measured]), minlength=now.model.size)
         rows = held_rows(measured, now.model.size)
@@ -216,6 +228,22 @@ def trusted(
     low, high = FACTORS[0] * out[-1], FACTORS[1] * out[-1]
     out[layout.factor.min() : -1] = np.clip(out[layout.factor.min() : -1], low, high)
     return out, [shrink * motion for motion in motions]
+
+
+def unseen_parts(model: Model, confidence: np.ndarray) -> np.ndarray:
+    """The limbs (C, N) bool that each view shows too little of to fit, from the detector's confidence (C, 33) in
+    one frame: a component that a joint landmark marks (an upper arm, a shin, a foot) is unseen in a view where
+    the landmark at its joint or at a child's (the shin's knee and ankle) is less than :data:`SEEN` sure.  A limb
+    behind a table finds the table's edges, which no pose of it explains; the detector's visibility says it is
+    not there.  The trunk and the head are always kept."""
+    component, _, _ = landmark_points(model, LANDMARKS)
+    marked = component >= 0
+    unsure = confidence[:, marked] < SEEN  # (C, M)
+    out = np.zeros((len(confidence), model.size), bool)
+    for c in np.unique(component[marked]):
+        ends = (component[marked] == c) | (model.parent[component[marked]] == c)
+        out[:, c] = unsure[:, ends].any(axis=1)
+    return out
 
 
 def held_rows(frames: list[FrameRows], components: int) -> list[FrameRows]:
