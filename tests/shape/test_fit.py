@@ -161,3 +161,17 @@ def test_a_limb_whose_joints_the_detector_does_not_see_is_left_out_of_that_view(
     names = lambda row: {model.names[c] for c in np.flatnonzero(row)}  # noqa: E731
     assert names(unseen[0]) == {"thigh_l", "shin_l", "upperarm_r"}
     assert names(unseen[1]) == {"upperarm_r"}
+
+
+def test_a_joint_the_detector_rarely_sees_is_held():
+    from tracker.keypoint_cue import LANDMARKS
+    from tracker.model import model_from_dict
+    from tracker.shape.fit import unseen_joints
+
+    model = model_from_dict(read_toml(HUMAN, "model", ""))
+    confidence = np.ones((10, 3, len(LANDMARKS)))
+    confidence[:, :, LANDMARKS.index("left_knee")] = 0.3  # behind a table in every view
+    confidence[:7, :, LANDMARKS.index("right_knee")] = 0.3  # seen in 3 frames of 10
+    confidence[:4, :, LANDMARKS.index("left_ankle")] = 0.3  # seen in 6 of 10
+    held = unseen_joints(model, confidence)
+    assert {model.names[c] for c in np.flatnonzero(held)} == {"shin_l", "shin_r"}

@@ -47,3 +47,18 @@ def test_the_prior_holds_the_given_model_scaled_and_each_joint_on_its_parents_st
     stretched[layout.joint[i] : layout.joint[i] + 3] = 1.1 * model.rest[i, :3, 3] * [1, 1, 1]
     residual = prior @ stretched
     np.testing.assert_allclose(np.abs(residual[residual != 0]), [2.0 * 0.1 * 0.29, 3.0 * 0.1], atol=1e-12)
+
+
+def test_a_held_joint_is_pulled_to_the_given_model_as_firmly_as_the_span():
+    model = model_from_dict(read_toml(HUMAN, "model", ""))
+    layout = Layout.of(model)
+    x = layout.start()
+    i = model.index("forearm_l")
+    x[layout.joint[i] + 2] += 0.01
+    held = np.zeros(model.size, bool)
+    held[[i, model.index("forearm_r")]] = True  # both sides of the tied set
+    residual = layout.prior(2.0, 3.0, 5.0, held=held) @ x
+    np.testing.assert_allclose(np.sort(np.abs(residual[residual != 0])), [0.05, 0.05])
+    held[model.index("forearm_r")] = False  # one side seen: the set is measured
+    residual = layout.prior(2.0, 3.0, 5.0, held=held) @ x
+    np.testing.assert_allclose(np.sort(np.abs(residual[residual != 0])), [0.02, 0.05])

@@ -73,6 +73,9 @@ all components and frames is left out of that frame's step."""
 SEEN = 0.5
 """A joint landmark's least confidence for the parts at its joint to be fitted in that view."""
 
+RARELY = 0.5
+"""A joint whose landmark is seen in fewer than this share of the views of the fitted frames is held."""
+
 MEASURED = 100
 """Samples with an edge, over the frames of the last round, that a component needs to count as measured; the
 others keep the given model's proportions, scaled."""
@@ -144,8 +147,9 @@ def fit_shape(
     start = _State(np.inf, landmarks.x, model, [poses[k] for k in kept], [], np.zeros(model.size, np.int64))
     rows = np.searchsorted(keypoints.frame, landmarks.frames[kept])
     hidden = [unseen_parts(model, keypoints.confidence[row]) for row in rows]
+    prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR, held=unseen_joints(model, keypoints.confidence[rows]))
     best, residuals = _edge_rounds(
-        layout, document, start, [images[k] for k in kept], hidden, recording.cameras, progress
+        layout, document, start, [images[k] for k in kept], hidden, prior, recording.cameras, progress
     )
     return ShapeFit(
         layout.document(best.x, document),
@@ -179,12 +183,12 @@ def _edge_rounds(
     start: _State,
     images: list[list[np.ndarray]],
     hidden: list[np.ndarray],
+    prior: np.ndarray,
     cameras: list,
     progress: Callable[..., Iterable],
 ) -> tuple[_State, tuple[float, ...]]:
     """The best state of the edge rounds from ``start`` (module docstring, step 4) in the frames' ``images``, the
-    parts ``hidden`` (C, N) in each frame's views left out, and each round's residual."""
-    prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR)
+    parts ``hidden`` (C, N) in each frame's views left out, under the ``prior`` rows, and each round's residual."""
     damping, best, now, residuals = DAMPING[0], start, start, []
     for search in progress(RANGES, total=len(RANGES)):
         tracker = Tracker(now.model, cameras, now.poses[0], dataclasses.replace(SNAP, search_range=search))
@@ -243,6 +247,17 @@ def unseen_parts(model: Model, confidence: np.ndarray) -> np.ndarray:
     for c in np.unique(component[marked]):
         ends = (component[marked] == c) | (model.parent[component[marked]] == c)
         out[:, c] = unsure[:, ends].any(axis=1)
+    return out
+
+
+def unseen_joints(model: Model, confidence: np.ndarray) -> np.ndarray:
+    """The joints (N,) bool, by their component, whose landmark the detector is sure of (:data:`SEEN`) in fewer
+    than :data:`RARELY` of the views of the frames' ``confidence`` (F, C, 33): their place is held at the given
+    model's, scaled (:meth:`tracker.shape.layout.Layout.prior`).  Joints no landmark marks are not among them."""
+    component, _, _ = landmark_points(model, LANDMARKS)
+    out = np.zeros(model.size, bool)
+    for j in np.flatnonzero(component >= 0):
+        out[component[j]] = (confidence[:, :, j] >= SEEN).mean() < RARELY
     return out
 
 

@@ -82,14 +82,20 @@ class Layout:
         """Every component's stretch factors (N, 3) under x."""
         return np.stack([x[f : f + 3] for f in self.factor])
 
-    def prior(self, joint_weight: float, factor_weight: float, span_weight: float = 0.0) -> np.ndarray:
-        """The prior's rows (R, width) (module docstring), each set once."""
+    def prior(
+        self, joint_weight: float, factor_weight: float, span_weight: float = 0.0, held: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The prior's rows (R, width) (module docstring), each set once; the joints ``held`` (N,) bool (those no
+        measurement reaches: every component of their set held) are pulled to the given model scaled with
+        ``span_weight`` instead of ``joint_weight``."""
+        held = np.zeros(len(self.names), bool) if held is None else held
         rows, seen = [], set()
         for i in map(int, np.flatnonzero(self.joint >= 0)):
             if self.joint[i] not in seen:
                 seen.add(self.joint[i])
-                block = joint_weight * self.joint_map(i)
-                block[:, -1] = -joint_weight * self.at0[i]
+                weight = span_weight if held[self.joint == self.joint[i]].all() else joint_weight
+                block = weight * self.joint_map(i)
+                block[:, -1] = -weight * self.at0[i]
                 rows.append(block)
                 span = span_weight * self.joint_map(i)
                 f = self.factor[self.parent[i]]
