@@ -2,12 +2,13 @@
 
 1. The keypoint detector on frames spread over the recording (:data:`FRAMES` by default), its landmarks
    triangulated frame by frame (:func:`tracker.keypoints.triangulation.frame_by_frame`).
-2. The joints fitted to them, alternating with each frame's pose (:func:`tracker.shape.landmarks.fit_landmarks`).
+2. The joints fitted to them, each frame's pose fitted first (:func:`tracker.shape.landmarks.fit_landmarks`).
 3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
    the frames the edges hold (status not lost) are kept.
 4. One round per search range of :data:`RANGES`: every kept frame's outlines measured at its pose, then one
    Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`);
-   a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`).
+   a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`),
+   and a joint it rarely sees is held at the given model's place, scaled (:func:`unseen_joints`).
 """
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ RARELY = 0.5
 """A joint whose landmark is seen in fewer than this share of the views of the fitted frames is held."""
 
 MEASURED = 100
-"""Samples with an edge, over the frames of the last round, that a component needs to count as measured; the
+"""Samples with an edge, over the frames of the best round, that a component needs to count as measured; the
 others keep the given model's proportions, scaled."""
 
 
