@@ -24,7 +24,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-import tomli_w
 
 from tracker import texture as textures
 from tracker.actor import actor_poses, capsule_body, stretched_body
@@ -37,7 +36,7 @@ from tracker.geometry import se3
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file
-from tracker.model import Model, joint_centres, load_model, model_from_dict
+from tracker.model import Model, joint_centres, load_model, model_from_dict, save_model
 from tracker.props import Box, box_corners, cast_boxes
 from tracker.render import Renderer, albedos, load_backgrounds
 from tracker.room import make_room, room_backdrop
@@ -517,7 +516,9 @@ def synthesize(
 
     atomic_write(out / "model.toml", lambda file: file.write(model_bytes))
     if actor is not None:
-        atomic_write(out / "body.toml", lambda file: tomli_w.dump(actor, file))
+        save_model(
+            out / "body.toml", actor, "The rendered body (tracker synth --body); model.toml is the tracking model."
+        )
     save_pose_file(out / ("init.toml" if write_init else "truth_init.toml"), model, shown[0])
     seen = seen_joints(joint_centres(shown), cameras, props)
     write_truth(out / "truth.npz", model, shown, seen=seen)

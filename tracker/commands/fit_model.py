@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     document = read_toml(start, "model", "pass --model with an existing models/*.toml")
     model_from_dict(document, start)  # a bad model is a one-line error before any detection
     require_detector()
-    cache = ensure_writable_folder(Path("out") / rec.path.resolve().name) / "keypoints.npz"
+    cache = ensure_writable_folder(options.output_folder(None, rec)) / "keypoints.npz"
     fit_and_save(
         rec,
         document,

@@ -62,7 +62,7 @@ def keypoint_pose(rec, model, start: int) -> np.ndarray:
         print(f"starting from the rest pose: {reason}")
         return rest_poses(model, in_view(rec.cameras))
     stop = min(rec.frame_count, start + FRAMES)
-    cache = ensure_writable_folder(Path("out") / rec.path.resolve().name) / "keypoints.npz"
+    cache = ensure_writable_folder(options.output_folder(None, rec)) / "keypoints.npz"
     keypoints, _ = detect_recording(rec, start, stop, cache=cache)
     print(f"starting from the pose fitted to the keypoints of frames {start}..{stop - 1} ({cache})")
     return first_pose(rec, model, keypoints)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from tracker.commands import options
 from tracker.errors import TrackerInputError
@@ -35,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
-    out = ensure_writable_folder(Path(args.out) if args.out else Path("out") / rec.path.resolve().name)
+    out = ensure_writable_folder(options.output_folder(args.out, rec))
     path = out / "keypoints.npz"
     started = time.perf_counter()
     keypoints, reused = detect_recording(

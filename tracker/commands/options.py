@@ -234,6 +234,11 @@ def recording(args: argparse.Namespace):
     return open_recording(args.recording, camera_names(args.cameras), args.calib)
 
 
+def output_folder(given: str | None, rec) -> Path:
+    """The folder a command writes a recording's results to: ``given`` (``--out``), else out/<recording name>."""
+    return Path(given) if given else Path("out") / rec.path.resolve().name
+
+
 def opened(args: argparse.Namespace):
     """The recording (``--cameras``, ``--calib``) and the body model (``--model``, else the recording's) a
     command works on."""
@@ -258,7 +263,7 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     from tracker.io.poses import load_poses
     from tracker.status import LOST
 
-    path = Path(given) if given else Path("out") / rec.path.resolve().name / "poses.npz"
+    path = Path(given) if given else output_folder(None, rec) / "poses.npz"
     if not given and not path.is_file():
         raise TrackerInputError(
             f"{path}: no poses to review or refine; run `tracker track {rec.path}` first or pass --poses"

@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
     settings = options.settings_from(args, rec.fps)
-    out = Path(args.out) if args.out else Path("out") / rec.path.resolve().name
+    out = options.output_folder(args.out, rec)
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     step = options.keypoint_step_at(args, rec.fps)
     model = _model(args, rec, out, step)
