@@ -246,6 +246,26 @@ def _rz(a):
     return se3.exp_so3(np.array([0.0, 0.0, a]))
 
 
+def _check_human(model: Model, motion: str) -> None:
+    """Raise TrackerInputError unless ``model`` has the human model's components that ``motion`` drives."""
+    missing = [n for n in RETARGET_MAP if n not in model.names]
+    if missing:
+        raise TrackerInputError(
+            f"model {model.name!r}: {motion} motion needs the components {', '.join(missing)}; use models/human.toml"
+        )
+
+
+def _forward(model: Model, local: dict[str, np.ndarray]) -> np.ndarray:
+    """Poses (N, 4, 4) by forward kinematics, E_i = E_parent T0_i R_i, from each component's rotation R_i
+    relative to its rest pose (the root's R at the origin)."""
+    poses = np.empty((model.size, 4, 4))
+    for i, name in enumerate(model.names):
+        pose = np.eye(4)
+        pose[0:3, 0:3] = local[name]
+        poses[i] = pose if model.parent[i] < 0 else poses[model.parent[i]] @ model.rest[i] @ pose
+    return poses
+
+
 def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 0) -> np.ndarray:
     """Smooth model poses (frames, N, 4, 4): turning on the spot, knee bends, arm swings and a wave.
 
@@ -254,12 +274,8 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
     and rates a little. Feet stay near z = 0 when the knees bend (the root drops).
     Needs the human model's component names.
     """
+    _check_human(model, "procedural")
     rng = np.random.default_rng(seed)
-    missing = [n for n in RETARGET_MAP if n not in model.names]
-    if missing:
-        raise TrackerInputError(
-            f"model {model.name!r}: procedural motion needs the components {', '.join(missing)}; use models/human.toml"
-        )
     idx = {name: model.index(name) for name in model.names}
     thigh = float(np.linalg.norm(model.rest[idx["shin_l"], 0:3, 3]))
     shin = float(np.linalg.norm(model.rest[idx["foot_l"], 0:3, 3]))
@@ -289,15 +305,9 @@ def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 
         local["upperarm_l"] = _ry(-raise_l) @ _rz(np.pi / 2)
         local["forearm_l"] = _rx(-(0.7 + 0.5 * wave))
         local["hand_l"] = _ry(0.3 * wave)
-        root = np.array([0.0, 0.0, 0.0])
-        poses = np.empty((model.size, 4, 4))
-        for i, name in enumerate(model.names):
-            pose = np.eye(4)
-            pose[0:3, 0:3] = local[name]
-            poses[i] = pose if model.parent[i] < 0 else poses[model.parent[i]] @ model.rest[i] @ pose
+        poses = _forward(model, local)
         # hips above the ankles: (thigh + shin) cos(bend) plus the ankle's height above the sole
-        root[2] = (thigh + shin) * np.cos(bend) + foot_low
-        poses[:, 0:3, 3] += root
+        poses[:, 2, 3] += (thigh + shin) * np.cos(bend) + foot_low
         out[f] = model.coerce(poses)
     out[:, :, 2, 3] -= np.median(lowest_points(model, out))
     return out
@@ -360,11 +370,7 @@ def athletic_motion(model: Model, frames: int, fps: float = 30.0, seed: int = 0)
     sways a little about the origin. Built by forward kinematics like :func:`procedural_motion`, then
     ``Model.coerce``; the feet stand on z = 0 when on the ground. Needs the human model's component names.
     """
-    missing = [n for n in RETARGET_MAP if n not in model.names]
-    if missing:
-        raise TrackerInputError(
-            f"model {model.name!r}: athletic motion needs the components {', '.join(missing)}; use models/human.toml"
-        )
+    _check_human(model, "athletic")
     rng = np.random.default_rng([seed, 13])
     idx = {name: model.index(name) for name in model.names}
     thigh = float(np.linalg.norm(model.rest[idx["shin_l"], 0:3, 3]))
@@ -407,14 +413,51 @@ def athletic_motion(model: Model, frames: int, fps: float = 30.0, seed: int = 0)
             swing = arm_forward + (0.9 * _bump(u) if counter else -0.4 * _bump(u) if move == "kick" else 0.0)
             local[f"upperarm_{side}"] = _rx(-swing) @ _ry(-sign * arm_side)
             local[f"forearm_{side}"] = _rx(-(0.3 + 0.8 * _bump(u) if move == "kick" else 0.3 + 0.4 * arm_forward))
-        poses = np.empty((model.size, 4, 4))
-        for i, name in enumerate(model.names):
-            pose = np.eye(4)
-            pose[0:3, 0:3] = local[name]
-            poses[i] = pose if model.parent[i] < 0 else poses[model.parent[i]] @ model.rest[i] @ pose
+        poses = _forward(model, local)
         poses[:, 0, 3] += 0.15 * np.sin(0.5 * t + sway[0])
         poses[:, 1, 3] += 0.15 * np.sin(0.4 * t + sway[1])
         poses[:, 2, 3] += (thigh + shin) * np.cos(bend) + foot_low + height
+        out[f] = model.coerce(poses)
+    out[:, :, 2, 3] -= np.median(lowest_points(model, out))
+    return out
+
+
+def seated_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 0) -> np.ndarray:
+    """Model poses (frames, N, 4, 4) of a person seated at a desk: thighs level, shins upright, feet flat.
+
+    The seat is as high as the shin plus the foot; the legs hardly move (a slow knee sway of 0.1 rad).
+    The upper body works at the desk: the trunk leans forward 0.05-0.45 rad and twists, the head
+    turns and nods, and each arm reaches forward 0.3-1.5 rad and out to the side 0.1-0.7 rad with the
+    elbow bending 0.3-1.7 rad, the two arms out of phase. The heading is random (seeded) and then
+    sways by 0.2 rad. Built by forward kinematics like :func:`procedural_motion`, then ``Model.coerce``;
+    the soles rest on z = 0. Needs the human model's component names.
+    """
+    _check_human(model, "seated")
+    rng = np.random.default_rng([seed, 29])
+    idx = {name: model.index(name) for name in model.names}
+    shin = float(np.linalg.norm(model.rest[idx["foot_l"], 0:3, 3]))
+    foot_low = -float(lowest_points(model, rest_poses(model, np.eye(4))[None])[0])
+    heading = rng.uniform(0.0, 2.0 * np.pi)
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=8)
+    rate = rng.uniform(0.85, 1.15, size=4)
+    out = np.empty((frames, model.size, 4, 4))
+    for f in range(frames):
+        t = f / fps
+        wave = np.sin(2.0 * np.pi * np.array([0.3, 0.45, 0.6, 0.25]) * rate * t + phase[:4])
+        local = {name: np.eye(3) for name in model.names}
+        local["pelvis"] = _rz(heading + 0.2 * np.sin(0.4 * t + phase[4]))
+        local["torso"] = _rz(0.3 * wave[3]) @ _rx(-(0.25 + 0.2 * wave[0]))
+        local["head"] = _rz(0.5 * np.sin(0.5 * t + phase[5])) @ _rx(0.2 * np.sin(0.7 * t + phase[6]))
+        for k, (side, sign) in enumerate((("l", 1.0), ("r", -1.0))):
+            sway = 0.1 * np.sin(0.3 * t + phase[7] + np.pi * k)
+            local[f"thigh_{side}"] = _rx(-np.pi / 2 + sway) @ _ry(-sign * 0.15)
+            local[f"shin_{side}"] = _rx(np.pi / 2 - sway)
+            reach, out_side = wave[1 + k], wave[2 - k]
+            local[f"upperarm_{side}"] = _rx(-(0.9 + 0.6 * reach)) @ _ry(-sign * (0.4 + 0.3 * out_side))
+            local[f"forearm_{side}"] = _rx(-(1.0 - 0.7 * reach))
+            local[f"hand_{side}"] = _rx(0.3 * out_side)
+        poses = _forward(model, local)
+        poses[:, 2, 3] += shin + foot_low
         out[f] = model.coerce(poses)
     out[:, :, 2, 3] -= np.median(lowest_points(model, out))
     return out

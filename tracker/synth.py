@@ -2,7 +2,7 @@
 
 Pipeline of :func:`synthesize`::
 
-    motion (BVH clip | procedural | athletic) -> model poses (F, N, 4, 4)        (tracker.clips)
+    motion (BVH clip | procedural | athletic | seated) -> model poses (F, N, 4, 4)        (tracker.clips)
     staging: the body that plays them         -> the model itself, or capsules  (tracker.actor)
     per camera, once                          -> the backdrop: photos, or a room (tracker.room)
     per frame and camera                      -> ray-cast body over the backdrop, props, texture,
@@ -29,7 +29,7 @@ from tracker import texture as textures
 from tracker.actor import actor_poses, capsule_body, stretched_body
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, save_calibration
-from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, surface_samples
+from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, seated_motion, surface_samples
 from tracker.errors import TrackerInputError
 from tracker.face import HAIR, Face
 from tracker.geometry import se3
@@ -256,7 +256,7 @@ def motion_poses(
     """Poses (F, N, 4, 4), frame rate and the BVH path (or None) for a motion spec.
 
     ``motion`` is ``"bvh:PATH"`` (retargeted frames start, start + stride, ...;
-    rate = BVH rate / stride), ``"procedural"`` or ``"athletic"`` (at ``fps``, varied by ``seed``).
+    rate = BVH rate / stride), ``"procedural"``, ``"athletic"`` or ``"seated"`` (at ``fps``, varied by ``seed``).
     """
     if motion.startswith("bvh:"):
         path = Path(motion[4:])
@@ -268,8 +268,10 @@ def motion_poses(
         return procedural_motion(model, frames, fps, seed), float(fps), None
     if motion == "athletic":
         return athletic_motion(model, frames, fps, seed), float(fps), None
+    if motion == "seated":
+        return seated_motion(model, frames, fps, seed), float(fps), None
     raise TrackerInputError(
-        f"motion {motion!r} is not known; use --motion bvh:PATH/TO/CLIP.bvh, procedural or athletic"
+        f"motion {motion!r} is not known; use --motion bvh:PATH/TO/CLIP.bvh, procedural, athletic or seated"
     )
 
 
@@ -409,7 +411,7 @@ def synthesize(
     instead when not ``write_init``, so that a tracker must find the start), ``truth.npz``
     (joints no camera sees are NaN) and a ``README.md`` with credits.  ``motion``:
     ``"bvh:PATH"`` (frames start, start + stride, ... of the clip, at the clip's rate / stride),
-    ``"procedural"`` or ``"athletic"`` (at ``fps``, varied by ``seed``).  ``quality`` applies to
+    ``"procedural"``, ``"athletic"`` or ``"seated"`` (at ``fps``, varied by ``seed``).  ``quality`` applies to
     MJPG (libjpeg quality, 4:2:0); other OpenCV fourccs (``mp4v``, ``XVID``,
     ``FFV1``) go through ``cv2.VideoWriter``.  ``backgrounds``: image paths (see
     :func:`load_backgrounds`); ``noise`` sigma in grey levels; ``blur`` edge

@@ -16,14 +16,16 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", required=True, help="body model TOML")
     parser.add_argument("--calib", required=True, help="camera rig calibration.toml")
     parser.add_argument(
-        "--motion", required=True, help="bvh:PATH (a BVH clip, retargeted), procedural or athletic (hops, kicks, spins)"
+        "--motion",
+        required=True,
+        help="bvh:PATH (a BVH clip, retargeted), procedural, athletic (hops, kicks, spins) or seated (at a desk)",
     )
     parser.add_argument("--out", required=True, help="recording folder to write")
     parser.add_argument("--frames", type=positive_int, default=160, help="frames to render (default 160)")
     parser.add_argument("--start", type=int, default=0, help="first BVH frame (default 0)")
     parser.add_argument("--stride", type=positive_int, default=2, help="BVH frames per rendered frame (default 2)")
     parser.add_argument(
-        "--fps", type=positive_float, default=60.0, help="frame rate of procedural and athletic motion (default 60)"
+        "--fps", type=positive_float, default=60.0, help="frame rate of the made-up motions (default 60)"
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed for noise, backgrounds, motion, body, texture")
     parser.add_argument(
