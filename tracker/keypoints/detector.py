@@ -117,7 +117,7 @@ class Detection:
         return bool(np.isfinite(self.pixels).all())
 
 
-def _rgb(image: np.ndarray) -> np.ndarray:
+def rgb_of(image: np.ndarray) -> np.ndarray:
     """The RGB (H, W, 3) uint8 of a BGR (H, W, 3) or grey (H, W) uint8 image."""
     return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB if image.ndim == 2 else cv2.COLOR_BGR2RGB)
 
@@ -207,7 +207,7 @@ class Detector:
 
     def whole(self, image: np.ndarray) -> Detection:
         """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows."""
-        found = _read(self._pose, _rgb(image))
+        found = _read(self._pose, rgb_of(image))
         if found.found:
             self._last = around(found.pixels)
         return found
@@ -215,7 +215,7 @@ class Detector:
     def cropped(self, image: np.ndarray) -> Detection:
         """The landmarks the crops find in the image just given to :meth:`whole`: followed around the last
         landmarks, else searched for."""
-        rgb = _rgb(image)
+        rgb = rgb_of(image)
         for run in (self._follow, self._search):
             found = run(rgb)
             if found.found:

@@ -1,7 +1,9 @@
 """A body model fitted to the person in a recording (docs/fit-model.md).
 
-1. The keypoint detector on frames spread over the recording (:data:`FRAMES` by default), its landmarks
-   triangulated frame by frame (:func:`tracker.keypoints.triangulation.frame_by_frame`).
+1. The keypoint detector on frames spread over the recording (:data:`FRAMES` by default); a landmark off the
+   detector's segmentation of the person in a view counts as unseen there (:mod:`tracker.keypoints.silhouette`:
+   a desk before the legs); the landmarks triangulated frame by frame
+   (:func:`tracker.keypoints.triangulation.frame_by_frame`).
 2. The joints fitted to them, each frame's pose fitted first (:func:`tracker.shape.landmarks.fit_landmarks`).
 3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
    the frames the edges hold (status not lost) are kept.
@@ -18,6 +20,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
@@ -27,6 +30,8 @@ from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.first_pose import SNAP, snap_to_edges
+from tracker.keypoints.silhouette import PersonMask, Segmenter
+from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import frame_by_frame
 from tracker.model import Model, model_from_dict, save_model
 from tracker.proportions import sizes
@@ -34,7 +39,7 @@ from tracker.shape.edges import FrameRows, bundle_step, frame_rows, moved
 from tracker.shape.landmarks import fit_landmarks
 from tracker.shape.layout import Layout
 from tracker.status import LOST
-from tracker.track import Tracker
+from tracker.track import Inspection, Tracker
 
 FRAMES = 40
 """Frames the fit reads by default, spread evenly over the recording: many poses tell the lengths apart."""
@@ -76,6 +81,10 @@ SEEN = 0.5
 
 RARELY = 0.5
 """A joint whose landmark is seen in fewer than this share of the views of the fitted frames is held."""
+
+ON_PERSON = 0.5
+"""A component whose outline samples lie on the person's segmentation in a view less than this share of the time
+is left out of that view (:func:`off_person`)."""
 
 MEASURED = 100
 """Samples with an edge, over the frames of the best round, that a component needs to count as measured; the
@@ -126,11 +135,13 @@ def fit_shape(
     step = max(1, recording.frame_count // max(frames, 1))
     say(f"keypoints: detecting the body in every {step}th frame" if step > 1 else "keypoints: detecting the body")
     keypoints, _ = detect_recording(recording, 0, recording.frame_count, step=step, cache=cache, progress=progress)
+    say("silhouettes: which landmarks lie on the person")
+    keypoints, greys, masks = _on_person(recording, keypoints, step, progress)
     found = frame_by_frame(keypoints, recording.cameras, model)
     say(f"landmarks: {len(found.rows)} of {len(keypoints.frame)} frames show the body in two views or more")
     landmarks = fit_landmarks(layout, document, found.points, keypoints.frame[found.rows], progress=progress)
     model = model_from_dict(layout.document(landmarks.x, document))
-    images = _images(recording, landmarks.frames, step)
+    images = [greys[row] for row in np.searchsorted(keypoints.frame, landmarks.frames)]
     poses, held = [], []
     for k, row in enumerate(progress(np.searchsorted(keypoints.frame, landmarks.frames), total=len(images))):
         marks = consistent(keypoints.rows(slice(row, row + 1)), recording.cameras)[0]
@@ -149,9 +160,8 @@ def fit_shape(
     rows = np.searchsorted(keypoints.frame, landmarks.frames[kept])
     hidden = [unseen_parts(model, keypoints.confidence[row]) for row in rows]
     prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR, held=unseen_joints(model, keypoints.confidence[rows]))
-    best, residuals = _edge_rounds(
-        layout, document, start, [images[k] for k in kept], hidden, prior, recording.cameras, progress
-    )
+    views = [(images[k], masks[row], unseen) for k, row, unseen in zip(kept, rows, hidden)]
+    best, residuals = _edge_rounds(layout, document, start, views, prior, recording.cameras, progress)
     return ShapeFit(
         layout.document(best.x, document),
         layout,
@@ -182,25 +192,24 @@ def _edge_rounds(
     layout: Layout,
     document: dict,
     start: _State,
-    images: list[list[np.ndarray]],
-    hidden: list[np.ndarray],
+    views: list[tuple[list[np.ndarray], list[PersonMask | None], np.ndarray]],
     prior: np.ndarray,
     cameras: list,
     progress: Callable[..., Iterable],
 ) -> tuple[_State, tuple[float, ...]]:
-    """The best state of the edge rounds from ``start`` (module docstring, step 4) in the frames' ``images``, the
-    parts ``hidden`` (C, N) in each frame's views left out, under the ``prior`` rows, and each round's residual."""
+    """The best state of the edge rounds from ``start`` (module docstring, step 4) under the ``prior`` rows, and
+    each round's residual.  Each frame's ``views`` are its images, the person's masks and the parts (C, N) the
+    detector does not see in each view: those are left out, and so are those off the masks (:func:`off_person`)."""
     damping, best, now, residuals = DAMPING[0], start, start, []
     for search in progress(RANGES, total=len(RANGES)):
         tracker = Tracker(now.model, cameras, now.poses[0], dataclasses.replace(SNAP, search_range=search))
         scaled = tracker.settings.search_range  # for the image size
         factors = layout.factors(now.x)
-        measured = [
-            frame_rows(
-                layout, now.model, factors, pose, tracker.inspect(frame, poses=pose, search_range=scaled)
-            ).without(unseen)
-            for pose, frame, unseen in zip(now.poses, images, hidden)
-        ]
+        measured = []
+        for pose, (images, masks, unseen) in zip(now.poses, views):
+            seen_here = tracker.inspect(images, poses=pose, search_range=scaled)
+            hidden = unseen | off_person(seen_here, masks, now.model.size)
+            measured.append(frame_rows(layout, now.model, factors, pose, seen_here).without(hidden))
         seen = np.bincount(np.concatenate([frame.component for frame in measured]), minlength=now.model.size)
         rows = held_rows(measured, now.model.size)
         weight = np.concatenate([frame.weight for frame in rows])
@@ -274,11 +283,47 @@ def held_rows(frames: list[FrameRows], components: int) -> list[FrameRows]:
     return [frame.without(stray[k]) for k, frame in enumerate(frames)]
 
 
-def _images(recording: Recording, wanted: np.ndarray, step: int) -> list[list[np.ndarray]]:
-    """The grey images (one per camera) of the frames ``wanted`` (every one a multiple of ``step``)."""
-    keep = set(int(frame) for frame in wanted)
-    out = {index: greys for index, greys in frames_of(recording, 0, recording.frame_count, step=step) if index in keep}
-    return [out[int(frame)] for frame in wanted]
+def _on_person(
+    recording: Recording, keypoints: Keypoints, step: int, progress: Callable[..., Iterable]
+) -> tuple[Keypoints, list[list[np.ndarray]], list[list[PersonMask | None]]]:
+    """``keypoints`` with no confidence where a landmark lies off the person's segmentation in its view (kept as
+    detected where the segmenter finds nobody), the grey images (one per camera) of their frames (every one a
+    multiple of ``step``) and the person's mask in each (None where not found)."""
+    wanted = {int(frame): row for row, frame in enumerate(keypoints.frame)}
+    confidence = keypoints.confidence.copy()
+    greys: list[list[np.ndarray]] = [[] for _ in wanted]
+    masks: list[list[PersonMask | None]] = [[] for _ in wanted]
+    segmenter = Segmenter()
+    try:
+        every = frames_of(recording, 0, recording.frame_count, colour=True, step=step)
+        for index, images in progress(every, total=len(range(0, recording.frame_count, step))):
+            if index not in wanted:
+                continue
+            row = wanted[index]
+            for view, image in enumerate(images):
+                greys[row].append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
+                mask = segmenter.mask(image, keypoints.pixels[row, view])
+                if mask is not None:
+                    confidence[row, view] *= mask.covers(keypoints.pixels[row, view])
+                masks[row].append(mask)
+    finally:
+        segmenter.close()
+    return dataclasses.replace(keypoints, confidence=confidence), greys, masks
+
+
+def off_person(inspection: Inspection, masks: list[PersonMask | None], components: int) -> np.ndarray:
+    """The components (C, N) bool whose outline samples in ``inspection`` lie on the person's mask in a view less
+    than :data:`ON_PERSON` of the time (a part behind a desk, whose outline falls on the desk); none in a view
+    without a mask."""
+    out = np.zeros((len(masks), components), bool)
+    for view, mask in enumerate(masks):
+        if mask is None:
+            continue
+        here = inspection.camera == view
+        total = np.bincount(inspection.component[here], minlength=components)
+        on = np.bincount(inspection.component[here], weights=mask.covers(inspection.pixel[here]), minlength=components)
+        out[view] = (total > 0) & (on < ON_PERSON * total)
+    return out
 
 
 GENERIC = Path(__file__).resolve().parents[2] / "models" / "human.toml"
@@ -298,7 +343,7 @@ def changes(base: dict, fit: ShapeFit) -> list[str]:
     unmeasured = [name for name, seen in zip(fit.layout.names, fit.measured()) if not seen]
     if unmeasured:
         lines.append(
-            f"not measured (too few edges seen): {', '.join(unmeasured)}; they keep the given proportions, "
+            f"not measured (hidden, or too few edges seen): {', '.join(unmeasured)}; they keep the given proportions, "
             f"scaled by {fit.x[-1]:.3f}"
         )
     return lines
