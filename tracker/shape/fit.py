@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Iterable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +30,7 @@ from tracker.io.recording import frames as frames_of
 from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import detect_recording
+from tracker.keypoints.detector import native_logs_muted
 from tracker.keypoints.first_pose import SNAP, snap_to_edges
 from tracker.keypoints.silhouette import PersonMask, Segmenter
 from tracker.keypoints.store import Keypoints
@@ -288,13 +290,16 @@ def _on_person(
 ) -> tuple[Keypoints, list[list[np.ndarray]], list[list[PersonMask | None]]]:
     """``keypoints`` with no confidence where a landmark lies off the person's segmentation in its view (kept as
     detected where the segmenter finds nobody), the grey images (one per camera) of their frames (every one a
-    multiple of ``step``) and the person's mask in each (None where not found)."""
+    multiple of ``step``) and the person's mask in each (None where not found).  MediaPipe's native logs are
+    muted the whole time, as while detecting."""
     wanted = {int(frame): row for row, frame in enumerate(keypoints.frame)}
     confidence = keypoints.confidence.copy()
     greys: list[list[np.ndarray]] = [[] for _ in wanted]
     masks: list[list[PersonMask | None]] = [[] for _ in wanted]
-    segmenter = Segmenter()
-    try:
+    with ExitStack() as stack:
+        stack.enter_context(native_logs_muted())  # the graph's threads log while it runs
+        segmenter = Segmenter()
+        stack.callback(segmenter.close)
         every = frames_of(recording, 0, recording.frame_count, colour=True, step=step)
         for index, images in progress(every, total=len(range(0, recording.frame_count, step))):
             if index not in wanted:
@@ -306,8 +311,6 @@ def _on_person(
                 if mask is not None:
                     confidence[row, view] *= mask.covers(keypoints.pixels[row, view])
                 masks[row].append(mask)
-    finally:
-        segmenter.close()
     return dataclasses.replace(keypoints, confidence=confidence), greys, masks
 
 
