@@ -68,3 +68,19 @@ def test_bench_on_a_folder_without_model_or_first_pose_is_one_line(tiny_recordin
     assert main(["bench", str(folder), "--repeats", "1"]) == 2
     errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("tracker: error:")]
     assert len(errors) == 1 and f"{folder}: no {missing}" in errors[0]
+    option = "--model" if missing == "model.toml" else "--init"
+    assert f"pass {option}" in errors[0]
+
+
+def test_bench_takes_the_model_and_first_pose_from_elsewhere(tiny_recording, tmp_path, capsys):
+    """A folder with only its calibration and videos (a lab's recording): --model and --init give the rest."""
+    folder = tmp_path / "rec"
+    shutil.copytree(tiny_recording, folder)
+    for name in ("model.toml", "init.toml"):
+        shutil.move(folder / name, tmp_path / name)
+    args = ["bench", str(folder), "--model", str(tmp_path / "model.toml"), "--init", str(tmp_path / "init.toml")]
+    assert main([*args, "--json", "--repeats", "1", "--keypoints", "off"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["frames"] == 6 and result["fps_all_views"] > 0
+    assert main(["bench", str(folder), "--model", str(tmp_path / "nowhere.toml"), "--init", str(tmp_path)]) == 2
+    assert "nowhere.toml" in capsys.readouterr().err

@@ -94,15 +94,14 @@ def detector_ms(recording: Recording, count: int = 40) -> float:
     return 1e3 * _median(seconds)
 
 
-def track_run(recording: Recording, model: Model, settings: Settings, out: Path, keypoint_step: int = 0) -> TrackRun:
-    """One end-to-end pass: reader threads, tracking and the poses.npz writer; with ``keypoint_step`` the
-    detector's worker on every keypoint_step-th frame beside them, started before the kernels load."""
-    if recording.init_path is None:
-        raise TrackerInputError(
-            f"{recording.path}: no init.toml; tracker bench needs a recording folder with its first pose"
-        )
+def track_run(
+    recording: Recording, model: Model, start: np.ndarray, settings: Settings, out: Path, keypoint_step: int = 0
+) -> TrackRun:
+    """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
+    with ``keypoint_step`` the detector's worker on every keypoint_step-th frame beside them, started before the
+    kernels load."""
     stream = KeypointStream(recording, 0, recording.frame_count, keypoint_step) if keypoint_step else None
-    tracker = Tracker(model, recording.cameras, load_pose_file(recording.init_path, model), settings)
+    tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     tracker.times = StageTimes()
     output = 0.0
@@ -124,28 +123,40 @@ def track_run(recording: Recording, model: Model, settings: Settings, out: Path,
     return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
 
 
-def run(path: Path = DEMO, settings: Settings = Settings(), repeats: int = 3, keypoint_step: int | None = None) -> dict:
+def run(
+    path: Path = DEMO,
+    settings: Settings = Settings(),
+    repeats: int = 3,
+    keypoint_step: int | None = None,
+    model_path: Path | None = None,
+    init_path: Path | None = None,
+) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
-    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate)."""
+    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate).  The body
+    model and the first pose are ``model_path`` and ``init_path``, else the recording's own."""
     every = open_recording(path)
     if keypoint_step is None:
         keypoint_step = default_step(every.fps)
     first = open_recording(path, [every.cameras[0].name])
-    if every.model_path is None or every.init_path is None:
-        missing = "model.toml" if every.model_path is None else "init.toml"
+    model_path = model_path or every.model_path
+    init_path = init_path or every.init_path
+    if model_path is None or init_path is None:
+        missing, option = ("model.toml", "--model") if model_path is None else ("init.toml", "--init")
         raise TrackerInputError(
-            f"{path}: no {missing}; tracker bench needs a recording folder with a model and a first pose"
+            f"{path}: no {missing}; tracker bench needs a model and a first pose: pass {option} "
+            "(tracker fit-model and tracker init write them)"
         )
-    model = load_model(every.model_path)
+    model = load_model(model_path)
+    start = load_pose_file(init_path, model)
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
         decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
         floor_all = [decode_only_fps(every) for _ in range(repeats)]
         floor_one = [decode_only_fps(first) for _ in range(repeats)]
-        runs_all = [track_run(every, model, settings, out) for _ in range(repeats)]
-        runs_one = [track_run(first, model, settings, out) for _ in range(repeats)]
+        runs_all = [track_run(every, model, start, settings, out) for _ in range(repeats)]
+        runs_one = [track_run(first, model, start, settings, out) for _ in range(repeats)]
         runs_cue = [
-            track_run(every, model, settings, out, keypoint_step) for _ in range(repeats if keypoint_step else 0)
+            track_run(every, model, start, settings, out, keypoint_step) for _ in range(repeats if keypoint_step else 0)
         ]
         detector = detector_ms(every) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}

@@ -14,6 +14,8 @@ HELP = "per-stage timings, frames per second and the decode-only floor"
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker bench``."""
     parser.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
+    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    parser.add_argument("--init", help="first pose TOML (default: the recording's init.toml)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     parser.add_argument(
         "--scaling",
@@ -37,6 +39,13 @@ def run(args: argparse.Namespace) -> int:
         result = bench.scaling()
         print(json.dumps(result, indent=2) if args.json else bench.format_scaling(result))
         return 0
-    result = bench.run(Path(args.recording) if args.recording else bench.DEMO, settings, args.repeats, args.keypoints)
+    result = bench.run(
+        Path(args.recording) if args.recording else bench.DEMO,
+        settings,
+        args.repeats,
+        args.keypoints,
+        Path(args.model) if args.model else None,
+        Path(args.init) if args.init else None,
+    )
     print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
     return 0
