@@ -84,3 +84,19 @@ def test_bench_takes_the_model_and_first_pose_from_elsewhere(tiny_recording, tmp
     assert result["frames"] == 6 and result["fps_all_views"] > 0
     assert main(["bench", str(folder), "--model", str(tmp_path / "nowhere.toml"), "--init", str(tmp_path)]) == 2
     assert "nowhere.toml" in capsys.readouterr().err
+
+
+def test_a_long_run_reads_the_recording_in_a_loop_and_reports_memory(tiny_recording, capsys, monkeypatch):
+    """30 frames of a 6-frame recording: five passes, every frame written, memory read before, after the
+    settled frame and at the end (Linux reports it; the CI machines are Linux)."""
+    from tracker import bench
+
+    monkeypatch.setattr(bench, "SETTLED", 12)
+    assert main(["bench", str(tiny_recording), "--long", "30", "--keypoints", "off", "--json", "--quiet"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["frames"] == 30 and result["frames_written"] == 30 and result["settled_frame"] == 12
+    memory = [result[key] for key in ("resident_mb_start", "resident_mb_settled", "resident_mb_end")]
+    assert all(50 < value < 5000 for value in memory)
+    assert result["resident_mb_growth_after_settled"] == result["resident_mb_end"] - result["resident_mb_settled"]
+    assert main(["bench", str(tiny_recording), "--long", "8", "--keypoints", "off", "--quiet"]) == 0
+    assert "poses.npz holds 8" in capsys.readouterr().out

@@ -14,12 +14,15 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
   in this process), and frames per second end to end with the detector beside the tracker at its
   default rate (a worker process started afresh in each pass, as ``tracker track`` does, so its
-  start-up counts).
+  start-up counts);
+* a long run (:func:`long_run`): thousands of frames, the recording read in a loop, and the resident
+  memory before, after the first :data:`SETTLED` frames and at the end (a live session must not grow).
 """
 
 from __future__ import annotations
 
 import itertools
+import os
 import statistics
 import tempfile
 import time
@@ -33,7 +36,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
-from tracker.io.poses import PosesWriter
+from tracker.io.poses import PosesWriter, load_poses
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.io.stepwrite import step_and_write
@@ -123,6 +126,22 @@ def track_run(
     return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
 
 
+def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tuple[Recording, Model, np.ndarray]:
+    """The recording at ``path``, the body model and the first pose (``model_path`` and ``init_path``, else the
+    recording's own); a one-line error naming the option when one is missing."""
+    recording = open_recording(path)
+    model_path = model_path or recording.model_path
+    init_path = init_path or recording.init_path
+    if model_path is None or init_path is None:
+        missing, option = ("model.toml", "--model") if model_path is None else ("init.toml", "--init")
+        raise TrackerInputError(
+            f"{path}: no {missing}; tracker bench needs a model and a first pose: pass {option} "
+            "(tracker fit-model and tracker init write them)"
+        )
+    model = load_model(model_path)
+    return recording, model, load_pose_file(init_path, model)
+
+
 def run(
     path: Path = DEMO,
     settings: Settings = Settings(),
@@ -134,20 +153,10 @@ def run(
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
     cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate).  The body
     model and the first pose are ``model_path`` and ``init_path``, else the recording's own."""
-    every = open_recording(path)
+    every, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
         keypoint_step = default_step(every.fps)
     first = open_recording(path, [every.cameras[0].name])
-    model_path = model_path or every.model_path
-    init_path = init_path or every.init_path
-    if model_path is None or init_path is None:
-        missing, option = ("model.toml", "--model") if model_path is None else ("init.toml", "--init")
-        raise TrackerInputError(
-            f"{path}: no {missing}; tracker bench needs a model and a first pose: pass {option} "
-            "(tracker fit-model and tracker init write them)"
-        )
-    model = load_model(model_path)
-    start = load_pose_file(init_path, model)
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
         decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
@@ -184,6 +193,96 @@ def run(
         "detector_ms_per_view": detector,
         "fps_all_views_with_keypoints": _median([r.fps for r in runs_cue]) if runs_cue else float("nan"),
     }
+
+
+def resident_mb() -> float:
+    """This process's resident memory in MB (Linux's /proc/self/statm), or NaN where the system does not say."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+    return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
+
+
+SETTLED = 500
+"""The frame after which a long run's memory should stay flat: the caches, queues and buffers are full by then."""
+
+
+def long_run(
+    path: Path,
+    total: int,
+    settings: Settings = Settings(),
+    keypoint_step: int | None = None,
+    model_path: Path | None = None,
+    init_path: Path | None = None,
+    progress=lambda iterable, total=None: iterable,
+) -> dict:
+    """A long run for memory: ``total`` frames tracked and written to a poses.npz, the recording read again
+    and again from its first frame (each pass with a fresh keypoint worker, at ``keypoint_step``: 0 for none,
+    None for the default), and this process's resident memory before the first frame, after frame
+    :data:`SETTLED` and at the end.  The body jumps where a pass starts again, as a cut in a live session
+    would make it; the figures are about memory and the file, not accuracy."""
+    recording, model, start = _subject(path, model_path, init_path)
+    if keypoint_step is None:
+        keypoint_step = default_step(recording.fps)
+    tracker = Tracker(model, recording.cameras, start, settings)
+    tracker.warm_up()
+    memory = {"start": resident_mb(), "settled": float("nan")}
+    done = 0
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(folder) / "poses.npz"
+        bar = iter(progress(range(total), total=total))
+        with PosesWriter(out, list(model.names), list(model.joint_names), recording.fps) as writer:
+            while done < total:
+                stop = min(recording.frame_count, total - done)
+                stream = KeypointStream(recording, 0, stop, keypoint_step) if keypoint_step else None
+                try:
+                    for index, images in frames(recording, 0, stop, prepare=tracker.smooth):
+                        keypoints = None if stream is None else stream.get(index)
+                        step_and_write(tracker, writer, done, images, keypoints=keypoints)
+                        done += 1
+                        next(bar, None)
+                        if done == SETTLED:
+                            memory["settled"] = resident_mb()
+                finally:
+                    if stream is not None:
+                        stream.close()
+        elapsed = time.perf_counter() - started
+        memory["end"] = resident_mb()
+        written = len(load_poses(out)["frame"])
+    return {
+        "recording": str(path),
+        "views": len(recording.cameras),
+        "frames": done,
+        "frames_written": written,
+        "fps": done / elapsed,
+        "keypoint_step": keypoint_step,
+        "resident_mb_start": memory["start"],
+        "settled_frame": SETTLED,
+        "resident_mb_settled": memory["settled"],
+        "resident_mb_end": memory["end"],
+        "resident_mb_growth_after_settled": memory["end"] - memory["settled"],
+    }
+
+
+def format_long(result: dict) -> str:
+    """A Markdown table of :func:`long_run`'s figures."""
+    cue = schedule_words(result["keypoint_step"]) if result["keypoint_step"] else "off"
+    return "\n".join(
+        [
+            f"Recording `{result['recording']}` read in a loop: {result['views']} views, {result['frames']} frames "
+            f"tracked ({result['fps']:.0f} frames per second, keypoint cue {cue}); poses.npz holds "
+            f"{result['frames_written']}.",
+            "",
+            "| resident memory | MB |",
+            "| --- | --- |",
+            f"| before the first frame | {result['resident_mb_start']:.0f} |",
+            f"| after frame {result['settled_frame']} | {result['resident_mb_settled']:.0f} |",
+            f"| at the end | {result['resident_mb_end']:.0f} |",
+            f"| growth after frame {result['settled_frame']} | {result['resident_mb_growth_after_settled']:+.1f} |",
+        ]
+    )
 
 
 def format_table(result: dict) -> str:

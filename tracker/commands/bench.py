@@ -23,6 +23,13 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="time one iteration against the number of components (7-120) and of cameras (1-8)",
     )
     parser.add_argument("--repeats", type=options.positive_int, default=3, help="passes per figure (default 3)")
+    parser.add_argument(
+        "--long",
+        type=options.positive_int,
+        metavar="FRAMES",
+        help="instead, track this many frames (the recording read in a loop) and report resident memory",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar (--long)")
     options.add_keypoint_options(parser, "time the keypoint cue at this rate")
     options.add_tuning_options(parser, ("iterations", "spacing", "resample_every"))
 
@@ -39,13 +46,21 @@ def run(args: argparse.Namespace) -> int:
         result = bench.scaling()
         print(json.dumps(result, indent=2) if args.json else bench.format_scaling(result))
         return 0
+    model = Path(args.model) if args.model else None
+    init = Path(args.init) if args.init else None
+    recording = Path(args.recording) if args.recording else bench.DEMO
+    if args.long:
+        bar = options.bar(args, None, "frame")
+        long = bench.long_run(recording, args.long, settings, args.keypoints, model, init, bar)
+        print(json.dumps(long, indent=2) if args.json else bench.format_long(long))
+        return 0
     result = bench.run(
-        Path(args.recording) if args.recording else bench.DEMO,
+        recording,
         settings,
         args.repeats,
         args.keypoints,
-        Path(args.model) if args.model else None,
-        Path(args.init) if args.init else None,
+        model,
+        init,
     )
     print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
     return 0
