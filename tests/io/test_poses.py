@@ -33,7 +33,7 @@ def write_frames(writer: PosesWriter, frames: range, seed: int = 0) -> list[tupl
 def test_round_trip(tmp_path: Path) -> None:
     path = tmp_path / "new" / "folder" / "poses.npz"  # missing folders are created
     with PosesWriter(path, COMPONENTS, JOINTS, fps=25.0) as writer:
-        rows = write_frames(writer, range(10, 110))  # grows past the initial capacity
+        rows = write_frames(writer, range(10, 110))
     arrays = load_poses(path)
     np.testing.assert_array_equal(arrays["frame"], np.arange(10, 110))
     np.testing.assert_allclose(arrays["time"], np.arange(100) / 25.0)
@@ -163,3 +163,42 @@ def test_rows_with_their_own_times_keep_them(tmp_path: Path) -> None:
         with pytest.raises(ValueError, match="every frame a time or none"):
             writer.append(3, poses, joints, 0, 0.5)
     np.testing.assert_array_equal(load_poses(path)["time"], [0.05, 0.1, 0.3])
+
+
+def test_a_long_run_keeps_its_rows_on_disk_and_cleans_up(tmp_path: Path) -> None:
+    """1000 frames with capture times, flushed as they come: the file holds every row in order, the writer's
+    memory holds a fixed number of rows however many are written, and closing removes its raw files."""
+    import tracker.io.poses as poses_module
+
+    path = tmp_path / "poses.npz"
+    writer = PosesWriter(path, COMPONENTS, JOINTS, fps=30.0, flush_every=7)
+    held = sum(column.nbytes for column in writer._buffer.values())
+    rng = np.random.default_rng(3)
+    rows = []
+    for frame in range(1000):
+        poses, joints = row(rng)
+        writer.append(frame, poses, joints, frame % 4, 0.1 * frame, 0.002, time=0.5 + frame / 29.97)
+        rows.append((poses, joints))
+        if frame == 600:
+            assert len(load_poses(path)["frame"]) >= 480  # flushed along the way, a valid file
+    assert sum(column.nbytes for column in writer._buffer.values()) == held
+    assert 1000 > poses_module._BUFFER
+    raw = writer._rows
+    assert raw.is_dir()
+    writer.close()
+    assert not raw.exists()
+    arrays = load_poses(path)
+    np.testing.assert_array_equal(arrays["frame"], np.arange(1000))
+    np.testing.assert_allclose(arrays["time"], 0.5 + np.arange(1000) / 29.97)
+    np.testing.assert_array_equal(arrays["poses"], np.stack([p for p, _ in rows]))
+    np.testing.assert_array_equal(arrays["joints"], np.stack([j for _, j in rows]))
+    np.testing.assert_array_equal(arrays["status"], np.arange(1000) % 4)
+
+
+def test_a_writer_with_no_frames_writes_an_empty_file(tmp_path: Path) -> None:
+    path = tmp_path / "poses.npz"
+    with PosesWriter(path, COMPONENTS, JOINTS, fps=30.0):
+        pass
+    arrays = load_poses(path)
+    assert arrays["joints"].shape == (0, len(JOINTS), 3) and arrays["poses"].shape == (0, len(COMPONENTS), 4, 4)
+    assert arrays["time"].shape == (0,)

@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from tracker.io.markers import read_markers
-    from tracker.io.poses import PosesWriter
+    from tracker.io.poses import PosesWriter, load_poses
     from tracker.physics.points import PointsSettings, load_points_model, start_frame, track
     from tracker.physics.shapes import ShapesWriter
     from tracker.status import LOST, TRACKED, UNCERTAIN
@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
             done = len(writer)
             final = shapes.write(done)  # the frames poses.npz holds, even if Ctrl-C fell between the two appends
     elapsed = time.perf_counter() - started
-    results = writer.arrays()
+    results = load_poses(out / "poses.npz")
     counts = np.bincount(results["status"], minlength=3)
     print(
         f"{'interrupted after' if interrupted else 'fitted'} {done} frames in {elapsed:.1f} s "

@@ -17,12 +17,17 @@ or a quarter more frames than the file holds (whichever is more), and on close,
 so a reader, or a run stopped with Ctrl-C, always finds a valid file of the
 frames done. Each flush rewrites every frame so far (about 2.3 kB a frame for 15
 components), and the growing interval keeps the total written at about five
-times the final file, however long the run.
+times the final file, however long the run.  The rows themselves wait on disk, in
+one raw file per array in a temporary folder, and each flush streams them into the
+archive in chunks: the writer's memory stays the same through a session of hours.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
+import weakref
 import zipfile
 from pathlib import Path
 from types import TracebackType
@@ -34,7 +39,14 @@ from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.errors import TrackerInputError
 from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
-_INITIAL_CAPACITY = 64
+_BUFFER = 256
+"""Rows a writer holds in memory before appending them to its raw files."""
+
+_KEYS = ("frame", "time", "component_names", "poses", "joint_names", "joints", "status", "residual", "elapsed")
+"""The archive's arrays, in its order."""
+
+_CHUNK = 1 << 22
+"""Bytes of a raw file copied into the archive at a time."""
 
 
 def flush_due(unflushed: int, count: int, every: int) -> bool:
@@ -68,17 +80,21 @@ class PosesWriter:
         self._component_names = np.array(component_names, dtype=str)
         self._joint_names = np.array(joint_names, dtype=str)
         n, j = len(component_names), len(joint_names)
-        self._columns: dict[str, np.ndarray] = {
-            "frame": np.empty(_INITIAL_CAPACITY, np.int64),
-            "poses": np.empty((_INITIAL_CAPACITY, n, 4, 4), np.float64),
-            "joints": np.empty((_INITIAL_CAPACITY, j, 3), np.float64),
-            "status": np.empty(_INITIAL_CAPACITY, np.int8),
-            "residual": np.empty(_INITIAL_CAPACITY, np.float64),
-            "elapsed": np.empty(_INITIAL_CAPACITY, np.float64),
-            "time": np.empty(_INITIAL_CAPACITY, np.float64),
+        self._buffer: dict[str, np.ndarray] = {
+            "frame": np.empty(_BUFFER, np.int64),
+            "poses": np.empty((_BUFFER, n, 4, 4), np.float64),
+            "joints": np.empty((_BUFFER, j, 3), np.float64),
+            "status": np.empty(_BUFFER, np.int8),
+            "residual": np.empty(_BUFFER, np.float64),
+            "elapsed": np.empty(_BUFFER, np.float64),
+            "time": np.empty(_BUFFER, np.float64),
         }
+        self._rows = Path(tempfile.mkdtemp(prefix="poses-rows-"))
+        self._removal = weakref.finalize(self, shutil.rmtree, self._rows, True)
+        self._first_frame = 0
         self._timed: bool | None = None  # whether rows come with their own times (all or none)
         self._count = 0
+        self._buffered = 0
         self._unflushed = 0
         self._closed = False
 
@@ -114,48 +130,82 @@ class PosesWriter:
             "time": np.nan if time is None else time,
         }
         for key, value in row.items():
-            if np.shape(value) != self._columns[key].shape[1:]:
-                raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._columns[key].shape[1:]}")
+            if np.shape(value) != self._buffer[key].shape[1:]:
+                raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._buffer[key].shape[1:]}")
         if status not in (TRACKED, UNCERTAIN, LOST, RESEEDED):
             raise ValueError(f"status must be 0, 1, 2 or 3, got {status}")
-        if self._count == len(self._columns["frame"]):
-            self._columns = {
-                key: np.concatenate([column, np.empty_like(column)]) for key, column in self._columns.items()
-            }
+        if self._count == 0:
+            self._first_frame = int(frame_index)
         for key, value in row.items():
-            self._columns[key][self._count] = value
+            self._buffer[key][self._buffered] = value
+        self._buffered += 1
         self._count += 1
         self._unflushed += 1
+        if self._buffered == _BUFFER:
+            self._spill()
         if flush_due(self._unflushed, self._count, self.flush_every):
             self.flush()
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The frames so far as the poses.npz arrays (views, do not modify)."""
-        done = {key: column[: self._count] for key, column in self._columns.items()}
-        first = done["frame"][0] if self._count else 0
-        return {
-            "frame": done["frame"],
-            "time": done["time"] if self._timed else (done["frame"] - first) / self.fps,
-            "component_names": self._component_names,
-            "poses": done["poses"],
-            "joint_names": self._joint_names,
-            "joints": done["joints"],
-            "status": done["status"],
-            "residual": done["residual"],
-            "elapsed": done["elapsed"],
-        }
+    def _spill(self) -> None:
+        """Append the rows held in memory to the raw files."""
+        for key, column in self._buffer.items():
+            with open(self._rows / key, "ab") as file:
+                file.write(column[: self._buffered].tobytes())
+        self._buffered = 0
+
+    def _chunks(self, key: str):
+        """The raw bytes of column ``key`` so far, a chunk at a time (the time computed from the frames when the
+        rows came without times)."""
+        self._spill()
+        if key == "time" and not self._timed:
+            rows = max(1, _CHUNK // 8)
+            frames = np.memmap(self._rows / "frame", np.int64, "r") if self._count else np.empty(0, np.int64)
+            for begin in range(0, self._count, rows):
+                yield ((frames[begin : begin + rows] - self._first_frame) / self.fps).tobytes()
+            return
+        if not self._count:
+            return
+        with open(self._rows / key, "rb") as file:
+            while chunk := file.read(_CHUNK):
+                yield chunk
+
+    def _header(self, key: str) -> dict:
+        """The .npy header of column ``key`` with every frame so far."""
+        column = self._buffer[key]
+        shape = (self._count, *column.shape[1:])
+        return {"descr": np.lib.format.dtype_to_descr(column.dtype), "fortran_order": False, "shape": shape}
+
+    def _names(self, key: str) -> np.ndarray:
+        return self._component_names if key == "component_names" else self._joint_names
+
+    def _write(self, file) -> None:
+        """The archive np.savez would write (stored .npy members), streamed from the raw files."""
+        with zipfile.ZipFile(file, "w", zipfile.ZIP_STORED, allowZip64=True) as archive:
+            for key in _KEYS:
+                self._member(archive, key)
+
+    def _member(self, archive: zipfile.ZipFile, key: str) -> None:
+        with archive.open(f"{key}.npy", "w", force_zip64=True) as member:
+            if key.endswith("_names"):
+                np.lib.format.write_array(member, self._names(key), allow_pickle=False)
+                return
+            np.lib.format.write_array_header_2_0(member, self._header(key))
+            for chunk in self._chunks(key):
+                member.write(chunk)
 
     def flush(self) -> None:
         """Rewrite poses.npz atomically with every frame so far."""
-        arrays: dict[str, Any] = self.arrays()  # Any: numpy's savez stub types **kwds like allow_pickle
-        atomic_write(self.path, lambda file: np.savez(file, **arrays))
+        atomic_write(self.path, self._write)
         self._unflushed = 0
 
     def close(self) -> None:
-        """Flush and stop accepting frames; closing twice is harmless."""
+        """Flush, stop accepting frames and remove the raw files; closing twice is harmless."""
         if not self._closed:
             self._closed = True
-            self.flush()
+            try:
+                self.flush()
+            finally:
+                self._removal()
 
     def __enter__(self) -> PosesWriter:
         return self
