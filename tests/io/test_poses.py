@@ -202,3 +202,44 @@ def test_a_writer_with_no_frames_writes_an_empty_file(tmp_path: Path) -> None:
     arrays = load_poses(path)
     assert arrays["joints"].shape == (0, len(JOINTS), 3) and arrays["poses"].shape == (0, len(COMPONENTS), 4, 4)
     assert arrays["time"].shape == (0,)
+
+
+def test_a_spill_broken_off_is_done_again(tmp_path: Path, monkeypatch) -> None:
+    """Ctrl-C while the rows go to disk (after the first array, before the second; the frame that caused it
+    is not taken), then two frames more: closing writes a valid file with every frame once, in order."""
+    import tracker.io.poses as poses_module
+
+    monkeypatch.setattr(poses_module, "_BUFFER", 4)
+    path = tmp_path / "poses.npz"
+    writer = PosesWriter(path, COMPONENTS, JOINTS, fps=30.0, flush_every=1000)
+    write_frames(writer, range(4))  # the buffer is full: the next frame spills it first
+    real_open, opened = open, []
+
+    def interrupted_open(file, mode="r", *args, **kwargs):
+        opened.append(file)
+        if len(opened) == 2:
+            raise KeyboardInterrupt
+        return real_open(file, mode, *args, **kwargs)
+
+    monkeypatch.setattr("builtins.open", interrupted_open)
+    with pytest.raises(KeyboardInterrupt):
+        write_frames(writer, range(4, 5), seed=1)
+    monkeypatch.setattr("builtins.open", real_open)
+    write_frames(writer, range(4, 6), seed=2)
+    writer.close()
+    arrays = load_poses(path)
+    np.testing.assert_array_equal(arrays["frame"], np.arange(6))
+    assert arrays["poses"].shape == (6, len(COMPONENTS), 4, 4)
+
+
+def test_rows_that_cannot_be_kept_are_a_one_line_error(tmp_path: Path, monkeypatch) -> None:
+    import tracker.io.poses as poses_module
+
+    monkeypatch.setattr(poses_module, "_BUFFER", 2)
+    writer = PosesWriter(tmp_path / "poses.npz", COMPONENTS, JOINTS, fps=30.0, flush_every=1000)
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("")
+    writer._rows = blocked  # as if the temporary folder's disk had gone
+    write_frames(writer, range(2))
+    with pytest.raises(TrackerInputError, match="not-a-folder: cannot keep the tracked frames there.*TMPDIR"):
+        write_frames(writer, range(2, 3))

@@ -94,6 +94,7 @@ class PosesWriter:
         self._first_frame = 0
         self._timed: bool | None = None  # whether rows come with their own times (all or none)
         self._count = 0
+        self._on_disk = 0
         self._buffered = 0
         self._unflushed = 0
         self._closed = False
@@ -136,21 +137,30 @@ class PosesWriter:
             raise ValueError(f"status must be 0, 1, 2 or 3, got {status}")
         if self._count == 0:
             self._first_frame = int(frame_index)
+        if self._buffered == len(self._buffer["frame"]):
+            self._spill()
         for key, value in row.items():
             self._buffer[key][self._buffered] = value
         self._buffered += 1
         self._count += 1
         self._unflushed += 1
-        if self._buffered == _BUFFER:
-            self._spill()
         if flush_due(self._unflushed, self._count, self.flush_every):
             self.flush()
 
     def _spill(self) -> None:
-        """Append the rows held in memory to the raw files."""
-        for key, column in self._buffer.items():
-            with open(self._rows / key, "ab") as file:
-                file.write(column[: self._buffered].tobytes())
+        """Append the rows held in memory to the raw files.  Each file is first cut back to the rows written for
+        certain, so a spill broken off (Ctrl-C) is simply done again."""
+        try:
+            for key, column in self._buffer.items():
+                with open(self._rows / key, "ab") as file:
+                    file.truncate(self._on_disk * column[0].nbytes)
+                    file.write(column[: self._buffered].tobytes())
+        except OSError as error:
+            raise TrackerInputError(
+                f"{self._rows}: cannot keep the tracked frames there ({error.strerror or error}); "
+                "free some space, or point TMPDIR at a disk that has it"
+            ) from None
+        self._on_disk += self._buffered
         self._buffered = 0
 
     def _chunks(self, key: str):
