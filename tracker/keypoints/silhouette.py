@@ -52,8 +52,8 @@ class PersonMask:
         not finite."""
         size = self.person.shape[0]
         finite = np.isfinite(pixels).all(axis=1)
-        crop = np.where(finite[:, None], pixels, -1e9) @ crop_from_image(self.region, size)[:, :2].T
-        crop += crop_from_image(self.region, size)[:, 2]
+        affine = crop_from_image(self.region, size)
+        crop = np.where(finite[:, None], pixels, -1e9) @ affine[:, :2].T + affine[:, 2]
         at = np.floor(crop).astype(np.int64)
         inside = finite & (at >= 0).all(axis=1) & (at < size).all(axis=1)
         out = np.zeros(len(pixels), bool)

@@ -9,8 +9,9 @@
    the frames the edges hold (status not lost) are kept.
 4. One round per search range of :data:`RANGES`: every kept frame's outlines measured at its pose, then one
    Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`);
-   a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`),
-   and a joint it rarely sees is held at the given model's place, scaled (:func:`unseen_joints`).
+   a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`)
+   or where its outline falls off the person's segmentation (:func:`off_person`), and a joint the detector
+   rarely sees is held at the given model's place, scaled (:func:`unseen_joints`).
 """
 
 from __future__ import annotations
