@@ -1,5 +1,6 @@
 """The command line: a tracked run end to end, and one-line errors with exit code 2 for bad input."""
 
+import argparse
 import shutil
 from pathlib import Path
 
@@ -111,7 +112,9 @@ def test_missing_recording_folder(tmp_path, capsys):
     assert "nowhere" in _error_line(capsys)
 
 
-@pytest.mark.parametrize("option", [["--iterations", "0"], ["--spacing", "-1"], ["--damping", "2"], ["--frames", "0"]])
+@pytest.mark.parametrize(
+    "option", [["--iterations", "0"], ["--spacing", "-1"], ["--damping", "2"], ["--frames", "0"], ["--work-side", "-1"]]
+)
 def test_bad_options_are_usage_errors(tiny_recording, option, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["track", str(tiny_recording), *option])
@@ -183,3 +186,14 @@ def test_motion_models_from_the_command_line(tiny_recording, tmp_path, option, c
         main(["track", "--help"])
     shown = capsys.readouterr().out
     assert "--dynamics" in shown and "--motion" not in shown
+
+
+def test_work_side_sets_the_search_reduction():
+    """--work-side reaches the tracker's settings (0: full size); without it the default stands."""
+    from tracker.commands import options
+    from tracker.track import Settings
+
+    parser = argparse.ArgumentParser()
+    options.add_tuning_options(parser)
+    assert options.settings_from(parser.parse_args(["--work-side", "0"])).work_side == 0
+    assert options.settings_from(parser.parse_args([])).work_side == Settings().work_side == 480

@@ -194,6 +194,7 @@ def test_measure_kernel_information_matches_numpy():
     visible, found, sum_wm, sum_w = measure_kernel(
         images,
         cam_size,
+        np.ones(len(cam_size), np.int64),
         count,
         s_cam,
         s_comp,
@@ -254,6 +255,7 @@ def test_measure_kernel_hand_made_offsets():
     measure_kernel(
         images,
         cam_size,
+        np.ones(len(cam_size), np.int64),
         4,
         np.zeros(4, np.int64),
         s_comp,
@@ -295,6 +297,7 @@ def test_measure_kernel_searches_from_the_linearly_moved_sample():
     measure_kernel(
         images,
         cam_size,
+        np.ones(len(cam_size), np.int64),
         2,
         np.zeros(2, np.int64),
         s_comp,
@@ -329,3 +332,55 @@ def test_component_misfits_are_the_median_offset_of_each_components_found_sample
         found = offset[:count][(component[:count] == i) & ~np.isnan(offset[:count])]
         assert got[i] == np.median(np.abs(found))  # rows past count are not read
     assert got[components - 1] == np.inf
+
+
+@pytest.mark.parametrize("factor", [2, 3])
+def test_a_reduced_image_gives_the_full_size_offsets(factor):
+    """The search reads an image reduced by ``factor`` (tracker.track.smooth) from the samples' full-size
+    places: the offsets of samples on straight and oblique edges, in full-size pixels, are those found in the
+    full image, to the reduced image's sub-pixel precision."""
+    from tracker.track import smooth
+
+    size = 240
+    raw = np.zeros((size, size), np.uint8)
+    cv2.fillPoly(raw, [np.array([[60, 20], [200, 50], [170, 220], [30, 190]]) * 16], 200, cv2.LINE_AA, shift=4)
+    raw[raw == 0] = 40
+    full, reduced = smooth(raw, 2.25), smooth(raw, 2.25, work_side=size // factor)
+    assert reduced.shape == (size // factor, size // factor)
+    corners = np.array([[60, 20], [200, 50], [170, 220], [30, 190]], float)
+    pixels, normals = [], []
+    for a, b in zip(corners, np.roll(corners, -1, axis=0)):
+        along = (b - a) / np.linalg.norm(b - a)
+        outward = np.array([along[1], -along[0]])
+        for share in (0.3, 0.5, 0.7):
+            for miss in (-6.0, 2.5, 7.0):
+                pixels.append(a + share * (b - a) + miss * outward)
+                normals.append(outward)
+    pixels, normals = np.array(pixels), np.array(normals)
+    count = len(pixels)
+    found = []
+    for image, scale in ((full, 1), (reduced, factor)):
+        offsets = np.empty(count)
+        measure_kernel(
+            image[None],
+            np.array([image.shape[::-1]], np.int64),
+            np.array([scale]),
+            count,
+            np.zeros(count, np.int64),
+            np.zeros(count, np.int64),
+            pixels,
+            normals,
+            np.zeros((count, 6)),
+            np.zeros((1, 6)),
+            RANGE,
+            2.0,
+            1.0,
+            1,
+            offsets,
+            np.empty(count),
+            np.empty((1, 6, 6)),
+            np.empty((1, 6)),
+        )
+        found.append(offsets)
+    assert not np.isnan(found[0]).any() and not np.isnan(found[1]).any()
+    assert np.abs(found[1] - found[0]).max() < 0.13 * factor  # sub-pixel precision of a reduced pixel

@@ -41,11 +41,11 @@ from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.detector import Detector
-from tracker.keypoints.stream import KeypointStream, default_step, schedule_words
+from tracker.keypoints.stream import KeypointStream, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
 from tracker.synth import look_at_camera
-from tracker.track import STAGES, Settings, StageTimes, Tracker
+from tracker.track import STAGES, Settings, StageTimes, Tracker, reductions
 
 DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
 HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
@@ -97,13 +97,21 @@ def detector_ms(recording: Recording, count: int = 40) -> float:
     return 1e3 * _median(seconds)
 
 
+def _stream(recording: Recording, stop: int, keypoint_step: int, settings: Settings) -> KeypointStream | None:
+    """The detector beside the tracker on frames 0..stop-1, fed the tracker's images as ``tracker track`` feeds
+    it, or None for ``keypoint_step`` 0."""
+    if not keypoint_step:
+        return None
+    return KeypointStream(recording, 0, stop, keypoint_step, reduction=reductions(settings, recording.cameras))
+
+
 def track_run(
     recording: Recording, model: Model, start: np.ndarray, settings: Settings, out: Path, keypoint_step: int = 0
 ) -> TrackRun:
     """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
     with ``keypoint_step`` the detector's worker on every keypoint_step-th frame beside them, started before the
     kernels load."""
-    stream = KeypointStream(recording, 0, recording.frame_count, keypoint_step) if keypoint_step else None
+    stream = _stream(recording, recording.frame_count, keypoint_step, settings)
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     tracker.times = StageTimes()
@@ -111,7 +119,7 @@ def track_run(
     started = time.perf_counter()
     try:
         with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
-            for index, images in frames(recording, prepare=tracker.smooth):
+            for index, images in tracked_frames(stream, recording, 0, recording.frame_count, tracker.smooth):
                 mark = time.perf_counter()
                 keypoints = None if stream is None else stream.get(index)
                 _, spent = step_and_write(tracker, writer, index, images, keypoints=keypoints)
@@ -236,9 +244,9 @@ def long_run(
         with PosesWriter(out, list(model.names), list(model.joint_names), recording.fps) as writer:
             while done < total:
                 stop = min(recording.frame_count, total - done)
-                stream = KeypointStream(recording, 0, stop, keypoint_step) if keypoint_step else None
+                stream = _stream(recording, stop, keypoint_step, settings)
                 try:
-                    for index, images in frames(recording, 0, stop, prepare=tracker.smooth):
+                    for index, images in tracked_frames(stream, recording, 0, stop, tracker.smooth):
                         keypoints = None if stream is None else stream.get(index)
                         step_and_write(tracker, writer, done, images, keypoints=keypoints)
                         done += 1

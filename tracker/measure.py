@@ -91,6 +91,7 @@ def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, p
 def measure_kernel(
     images,
     cam_size,
+    cam_factor,
     count,
     s_cam,
     s_comp,
@@ -114,7 +115,13 @@ def measure_kernel(
     ``twist`` (n_components, 6) is each component's motion since the samples were taken: every search
     starts from the sample's first-order predicted position ``p + (L . twist_i) n`` (section 3; zero
     for fresh samples), and ``m`` is measured from there.  ``s_lo``, ``s_hi`` (optional, integer per
-    sample) restrict each search to ``[lo, hi]`` about that start.
+    sample) restrict each search to ``[lo, hi]`` about that start.  Camera k's image may be reduced by the
+    integer ``cam_factor[k]`` = f (f x f blocks averaged, ``cam_size[k]`` its reduced size): its searches then
+    step one reduced pixel at a time, over ``search_range // f`` of them (``lo``, ``hi`` likewise, inwards), from
+    the sample's place in it, ``(p + 0.5) / f - 0.5``, and their offsets are given in full-size pixels (times f);
+    ``threshold`` stays a derivative per full-size pixel.  Steps of a full-size pixel in the reduced image would
+    read its bilinear interpolation, whose slope is flat between its pixels: the sub-pixel peak would be off by up
+    to a third of a full-size pixel.
     """
     information[:] = 0.0
     eta[:] = 0.0
@@ -124,6 +131,7 @@ def measure_kernel(
     sum_w = 0.0
     for s in range(count):
         k = s_cam[s]
+        f = cam_factor[k]
         lo = -search_range
         hi = search_range
         if s_lo is not None:
@@ -136,19 +144,20 @@ def measure_kernel(
             moved += s_jac[s, a] * twist[i, a]
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
-        m = edge_offset(
+        shift = (1.0 - f) / (2.0 * f)  # (p + 0.5) / f - 0.5 written so that f = 1 leaves p's bits as they are
+        m = f * edge_offset(
             images[k],
             cam_size[k, 0],
             cam_size[k, 1],
-            s_pixel[s, 0] + moved * nx,
-            s_pixel[s, 1] + moved * ny,
+            (s_pixel[s, 0] + moved * nx) / f + shift,
+            (s_pixel[s, 1] + moved * ny) / f + shift,
             nx,
             ny,
-            search_range,
-            threshold,
+            max(search_range // f, 1),
+            threshold * f,
             profile,
-            lo,
-            hi,
+            -(-lo // f),
+            hi // f,
         )
         o_offset[s] = m
         if np.isnan(m):

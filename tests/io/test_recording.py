@@ -208,3 +208,69 @@ def test_seeking_decodes_exactly_as_the_readers() -> None:
             np.testing.assert_array_equal(seeker.read(index), sequence[index])
     finally:
         seeker.close()
+
+
+def test_other_codecs_give_their_luma_and_seek_exactly(tmp_path: Path) -> None:
+    """A video in another codec (MPEG-4 part 2 here) is decoded by PyAV: its grey frames are the luma in full
+    range (what OpenCV's colour frame made grey gives, to a level or two), colour frames are BGR, and random
+    access across key frames gives the sequence's frames exactly."""
+    import itertools
+
+    import av
+
+    from tracker.io.readers import FrameSeeker, grey_frames
+
+    video, count, size = tmp_path / "cam0.mp4", 40, (96, 64)
+    with av.open(str(video), "w") as container:  # a key frame every 10, B-frames between
+        stream = container.add_stream("mpeg4", rate=int(FPS), options={"g": "10", "bf": "2"})
+        stream.width, stream.height, stream.pix_fmt, stream.bit_rate = *size, "yuv420p", 4_000_000
+        for index in range(count):
+            bgr = cv2.cvtColor(cv2.resize(content(0, index % 12), size), cv2.COLOR_GRAY2BGR)
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(bgr, format="bgr24")))
+        container.mux(stream.encode())
+    with av.open(str(video)) as container:
+        packets = [packet for packet in container.demux(container.streams.video[0]) if packet.size]
+        assert len(packets) == count and 3 <= sum(packet.is_keyframe for packet in packets) < count
+    sequence = list(itertools.islice(grey_frames(video), count))
+    capture = cv2.VideoCapture(str(video))
+    for index, image in enumerate(sequence):
+        assert image.shape == size[::-1] and image.dtype == np.uint8
+        ok, bgr = capture.read()
+        assert ok and np.abs(image.astype(float) - cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)).mean() < 2.0
+        assert np.abs(image.astype(float) - cv2.resize(content(0, index % 12), size)).mean() < 4.0
+    capture.release()
+    colour = next(grey_frames(video, start=5, colour=True))
+    assert colour.shape == (*size[::-1], 3) and np.abs(colour.astype(float).mean(axis=2) - sequence[5]).mean() < 3.0
+    seeker = FrameSeeker(video)
+    try:
+        for index in (30, 3, 4, 39, 0, 17, 18):
+            np.testing.assert_array_equal(seeker.read(index), sequence[index])
+    finally:
+        seeker.close()
+    assert [len(list(itertools.islice(grey_frames(video, start, step=3), 4))) for start in (0, 7)] == [4, 4]
+    np.testing.assert_array_equal(next(grey_frames(video, start=7, step=3)), sequence[7])
+
+
+def test_readers_give_the_named_frames_also_in_reduced_colour(tmp_path: Path) -> None:
+    """ColourCopies: the frames named come as WithColour, ``prepare`` applied to the grey image and the colour
+    image (BGR) reduced by the factor, from videos and image folders alike; the other frames as before."""
+    from tracker.io.readers import ColourCopies, WithColour, read_frames
+
+    folder = make_recording(tmp_path / "rec")
+    images = folder / "cam1"
+    images.mkdir()
+    for index in range(COUNT):
+        cv2.imwrite(str(images / f"{index:06d}.png"), content(1, index))
+    sources = [folder / "cam0.avi", images]
+    copies = [ColourCopies(frozenset({2, 5}), 2), ColourCopies(frozenset({2, 5}), 1)]
+    for index, frame in read_frames(sources, 1, 7, prepare=lambda image: image + 1, copies=copies):
+        for camera, item in enumerate(frame):
+            if index in (2, 5):
+                assert isinstance(item, WithColour)
+                grey, colour = item.image, item.colour
+                assert colour.shape == ((HEIGHT // 2, WIDTH // 2, 3) if camera == 0 else (HEIGHT, WIDTH, 3))
+                expected = content(camera, index)[:: 2 - camera, :: 2 - camera]
+                assert np.abs(colour.mean(axis=2) - expected).mean() < 6.0
+            else:
+                grey = item
+            assert grey.shape == (HEIGHT, WIDTH) and np.abs(grey.astype(float) - 1 - content(camera, index)).mean() < 4

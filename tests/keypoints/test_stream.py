@@ -119,3 +119,31 @@ def test_the_worker_keeps_mediapipes_native_logs_off_the_terminal(tmp_path, capf
         assert stream.get(4) is not None
     err = capfd.readouterr().err
     assert "XNNPACK" not in err and "W0000" not in err and "absl" not in err
+
+
+def test_a_fed_worker_detects_in_the_readers_colour_copies_as_a_reading_one_does(tmp_path):
+    """Fed by the tracker's readers (tracked_frames), the worker decodes nothing and finds the landmarks a worker
+    reading the recording finds, in the same colour frames; the frames come out without their colour copies, the
+    images prepared as asked.  Reduced by 2, the copies still place the body, its landmarks in full-size pixels
+    within a few pixels of the full-size ones."""
+    from tracker.keypoints.stream import tracked_frames
+
+    recording = open_recording(DEMO)
+    landmarks = {}
+    for name, reduction in (("reading", None), ("fed", [1, 1, 1]), ("halved", [2, 2, 2])):
+        with KeypointStream(recording, 0, 9, 4, tmp_path / f"{name}.npz", reduction) as stream:
+            assert (stream.fed is None) == (reduction is None)
+            seen = []
+            for index, images in tracked_frames(stream, recording, 0, 9, prepare=lambda image: image[::2, ::2]):
+                assert all(isinstance(image, np.ndarray) and image.shape == (240, 320) for image in images)
+                seen.append(index)
+                stream.get(index)
+            assert seen == list(range(9))
+            assert stream.sent == ({0, 4, 8} if reduction else set())
+        landmarks[name] = load_keypoints(tmp_path / f"{name}.npz")
+    np.testing.assert_array_equal(landmarks["fed"].pixels, landmarks["reading"].pixels)
+    np.testing.assert_array_equal(landmarks["fed"].confidence, landmarks["reading"].confidence)
+    full, halved = landmarks["reading"], landmarks["halved"]
+    both = (full.confidence > 0.5) & (halved.confidence > 0.5)
+    assert both.sum() > 100
+    assert np.median(np.linalg.norm(full.pixels - halved.pixels, axis=3)[both]) < 4.0

@@ -15,7 +15,7 @@ from typing import Any
 
 from tracker.errors import TrackerInputError
 
-TUNING = ("iterations", "spacing", "resample_every", "search_range", "dynamics", "damping", "max_turn")
+TUNING = ("iterations", "spacing", "resample_every", "search_range", "dynamics", "damping", "max_turn", "work_side")
 
 
 def positive_int(text: str) -> int:
@@ -23,6 +23,14 @@ def positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def whole_number(text: str) -> int:
+    """Argument type: an integer >= 0."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number (0 or more), got {text}")
     return value
 
 
@@ -150,6 +158,15 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 metavar="RAD",
                 help="largest rotation of any component in one iteration; a larger step is scaled down whole, which "
                 "keeps a body from flipping on clutter but slows it in fast motion (default: no limit)",
+            ),
+        ),
+        "work_side": (
+            ["--work-side"],
+            dict(
+                type=whole_number,
+                metavar="PIXELS",
+                help="search larger images reduced by the largest whole factor that keeps their short side at least "
+                "this long (default 480: 1080p is searched at half size; 0: always at full size)",
             ),
         ),
         "damping": (

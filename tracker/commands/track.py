@@ -59,10 +59,11 @@ def run(args: argparse.Namespace) -> int:
 
     from tracker.evaluate import evaluate, format_report
     from tracker.io.poses import PosesWriter, load_poses
-    from tracker.io.recording import capture_times, frames
+    from tracker.io.recording import capture_times
     from tracker.io.stepwrite import step_and_write
+    from tracker.keypoints.stream import tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
-    from tracker.track import Tracker
+    from tracker.track import Tracker, reductions
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
@@ -83,7 +84,10 @@ def run(args: argparse.Namespace) -> int:
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
-    stream = _keypoints(rec, begin, stop, out, step)  # the detector starts up while the kernels load
+    # the detector starts up while the kernels load; fed the tracker's own images unless they are differences
+    stream = _keypoints(
+        rec, begin, stop, out, step, None if background is not None else reductions(settings, rec.cameras)
+    )
     recovery = None
     if stream is not None:
         from tracker.keypoints.recovery import Recovery
@@ -115,9 +119,8 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
-            for index, images in progress(
-                frames(rec, begin, stop, prepare=prepare, colour=background is not None), total=stop - begin
-            ):
+            read = tracked_frames(stream, rec, begin, stop, prepare=prepare, colour=background is not None)
+            for index, images in progress(read, total=stop - begin):
                 shown = images
                 if background is not None and overlay is not None:
                     shown, images = zip(*images)
@@ -239,15 +242,15 @@ def _first_pose(args: argparse.Namespace, rec, model, stop: int, out: Path, sett
     raise TrackerInputError(f"{rec.path}: no frames to fit a first pose to; pass --init")
 
 
-def _keypoints(rec, begin: int, stop: int, out: Path, step: int):
+def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):
     """The detector's stream of every ``step``-th frame (``--keypoints``; cached in OUT/keypoints.npz), or None
-    (off)."""
+    (off); fed the tracker's images, reduced by ``reduction``, unless that is None."""
     if not step:
         return None
     from tracker.atomic import ensure_writable_folder
     from tracker.keypoints.stream import KeypointStream, schedule_words
 
-    stream = KeypointStream(rec, begin, stop, step, ensure_writable_folder(out) / "keypoints.npz")
+    stream = KeypointStream(rec, begin, stop, step, ensure_writable_folder(out) / "keypoints.npz", reduction)
     every = schedule_words(step)
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
     print(f"keypoints: {every}, {source}", file=sys.stderr)

@@ -1,12 +1,19 @@
 """Decoding the frames of a recording: grey (or colour) images, one reader thread per camera.
 
 Each camera's video (or image folder) is decoded by its own thread into a
-bounded queue, so decoding runs beside the tracker (OpenCV releases the GIL
-while it decodes) and never runs more than ``queue_size`` frames ahead.
-Motion-JPEG videos are decoded straight to grey: the compressed frame is taken
-from the container as it is and libjpeg decodes only its luma plane, about
-twice as fast as decoding colour and converting.  Other codecs are decoded in
-colour and converted.  Readers asked for colour (the foreground cue needs it) decode BGR.
+bounded queue, so decoding runs beside the tracker (OpenCV and PyAV release the
+GIL while they decode) and never runs more than ``queue_size`` frames ahead.
+Grey images are the video's own luma, never a colour image converted back:
+
+* Motion-JPEG: the compressed frame is taken from the container as it is (OpenCV)
+  and libjpeg decodes only its luma plane, about twice as fast as colour;
+* other codecs (H.264, ...): PyAV decodes each frame in the calling thread alone
+  (one FFmpeg thread: the readers already run one per camera) and the grey image
+  is the decoded frame's Y plane, stretched from the video range 16-235 to 0-255
+  unless the video says it is full range.  On 1080x1920 H.264 that costs 3.0 ms of
+  CPU a frame against 7.0 ms for OpenCV's colour frame made grey (docs/speed.md).
+
+Readers asked for colour (the foreground cue and the keypoint detector need it) decode BGR.
 """
 
 from __future__ import annotations
@@ -16,8 +23,11 @@ import queue
 import re
 import threading
 from collections.abc import Callable, Generator, Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+import av
 import cv2
 import numpy as np
 
@@ -25,7 +35,36 @@ from tracker.errors import TrackerInputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 MJPG = int.from_bytes(b"MJPG", "little")  # the Motion-JPEG fourcc as OpenCV gives it
+LUMA_FIRST = ("yuv", "yuvj", "nv12", "nv21", "gray")  # pixel formats (name prefixes) whose plane 0 is the luma
+# video-range luma (16 black, 235 white) to full range, as a colour decoder's RGB made grey would give it
+VIDEO_TO_FULL = np.clip(np.round((np.arange(256) - 16) * 255 / 219), 0, 255).astype(np.uint8)
 _PUT_WAIT = 0.1  # seconds between checks of the stop flag while a queue is full
+
+
+@dataclass(frozen=True)
+class ColourCopies:
+    """Frames whose colour image a reader also gives (e.g. to the keypoint detector), reduced by ``factor``
+    (f x f block means, :func:`reduced`)."""
+
+    frames: frozenset[int]
+    factor: int = 1
+
+
+@dataclass(frozen=True)
+class WithColour:
+    """A frame as a reader gives it (grey, or what ``prepare`` made of it) with its reduced BGR colour image."""
+
+    image: Any
+    colour: np.ndarray
+
+
+def reduced(image: np.ndarray, factor: int) -> np.ndarray:
+    """``image`` reduced by the integer ``factor``: each pixel the mean of a block of factor x factor, the rows and
+    columns past the last whole block dropped (the image itself for 1)."""
+    if factor <= 1:
+        return image
+    height, width = image.shape[0] // factor, image.shape[1] // factor
+    return cv2.resize(image[: height * factor, : width * factor], (width, height), interpolation=cv2.INTER_AREA)
 
 
 def image_files(folder: Path) -> list[Path]:
@@ -69,17 +108,13 @@ def keeping_grey(prepare: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.nd
     return lambda frame: (grey(frame), prepare(frame))
 
 
-def _bgr(image: np.ndarray) -> np.ndarray:
-    """BGR uint8 (H, W, 3) from a BGR, BGRA or grey frame."""
-    if image.ndim == 3 and image.shape[2] == 3:
-        return image
-    code = cv2.COLOR_GRAY2BGR if image.ndim == 2 else cv2.COLOR_BGRA2BGR
-    return cv2.cvtColor(image, code)
-
-
-def grey_frames(source: Path, start: int = 0, colour: bool = False, step: int = 1) -> Generator[np.ndarray, None, None]:
+def grey_frames(
+    source: Path, start: int = 0, colour: bool = False, step: int = 1, copies: ColourCopies | None = None
+) -> Generator[Any, None, None]:
     """Grey (or, with ``colour``, BGR) frames start, start + step, ... of one video file or image folder (the
-    caller stops); the frames between are skipped undecoded where the container allows."""
+    caller stops); the frames between are skipped undecoded where the container allows.  The frames ``copies``
+    names come as :class:`WithColour`, their colour image decoded from the same frame."""
+    copies = copies or ColourCopies(frozenset())
     if source.is_dir():
         flags = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
         files = image_files(source)
@@ -88,24 +123,30 @@ def grey_frames(source: Path, start: int = 0, colour: bool = False, step: int = 
                 raise TrackerInputError(
                     f"{source}: image folder ended before the recording's last frame; add the missing images"
                 )
-            yield read_image(files[index], index, flags)
-    capture, raw = open_video(source)
+            image = read_image(files[index], index, flags)
+            if index in copies.frames:
+                yield WithColour(image, reduced(read_image(files[index], index), copies.factor))
+            else:
+                yield image
+    video = open_frames(source, colour)
     try:
         for index in range(start):
-            if not capture.grab():
-                raise _decode_error(source, index)
+            video.skip(index)
         for index in itertools.count(start, step):
-            yield _read_frame(capture, raw, source, index, colour)
+            if index in copies.frames:
+                image, bgr = video.read_with_colour(index)
+                yield WithColour(image, reduced(bgr, copies.factor))
+            else:
+                yield video.read(index)
             for skipped in range(index + 1, index + step):
-                if not capture.grab():
-                    raise _decode_error(source, skipped)
+                video.skip(skipped)
     finally:
-        capture.release()
+        video.close()
 
 
 def open_video(source: Path) -> tuple[cv2.VideoCapture, bool]:
-    """A capture of the video (FFmpeg, else any OpenCV backend) and whether its frames come as raw Motion-JPEG:
-    then each read gives the frame's JPEG bytes as stored (the readers decode them to grey directly)."""
+    """An OpenCV capture of the video (FFmpeg, else any OpenCV backend) and whether its frames come as raw
+    Motion-JPEG: then each read gives the frame's JPEG bytes as stored."""
     capture = cv2.VideoCapture(str(source), cv2.CAP_FFMPEG)
     if not capture.isOpened():
         capture = cv2.VideoCapture(str(source))
@@ -113,44 +154,156 @@ def open_video(source: Path) -> tuple[cv2.VideoCapture, bool]:
     return capture, bool(raw)
 
 
-def _read_frame(capture: cv2.VideoCapture, raw: bool, source: Path, index: int, colour: bool = False) -> np.ndarray:
-    """The next frame as grey uint8 (raw Motion-JPEG: libjpeg's luma plane; otherwise colour converted), or
-    as BGR uint8 with ``colour``."""
-    ok, data = capture.read()
-    if not ok:
-        raise _decode_error(source, index)
+class _MotionJpeg:
+    """A Motion-JPEG video through OpenCV: each frame's JPEG as stored, decoded by libjpeg (grey: luma only)."""
+
+    def __init__(self, source: Path, capture: cv2.VideoCapture, colour: bool):
+        self.source, self.capture, self.flags = source, capture, cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
+
+    def read(self, index: int) -> np.ndarray:
+        return self._decoded(self._data(index), self.flags, index)
+
+    def read_with_colour(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """The frame as :meth:`read` gives it and in BGR colour, both decoded from its JPEG."""
+        data = self._data(index)
+        return self._decoded(data, self.flags, index), self._decoded(data, cv2.IMREAD_COLOR, index)
+
+    def _data(self, index: int) -> np.ndarray:
+        ok, data = self.capture.read()
+        if not ok:
+            raise _decode_error(self.source, index)
+        return data
+
+    def _decoded(self, data: np.ndarray, flags: int, index: int) -> np.ndarray:
+        image = cv2.imdecode(data, flags)
+        if image is None:
+            raise _decode_error(self.source, index)
+        return image
+
+    def skip(self, index: int) -> None:
+        if not self.capture.grab():
+            raise _decode_error(self.source, index)
+
+    def seek(self, index: int) -> None:
+        self.capture.set(cv2.CAP_PROP_POS_FRAMES, index)
+
+    def close(self) -> None:
+        self.capture.release()
+
+
+class _Decoded:
+    """Any other video through PyAV, one FFmpeg thread: grey is the frame's luma plane (module docstring)."""
+
+    def __init__(self, source: Path, colour: bool):
+        self.source, self.colour = source, colour
+        try:
+            self.container = av.open(str(source))
+            self.stream = self.container.streams.video[0]
+        except (av.FFmpegError, IndexError):
+            raise TrackerInputError(
+                f"{source}: corrupt or unsupported video; re-encode it, e.g. as H.264 .mp4"
+            ) from None
+        self.stream.thread_count = 1
+        self.frames = self.container.decode(self.stream)
+
+    def _next(self, index: int) -> av.VideoFrame:
+        try:
+            return next(self.frames)
+        except (StopIteration, av.FFmpegError):
+            raise _decode_error(self.source, index) from None
+
+    def read(self, index: int) -> np.ndarray:
+        frame = self._next(index)
+        return frame.to_ndarray(format="bgr24") if self.colour else luma(frame)
+
+    def read_with_colour(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """The frame as :meth:`read` gives it and in BGR colour."""
+        frame = self._next(index)
+        bgr = frame.to_ndarray(format="bgr24")
+        return (bgr if self.colour else luma(frame)), bgr
+
+    def skip(self, index: int) -> None:
+        self._next(index)
+
+    def seek(self, index: int) -> None:
+        """Make frame ``index`` the next one read: seek to the key frame before it, then decode up to it (its
+        time stamp from the stream's frame rate)."""
+        stream = self.stream
+        rate, base = stream.average_rate or stream.guessed_rate, stream.time_base
+        if not rate or not base:
+            raise TrackerInputError(f"{self.source}: the video has no frame rate to seek by; re-encode it")
+        target = (stream.start_time or 0) + round(index / (rate * base))
+        half = round(0.5 / (rate * base))
+        self.container.seek(target, stream=stream, backward=True)
+        self.frames = self.container.decode(stream)
+        while True:
+            frame = self._next(index)
+            if frame.pts is None or frame.pts >= target - half:
+                self.frames = itertools.chain([frame], self.frames)
+                return
+
+    def close(self) -> None:
+        self.container.close()
+
+
+def luma(frame: av.VideoFrame) -> np.ndarray:
+    """The grey uint8 (H, W) image of a decoded frame: its luma plane where it has one, in full range."""
+    if not frame.format.name.startswith(LUMA_FIRST):
+        return frame.to_ndarray(format="gray")
+    plane = frame.planes[0]
+    rows = np.frombuffer(memoryview(plane), np.uint8).reshape(frame.height, plane.line_size)[:, : frame.width]
+    full = frame.color_range == av.video.reformatter.ColorRange.JPEG or frame.format.name.startswith(("yuvj", "gray"))
+    return rows.copy() if full else cv2.LUT(rows, VIDEO_TO_FULL)
+
+
+def open_frames(source: Path, colour: bool = False) -> _MotionJpeg | _Decoded:
+    """The frames of a video file, read in order (``read``/``skip`` each take the frame's index for errors) or
+    from anywhere (``seek``), grey (or BGR with ``colour``)."""
+    capture, raw = open_video(source)
     if raw:
-        image = cv2.imdecode(data, cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE)
-    else:
-        image = _bgr(data) if colour else grey(data)
-    if image is None:
-        raise _decode_error(source, index)
-    return image
+        return _MotionJpeg(source, capture, colour)
+    capture.release()
+    return _Decoded(source, colour)
 
 
 class _Reader:
     """A thread that decodes ``count`` frames of one source into a bounded queue (errors travel along)."""
 
     def __init__(
-        self, source: Path, start: int, count: int, queue_size: int, prepare=None, colour: bool = False, step: int = 1
+        self,
+        source: Path,
+        start: int,
+        count: int,
+        queue_size: int,
+        prepare=None,
+        colour: bool = False,
+        step: int = 1,
+        copies: ColourCopies | None = None,
     ):
         self.source, self.start, self.count, self.prepare, self.colour = source, start, count, prepare, colour
-        self.step = step
+        self.step, self.copies = step, copies
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
         self.thread.start()
 
     def _run(self) -> None:
-        frames = grey_frames(self.source, self.start, self.colour, self.step)
+        frames = grey_frames(self.source, self.start, self.colour, self.step, self.copies)
         try:
             for image in itertools.islice(frames, self.count):
-                if not self._put(image if self.prepare is None else self.prepare(image)):
+                if not self._put(self._prepared(image)):
                     return
         except BaseException as error:  # handed to the consumer, raised there
             self._put(error)
         finally:
             frames.close()
+
+    def _prepared(self, image):
+        if self.prepare is None:
+            return image
+        if isinstance(image, WithColour):
+            return WithColour(self.prepare(image.image), image.colour)
+        return self.prepare(image)
 
     def _put(self, item) -> bool:
         while not self.stopping.is_set():
@@ -173,15 +326,24 @@ class _Reader:
 
 
 def read_frames(
-    sources: list[Path], start: int, stop: int, queue_size: int = 4, prepare=None, colour: bool = False, step: int = 1
+    sources: list[Path],
+    start: int,
+    stop: int,
+    queue_size: int = 4,
+    prepare=None,
+    colour: bool = False,
+    step: int = 1,
+    copies: list[ColourCopies] | None = None,
 ) -> Iterator[tuple[int, list]]:
     """(index, one grey image per source) for frames start, start + step, ... before stop, each source decoded
     by its own thread (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that
-    thread too (e.g. the tracker's smoothing); a list of them gives each source its own."""
+    thread too (e.g. the tracker's smoothing); a list of them gives each source its own.  With ``copies`` (one
+    per source) the frames they name come as :class:`WithColour` (``prepare`` applied to the image)."""
     preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
     indices = range(start, stop, step)
     readers = [
-        _Reader(source, start, len(indices), queue_size, each, colour, step) for source, each in zip(sources, preparers)
+        _Reader(source, start, len(indices), queue_size, each, colour, step, copy)
+        for source, each, copy in zip(sources, preparers, copies or [ColourCopies(frozenset())] * len(sources))
     ]
     try:
         for index in indices:
@@ -198,21 +360,20 @@ class FrameSeeker:
     def __init__(self, source: Path, colour: bool = False):
         self.source, self.colour = source, colour
         self.files = image_files(source) if source.is_dir() else None
-        self.capture: cv2.VideoCapture | None
-        self.capture, self.raw = (None, False) if self.files is not None else open_video(source)
+        self.video = None if self.files is not None else open_frames(source, colour)
         self.next_index = 0
 
     def read(self, index: int) -> np.ndarray:
         """Frame ``index`` decoded exactly as the tracker's readers decode it."""
         if self.files is not None:
             return read_image(self.files[index], index, cv2.IMREAD_COLOR if self.colour else cv2.IMREAD_GRAYSCALE)
-        assert self.capture is not None  # a video: opened in __init__
+        assert self.video is not None  # a video: opened in __init__
         if index != self.next_index:
-            self.capture.set(cv2.CAP_PROP_POS_FRAMES, index)
-        image = _read_frame(self.capture, self.raw, self.source, index, self.colour)
+            self.video.seek(index)
+        image = self.video.read(index)
         self.next_index = index + 1
         return image
 
     def close(self) -> None:
-        if self.capture is not None:
-            self.capture.release()
+        if self.video is not None:
+            self.video.close()

@@ -26,7 +26,7 @@ import numpy as np
 
 from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
-from tracker.io.readers import image_files, read_frames, read_image
+from tracker.io.readers import ColourCopies, image_files, read_frames, read_image
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
 DEFAULT_FPS = 30.0  # for image folders, videos and camera devices that do not state a frame rate
@@ -126,14 +126,21 @@ def open_recording(
 
 
 def frames(
-    recording: Recording, start: int = 0, stop: int | None = None, prepare=None, colour: bool = False, step: int = 1
+    recording: Recording,
+    start: int = 0,
+    stop: int | None = None,
+    prepare=None,
+    colour: bool = False,
+    step: int = 1,
+    copies: list[ColourCopies] | None = None,
 ) -> Iterator[tuple[int, list]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1 (every
     ``step``-th of them: the others are skipped undecoded where the container allows).
 
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
-    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given. A frame that fails
-    to decode raises TrackerInputError naming the file and the index.
+    with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given; the frames
+    ``copies`` (one per camera) names also come with their reduced colour image (:class:`WithColour`). A frame that
+    fails to decode raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
     if not 0 <= start <= stop <= recording.frame_count:
@@ -141,7 +148,7 @@ def frames(
             f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
             "pick a range inside it"
         )
-    return read_frames(recording.sources, start, stop, prepare=prepare, colour=colour, step=step)
+    return read_frames(recording.sources, start, stop, prepare=prepare, colour=colour, step=step, copies=copies)
 
 
 def capture_times(recording: Recording) -> np.ndarray | None:

@@ -18,7 +18,7 @@ import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording, frames
-from tracker.keypoints.detector import DETECTOR, Detector, detect_views, native_logs_muted
+from tracker.keypoints.detector import DETECTOR, Detection, Detector, detect_views, native_logs_muted
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
 _HASHED = 1 << 16
@@ -97,18 +97,27 @@ def detections(recording: Recording, start: int, stop: int, step: int = 1) -> It
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):
-            found = detect_views(detectors, images)
-            yield (
-                index,
-                Keypoints(
-                    np.array([index]),
-                    names,
-                    np.stack([detection.pixels for detection in found])[None],
-                    np.stack([detection.confidence for detection in found])[None],
-                    np.stack([detection.world for detection in found])[None],
-                    recording=identity,
-                ),
-            )
+            yield index, frame_keypoints(index, detect_views(detectors, images), names, identity)
+
+
+def frame_keypoints(
+    index: int, found: list[Detection], names: tuple[str, ...], identity: str, reduction: np.ndarray | None = None
+) -> Keypoints:
+    """One frame's keypoints from its views' detections; with ``reduction`` (one integer factor per camera) the
+    detections were made in images reduced by it (:func:`tracker.track.smooth`), and their pixels are taken back
+    to full size, ``f (p + 0.5) - 0.5``."""
+    pixels = np.stack([detection.pixels for detection in found])
+    if reduction is not None:
+        factor = np.asarray(reduction, float)[:, None, None]
+        pixels = factor * (pixels + 0.5) - 0.5
+    return Keypoints(
+        np.array([index]),
+        names,
+        pixels[None],
+        np.stack([detection.confidence for detection in found])[None],
+        np.stack([detection.world for detection in found])[None],
+        recording=identity,
+    )
 
 
 def stacked(rows: list[Keypoints]) -> Keypoints:

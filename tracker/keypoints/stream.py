@@ -1,11 +1,17 @@
 """The detector beside the tracker: a worker process detects every ``step``-th frame ahead of it.
 
-The worker reads the recording itself (the frames between are skipped undecoded), runs one
-landmarker per camera, checks the views against each other (:mod:`tracker.keypoints.consistency`)
-and hands each frame's landmarks over a queue, in frame order.  It is a process, not a thread, so
-the detector's Python glue never holds the tracker's interpreter lock; on a machine with two cores
-the two run side by side.  The tracker asks for a frame's landmarks when it reaches that frame and
-waits only if the worker has not got there yet, so a run's result does not depend on timing.  A
+The worker either reads the recording itself or is fed by the tracker's reader threads
+(:meth:`KeypointStream.copies`, :meth:`KeypointStream.feed`), runs one landmarker per camera, checks the views
+against each other (:mod:`tracker.keypoints.consistency`) and hands each frame's landmarks over a queue, in
+frame order.  Fed, it decodes nothing: the readers decode each video once and give the scheduled frames also in
+colour, reduced as the edge search reduces them (:func:`tracker.track.reductions`), and the landmarks are taken
+back to full-size pixels.  On 1080x1920 H.264 that saves the second decoding of every frame of every view (3 ms
+of CPU each).  Colour it must be: in grey the detector takes the demo's backdrop photograph of a player for the
+body it should find (docs/keypoints.md).  The tracker reads its frames ``step + LAG`` frames ahead
+of the one it tracks (:func:`tracked_frames`), so the worker detects a frame while the tracker is still on earlier
+ones.  It is a process, not a thread, so the detector's Python glue never holds the tracker's interpreter lock;
+on a machine with two cores the two run side by side.  The tracker asks for a frame's landmarks when it
+reaches that frame and waits only if the worker has not got there yet, so a run's result does not depend on timing.  A
 frame between two detected ones gets their landmarks interpolated (so the tracker waits for the
 later one): at 60 frames a second a body moves little in a few frames, and a cue in every frame
 holds it far better than one in every fourth.
@@ -22,15 +28,18 @@ from __future__ import annotations
 import multiprocessing
 import queue
 import signal
+from collections import deque
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.recording import Recording
+from tracker.io.readers import ColourCopies, WithColour
+from tracker.io.recording import Recording, frames
 from tracker.keypoints.consistency import consistent
-from tracker.keypoints.detect import cached, detections, holding, merged, stacked
-from tracker.keypoints.detector import native_logs_muted, require_detector
+from tracker.keypoints.detect import cached, detections, fingerprint, frame_keypoints, holding, merged, stacked
+from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints, save_keypoints
 
 RATE = 15.0
@@ -52,6 +61,10 @@ def schedule_words(step: int) -> str:
 _POLL = 0.5
 """Seconds between checks that the worker is still alive while waiting for it."""
 
+LAG = 6
+"""Frames a fed worker gets to detect a frame in before the tracker reaches the frames it is interpolated for
+(six frames at 60 fps is 100 ms: four HD views take the detector 40-60 ms)."""
+
 
 def schedule(start: int, stop: int, step: int) -> np.ndarray:
     """The frames the detector sees: start, start + step, ... before stop, and the last one (so that every
@@ -59,27 +72,84 @@ def schedule(start: int, stop: int, step: int) -> np.ndarray:
     return np.unique(np.r_[np.arange(start, stop, step), stop - 1])
 
 
-def _work(recording: Recording, start: int, stop: int, step: int, results) -> None:
+def _work(recording: Recording, start: int, stop: int, step: int, results, fed=None, reduction=None) -> None:
     """The worker process: detect and check each scheduled frame, put (raw, checked) on ``results``, then
-    None; an error is put instead and ends it.  Ctrl-C is the parent's to handle."""
+    None; an error is put instead and ends it.  With ``fed``, a queue, the frames are (index, images) taken
+    from it (reduced by ``reduction``) until None; else the worker reads them.  Ctrl-C is the parent's to handle."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         with native_logs_muted():
-            runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
-            for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-                for _, raw in detections(recording, first, last, every):
-                    results.put((raw, consistent(raw, recording.cameras)[0]))
+            if fed is not None:
+                _detect_fed(recording, fed, reduction, results)
+            else:
+                runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
+                for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
+                    for _, raw in detections(recording, first, last, every):
+                        results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
 
 
-class KeypointStream:
-    """Checked landmarks of the scheduled frames, from the cache or from a worker process."""
+def _detect_fed(recording: Recording, fed, reduction, results) -> None:
+    """Detect in the frames put on ``fed`` (one landmarker per camera, in video mode) until None."""
+    names, identity = tuple(camera.name for camera in recording.cameras), fingerprint(recording)
+    detectors = [Detector() for _ in recording.cameras]
+    try:
+        while (item := fed.get()) is not None:
+            index, images = item
+            raw = frame_keypoints(index, detect_views(detectors, images), names, identity, reduction)
+            results.put((raw, consistent(raw, recording.cameras)[0]))
+    finally:
+        for detector in detectors:
+            detector.close()
 
-    def __init__(self, recording: Recording, start: int, stop: int, step: int, cache: Path | None = None):
+
+def tracked_frames(
+    stream: KeypointStream | None, recording: Recording, start: int, stop: int, prepare=None, colour: bool = False
+) -> Iterator[tuple[int, list]]:
+    """:func:`tracker.io.recording.frames` for the frame loop beside ``stream``: a fed stream gets the scheduled
+    frames' colour images from the readers (:func:`_fed_ahead`)."""
+    if stream is None or stream.fed is None:
+        return frames(recording, start, stop, prepare=prepare, colour=colour)
+    return _fed_ahead(stream, frames(recording, start, stop, prepare=prepare, colour=colour, copies=stream.copies()))
+
+
+def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Iterator[tuple[int, list]]:
+    """The frames (index, images) of ``items``, each frame's colour images (:class:`WithColour`) handed to the
+    fed ``stream`` (:meth:`KeypointStream.feed`) as it is read and the frame given out, without them,
+    :attr:`KeypointStream.lead` frames later."""
+    window: deque[tuple[int, list]] = deque()
+    for index, images in items:
+        if any(isinstance(image, WithColour) for image in images):
+            stream.feed(index, [image.colour for image in images])
+            images = [image.image for image in images]
+        window.append((index, images))
+        if len(window) > stream.lead:
+            yield window.popleft()
+    yield from window
+
+
+class KeypointStream:
+    """Checked landmarks of the scheduled frames, from the cache or from a worker process: one that reads the
+    recording, or, with ``reduction`` (the tracker's, one factor per camera), one fed the tracker's images (the
+    frame loop reads through :func:`tracked_frames`)."""
+
+    def __init__(
+        self,
+        recording: Recording,
+        start: int,
+        stop: int,
+        step: int,
+        cache: Path | None = None,
+        reduction: np.ndarray | None = None,
+    ):
         self.recording, self.cache = recording, cache
         self.wanted = schedule(start, stop, step)
+        self.lead = step + LAG
+        self.reduction = reduction
+        self.fed = None
+        self.sent: set[int] = set()
         self.old = cached(cache, recording) if cache is not None else None
         self.raw: list[Keypoints] = []
         self.checked: dict[int, Keypoints] = {}
@@ -95,11 +165,31 @@ class KeypointStream:
         require_detector()
         context = multiprocessing.get_context("spawn")
         self.results = context.Queue()
+        self.fed = None if reduction is None else context.Queue()
         self.worker = context.Process(
-            target=_work, args=(recording, start, stop, step, self.results), name="keypoint detector", daemon=True
+            target=_work,
+            args=(recording, start, stop, step, self.results, self.fed, reduction),
+            name="keypoint detector",
+            daemon=True,
         )
         self.worker.start()
         self.finished = False
+
+    def copies(self) -> list[ColourCopies] | None:
+        """What the readers must give a fed worker, one per camera: the scheduled frames the cache does not hold,
+        in colour, reduced as the tracker's images are; None for a stream that is not fed."""
+        if self.fed is None:
+            return None
+        assert self.reduction is not None  # fed streams have one
+        wanted = frozenset(int(frame) for frame in self.wanted if frame not in self.checked)
+        return [ColourCopies(wanted, int(factor)) for factor in self.reduction]
+
+    def feed(self, index: int, images: list[np.ndarray]) -> None:
+        """Hand a fed worker frame ``index``'s colour images (BGR, one per camera, reduced by the stream's
+        ``reduction``)."""
+        assert self.fed is not None and index not in self.sent, f"frame {index} fed twice or to a reading stream"
+        self.fed.put((index, images))
+        self.sent.add(index)
 
     def get(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of ``frame`` (pixels (C, 33, 2), confidence (C, 33)), waiting for the
@@ -121,6 +211,7 @@ class KeypointStream:
 
     def _checked(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of a scheduled frame, waiting for the worker if need be."""
+        assert self.fed is None or frame in self.checked or frame in self.sent, f"frame {frame} was never fed"
         while frame not in self.checked and self.worker is not None and not self.finished:
             self._receive()
         found = self.checked.get(frame)
@@ -150,6 +241,8 @@ class KeypointStream:
 
     def close(self) -> None:
         """Stop the worker and add what it detected to the cache."""
+        if self.fed is not None:  # frames it will not take must not hold this process up at exit
+            self.fed.cancel_join_thread()
         if self.worker is not None:
             if self.worker.is_alive():
                 self.worker.terminate()
