@@ -3,6 +3,7 @@ far off is seeded again from the keypoints (on the rendered demo, with its truth
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -242,3 +243,28 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
+
+
+def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkeypatch):
+    """A strayed pose whose landmarks cannot be fitted (fitted gives None) is tried once, then not again for
+    WINDOW frames, then after twice as long; a lost frame is tried all the same."""
+    from tracker.status import LOST
+    from tracker.track import FrameResult, Tracker
+
+    model, truth, recovery = _at_truth()
+    keypoints = _true_landmarks(recovery, truth)
+    moved = _moved(truth)
+    fits = []
+    monkeypatch.setattr(recovery, "fitted", lambda start: fits.append(1))
+    tracker = Tracker(model, recovery.cameras, moved)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    counts = []
+    for _ in range(WINDOW + 2 * WINDOW + WINDOW + 2):
+        assert recovery(tracker, None, keypoints, tracked) is tracked
+        counts.append(len(fits))
+    first = counts.index(1)  # once WINDOW frames of landmarks are in
+    assert first == WINDOW - 1 and counts[first + WINDOW] == 1 and counts[first + WINDOW + 1] == 2
+    assert counts[first + 3 * WINDOW + 1] == 2 and counts[first + 3 * WINDOW + 2] == 3
+    assert recovery.declined == 0 and recovery.reseeded == 0
+    recovery(tracker, None, keypoints, dataclasses.replace(tracked, status=LOST))
+    assert len(fits) == 4

@@ -20,9 +20,10 @@ The edges then arbitrate: the tracker starts again from the snapped pose, its st
 tracked pose's did (a frame that is not lost). Landmarks that two views agree on can still be
 wrong, the detector following a bystander or reading an arm the other way round; a re-seed fitted
 to them lands off the body's outlines, and the tracked pose is kept (``declined`` counts these). A
-try costs about half a second (the fit and the snap), so after a declined one the recovery waits :data:`WINDOW`
-frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost frame
-is always tried.
+try costs about half a second (the fit and the snap), so after a declined one, or one whose landmarks cannot
+place the body (the fit alone costs 0.3-0.5 s at HD, and was tried again in every frame), the recovery waits
+:data:`WINDOW` frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost
+frame is always tried.
 
 Image distances, not triangulated ones: two views triangulate a detector's few pixels of noise into
 centimetres of depth, while the share of the body's size reads the same in any view; the mean over
@@ -92,7 +93,7 @@ class Recovery:
     min_confidence: float = 0.5
     reseeded: int = 0
     declined: int = 0
-    refusals: int = 0  # re-seeds declined since the last one taken
+    refusals: int = 0  # tries since the last re-seed that did not re-seed (declined, or the fit failed)
     wait: int = 0  # frames to go before the next re-seed of a frame that is not lost
     recent: list = dataclasses.field(default_factory=list)  # the last frames' (pixels, confidence), newest first
 
@@ -142,6 +143,12 @@ class Recovery:
         except TrackerInputError:  # the landmarks cannot place the body: go on as tracked
             return None
 
+    def back_off(self) -> None:
+        """After a try that did not re-seed: wait :data:`WINDOW` frames before the next, twice as long after two
+        such tries in a row, and so on up to :data:`BACKOFF` doublings (a lost frame is tried all the same)."""
+        self.refusals += 1
+        self.wait = WINDOW * 2 ** (min(self.refusals, BACKOFF) - 1)
+
     def __call__(
         self, tracker: Tracker, images, keypoints: tuple[np.ndarray, np.ndarray] | None, result: FrameResult
     ) -> FrameResult:
@@ -163,15 +170,15 @@ class Recovery:
         if len(self.recent) < WINDOW and len(self.cameras) >= 2:
             return result  # not yet enough frames to fit to
         seed = self.fitted(result.poses)
-        if seed is None:
+        if seed is None:  # the landmarks cannot place the body: a failed try, as costly as a declined one
+            self.back_off()
             return result
         snapped = snap_to_edges(
             self.model, self.cameras, seed, images, keypoints=keypoints, settings=tracker.settings, smoothed=True
         )
         if result.status != LOST and snapped.share < result.share:
             self.declined += 1
-            self.refusals += 1
-            self.wait = WINDOW * 2 ** (min(self.refusals, BACKOFF) - 1)
+            self.back_off()
             return result  # the edges side with the tracked pose (module docstring)
         self.refusals = 0
         self.streak[:] = 0
