@@ -147,3 +147,18 @@ def test_a_fed_worker_detects_in_the_readers_colour_copies_as_a_reading_one_does
     both = (full.confidence > 0.5) & (halved.confidence > 0.5)
     assert both.sum() > 100
     assert np.median(np.linalg.norm(full.pixels - halved.pixels, axis=3)[both]) < 4.0
+
+
+def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
+    """Closing the frame loop of a fed stream before its end (Ctrl-C, an error) ends every reader thread."""
+    import threading
+
+    from tracker.keypoints.stream import tracked_frames
+
+    recording = open_recording(DEMO)
+    with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.ones(3, np.int64)) as stream:
+        read = tracked_frames(stream, recording, 0, 40)
+        index, images = next(read)
+        assert index == 0 and len(images) == 3
+        read.close()
+    assert not [thread for thread in threading.enumerate() if thread.name.startswith("reader ")]

@@ -29,7 +29,7 @@ import multiprocessing
 import queue
 import signal
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -120,14 +120,18 @@ def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Ite
     fed ``stream`` (:meth:`KeypointStream.feed`) as it is read and the frame given out, without them,
     :attr:`KeypointStream.lead` frames later."""
     window: deque[tuple[int, list]] = deque()
-    for index, images in items:
-        if any(isinstance(image, WithColour) for image in images):
-            stream.feed(index, [image.colour for image in images])
-            images = [image.image for image in images]
-        window.append((index, images))
-        if len(window) > stream.lead:
-            yield window.popleft()
-    yield from window
+    try:
+        for index, images in items:
+            if any(isinstance(image, WithColour) for image in images):
+                stream.feed(index, [image.colour for image in images])
+                images = [image.image for image in images]
+            window.append((index, images))
+            if len(window) > stream.lead:
+                yield window.popleft()
+        yield from window
+    finally:  # given up early (Ctrl-C): the reader threads stop now
+        if isinstance(items, Generator):
+            items.close()
 
 
 class KeypointStream:
