@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tracker.cli import main
-from tracker.io.recording import open_recording
+from tracker.io.recording import frames, open_recording
 from tracker.keypoints import stream as stream_module
 from tracker.keypoints.detect import detect_recording, fingerprint
 from tracker.keypoints.store import load_keypoints, save_keypoints
@@ -121,29 +121,37 @@ def test_the_worker_keeps_mediapipes_native_logs_off_the_terminal(tmp_path, capf
     assert "XNNPACK" not in err and "W0000" not in err and "absl" not in err
 
 
-def test_a_fed_worker_detects_in_the_readers_colour_copies_as_a_reading_one_does(tmp_path):
-    """Fed by the tracker's readers (tracked_frames), the worker decodes nothing and finds the landmarks a worker
-    reading the recording finds, in the same colour frames; the frames come out without their colour copies, the
-    images prepared as asked.  Reduced by 2, the copies still place the body, its landmarks in full-size pixels
-    within a few pixels of the full-size ones."""
+def test_a_fed_worker_detects_in_the_readers_colour_copies(tmp_path):
+    """Fed by the tracker's readers (tracked_frames) for views they reduce, the worker decodes nothing and finds
+    the landmarks a landmarker finds in those frames' colour images reduced alike, taken back to full-size pixels
+    (within a few pixels of the full-size ones); the frames come out without their colour copies, prepared as
+    asked.  Views that are not reduced are read by the worker itself."""
+    from tracker.io.readers import reduced
+    from tracker.keypoints.detect import frame_keypoints
+    from tracker.keypoints.detector import Detector, detect_views
     from tracker.keypoints.stream import tracked_frames
 
     recording = open_recording(DEMO)
-    landmarks = {}
-    for name, reduction in (("reading", None), ("fed", [1, 1, 1]), ("halved", [2, 2, 2])):
+    for name, reduction in (("reading", np.ones(3, np.int64)), ("halved", np.full(3, 2))):
         with KeypointStream(recording, 0, 9, 4, tmp_path / f"{name}.npz", reduction) as stream:
-            assert (stream.fed is None) == (reduction is None)
+            assert (stream.fed is None) == (name == "reading")
             seen = []
             for index, images in tracked_frames(stream, recording, 0, 9, prepare=lambda image: image[::2, ::2]):
                 assert all(isinstance(image, np.ndarray) and image.shape == (240, 320) for image in images)
                 seen.append(index)
                 stream.get(index)
-            assert seen == list(range(9))
-            assert stream.sent == ({0, 4, 8} if reduction else set())
-        landmarks[name] = load_keypoints(tmp_path / f"{name}.npz")
-    np.testing.assert_array_equal(landmarks["fed"].pixels, landmarks["reading"].pixels)
-    np.testing.assert_array_equal(landmarks["fed"].confidence, landmarks["reading"].confidence)
-    full, halved = landmarks["reading"], landmarks["halved"]
+            assert seen == list(range(9)) and stream.sent == ({0, 4, 8} if stream.fed else set())
+    full, halved = load_keypoints(tmp_path / "reading.npz"), load_keypoints(tmp_path / "halved.npz")
+    detectors = [Detector() for _ in recording.cameras]
+    names = tuple(camera.name for camera in recording.cameras)
+    try:
+        for row, (index, images) in enumerate(frames(recording, 0, 9, colour=True, step=4)):
+            alike = detect_views(detectors, [reduced(image, 2) for image in images])
+            expected = frame_keypoints(index, alike, names, "", np.full(3, 2))
+            np.testing.assert_array_equal(halved.pixels[row], expected.pixels[0])
+    finally:
+        for detector in detectors:
+            detector.close()
     both = (full.confidence > 0.5) & (halved.confidence > 0.5)
     assert both.sum() > 100
     assert np.median(np.linalg.norm(full.pixels - halved.pixels, axis=3)[both]) < 4.0
@@ -156,7 +164,8 @@ def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
     from tracker.keypoints.stream import tracked_frames
 
     recording = open_recording(DEMO)
-    with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.ones(3, np.int64)) as stream:
+    with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2)) as stream:
+        assert stream.fed is not None
         read = tracked_frames(stream, recording, 0, 40)
         index, images = next(read)
         assert index == 0 and len(images) == 3

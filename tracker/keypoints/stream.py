@@ -2,19 +2,19 @@
 
 The worker either reads the recording itself or is fed by the tracker's reader threads
 (:meth:`KeypointStream.copies`, :meth:`KeypointStream.feed`), runs one landmarker per camera, checks the views
-against each other (:mod:`tracker.keypoints.consistency`) and hands each frame's landmarks over a queue, in
-frame order.  Fed, it decodes nothing: the readers decode each video once and give the scheduled frames also in
-colour, reduced as the edge search reduces them (:func:`tracker.track.reductions`), and the landmarks are taken
-back to full-size pixels.  On 1080x1920 H.264 that saves the second decoding of every frame of every view (3 ms
-of CPU each).  Colour it must be: in grey the detector takes the demo's backdrop photograph of a player for the
-body it should find (docs/keypoints.md).  The tracker reads its frames ``step + LAG`` frames ahead
-of the one it tracks (:func:`tracked_frames`), so the worker detects a frame while the tracker is still on earlier
-ones.  It is a process, not a thread, so the detector's Python glue never holds the tracker's interpreter lock;
-on a machine with two cores the two run side by side.  The tracker asks for a frame's landmarks when it
-reaches that frame and waits only if the worker has not got there yet, so a run's result does not depend on timing.  A
-frame between two detected ones gets their landmarks interpolated (so the tracker waits for the
-later one): at 60 frames a second a body moves little in a few frames, and a cue in every frame
-holds it far better than one in every fourth.
+against each other (:mod:`tracker.keypoints.consistency`) and hands each frame's landmarks over a queue, in frame
+order.  Fed (large views only, :class:`KeypointStream`), it decodes nothing: the readers decode each video once and
+give the scheduled frames also in colour, reduced as the edge search reduces them
+(:func:`tracker.track.reductions`), and the landmarks are taken back to full-size pixels.  On 1080x1920 H.264 that
+saves the second decoding of every frame of every view (3 ms of CPU each).  Colour it must be: in grey the detector
+takes the demo's backdrop photograph of a player for the body it should find (docs/keypoints.md).  The tracker reads
+its frames ``step + LAG`` frames ahead of the one it tracks (:func:`tracked_frames`), so the worker detects a frame
+while the tracker is still on earlier ones.  It is a process, not a thread, so the detector's Python glue never
+holds the tracker's interpreter lock; on a machine with two cores the two run side by side.  The tracker asks for a
+frame's landmarks when it reaches that frame and waits only if the worker has not got there yet, so a run's result
+does not depend on timing.  A frame between two detected ones gets their landmarks interpolated (so the tracker
+waits for the later one): at 60 frames a second a body moves little in a few frames, and a cue in every frame holds
+it far better than one in every fourth.
 
 A cache (``keypoints.npz``, :mod:`tracker.keypoints.detect`) that already holds the scheduled
 frames is used instead of the worker; otherwise what the worker detected is added to it when the
@@ -136,8 +136,13 @@ def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Ite
 
 class KeypointStream:
     """Checked landmarks of the scheduled frames, from the cache or from a worker process: one that reads the
-    recording, or, with ``reduction`` (the tracker's, one factor per camera), one fed the tracker's images (the
-    frame loop reads through :func:`tracked_frames`)."""
+    recording, or, with ``reduction`` (the tracker's, one factor per camera) that reduces some camera's images,
+    one fed by the tracker's readers (the frame loop reads through :func:`tracked_frames`).
+
+    Only reduced (large) views are fed: smaller ones decode cheaply (0.5 ms a 640x480 Motion-JPEG view against
+    3 ms a 1080x1920 H.264 one), and a worker that reads them itself detects ahead while the tracker's kernels
+    load, unbounded by the frames the tracker holds.  On the demo that head start is worth 55 against 38 frames a
+    second end to end; on the balancing trial feeding is worth 15 against 11 (docs/keypoints.md)."""
 
     def __init__(
         self,
@@ -169,7 +174,7 @@ class KeypointStream:
         require_detector()
         context = multiprocessing.get_context("spawn")
         self.results = context.Queue()
-        self.fed = None if reduction is None else context.Queue()
+        self.fed = context.Queue() if reduction is not None and np.max(reduction) > 1 else None
         self.worker = context.Process(
             target=_work,
             args=(recording, start, stop, step, self.results, self.fed, reduction),
