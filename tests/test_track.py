@@ -237,3 +237,18 @@ def test_hd_views_searched_at_half_size_track_as_at_full_size(hd_recording):
     full, _ = _track(hd_recording, 12, settings=Settings(work_side=0))
     assert reduced.mpjpe_mm <= 20.0 and full.mpjpe_mm <= 20.0, (reduced.mpjpe_mm, full.mpjpe_mm)
     assert abs(reduced.mpjpe_mm - full.mpjpe_mm) < 2.0, (reduced.mpjpe_mm, full.mpjpe_mm)
+
+
+def test_the_overlay_of_hd_views_is_drawn_on_the_full_size_frames(hd_recording, tmp_path, monkeypatch):
+    """Views searched at half size still get their overlay drawn on the frames as recorded (1280x960 each), where
+    the outlines' full-size pixels belong."""
+    from tracker.viewer.overlay import OverlayVideo
+
+    drawn = []
+    write = OverlayVideo.write
+    monkeypatch.setattr(
+        OverlayVideo, "write", lambda self, images, *rest: drawn.append(images) or write(self, images, *rest)
+    )
+    args = ["track", str(hd_recording), "--frames", "2", "--keypoints", "off", "--overlay", str(tmp_path / "o.avi")]
+    assert main([*args, "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert len(drawn) == 2 and all(image.shape == (960, 1280) for images in drawn for image in images)

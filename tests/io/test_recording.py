@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import cv2
@@ -274,3 +275,22 @@ def test_readers_give_the_named_frames_also_in_reduced_colour(tmp_path: Path) ->
             else:
                 grey = item
             assert grey.shape == (HEIGHT, WIDTH) and np.abs(grey.astype(float) - 1 - content(camera, index)).mean() < 4
+
+
+def test_ten_bit_video_gives_its_grey_levels(tmp_path: Path) -> None:
+    """A 10-bit video (two bytes a luma sample) is converted, not read as bytes: flat frames keep their level."""
+    import av
+
+    from tracker.io.readers import grey_frames
+
+    video = tmp_path / "ten.mkv"
+    with av.open(str(video), "w") as container:
+        stream = container.add_stream("ffv1", rate=25)
+        stream.width, stream.height, stream.pix_fmt = 96, 64, "yuv420p10le"
+        for level in (20, 100, 180):
+            frame = av.VideoFrame.from_ndarray(np.full((64, 96, 3), level, np.uint8), format="bgr24")
+            container.mux(stream.encode(frame))
+        container.mux(stream.encode())
+    levels = [float(image.mean()) for image in itertools.islice(grey_frames(video), 3)]
+    assert all(image_shape == (64, 96) for image_shape in [next(grey_frames(video)).shape])
+    np.testing.assert_allclose(levels, [20, 100, 180], atol=2.0)

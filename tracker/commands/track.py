@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tracker.evaluate import evaluate, format_report
     from tracker.io.poses import PosesWriter, load_poses
+    from tracker.io.readers import keeping_grey
     from tracker.io.recording import capture_times
     from tracker.io.stepwrite import step_and_write
     from tracker.keypoints.stream import tracked_frames
@@ -103,14 +104,18 @@ def run(args: argparse.Namespace) -> int:
         from tracker.viewer.overlay import OverlayVideo
 
         overlay = OverlayVideo(Path(args.overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
+    # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
+    # reduced at HD, or colour differences)
+    shows = overlay is not None or live is not None
     if background is None:
-        prepare: Callable[[np.ndarray], np.ndarray] | list[Callable[[np.ndarray], object]] = tracker.smooth
+        prepare: Callable[[np.ndarray], object] | list[Callable[[np.ndarray], object]] = (
+            keeping_grey(tracker.smooth) if shows else tracker.smooth
+        )
     else:
         from tracker.foreground import preparers
-        from tracker.io.readers import keeping_grey
 
         measured = preparers(background, tracker.smooth)
-        prepare = [keeping_grey(camera) for camera in measured] if overlay is not None else list(measured)
+        prepare = [keeping_grey(camera) for camera in measured] if shows else list(measured)
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
     residuals = []
     interrupted = False
@@ -122,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
             read = tracked_frames(stream, rec, begin, stop, prepare=prepare, colour=background is not None)
             for index, images in progress(read, total=stop - begin):
                 shown = images
-                if background is not None and overlay is not None:
+                if shows:
                     shown, images = zip(*images)
                 at = None if times is None else float(times[index])
                 keypoints = None if stream is None else stream.get(index)
@@ -131,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
                 )
                 last = at
                 if live is not None:
-                    live.offer(index, images, result, spent)
+                    live.offer(index, shown, result, spent)
                 if overlay is not None:
                     overlay.write(shown, tracker.inspect())
                 counts[result.status] += 1

@@ -196,13 +196,15 @@ class _Decoded:
 
     def __init__(self, source: Path, colour: bool):
         self.source, self.colour = source, colour
+        unsupported = TrackerInputError(f"{source}: corrupt or unsupported video; re-encode it, e.g. as H.264 .mp4")
         try:
             self.container = av.open(str(source))
-            self.stream = self.container.streams.video[0]
-        except (av.FFmpegError, IndexError):
-            raise TrackerInputError(
-                f"{source}: corrupt or unsupported video; re-encode it, e.g. as H.264 .mp4"
-            ) from None
+        except av.FFmpegError:
+            raise unsupported from None
+        if not self.container.streams.video:
+            self.container.close()
+            raise unsupported
+        self.stream = self.container.streams.video[0]
         self.stream.thread_count = 1
         self.frames = self.container.decode(self.stream)
 
@@ -238,7 +240,9 @@ class _Decoded:
         self.frames = self.container.decode(stream)
         while True:
             frame = self._next(index)
-            if frame.pts is None or frame.pts >= target - half:
+            if frame.pts is None:
+                raise TrackerInputError(f"{self.source}: frames without time stamps cannot be sought; re-encode it")
+            if frame.pts >= target - half:
                 self.frames = itertools.chain([frame], self.frames)
                 return
 
@@ -248,8 +252,8 @@ class _Decoded:
 
 def luma(frame: av.VideoFrame) -> np.ndarray:
     """The grey uint8 (H, W) image of a decoded frame: its luma plane where it has one, in full range."""
-    if not frame.format.name.startswith(LUMA_FIRST):
-        return frame.to_ndarray(format="gray")
+    if not frame.format.name.startswith(LUMA_FIRST) or frame.format.components[0].bits != 8:
+        return frame.to_ndarray(format="gray")  # 10-bit and other formats: converted
     plane = frame.planes[0]
     rows = np.frombuffer(memoryview(plane), np.uint8).reshape(frame.height, plane.line_size)[:, : frame.width]
     full = frame.color_range == av.video.reformatter.ColorRange.JPEG or frame.format.name.startswith(("yuvj", "gray"))

@@ -104,12 +104,12 @@ def frame_keypoints(
     index: int, found: list[Detection], names: tuple[str, ...], identity: str, reduction: np.ndarray | None = None
 ) -> Keypoints:
     """One frame's keypoints from its views' detections; with ``reduction`` (one integer factor per camera) the
-    detections were made in images reduced by it (:func:`tracker.track.smooth`), and their pixels are taken back
-    to full size, ``f (p + 0.5) - 0.5``."""
+    detections were made in images reduced by it (:func:`tracker.io.readers.reduced`), and their pixels are taken
+    back to full size, ``f p``: the detector gives a share of the image's width and height times that width and
+    height (:func:`tracker.keypoints.detector._read`), and the reduced image spans the full one's whole blocks."""
     pixels = np.stack([detection.pixels for detection in found])
     if reduction is not None:
-        factor = np.asarray(reduction, float)[:, None, None]
-        pixels = factor * (pixels + 0.5) - 0.5
+        pixels = np.asarray(reduction, float)[:, None, None] * pixels
     return Keypoints(
         np.array([index]),
         names,

@@ -220,7 +220,8 @@ class KeypointStream:
 
     def _checked(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of a scheduled frame, waiting for the worker if need be."""
-        assert self.fed is None or frame in self.checked or frame in self.sent, f"frame {frame} was never fed"
+        if self.fed is not None and frame not in self.checked and frame not in self.sent:
+            raise RuntimeError(f"frame {frame}'s landmarks asked for before it was fed: read through tracked_frames")
         while frame not in self.checked and self.worker is not None and not self.finished:
             self._receive()
         found = self.checked.get(frame)
@@ -250,13 +251,14 @@ class KeypointStream:
 
     def close(self) -> None:
         """Stop the worker and add what it detected to the cache."""
-        if self.fed is not None:  # frames it will not take must not hold this process up at exit
-            self.fed.cancel_join_thread()
         if self.worker is not None:
             if self.worker.is_alive():
                 self.worker.terminate()
             self.worker.join()
             self.worker = None
+        if self.fed is not None:  # frames it will not take must not hold this process up, nor their memory
+            self.fed.cancel_join_thread()
+            self.fed.close()
         if self.cache is not None and self.raw:
             save_keypoints(self.cache, merged(self.old, stacked(self.raw)))
             self.raw = []
