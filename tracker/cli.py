@@ -14,6 +14,7 @@ import warnings
 
 from tracker.commands import (
     background,
+    batch,
     bench,
     calibrate,
     evaluate,
@@ -49,6 +50,7 @@ COMMANDS = {
     "points": points,
     "experiment": experiment,
     "bench": bench,
+    "batch": batch,
 }
 
 

@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from tracker.commands import options
 from tracker.commands.viewing import scene, serve
 from tracker.errors import TrackerInputError
+
+if TYPE_CHECKING:
+    from tracker.evaluate import Report
 
 HELP = "track a recording folder, write DIR/poses.npz and print a summary"
 
@@ -18,6 +23,20 @@ HELP = "track a recording folder, write DIR/poses.npz and print a summary"
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker track``."""
     parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
+    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
+    add_tracking_options(parser)
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--overlay",
+        metavar="VIDEO",
+        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches",
+    )
+    options.add_live_view_options(parser, "then review the result")
+    options.add_viewer_options(parser)
+
+
+def add_tracking_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker track`` that say how a recording is tracked (``tracker batch`` passes them on)."""
     parser.add_argument(
         "--model",
         help="body model TOML (default: the recording's model.toml, else models/human.toml fitted to the person "
@@ -28,7 +47,6 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="pose at the first frame (default: the recording's init.toml, else fitted to the keypoints of the "
         "first frames)",
     )
-    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
     options.add_recording_options(parser)
     parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     parser.add_argument("--frames", type=options.positive_int, help="number of frames to track (default: all)")
@@ -42,22 +60,60 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "'median' estimates it from the recording (the person must move about), DIR holds "
         "<camera>.png images of it (default none)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument(
-        "--overlay",
-        metavar="VIDEO",
-        help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches",
-    )
-    options.add_live_view_options(parser, "then review the result")
-    options.add_viewer_options(parser)
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """What a run of ``tracker track`` did: what its summary prints, and the viewer left to review it."""
+
+    poses: Path  # the poses.npz written
+    frames: int  # frames tracked
+    views: int  # cameras tracked in
+    iterations: int  # IRLS iterations per frame
+    fps: float  # frames per second of the tracking loop (decoding included, start-up not)
+    residual: float  # mean residual of the frames, pixels (NaN when no frame found an edge)
+    counts: dict[int, int]  # frames per status (tracker.status)
+    declined: int | None  # re-seeds the edges declined; None without the keypoint cue
+    interrupted: bool  # stopped by Ctrl-C: the frames done are written
+    report: Report | None  # the accuracy against the recording's truth.npz, when it has one
+    review: Callable[[], int] | None = dataclasses.field(default=None, compare=False)  # --view: serve the review
 
 
 def run(args: argparse.Namespace) -> int:
     """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
     130 after Ctrl-C with the frames done written."""
+    outcome = track(args)
+    if outcome.interrupted:
+        print(f"wrote {outcome.poses} ({outcome.frames} frames)")
+        print("interrupted: the frames done so far are saved", file=sys.stderr)
+        return 130
+    print_summary(outcome)
+    return outcome.review() if outcome.review is not None else 0
+
+
+def print_summary(outcome: Outcome) -> None:
+    """What a finished run prints: the file written, speed, residual, status counts and the accuracy."""
+    from tracker.evaluate import format_report
+    from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
+
+    print(f"wrote {outcome.poses} ({outcome.frames} frames)")
+    print(f"frames per second: {outcome.fps:.1f} ({outcome.views} views, {outcome.iterations} iterations per frame)")
+    print(f"mean residual: {outcome.residual:.2f} px")
+    counts = outcome.counts
+    reseeded = ""
+    if outcome.declined is not None:
+        reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({outcome.declined} declined by the edges)"
+    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
+    if outcome.report is not None:
+        print(format_report(outcome.report))
+
+
+def track(args: argparse.Namespace) -> Outcome:
+    """Track the recording of ``args`` (the options of ``tracker track``) and write OUT/poses.npz; after Ctrl-C,
+    the frames done are written and the outcome says it was interrupted."""
     import numpy as np
 
-    from tracker.evaluate import evaluate, format_report
+    from tracker.evaluate import evaluate
     from tracker.io.poses import PosesWriter, load_poses
     from tracker.io.readers import keeping_grey
     from tracker.io.recording import capture_times
@@ -66,8 +122,6 @@ def run(args: argparse.Namespace) -> int:
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.track import Tracker, reductions
 
-    if args.record and not args.view:
-        raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec = options.recording(args)
     if not 0 <= args.start < rec.frame_count:
         raise TrackerInputError(
@@ -152,29 +206,33 @@ def run(args: argparse.Namespace) -> int:
     if live is not None:
         live.close()
     done = len(residuals)
-    print(f"wrote {out / 'poses.npz'} ({done} frames)")
-    if interrupted:
-        print("interrupted: the frames done so far are saved", file=sys.stderr)
-        return 130
-    fps = done / elapsed if elapsed > 0 else float("inf")
-    print(f"frames per second: {fps:.1f} ({len(rec.cameras)} views, {settings.iterations} iterations per frame)")
-    print(f"mean residual: {np.nanmean(residuals) if np.isfinite(residuals).any() else float('nan'):.2f} px")
-    reseeded = ""
-    if recovery is not None:
-        reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({recovery.declined} declined by the edges)"
-    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
-    results = load_poses(out / "poses.npz") if truth is not None or live is not None else None
-    if truth is not None:
-        assert results is not None  # loaded when there is a truth
-        print(format_report(evaluate(results, truth)))
-    if live is not None and done > 0:
+    poses = out / "poses.npz"
+    results = load_poses(poses) if not interrupted and (truth is not None or live is not None) else None
+    report = evaluate(results, truth) if results is not None and truth is not None else None
+    review: Callable[[], int] | None = None
+    if live is not None and results is not None and done > 0:
         from tracker.viewer.review import Review
 
-        assert results is not None  # loaded when there is a live view
-        review = Review(live.scene, rec, model, results, truth, settings)
-        review.show(done - 1)
-        return serve(f"tracking done; the viewer now reviews {out / 'poses.npz'}", review)
-    return 0
+        def serve_review() -> int:
+            shown = Review(live.scene, rec, model, results, truth, settings)
+            shown.show(done - 1)
+            return serve(f"tracking done; the viewer now reviews {poses}", shown)
+
+        review = serve_review
+
+    return Outcome(
+        poses=poses,
+        frames=done,
+        views=len(rec.cameras),
+        iterations=settings.iterations,
+        fps=done / elapsed if elapsed > 0 else float("inf"),
+        residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
+        counts=counts,
+        declined=None if recovery is None else recovery.declined,
+        interrupted=interrupted,
+        report=report,
+        review=review,
+    )
 
 
 def _model(args: argparse.Namespace, rec, out: Path, step: int):

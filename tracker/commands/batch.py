@@ -1,0 +1,276 @@
+"""``tracker batch``: track many recording folders, one Ray task each, locally or on a cluster (docs/batch.md).
+
+The driver matches the folders, gives each a results folder under ``--out`` (its path from the folders' common
+parent), and submits one task per folder that is not finished according to the manifest
+(:mod:`tracker.io.batch`), at most ``--workers`` at a time. A task runs ``tracker track`` in the Ray worker,
+its output going to the results folder's ``track.log``, and returns the recording's :class:`Row`. A one-line
+input error (a missing calibration, say) fails the recording at once; a crash (an exception, a worker that
+died) is tried again, up to :data:`RETRIES` times. Each finished recording is written to the manifest as it
+comes, so a batch stopped by Ctrl-C or a lost driver resumes where it was: run the same command again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import glob
+import logging
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from tracker.commands import options, track
+from tracker.errors import TrackerInputError
+
+HELP = "track many recording folders, one Ray task each, locally or on a cluster"
+
+RETRIES = 2
+"""Tries after the first for a recording whose task crashed."""
+
+INSTALL = "pip install 'tracker[cluster]' (in a clone: pip install -e '.[cluster]'; make setup does it)"
+
+PATHS = ("model", "init", "calib")
+"""Tracking options that name files: made absolute, so that every worker reads the same ones."""
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker batch``: its own, then those of ``tracker track`` that it passes on."""
+    parser.add_argument(
+        "recordings",
+        nargs="+",
+        metavar="GLOB",
+        help="recording folders, or glob patterns matching them (quote them to match on the driver: 'data/*/trial*')",
+    )
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output folder: one results folder a recording, the manifest and summary.csv",
+    )
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="address of a running Ray cluster (e.g. 10.0.0.5:6379, or auto); default: a local one started for "
+        "the batch",
+    )
+    parser.add_argument(
+        "--workers",
+        type=options.positive_int,
+        help="recordings tracked at once (default: half the machine's cores locally, as each recording keeps "
+        "about two busy; on a cluster, half its CPUs)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    track.add_tracking_options(parser)
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """One recording of the batch and its results folder."""
+
+    recording: Path
+    name: str
+    out: Path
+
+
+def matched(patterns: list[str]) -> list[Path]:
+    """The folders ``patterns`` (paths or glob patterns) match, absolute, in order, each once; a one-line error
+    for a pattern that matches no folder."""
+    found: dict[Path, None] = {}
+    for pattern in patterns:
+        folders = [Path(path).resolve() for path in sorted(glob.glob(pattern)) if Path(path).is_dir()]
+        if not folders:
+            raise TrackerInputError(
+                f"{pattern}: matches no folder; give recording folders or a pattern that matches them"
+            )
+        found.update(dict.fromkeys(folders))
+    return list(found)
+
+
+def jobs(recordings: list[Path], out: Path) -> list[Job]:
+    """Each recording with its results folder: its path below the recordings' common parent (its own name when
+    alone), under ``out``."""
+    if len(recordings) == 1:
+        names = [recordings[0].name]
+    else:
+        parent = Path(os.path.commonpath([recording.parent for recording in recordings]))
+        names = [recording.relative_to(parent).as_posix() for recording in recordings]
+    return [Job(recording, name, out / name) for recording, name in zip(recordings, names)]
+
+
+def tracking_options(args: argparse.Namespace) -> dict:
+    """The ``tracker track`` options of ``args`` (the ones :func:`tracker.commands.track.add_tracking_options`
+    makes), file names made absolute."""
+    parser = argparse.ArgumentParser()
+    track.add_tracking_options(parser)
+    chosen = {key: getattr(args, key) for key in vars(parser.parse_args([]))}
+    for key in PATHS:
+        if chosen[key] is not None:
+            chosen[key] = str(Path(chosen[key]).resolve())
+    if chosen["background"] not in ("none", "median"):
+        chosen["background"] = str(Path(chosen["background"]).resolve())
+    return chosen
+
+
+def track_recording(recording: str, name: str, out: str, chosen: dict):
+    """The Ray task: ``tracker track recording --out out`` with the ``chosen`` tracking options, its output in
+    OUT/track.log; the recording's row, failed with the error's line for bad input. Any other exception is the
+    driver's to retry."""
+    import cv2
+
+    from tracker.atomic import ensure_writable_folder
+    from tracker.io.batch import DONE, FAILED, Row
+    from tracker.status import LOST
+
+    cv2.setNumThreads(1)  # as tracker.cli.main: the reader threads run in parallel already
+    parser = argparse.ArgumentParser()
+    track.add_options(parser)
+    args = parser.parse_args([recording, "--out", out, "--quiet"])
+    vars(args).update(chosen)
+    started = time.perf_counter()
+    log = ensure_writable_folder(out) / "track.log"
+    with open(log, "w") as stream, contextlib.redirect_stdout(stream), contextlib.redirect_stderr(stream):
+        try:
+            outcome = track.track(args)
+        except TrackerInputError as error:
+            print(f"tracker: error: {error}", file=sys.stderr)
+            return Row(recording, name, FAILED, seconds=time.perf_counter() - started, error=str(error))
+        track.print_summary(outcome)
+    return Row(
+        recording,
+        name,
+        DONE,
+        frames=outcome.frames,
+        fps=outcome.fps,
+        residual_px=outcome.residual,
+        lost=outcome.counts[LOST],
+        mpjpe_mm=outcome.report.mpjpe_mm if outcome.report is not None else float("nan"),
+        seconds=time.perf_counter() - started,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Track the recordings not yet finished in ``--out`` and print and write the summary of them all; 1 when a
+    recording failed, 130 after Ctrl-C (the finished ones kept, the batch resumable)."""
+    ray = _ray()
+    from tracker.atomic import ensure_writable_folder
+    from tracker.io.batch import FAILED, Manifest, format_summary, write_summary
+
+    out = ensure_writable_folder(args.out).resolve()
+    everything = jobs(matched(args.recordings), out)
+    manifest = Manifest.open(out / "manifest.json", tracking_options(args))
+    todo = [job for job in everything if (row := manifest.row(str(job.recording))) is None or row.state == FAILED]
+    for job in todo:  # what an unfinished try left goes, but never a folder the batch did not make
+        if job.out.exists():
+            if not manifest.owns(str(job.recording)):
+                raise TrackerInputError(
+                    f"{job.out}: already exists and is not from this batch; pick another --out or move it away"
+                )
+            shutil.rmtree(job.out)
+    if len(todo) < len(everything):
+        before = len(everything) - len(todo)
+        print(f"resuming: {before} of {len(everything)} recordings finished before", file=sys.stderr)
+    manifest.start([str(job.recording) for job in todo])
+    interrupted = _track_all(ray, args, todo, manifest) if todo else False
+    rows = [row for job in everything if (row := manifest.row(str(job.recording))) is not None]
+    print(format_summary(rows))
+    write_summary(rows, out / "summary.csv")
+    print(f"wrote {out / 'summary.csv'}")
+    if interrupted:
+        print(
+            f"interrupted: {len(rows)} of {len(everything)} recordings finished; run the same command again to resume",
+            file=sys.stderr,
+        )
+        return 130
+    failed = sum(row.state == FAILED for row in rows)
+    if failed:
+        print(f"{failed} of {len(rows)} recordings failed: their errors are in the summary", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _ray():
+    """The ray module, or a one-line error saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise TrackerInputError(f"tracker batch runs on Ray, which is not installed here: {INSTALL}") from None
+    return ray
+
+
+def _start(ray, args: argparse.Namespace) -> int:
+    """Connect to ``--ray``, or start a local Ray with ``--workers`` CPUs; the recordings to track at once."""
+    runtime = {"env_vars": {"OPENBLAS_NUM_THREADS": "1"}}  # as tracker.cli.main: small matrices only
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False, "runtime_env": runtime}
+    if args.ray is None:
+        workers = args.workers or max(1, (os.cpu_count() or 2) // 2)
+        ray.init(num_cpus=workers, include_dashboard=False, **quiet)
+        return workers
+    try:
+        ray.init(address=args.ray, **quiet)
+    except (ConnectionError, RuntimeError, ValueError) as error:
+        raise TrackerInputError(
+            f"--ray {args.ray}: cannot join a Ray cluster there ({_line(error)}); start one with 'ray start --head' "
+            "and pass the address it prints, or leave out --ray to run locally"
+        ) from None
+    return args.workers or max(1, int(ray.cluster_resources().get("CPU", 2)) // 2)
+
+
+def _line(error: BaseException) -> str:
+    """The last non-empty line of an error's text (a Ray error's is a traceback ending in what went wrong)."""
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    return lines[-1] if lines else type(error).__name__
+
+
+def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool:
+    """Track ``todo`` on Ray, at most the workers' number at a time, each finished row written to ``manifest``
+    as it comes; a crashed try tried again up to :data:`RETRIES` times. Whether Ctrl-C stopped it."""
+    from tracker.io.batch import FAILED, Row
+
+    workers = _start(ray, args)
+    try:
+        task = ray.remote(num_cpus=1, max_retries=0)(track_recording)
+        chosen = manifest.options
+        waiting = list(todo)
+        pending: dict = {}  # task -> (job, its try)
+
+        def submit(job: Job, attempt: int) -> None:
+            pending[task.remote(str(job.recording), job.name, str(job.out), chosen)] = (job, attempt)
+
+        progress = options.bar(args, "recordings", "recording", leave=True)(total=len(todo))
+        try:
+            while waiting or pending:
+                while waiting and len(pending) < workers:
+                    submit(waiting.pop(0), 1)
+                [ready], _ = ray.wait(list(pending), num_returns=1)
+                job, attempt = pending.pop(ready)
+                try:
+                    row = dataclasses.replace(ray.get(ready), attempts=attempt)
+                except ray.exceptions.RayError as error:
+                    if attempt <= RETRIES:
+                        progress.write(f"{job.name}: try {attempt} crashed ({_line(error)}); trying again", sys.stderr)
+                        shutil.rmtree(job.out, ignore_errors=True)
+                        submit(job, attempt + 1)
+                        continue
+                    row = Row(str(job.recording), job.name, FAILED, attempts=attempt, error=f"crashed: {_line(error)}")
+                manifest.finish(row)
+                progress.update(1)
+                progress.write(_finished(row), sys.stdout)
+        except KeyboardInterrupt:
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            return True
+        finally:
+            progress.close()
+    finally:
+        ray.shutdown()
+    return False
+
+
+def _finished(row) -> str:
+    """The line printed when a recording finishes."""
+    if row.error:
+        return f"{row.state} {row.name}: {row.error}"
+    return f"{row.state} {row.name}: {row.frames} frames at {row.fps:.1f} fps, {row.lost} lost"
