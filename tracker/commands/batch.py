@@ -206,7 +206,7 @@ def _start(ray, args: argparse.Namespace) -> int:
     quiet = {"logging_level": logging.ERROR, "log_to_driver": False, "runtime_env": runtime}
     if args.ray is None:
         workers = args.workers or max(1, (os.cpu_count() or 2) // 2)
-        ray.init(num_cpus=workers, include_dashboard=False, **quiet)
+        ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)  # a new one, never another's
         return workers
     try:
         ray.init(address=args.ray, **quiet)

@@ -1,0 +1,227 @@
+"""``tracker batch`` on a local two-worker Ray: the same results as ``tracker track`` alone, a bad folder reported
+while the others finish, a killed worker's recording tried again, an interrupted batch resumed without redoing
+anything; and one-line errors without Ray, for other options, and for a folder that is not the batch's."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import HUMAN
+
+from tracker.camera import save_calibration
+from tracker.cli import main
+from tracker.synth import look_at_camera, synthesize
+
+pytest.importorskip("ray", reason="tracker batch needs Ray: pip install -e '.[cluster]'")
+
+
+@pytest.fixture(scope="session")
+def recordings(tmp_path_factory) -> list[Path]:
+    """Four small two-camera renderings (8 frames each, the first 300) and a folder without a calibration."""
+    folder = tmp_path_factory.mktemp("batch")
+    rig = [
+        look_at_camera("cam0", (0.5, -3.5, 1.3), (0.0, 0.0, 0.9), size=(320, 240), focal=280.0),
+        look_at_camera("cam1", (3.3, 0.8, 1.6), (0.0, 0.0, 0.9), size=(320, 240), focal=280.0),
+    ]
+    save_calibration(rig, folder / "rig.toml")
+    made = []
+    for seed, frames in zip((11, 12, 13, 14), (300, 8, 8, 8)):
+        made.append(folder / "trials" / f"trial{seed}")
+        synthesize(HUMAN, folder / "rig.toml", made[-1], motion="procedural", frames=frames, seed=seed)
+    return made
+
+
+@pytest.fixture
+def with_bad(recordings, tmp_path) -> list[Path]:
+    """The renderings and, among them, a folder with a video but no calibration."""
+    bad = recordings[0].parent / "trial00-uncalibrated"
+    bad.mkdir(exist_ok=True)
+    (bad / "cam0.avi").write_bytes((recordings[1] / "cam0.avi").read_bytes())
+    return [bad, *recordings]
+
+
+def _tracked_alone(recording: Path, out: Path, *options: str) -> Path:
+    assert main(["track", str(recording), "--out", str(out), "--quiet", *options]) == 0
+    return out
+
+
+def _same_results(alone: Path, batched: Path) -> None:
+    """Every file ``tracker track`` wrote alone is in the batch's folder with the same bytes; in poses.npz, every
+    array but ``elapsed`` (the seconds each frame took, which no two runs share)."""
+    assert sorted(path.name for path in alone.iterdir()) == sorted(
+        path.name for path in batched.iterdir() if path.name != "track.log"
+    )
+    for path in alone.iterdir():
+        if path.name != "poses.npz":
+            assert path.read_bytes() == (batched / path.name).read_bytes(), path.name
+    with np.load(alone / "poses.npz") as one, np.load(batched / "poses.npz") as other:
+        assert one.files == other.files
+        for key in one.files:
+            if key != "elapsed":
+                assert one[key].tobytes() == other[key].tobytes(), key
+
+
+def _summary(out: Path) -> dict[str, dict]:
+    with open(out / "summary.csv", newline="") as file:
+        return {row["name"]: row for row in csv.DictReader(file)}
+
+
+def test_batch_gives_what_track_gives_alone_and_reports_a_bad_folder(with_bad, tmp_path, capsys):
+    out = tmp_path / "batch"
+    assert main(["batch", *map(str, with_bad), "--out", str(out), "--workers", "2", "--quiet"]) == 1
+    printed = capsys.readouterr()
+    summary = _summary(out)
+    assert list(summary) == [path.name for path in with_bad]
+    bad = summary["trial00-uncalibrated"]
+    assert bad["state"] == "failed" and bad["attempts"] == "1"
+    assert "calibration.toml" in bad["error"] and "\n" not in bad["error"]
+    assert bad["error"] in printed.out
+    assert "1 of 5 recordings failed" in printed.err
+    for recording in with_bad[1:]:
+        row = summary[recording.name]
+        assert row["state"] == "done" and row["error"] == ""
+        alone = _tracked_alone(recording, tmp_path / "alone" / recording.name)
+        with np.load(alone / "poses.npz") as poses:
+            assert int(row["frames"]) == len(poses["frame"])
+            assert int(row["lost"]) == int((poses["status"] == 2).sum())
+            assert float(row["residual_px"]) == pytest.approx(np.nanmean(poses["residual"]), rel=1e-9)
+        assert np.isfinite(float(row["mpjpe_mm"]))  # each rendering has its truth.npz
+        _same_results(alone, out / recording.name)
+
+
+def _batch(recordings: list[Path], out: Path) -> subprocess.Popen:
+    """``tracker batch`` in a process of its own, on two local workers, edges only; its output read line by line."""
+    command = [sys.executable, "-m", "tracker.cli", "batch", *map(str, recordings), "--out", str(out)]
+    command += ["--workers", "2", "--keypoints", "off", "--quiet"]
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+
+def _first_finished(batch: subprocess.Popen) -> str:
+    """Read the batch's output up to the first recording it finishes; that line."""
+    assert batch.stdout is not None
+    for line in batch.stdout:
+        if line.startswith("done "):
+            return line
+    raise AssertionError(f"the batch finished nothing: {batch.communicate()}")
+
+
+def _descendants(pid: int) -> list[int]:
+    """The processes below ``pid`` (Linux: from /proc)."""
+    parent = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            parent[int(entry.name)] = int(stat[stat.rindex(")") + 2 :].split()[1])
+    found, frontier = [], [pid]
+    while frontier:
+        children = [child for child, up in parent.items() if up in frontier]
+        found += children
+        frontier = children
+    return found
+
+
+def _busy_workers(pid: int) -> list[int]:
+    """The Ray workers below ``pid`` that are running a recording's task (Ray titles them by the task)."""
+    busy = []
+    for child in _descendants(pid):
+        try:
+            title = Path(f"/proc/{child}/cmdline").read_bytes().split(b"\0")[0]
+        except OSError:
+            continue
+        if title.startswith(b"ray::track_recording"):
+            busy.append(child)
+    return busy
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds Ray's worker processes in /proc (Linux)")
+def test_a_killed_worker_is_tried_again_and_nothing_is_lost(recordings, tmp_path):
+    out = tmp_path / "batch"
+    batch = _batch(recordings, out)
+    _first_finished(batch)  # the 300-frame recording is still being tracked, another one perhaps
+    busy = _busy_workers(batch.pid)
+    assert busy, "no worker was tracking when the first recording finished"
+    os.kill(busy[0], signal.SIGKILL)
+    printed, errors = batch.communicate(timeout=600)
+    assert batch.returncode == 0, errors
+    assert "crashed" in errors and "trying again" in errors
+    summary = _summary(out)
+    assert all(row["state"] == "done" for row in summary.values())
+    [retried] = [name for name, row in summary.items() if row["attempts"] == "2"]
+    assert sorted(int(row["attempts"]) for row in summary.values()) == [1, 1, 1, 2]
+    recording = next(path for path in recordings if path.name == retried)
+    _same_results(_tracked_alone(recording, tmp_path / "alone", "--keypoints", "off"), out / retried)
+
+
+def test_an_interrupted_batch_resumes_without_redoing_what_was_finished(recordings, tmp_path):
+    out = tmp_path / "batch"
+    batch = _batch(recordings, out)
+    _first_finished(batch)
+    batch.send_signal(signal.SIGINT)
+    printed, errors = batch.communicate(timeout=600)
+    assert batch.returncode == 130, errors
+    assert "run the same command again to resume" in errors
+    states = {
+        Path(path).name: entry["state"]
+        for path, entry in json.loads((out / "manifest.json").read_text())["recordings"].items()
+    }
+    finished = sorted(name for name, state in states.items() if state == "done")
+    assert finished and len(finished) < len(recordings)
+    kept = {name: (out / name / "poses.npz").stat().st_mtime_ns for name in finished}
+
+    again = _batch(recordings, out)
+    printed, errors = again.communicate(timeout=600)
+    assert again.returncode == 0, errors
+    assert f"resuming: {len(finished)} of {len(recordings)} recordings finished before" in errors
+    tracked_now = sorted(line.split()[1].rstrip(":") for line in printed.splitlines() if line.startswith("done "))
+    assert tracked_now == sorted(set(states) - set(finished))  # each recording tracked once in all
+    assert {name: (out / name / "poses.npz").stat().st_mtime_ns for name in finished} == kept
+    summary = _summary(out)
+    assert sorted(summary) == sorted(path.name for path in recordings)
+    assert all(row["state"] == "done" for row in summary.values())
+    for recording in recordings:
+        with np.load(out / recording.name / "poses.npz") as poses, np.load(recording / "truth.npz") as truth:
+            assert len(poses["frame"]) == len(truth["frame"])
+
+
+def test_without_ray_it_says_how_to_install_it(recordings, tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)
+    assert main(["batch", str(recordings[1]), "--out", str(tmp_path / "out")]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "Ray" in line and "pip install" in line and "[cluster]" in line
+
+
+def test_other_options_on_the_same_output_folder_are_refused(recordings, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "manifest.json").write_text(
+        json.dumps({"format": "tracker batch manifest", "version": 1, "options": {"iterations": 9}, "recordings": {}})
+    )
+    assert main(["batch", str(recordings[1]), "--out", str(out), "--iterations", "4"]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "manifest.json" in line and "iterations" in line
+
+
+def test_a_folder_the_batch_did_not_make_is_left_alone(recordings, tmp_path, capsys):
+    out = tmp_path / "out"
+    (out / recordings[1].name).mkdir(parents=True)
+    (out / recordings[1].name / "notes.txt").write_text("mine")
+    assert main(["batch", str(recordings[1]), "--out", str(out)]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert recordings[1].name in line and "not from this batch" in line
+    assert (out / recordings[1].name / "notes.txt").read_text() == "mine"
+
+
+def test_a_pattern_that_matches_nothing_is_one_line(tmp_path, capsys):
+    assert main(["batch", str(tmp_path / "nothing-*"), "--out", str(tmp_path / "out")]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "nothing-*" in line and "matches no folder" in line
