@@ -59,8 +59,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--workers",
         type=options.positive_int,
-        help="recordings tracked at once (default: half the machine's cores locally, as each recording keeps "
-        "about two busy; on a cluster, half its CPUs)",
+        help="recordings tracked at once (default: the machine's cores locally, the cluster's CPUs with --ray)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     track.add_tracking_options(parser)
@@ -137,6 +136,8 @@ def track_recording(recording: str, name: str, out: str, chosen: dict):
         except TrackerInputError as error:
             print(f"tracker: error: {error}", file=sys.stderr)
             return Row(recording, name, FAILED, seconds=time.perf_counter() - started, error=str(error))
+        if outcome.interrupted:  # Ctrl-C reached the worker too: not a finished recording
+            raise RuntimeError(f"{recording}: interrupted after {outcome.frames} frames")
         track.print_summary(outcome)
     return Row(
         recording,
@@ -205,7 +206,7 @@ def _start(ray, args: argparse.Namespace) -> int:
     runtime = {"env_vars": {"OPENBLAS_NUM_THREADS": "1"}}  # as tracker.cli.main: small matrices only
     quiet = {"logging_level": logging.ERROR, "log_to_driver": False, "runtime_env": runtime}
     if args.ray is None:
-        workers = args.workers or max(1, (os.cpu_count() or 2) // 2)
+        workers = args.workers or os.cpu_count() or 1
         ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)  # a new one, never another's
         return workers
     try:
@@ -215,7 +216,7 @@ def _start(ray, args: argparse.Namespace) -> int:
             f"--ray {args.ray}: cannot join a Ray cluster there ({_line(error)}); start one with 'ray start --head' "
             "and pass the address it prints, or leave out --ray to run locally"
         ) from None
-    return args.workers or max(1, int(ray.cluster_resources().get("CPU", 2)) // 2)
+    return args.workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
 
 
 def _line(error: BaseException) -> str:
