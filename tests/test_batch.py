@@ -6,6 +6,7 @@ import csv
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -225,3 +226,12 @@ def test_a_pattern_that_matches_nothing_is_one_line(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nothing-*"), "--out", str(tmp_path / "out")]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
     assert "nothing-*" in line and "matches no folder" in line
+
+
+def test_an_address_where_no_ray_answers_is_one_line(recordings, tmp_path, capsys):
+    with socket.socket() as closed:  # a port bound but not listening: connections to it are refused
+        closed.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{closed.getsockname()[1]}"
+        assert main(["batch", str(recordings[1]), "--out", str(tmp_path / "out"), "--ray", address]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert address in line and "ray start --head" in line

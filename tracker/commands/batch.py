@@ -18,6 +18,7 @@ import glob
 import logging
 import os
 import shutil
+import socket
 import sys
 import time
 from pathlib import Path
@@ -209,6 +210,7 @@ def _start(ray, args: argparse.Namespace) -> int:
         workers = args.workers or os.cpu_count() or 1
         ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)  # a new one, never another's
         return workers
+    _answers(args.ray)
     try:
         ray.init(address=args.ray, **quiet)
     except (ConnectionError, RuntimeError, ValueError) as error:
@@ -217,6 +219,20 @@ def _start(ray, args: argparse.Namespace) -> int:
             "and pass the address it prints, or leave out --ray to run locally"
         ) from None
     return args.workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+def _answers(address: str) -> None:
+    """A one-line error when nothing listens at a HOST:PORT ``address`` (Ray itself would retry for minutes)."""
+    host, _, port = address.rpartition(":")
+    if not host or "/" in host or not port.isdigit():
+        return  # "auto", ray://..., or an address Ray reads its own way
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as error:
+        raise TrackerInputError(
+            f"--ray {address}: nothing answers there ({error.strerror or error}); start the head with "
+            "'ray start --head' and pass the address it prints, or leave out --ray to run locally"
+        ) from None
 
 
 def _line(error: BaseException) -> str:
