@@ -17,6 +17,7 @@ from conftest import HUMAN
 
 from tracker.camera import save_calibration
 from tracker.cli import main
+from tracker.commands.batch import jobs, matched
 from tracker.synth import look_at_camera, synthesize
 
 pytest.importorskip("ray", reason="tracker batch needs Ray: pip install -e '.[cluster]'")
@@ -100,7 +101,8 @@ def _batch(recordings: list[Path], out: Path) -> subprocess.Popen:
     """``tracker batch`` in a process of its own, on two local workers, edges only; its output read line by line."""
     command = [sys.executable, "-m", "tracker.cli", "batch", *map(str, recordings), "--out", str(out)]
     command += ["--workers", "2", "--keypoints", "off", "--quiet"]
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONUNBUFFERED"}  # lines must come as made
+    env["OPENBLAS_NUM_THREADS"] = "1"
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
 
@@ -131,36 +133,31 @@ def _descendants(pid: int) -> list[int]:
     return found
 
 
-def _busy_workers(pid: int) -> list[int]:
-    """The Ray workers below ``pid`` that are running a recording's task (Ray titles them by the task)."""
-    busy = []
+def _worker_reading(pid: int, recording: Path) -> int:
+    """The Ray worker below ``pid`` that has a file of ``recording`` open: the one tracking it."""
     for child in _descendants(pid):
         try:
-            title = Path(f"/proc/{child}/cmdline").read_bytes().split(b"\0")[0]
+            opened = [os.readlink(link) for link in Path(f"/proc/{child}/fd").iterdir()]
         except OSError:
             continue
-        if title.startswith(b"ray::track_recording"):
-            busy.append(child)
-    return busy
+        if any(path.startswith(f"{recording}/") for path in opened):
+            return child
+    raise AssertionError(f"no process is reading {recording}")
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds Ray's worker processes in /proc (Linux)")
 def test_a_killed_worker_is_tried_again_and_nothing_is_lost(recordings, tmp_path):
     out = tmp_path / "batch"
     batch = _batch(recordings, out)
-    _first_finished(batch)  # the 300-frame recording is still being tracked, another one perhaps
-    busy = _busy_workers(batch.pid)
-    assert busy, "no worker was tracking when the first recording finished"
-    os.kill(busy[0], signal.SIGKILL)
+    _first_finished(batch)  # an 8-frame one: the 300-frame recording is still being tracked
+    os.kill(_worker_reading(batch.pid, recordings[0]), signal.SIGKILL)
     printed, errors = batch.communicate(timeout=600)
     assert batch.returncode == 0, errors
     assert "crashed" in errors and "trying again" in errors
     summary = _summary(out)
     assert all(row["state"] == "done" for row in summary.values())
-    [retried] = [name for name, row in summary.items() if row["attempts"] == "2"]
-    assert sorted(int(row["attempts"]) for row in summary.values()) == [1, 1, 1, 2]
-    recording = next(path for path in recordings if path.name == retried)
-    _same_results(_tracked_alone(recording, tmp_path / "alone", "--keypoints", "off"), out / retried)
+    assert [row["attempts"] for row in summary.values()] == ["2", "1", "1", "1"]
+    _same_results(_tracked_alone(recordings[0], tmp_path / "alone", "--keypoints", "off"), out / recordings[0].name)
 
 
 def test_an_interrupted_batch_resumes_without_redoing_what_was_finished(recordings, tmp_path):
@@ -235,3 +232,24 @@ def test_an_address_where_no_ray_answers_is_one_line(recordings, tmp_path, capsy
         assert main(["batch", str(recordings[1]), "--out", str(tmp_path / "out"), "--ray", address]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
     assert address in line and "ray start --head" in line
+
+
+def test_a_recording_keeps_its_results_folder_and_folders_never_overlap(tmp_path, one_line_error):
+    data, out = tmp_path / "data", tmp_path / "out"
+    first = jobs([data / "s1" / "t1", data / "s2" / "t1"], out, {})
+    assert [job.name for job in first] == ["s1/t1", "s2/t1"]
+    known = {str(job.recording): job.name for job in first}
+    [again] = jobs([data / "s1" / "t1"], out, known)  # alone now, it would be called t1
+    assert again.name == "s1/t1" and again.out == out / "s1" / "t1"
+    [added] = jobs([data / "t1"], out, known)
+    assert added.name == "t1"
+    message = one_line_error(lambda: jobs([data / "s1"], out, known))  # s1/t1 would lie inside its folder
+    assert "share a folder" in message and str(data / "s1") in message
+    message = one_line_error(lambda: jobs([data / "a", data / "a" / "b"], out, {}))
+    assert "share a folder" in message
+
+
+def test_the_output_folder_is_not_a_recording(tmp_path):
+    for name in ("t1", "t2", "results", "results/t1"):
+        (tmp_path / name).mkdir(parents=True)
+    assert matched([str(tmp_path / "*")], tmp_path / "results") == [tmp_path / "t1", tmp_path / "t2"]

@@ -21,22 +21,24 @@ def _rows() -> list[Row]:
 
 def test_manifest_reopens_with_started_and_finished_recordings(tmp_path):
     manifest = Manifest.open(tmp_path / "manifest.json", OPTIONS)
-    assert not manifest.owns("/data/a")
-    manifest.start(["/data/a", "/data/b", "/data/c"])
+    assert manifest.names == {}
+    manifest.start({"/data/a": "a", "/data/b": "b", "/data/c": "c"})
     done, _, failed = _rows()
-    manifest.finish(done)
     manifest.finish(failed)
+    manifest.finish(done)
 
     again = Manifest.open(tmp_path / "manifest.json", dict(OPTIONS))
     assert repr(again.row("/data/a")) == repr(done)  # NaN fields: equal as written, not as floats
     assert repr(again.row("/data/c")) == repr(failed)
-    assert again.row("/data/b") is None and again.owns("/data/b")
-    assert not again.owns("/data/d")
+    assert again.row("/data/b") is None and again.names == {"/data/a": "a", "/data/b": "b", "/data/c": "c"}
+    assert [row.name for row in again.finished()] == ["a", "c"]  # in the order taken on, not finished
+    again.start({"/data/c": "c"})  # a failed recording tried again is no longer finished
+    assert [row.name for row in again.finished()] == ["a"]
     assert [path.name for path in tmp_path.iterdir()] == ["manifest.json"]  # no temporary file left
 
 
 def test_manifest_of_other_options_is_refused_naming_them(tmp_path, one_line_error):
-    Manifest.open(tmp_path / "manifest.json", OPTIONS).start(["/data/a"])
+    Manifest.open(tmp_path / "manifest.json", OPTIONS).start({"/data/a": "a"})
     other = {**OPTIONS, "iterations": 4, "keypoints": 0}
     message = one_line_error(lambda: Manifest.open(tmp_path / "manifest.json", other))
     assert "iterations, keypoints" in message and "--out" in message

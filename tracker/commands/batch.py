@@ -6,7 +6,7 @@ parent), and submits one task per folder that is not finished according to the m
 its output going to the results folder's ``track.log``, and returns the recording's :class:`Row`. A one-line
 input error (a missing calibration, say) fails the recording at once; a crash (an exception, a worker that
 died) is tried again, up to :data:`RETRIES` times. Each finished recording is written to the manifest as it
-comes, so a batch stopped by Ctrl-C or a lost driver resumes where it was: run the same command again.
+comes, so a batch stopped by Ctrl-C (or a driver that died) resumes where it was: run the same command again.
 """
 
 from __future__ import annotations
@@ -75,12 +75,13 @@ class Job:
     out: Path
 
 
-def matched(patterns: list[str]) -> list[Path]:
-    """The folders ``patterns`` (paths or glob patterns) match, absolute, in order, each once; a one-line error
-    for a pattern that matches no folder."""
+def matched(patterns: list[str], out: Path) -> list[Path]:
+    """The folders ``patterns`` (paths or glob patterns) match, absolute, in order, each once, leaving out the
+    batch's own output folder ``out`` and what lies in it; a one-line error for a pattern that matches none."""
     found: dict[Path, None] = {}
     for pattern in patterns:
-        folders = [Path(path).resolve() for path in sorted(glob.glob(pattern)) if Path(path).is_dir()]
+        folders = [Path(path).resolve() for path in sorted(glob.glob(pattern))]
+        folders = [folder for folder in folders if folder.is_dir() and folder != out and out not in folder.parents]
         if not folders:
             raise TrackerInputError(
                 f"{pattern}: matches no folder; give recording folders or a pattern that matches them"
@@ -89,15 +90,27 @@ def matched(patterns: list[str]) -> list[Path]:
     return list(found)
 
 
-def jobs(recordings: list[Path], out: Path) -> list[Job]:
-    """Each recording with its results folder: its path below the recordings' common parent (its own name when
-    alone), under ``out``."""
+def jobs(recordings: list[Path], out: Path, known: dict[str, str]) -> list[Job]:
+    """Each recording with its results folder under ``out``: the name it had in the batch before (``known``,
+    recording -> name, from the manifest), else its path below the recordings' common parent (its own name when
+    alone); a one-line error when two recordings' folders would be one or lie one inside the other."""
     if len(recordings) == 1:
-        names = [recordings[0].name]
+        fresh = {str(recordings[0]): recordings[0].name}
     else:
         parent = Path(os.path.commonpath([recording.parent for recording in recordings]))
-        names = [recording.relative_to(parent).as_posix() for recording in recordings]
-    return [Job(recording, name, out / name) for recording, name in zip(recordings, names)]
+        fresh = {str(recording): recording.relative_to(parent).as_posix() for recording in recordings}
+    names = {**known, **{recording: name for recording, name in fresh.items() if recording not in known}}
+    holders: dict[str, str] = {}  # a results folder, or a folder above one -> a recording whose it is
+    for recording, name in names.items():
+        parts = name.split("/")
+        for above in ("/".join(parts[:end]) for end in range(1, len(parts) + 1)):
+            other = holders.setdefault(above, recording)
+            if other != recording and (above == name or names[other] == above):
+                raise TrackerInputError(
+                    f"{out / name}: the results of {recording} would share a folder with those of {other}; "
+                    "track recordings that do not lie inside one another, or use another --out"
+                )
+    return [Job(recording, names[str(recording)], out / names[str(recording)]) for recording in recordings]
 
 
 def tracking_options(args: argparse.Namespace) -> dict:
@@ -130,7 +143,10 @@ def track_recording(recording: str, name: str, out: str, chosen: dict):
     args = parser.parse_args([recording, "--out", out, "--quiet"])
     vars(args).update(chosen)
     started = time.perf_counter()
-    log = ensure_writable_folder(out) / "track.log"
+    try:
+        log = ensure_writable_folder(out) / "track.log"
+    except TrackerInputError as error:
+        return Row(recording, name, FAILED, seconds=time.perf_counter() - started, error=str(error))
     with open(log, "w") as stream, contextlib.redirect_stdout(stream), contextlib.redirect_stderr(stream):
         try:
             outcome = track.track(args)
@@ -154,19 +170,20 @@ def track_recording(recording: str, name: str, out: str, chosen: dict):
 
 
 def run(args: argparse.Namespace) -> int:
-    """Track the recordings not yet finished in ``--out`` and print and write the summary of them all; 1 when a
-    recording failed, 130 after Ctrl-C (the finished ones kept, the batch resumable)."""
+    """Track the recordings not yet finished in ``--out`` and print and write the summary of all it finished; 1
+    when a recording failed, 130 after Ctrl-C (the finished ones kept, the batch resumable)."""
     ray = _ray()
     from tracker.atomic import ensure_writable_folder
     from tracker.io.batch import FAILED, Manifest, format_summary, write_summary
 
+    recordings = matched(args.recordings, Path(args.out).resolve())
     out = ensure_writable_folder(args.out).resolve()
-    everything = jobs(matched(args.recordings), out)
     manifest = Manifest.open(out / "manifest.json", tracking_options(args))
+    everything = jobs(recordings, out, manifest.names)
     todo = [job for job in everything if (row := manifest.row(str(job.recording))) is None or row.state == FAILED]
     for job in todo:  # what an unfinished try left goes, but never a folder the batch did not make
         if job.out.exists():
-            if not manifest.owns(str(job.recording)):
+            if str(job.recording) not in manifest.names:
                 raise TrackerInputError(
                     f"{job.out}: already exists and is not from this batch; pick another --out or move it away"
                 )
@@ -174,15 +191,16 @@ def run(args: argparse.Namespace) -> int:
     if len(todo) < len(everything):
         before = len(everything) - len(todo)
         print(f"resuming: {before} of {len(everything)} recordings finished before", file=sys.stderr)
-    manifest.start([str(job.recording) for job in todo])
+    manifest.start({str(job.recording): job.name for job in todo})
     interrupted = _track_all(ray, args, todo, manifest) if todo else False
-    rows = [row for job in everything if (row := manifest.row(str(job.recording))) is not None]
+    rows = manifest.finished()
     print(format_summary(rows))
     write_summary(rows, out / "summary.csv")
     print(f"wrote {out / 'summary.csv'}")
     if interrupted:
+        done = sum(manifest.row(str(job.recording)) is not None for job in everything)
         print(
-            f"interrupted: {len(rows)} of {len(everything)} recordings finished; run the same command again to resume",
+            f"interrupted: {done} of {len(everything)} recordings finished; run the same command again to resume",
             file=sys.stderr,
         )
         return 130
@@ -275,6 +293,7 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool
                 manifest.finish(row)
                 progress.update(1)
                 progress.write(_finished(row), sys.stdout)
+                sys.stdout.flush()  # a line as each finishes, also through a pipe
         except KeyboardInterrupt:
             for ref in pending:
                 ray.cancel(ref, force=True)

@@ -2,9 +2,11 @@
 and the summary of its recordings.
 
 ``DIR/manifest.json`` holds the tracking options of the batch and, for every recording it took on, either
-``{"state": "started"}`` (its results folder belongs to the batch but is not finished: a resumed batch empties
-it and tracks the recording again) or its finished :class:`Row` (``done`` or ``failed``).  It is rewritten
-atomically after every change, so a batch stopped at any moment leaves a manifest that says what is finished.
+``{"state": "started", "name": ...}`` (its results folder ``DIR/name`` belongs to the batch but is not finished:
+a resumed batch empties it and tracks the recording again) or its finished :class:`Row` (``done`` or
+``failed``), which names the folder too.  A recording keeps its folder's name for the life of the batch.  The
+manifest is rewritten atomically after every change, so a batch stopped at any moment leaves one that says what
+is finished.
 ``DIR/summary.csv`` holds the rows, one per recording, with the columns of :data:`COLUMNS`.
 """
 
@@ -50,12 +52,14 @@ COLUMNS = tuple(field.name for field in dataclasses.fields(Row))
 
 
 class Manifest:
-    """The batch's manifest at ``path`` (module docstring): what each recording's state is, under ``options``."""
+    """The batch's manifest at ``path`` (module docstring): each recording's results folder and state, under
+    ``options``."""
 
     def __init__(self, path: Path, options: dict) -> None:
         self.path = path
         self.options = options
-        self.entries: dict[str, Row | None] = {}  # recording -> its finished row, or None while started
+        self.names: dict[str, str] = {}  # recording -> its results folder's name, for every recording taken on
+        self.rows: dict[str, Row] = {}  # recording -> its finished row
 
     @classmethod
     def open(cls, path: Path, options: dict) -> Manifest:
@@ -68,10 +72,10 @@ class Manifest:
             data = json.loads(path.read_text())
             if data.get("format") != FORMAT or data.get("version") != VERSION:
                 raise ValueError("not a tracker batch manifest")
-            entries = {
-                recording: None if entry.get("state") == STARTED else Row(**entry)
-                for recording, entry in data["recordings"].items()
-            }
+            for recording, entry in data["recordings"].items():
+                manifest.names[recording] = str(entry["name"])
+                if entry.get("state") != STARTED:
+                    manifest.rows[recording] = Row(**entry)
         except (OSError, ValueError, KeyError, TypeError) as error:
             raise TrackerInputError(
                 f"{path}: unreadable batch manifest ({error}); remove it to start the batch afresh, or pick another "
@@ -85,32 +89,36 @@ class Manifest:
                 f"{path}: this batch was started with other tracking options ({', '.join(changed)}); run it again "
                 "with the same options to resume, or pick another --out"
             )
-        manifest.entries = entries
         return manifest
 
     def row(self, recording: str) -> Row | None:
         """The finished row of ``recording``, or None when it is not finished."""
-        return self.entries.get(recording)
+        return self.rows.get(recording)
 
-    def owns(self, recording: str) -> bool:
-        """Whether the batch took ``recording`` on before (its results folder is the batch's)."""
-        return recording in self.entries
+    def finished(self) -> list[Row]:
+        """The rows of every finished recording, in the order the batch took them on."""
+        return [self.rows[recording] for recording in self.names if recording in self.rows]
 
-    def start(self, recordings: list[str]) -> None:
-        """Mark ``recordings`` started (their results folders now belong to the batch) and save."""
-        self.entries.update(dict.fromkeys(recordings))
+    def start(self, names: dict[str, str]) -> None:
+        """Mark the recordings of ``names`` (recording -> results folder name) started, their results folders now
+        the batch's, and save."""
+        self.names.update(names)
+        for recording in names:
+            self.rows.pop(recording, None)
         self.save()
 
     def finish(self, row: Row) -> None:
         """Record ``row`` as its recording's outcome and save."""
-        self.entries[row.recording] = row
+        self.rows[row.recording] = row
         self.save()
 
     def save(self) -> None:
         """Write the manifest atomically."""
         recordings = {
-            recording: {"state": STARTED} if row is None else dataclasses.asdict(row)
-            for recording, row in self.entries.items()
+            recording: dataclasses.asdict(self.rows[recording])
+            if recording in self.rows
+            else {"state": STARTED, "name": name}
+            for recording, name in self.names.items()
         }
         text = json.dumps(
             {"format": FORMAT, "version": VERSION, "options": self.options, "recordings": recordings}, indent=1
