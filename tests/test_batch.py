@@ -133,16 +133,16 @@ def _descendants(pid: int) -> list[int]:
     return found
 
 
-def _worker_reading(pid: int, recording: Path) -> int:
-    """The Ray worker below ``pid`` that has a file of ``recording`` open: the one tracking it."""
+def _worker_tracking(pid: int, log: Path) -> int:
+    """The Ray worker below ``pid`` that has the ``track.log`` of a recording open: the one tracking it."""
     for child in _descendants(pid):
         try:
             opened = [os.readlink(link) for link in Path(f"/proc/{child}/fd").iterdir()]
         except OSError:
             continue
-        if any(path.startswith(f"{recording}/") for path in opened):
+        if str(log) in opened:
             return child
-    raise AssertionError(f"no process is reading {recording}")
+    raise AssertionError(f"no process is writing {log}")
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds Ray's worker processes in /proc (Linux)")
@@ -150,7 +150,7 @@ def test_a_killed_worker_is_tried_again_and_nothing_is_lost(recordings, tmp_path
     out = tmp_path / "batch"
     batch = _batch(recordings, out)
     _first_finished(batch)  # an 8-frame one: the 300-frame recording is still being tracked
-    os.kill(_worker_reading(batch.pid, recordings[0]), signal.SIGKILL)
+    os.kill(_worker_tracking(batch.pid, out / recordings[0].name / "track.log"), signal.SIGKILL)
     printed, errors = batch.communicate(timeout=600)
     assert batch.returncode == 0, errors
     assert "crashed" in errors and "trying again" in errors
@@ -158,6 +158,15 @@ def test_a_killed_worker_is_tried_again_and_nothing_is_lost(recordings, tmp_path
     assert all(row["state"] == "done" for row in summary.values())
     assert [row["attempts"] for row in summary.values()] == ["2", "1", "1", "1"]
     _same_results(_tracked_alone(recordings[0], tmp_path / "alone", "--keypoints", "off"), out / recordings[0].name)
+    kept = {path.name: (out / path.name / "poses.npz").stat().st_mtime_ns for path in recordings}
+
+    again = _batch(recordings, out)  # resumed: everything is finished, nothing is tracked again
+    printed, errors = again.communicate(timeout=600)
+    assert again.returncode == 0, errors
+    assert "resuming: 4 of 4 recordings finished before" in errors
+    assert not [line for line in printed.splitlines() if line.startswith("done ")]
+    assert {path.name: (out / path.name / "poses.npz").stat().st_mtime_ns for path in recordings} == kept
+    assert _summary(out) == summary
 
 
 def test_an_interrupted_batch_resumes_without_redoing_what_was_finished(recordings, tmp_path):
