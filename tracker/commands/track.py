@@ -122,6 +122,8 @@ def track(args: argparse.Namespace) -> Outcome:
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.track import Tracker, reductions
 
+    if args.record and not args.view:
+        raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec = options.recording(args)
     if not 0 <= args.start < rec.frame_count:
         raise TrackerInputError(
