@@ -83,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
     """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
     130 after Ctrl-C with the frames done written."""
     outcome = track(args)
+    print(f"wrote {outcome.poses} ({outcome.frames} frames)")
     if outcome.interrupted:
-        print(f"wrote {outcome.poses} ({outcome.frames} frames)")
         print("interrupted: the frames done so far are saved", file=sys.stderr)
         return 130
     print_summary(outcome)
@@ -92,11 +92,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(outcome: Outcome) -> None:
-    """What a finished run prints: the file written, speed, residual, status counts and the accuracy."""
+    """What a finished run prints after the file it wrote: speed, residual, status counts and the accuracy."""
     from tracker.evaluate import format_report
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
-    print(f"wrote {outcome.poses} ({outcome.frames} frames)")
     print(f"frames per second: {outcome.fps:.1f} ({outcome.views} views, {outcome.iterations} iterations per frame)")
     print(f"mean residual: {outcome.residual:.2f} px")
     counts = outcome.counts
