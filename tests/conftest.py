@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from tracker.camera import save_calibration
+from tracker.camera import look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
-from tracker.synth import look_at_camera, synthesize
+from tracker.synth import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 HUMAN = ROOT / "models" / "human.toml"

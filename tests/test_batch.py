@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from conftest import HUMAN
 
-from tracker.camera import save_calibration
+from tracker.camera import look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.commands.batch import jobs, matched
-from tracker.synth import look_at_camera, synthesize
+from tracker.synth import synthesize
 
 pytest.importorskip("ray", reason="tracker batch needs Ray: pip install -e '.[cluster]'")
 

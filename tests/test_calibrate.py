@@ -33,11 +33,10 @@ from tracker.calibrate.extrinsics import (
     calibrate_rig,
     chordal_mean,
 )
-from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.cli import build_parser
 from tracker.errors import TrackerInputError
 from tracker.geometry.se3 import from_rotation, inverse, rotation_angle
-from tracker.synth import look_at_camera
 
 OPENCV = SHARED_DATA / "opencv-stereo-chessboard"
 CALISCOPE = SHARED_DATA / "caliscope-4cam"  # its videos and corners; camera_array.toml, charuco.toml committed

@@ -11,7 +11,7 @@ import pytest
 import tomli_w
 from conftest import TEST_DATA
 
-from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
@@ -207,3 +207,11 @@ def test_loads_the_real_pose2sim_rig() -> None:
     for camera in cameras:
         u, v = camera.project(np.array([[0.0, 0.0, 1.0]]))[0]
         assert 0 <= u < camera.size[0] and 0 <= v < camera.size[1]
+
+
+def test_look_at_camera_centres_target():
+    cam = look_at_camera("x", (3.0, -2.0, 1.5), (0.1, 0.2, 0.9), (640, 480), 500.0, (-0.1, 0.02, 0, 0))
+    np.testing.assert_allclose(cam.project(np.array([[0.1, 0.2, 0.9]]))[0], [319.5, 239.5], atol=1e-9)
+    up = cam.project(np.array([[0.1, 0.2, 1.2]]))[0]
+    assert up[1] < 239.5  # world up is image up
+    np.testing.assert_allclose(cam.center, [3.0, -2.0, 1.5], atol=1e-12)

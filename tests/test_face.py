@@ -10,6 +10,7 @@ import pytest
 
 from tracker import render, synth, texture
 from tracker.actor import capsule_body
+from tracker.camera import look_at_camera
 from tracker.face import HAIR, Face, head_coordinates, paint_face
 from tracker.geometry import se3
 from tracker.model import load_model, model_from_dict, rest_poses
@@ -40,7 +41,7 @@ def test_head_coordinates_and_colours_at_hand_picked_points():
 
 
 def test_the_face_repaints_only_the_head_and_tells_front_from_back(human):
-    camera = synth.look_at_camera("c", (0.0, -2.0, 1.6), (0.0, 0.0, 1.45), (160, 120), 500.0)
+    camera = look_at_camera("c", (0.0, -2.0, 1.6), (0.0, 0.0, 1.45), (160, 120), 500.0)
     front = rest_poses(human, se3.from_rotvec(np.zeros(3), (0.0, 0.0, 0.92)))
     back = np.einsum("ab,nbc->nac", se3.from_rotvec((0.0, 0.0, np.pi)), front)
     head = human.index("head")

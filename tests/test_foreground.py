@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.foreground import (
@@ -27,7 +27,6 @@ from tracker.io.readers import keeping_grey
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model, rest_poses
 from tracker.render import Renderer, load_backgrounds
-from tracker.synth import look_at_camera
 
 WIDTH, HEIGHT, COUNT = 48, 32, 9
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tracker import render, room, synth
-from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.keypoints.detector import Detector, detect_views
 from tracker.model import joint_centres, load_model
@@ -30,8 +30,8 @@ def _rig(tmp_path) -> Path:
     path = tmp_path / "rig.toml"
     save_calibration(
         [
-            synth.look_at_camera("a", (0.5, -4.0, 1.4), (0, 0, 0.9), (160, 120), 140.0, (-0.05, 0.01, 0, 0)),
-            synth.look_at_camera("b", (4.0, 0.5, 1.2), (0, 0, 0.9), (160, 120), 140.0),
+            look_at_camera("a", (0.5, -4.0, 1.4), (0, 0, 0.9), (160, 120), 140.0, (-0.05, 0.01, 0, 0)),
+            look_at_camera("b", (4.0, 0.5, 1.2), (0, 0, 0.9), (160, 120), 140.0),
         ],
         path,
     )

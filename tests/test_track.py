@@ -216,8 +216,7 @@ def test_large_images_are_searched_reduced_by_a_whole_factor():
 def hd_recording(tmp_path_factory) -> Path:
     """Three 1280x960 views (short side 960: searched at half size by default) of the human model, encoded
     with MPEG-4 part 2 (decoded by PyAV, not as Motion-JPEG)."""
-    from tracker.camera import save_calibration
-    from tracker.synth import look_at_camera
+    from tracker.camera import look_at_camera, save_calibration
 
     folder = tmp_path_factory.mktemp("hd")
     rig = [

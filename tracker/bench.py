@@ -33,6 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
@@ -44,7 +45,6 @@ from tracker.keypoints.detector import Detector
 from tracker.keypoints.stream import KeypointStream, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
-from tracker.synth import look_at_camera
 from tracker.track import STAGES, Settings, StageTimes, Tracker, reductions
 
 DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"

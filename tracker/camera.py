@@ -134,6 +134,34 @@ class Camera:
         return xn.reshape(-1, 2)
 
 
+def look_at_camera(
+    name: str,
+    eye,
+    target=(0.0, 0.0, 1.0),
+    size=(640, 480),
+    focal: float = 560.0,
+    distortions=(0.0, 0.0, 0.0, 0.0),
+    up=(0.0, 0.0, 1.0),
+) -> Camera:
+    """A camera at ``eye`` looking at ``target`` with ``up`` pointing up in the image.
+
+    OpenCV axes (x right, y down, z forward); fx = fy = ``focal``; principal point
+    at the image centre ((w - 1)/2, (h - 1)/2 with pixel centres at integers).
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(right) < 1e-9:
+        raise ValueError("look_at_camera: the viewing direction is parallel to `up`; choose another up vector")
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    rotation = np.stack([right, down, forward])
+    w, h = int(size[0]), int(size[1])
+    matrix = np.array([[focal, 0.0, (w - 1) / 2.0], [0.0, focal, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return Camera(name, (w, h), matrix, np.asarray(distortions, dtype=np.float64), rotation, -rotation @ eye)
+
+
 def _points(points: np.ndarray) -> np.ndarray:
     """(M, 2) points as the contiguous float64 (M, 1, 2) array OpenCV wants."""
     return np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 1, 2))

@@ -28,7 +28,7 @@ import numpy as np
 from tracker import texture as textures
 from tracker.actor import actor_poses, capsule_body, stretched_body
 from tracker.atomic import atomic_write, ensure_writable_folder
-from tracker.camera import Camera, load_calibration, save_calibration
+from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, seated_motion, surface_samples
 from tracker.errors import TrackerInputError
 from tracker.face import HAIR, Face
@@ -44,34 +44,6 @@ from tracker.tomlfile import read_toml
 
 # ---------------------------------------------------------------------------------------------
 # Cameras
-
-
-def look_at_camera(
-    name: str,
-    eye,
-    target=(0.0, 0.0, 1.0),
-    size=(640, 480),
-    focal: float = 560.0,
-    distortions=(0.0, 0.0, 0.0, 0.0),
-    up=(0.0, 0.0, 1.0),
-) -> Camera:
-    """A camera at ``eye`` looking at ``target`` with ``up`` pointing up in the image.
-
-    OpenCV axes (x right, y down, z forward); fx = fy = ``focal``; principal point
-    at the image centre ((w - 1)/2, (h - 1)/2 with pixel centres at integers).
-    """
-    eye = np.asarray(eye, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - eye
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(up, dtype=np.float64))
-    if np.linalg.norm(right) < 1e-9:
-        raise ValueError("look_at_camera: the viewing direction is parallel to `up`; choose another up vector")
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    rotation = np.stack([right, down, forward])
-    w, h = int(size[0]), int(size[1])
-    matrix = np.array([[focal, 0.0, (w - 1) / 2.0], [0.0, focal, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-    return Camera(name, (w, h), matrix, np.asarray(distortions, dtype=np.float64), rotation, -rotation @ eye)
 
 
 def demo3_rig() -> list[Camera]:
