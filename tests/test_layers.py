@@ -22,6 +22,7 @@ LAYERS = (
         "tracker.measure",
         "tracker.keypoint_cue",
         "tracker.motion_prior",
+        "tracker.raycast",
         "tracker.render",
         "tracker.texture",
         "tracker.props",

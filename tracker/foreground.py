@@ -39,7 +39,7 @@ from tracker.errors import TrackerInputError
 from tracker.io.readers import FrameSeeker, read_image
 from tracker.io.recording import Recording
 from tracker.model import Model
-from tracker.render import Renderer
+from tracker.raycast import RayCaster
 from tracker.track import Settings
 
 SAMPLES = 25  # frames per camera for the median background
@@ -166,19 +166,19 @@ def reduced_camera(camera: Camera, factor: float) -> Camera:
 
 
 def silhouettes(
-    renderer: Renderer, size: tuple[int, int], factor: float, margin: int
+    caster: RayCaster, size: tuple[int, int], factor: float, margin: int
 ) -> Callable[[np.ndarray], np.ndarray]:
     """The function from poses to the pixels (H, W) bool of a ``size`` = (W, H) image that the body
-    covers, widened by a disc of radius ``margin`` pixels: ray cast by a renderer of the camera reduced
+    covers, widened by a disc of radius ``margin`` pixels: ray cast by a caster of the camera reduced
     by ``factor`` (:func:`reduced_camera`), each pixel u taking the reduced pixel nearest
     (u + 1/2) / factor - 1/2."""
-    width, height = renderer.camera.size
+    width, height = caster.camera.size
     cols = np.clip(np.rint((np.arange(size[0]) + 0.5) / factor - 0.5), 0, width - 1).astype(int)
     rows = np.clip(np.rint((np.arange(size[1]) + 0.5) / factor - 0.5), 0, height - 1).astype(int)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin + 1, 2 * margin + 1))
 
     def silhouette(poses: np.ndarray) -> np.ndarray:
-        mask = (renderer.cast(poses)[0] >= 0).astype(np.uint8)[rows[:, None], cols[None, :]]
+        mask = (caster.cast(poses)[0] >= 0).astype(np.uint8)[rows[:, None], cols[None, :]]
         return cv2.dilate(mask, disc).astype(bool)
 
     return silhouette
@@ -214,7 +214,7 @@ def cleared_background(
         short = min(camera.size)
         factor = max(1.0, short / MASK_SIDE)
         silhouette = silhouettes(
-            Renderer(model, reduced_camera(camera, factor)),
+            RayCaster(model, reduced_camera(camera, factor)),
             camera.size,
             factor,
             round(margin * max(1.0, short / Settings.reference_size)),

@@ -36,7 +36,7 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.props import Box, box_corners, cast_boxes
-from tracker.render import DEFAULT_LIGHT, pixel_rays
+from tracker.raycast import DEFAULT_LIGHT, pixel_rays
 from tracker.texture import lattice_hash, value_noise
 
 COATS = ("paint", "plaster", "stripes", "bricks")
