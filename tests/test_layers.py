@@ -17,11 +17,11 @@ LAYERS = (
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
     ("tracker.model", "tracker.camera", "tracker.proportions"),
     (
-        "tracker.outline",
-        "tracker.ownership",
-        "tracker.measure",
-        "tracker.keypoint_cue",
-        "tracker.motion_prior",
+        "tracker.tracking.outline",
+        "tracker.tracking.ownership",
+        "tracker.tracking.measure",
+        "tracker.tracking.keypoint_cue",
+        "tracker.tracking.motion_prior",
         "tracker.raycast",
         "tracker.render",
         "tracker.texture",
@@ -29,7 +29,7 @@ LAYERS = (
         "tracker.room",
         "tracker.face",
     ),
-    ("tracker.track",),
+    ("tracker.tracking", "tracker.tracking.track"),
     (
         "tracker.io",
         "tracker.clips",
@@ -37,7 +37,7 @@ LAYERS = (
         "tracker.synth",
         "tracker.suite",
         "tracker.evaluate",
-        "tracker.foreground",
+        "tracker.tracking.foreground",
     ),
     (
         "tracker.viewer",

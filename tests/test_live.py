@@ -24,7 +24,7 @@ from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.live import Recorder, assign_cameras, track_live
 from tracker.model import load_model
-from tracker.track import Settings
+from tracker.tracking.track import Settings
 
 DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
 
@@ -247,8 +247,8 @@ def test_the_keypoint_detector_runs_beside_the_live_tracker(tmp_path, capsys):
 
 
 def test_late_landmarks_move_with_the_tracked_body():
-    from tracker.keypoint_cue import LANDMARKS, landmark_points
     from tracker.keypoints.live import transferred
+    from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
     recording = open_recording(DEMO)
     model = load_model(recording.model_path)

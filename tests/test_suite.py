@@ -13,10 +13,10 @@ from tracker import suite
 from tracker.camera import load_calibration
 from tracker.cli import main
 from tracker.io.poses import PosesWriter, load_poses
-from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.store import Keypoints, save_keypoints
 from tracker.model import load_model
 from tracker.texture import KINDS
+from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = "turn-6fps-table"  # procedural, ring4 at 640x480: the cheapest render to make in a test

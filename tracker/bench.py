@@ -5,7 +5,7 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 
 * ``decode``: CPU milliseconds per frame to decode every camera's frame to grey,
   one camera after the other in one thread;
-* the tracker's stages (:data:`tracker.track.STAGES`) and ``output`` (joint
+* the tracker's stages (:data:`tracker.tracking.track.STAGES`) and ``output`` (joint
   centres and the poses.npz writer), milliseconds per frame;
 * end to end: frames per second of the whole ``tracker track`` loop (reader
   threads, tracking, writing) with the first camera only and with all cameras;
@@ -45,7 +45,7 @@ from tracker.keypoints.detector import Detector
 from tracker.keypoints.stream import KeypointStream, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.render import Renderer
-from tracker.track import STAGES, Settings, StageTimes, Tracker, reductions
+from tracker.tracking.track import STAGES, Settings, StageTimes, Tracker, reductions
 
 DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
 HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"

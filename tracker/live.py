@@ -52,7 +52,7 @@ from tracker.io.recording import VIDEO_SUFFIXES
 from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.live import LiveDetector, transferred
 from tracker.model import Model
-from tracker.track import Settings, Tracker
+from tracker.tracking.track import Settings, Tracker
 
 DEFAULT_OUT = Path("out") / "live"
 STATUS_PERIOD = 1.0  # seconds between status lines

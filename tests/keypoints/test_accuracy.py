@@ -11,11 +11,11 @@ import pytest
 
 from tracker.camera import load_calibration
 from tracker.io.poses import load_poses
-from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.accuracy import accuracy
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
 from tracker.synth import table_before
+from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
 
 @pytest.fixture(scope="module")

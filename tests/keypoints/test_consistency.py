@@ -10,10 +10,10 @@ import pytest
 
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.consistency import consistent, triangulate, triangulate_many, unswapped
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
+from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 

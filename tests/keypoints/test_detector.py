@@ -13,11 +13,11 @@ from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoint_cue import LANDMARKS
 from tracker.keypoints import detect
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.detector import Detection, Detector, detect_views
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
+from tracker.tracking.keypoint_cue import LANDMARKS
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 PAIRS = (("shoulder", "upperarm"), ("elbow", "forearm"), ("wrist", "hand"), ("hip", "thigh"), ("knee", "shin"))

@@ -15,7 +15,6 @@ from tracker.commands.init import keypoint_pose
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoint_cue import LANDMARKS, left_right_pairs
 from tracker.keypoints import detector
 from tracker.keypoints.anchors import anchors, reach, rigid_distances
 from tracker.keypoints.detect import detect_recording
@@ -24,6 +23,7 @@ from tracker.keypoints.fit import Body, fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
 from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
+from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
 from tracker.viewer.placement import in_view
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,10 +17,10 @@ from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file, save_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
-from tracker.keypoint_cue import LANDMARKS
 from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, STRAYED, WINDOW, Recovery
 from tracker.model import load_model
 from tracker.status import RESEEDED
+from tracker.tracking.keypoint_cue import LANDMARKS
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 COUNT = 70
@@ -206,7 +206,7 @@ def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch)
     """The swung arm's frames: no re-seed is tried until the landmarks have lain off for PERSISTENCE frames in a
     row."""
     import tracker.keypoints.recovery as recovery_module
-    from tracker.track import FrameResult, Tracker
+    from tracker.tracking.track import FrameResult, Tracker
 
     model, truth, recovery = _at_truth()
     keypoints = _true_landmarks(recovery, truth)
@@ -229,7 +229,7 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     """A strayed frame's re-seed is taken only when its outlines find at least the tracked pose's share of edges:
     the tracked pose (share 0.8) stays against a re-seed finding 0.5, and gives way to one finding 0.9."""
     import tracker.keypoints.recovery as recovery_module
-    from tracker.track import FrameResult, Tracker
+    from tracker.tracking.track import FrameResult, Tracker
 
     model, truth, recovery = _at_truth()
     keypoints = _true_landmarks(recovery, truth)
@@ -249,7 +249,7 @@ def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkey
     """A strayed pose whose landmarks cannot be fitted (fitted gives None) is tried once, then not again for
     WINDOW frames, then after twice as long; a lost frame is tried all the same."""
     from tracker.status import LOST
-    from tracker.track import FrameResult, Tracker
+    from tracker.tracking.track import FrameResult, Tracker
 
     model, truth, recovery = _at_truth()
     keypoints = _true_landmarks(recovery, truth)

@@ -27,7 +27,7 @@ from tracker.shape.edges import (
 )
 from tracker.shape.layout import Layout
 from tracker.tomlfile import read_toml
-from tracker.track import Inspection, Settings, Tracker
+from tracker.tracking.track import Inspection, Settings, Tracker
 
 PARTS = {
     "name": "parts",

@@ -149,9 +149,9 @@ def test_without_the_detector_fit_model_says_how_to_install_it(short_recording, 
 def test_a_limb_whose_joints_the_detector_does_not_see_is_left_out_of_that_view():
     """A knee hidden in one view (behind a table): the thigh and the shin it joins are not fitted there; the
     trunk always is, and every part in the other view."""
-    from tracker.keypoint_cue import LANDMARKS
     from tracker.model import model_from_dict
     from tracker.shape.fit import unseen_parts
+    from tracker.tracking.keypoint_cue import LANDMARKS
 
     model = model_from_dict(read_toml(HUMAN, "model", ""))
     confidence = np.ones((2, len(LANDMARKS)))
@@ -164,9 +164,9 @@ def test_a_limb_whose_joints_the_detector_does_not_see_is_left_out_of_that_view(
 
 
 def test_a_joint_the_detector_rarely_sees_is_held():
-    from tracker.keypoint_cue import LANDMARKS
     from tracker.model import model_from_dict
     from tracker.shape.fit import unseen_joints
+    from tracker.tracking.keypoint_cue import LANDMARKS
 
     model = model_from_dict(read_toml(HUMAN, "model", ""))
     confidence = np.ones((10, 3, len(LANDMARKS)))
@@ -183,7 +183,7 @@ def test_a_part_whose_outline_falls_off_the_person_is_left_out_of_that_view():
     from tracker.keypoints.region import Region
     from tracker.keypoints.silhouette import PersonMask
     from tracker.shape.fit import off_person
-    from tracker.track import Inspection
+    from tracker.tracking.track import Inspection
 
     person = np.zeros((256, 256), bool)
     person[:, :128] = True

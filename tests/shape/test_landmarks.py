@@ -7,12 +7,12 @@ import numpy as np
 from conftest import HUMAN
 
 from tracker.errors import TrackerInputError
-from tracker.keypoint_cue import LANDMARKS, anchors, landmark_world
 from tracker.model import model_from_dict, poses_from_rotations
 from tracker.proportions import sizes, stretched
 from tracker.shape.landmarks import PRIOR, design, fit_landmarks, solve
 from tracker.shape.layout import Layout
 from tracker.tomlfile import read_toml
+from tracker.tracking.keypoint_cue import LANDMARKS, anchors, landmark_world
 
 
 def posed_landmarks(model, rng, frames):

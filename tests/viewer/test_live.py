@@ -5,7 +5,7 @@ import numpy as np
 from tracker.io.posefile import load_pose_file
 from tracker.io.recording import frames, open_recording
 from tracker.model import load_model
-from tracker.track import Tracker
+from tracker.tracking.track import Tracker
 from tracker.viewer.live import LiveView
 from tracker.viewer.scene import Scene
 

@@ -3,7 +3,7 @@ import numpy as np
 from tracker.cli import main
 from tracker.io.recording import open_recording
 from tracker.model import load_model
-from tracker.track import Settings
+from tracker.tracking.track import Settings
 from tracker.viewer.review import Review, truth_rows
 from tracker.viewer.scene import Scene
 
@@ -126,8 +126,8 @@ def test_play_advances_the_timeline(server, tracked):
 
 def test_review_against_a_background_shows_the_difference_images(server, tracked):
     """With the run's empty scene the panels show and search |I - B| summed over colour, as tracking did."""
-    from tracker.foreground import Background
     from tracker.io.readers import FrameSeeker
+    from tracker.tracking.foreground import Background
 
     recording, results = tracked
     rec = open_recording(recording)

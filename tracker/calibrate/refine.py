@@ -29,7 +29,7 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.model import Model
-from tracker.track import Settings, Tracker, narrowing
+from tracker.tracking.track import Settings, Tracker, narrowing
 
 ROUNDS = 8
 

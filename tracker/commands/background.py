@@ -33,7 +33,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Write <camera>.png of the cleared background and print how much of each camera was cleared."""
     from tracker.atomic import ensure_writable_folder
-    from tracker.foreground import MINIMUM_FREE, cleared_background, save_background
+    from tracker.tracking.foreground import MINIMUM_FREE, cleared_background, save_background
 
     rec, model = options.opened(args)
     poses_path, results = options.tracked(args.poses, rec, model)

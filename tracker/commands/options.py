@@ -206,7 +206,7 @@ def renamed(new: str) -> dict[str, Any]:
 def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
     """Settings with the tuning options the user gave (the others at their defaults) and the frame rate
     of the images (the Kalman filter's time step)."""
-    from tracker.track import Settings
+    from tracker.tracking.track import Settings
 
     given = {key: getattr(args, key, None) for key in TUNING}
     given["frame_rate"] = frame_rate

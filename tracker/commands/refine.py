@@ -56,9 +56,9 @@ def run(args: argparse.Namespace) -> int:
     from tracker.atomic import ensure_writable_folder
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
-    from tracker.foreground import camera_stacks, sample_indices
     from tracker.io.readers import grey
-    from tracker.track import smoother
+    from tracker.tracking.foreground import camera_stacks, sample_indices
+    from tracker.tracking.track import smoother
 
     rec, model = options.opened(args)
     poses_path, results = options.tracked(args.poses, rec, model)
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     settings = options.settings_from(args, rec.fps)
     smooth = smoother(settings, rec.cameras)
     if args.background:
-        from tracker.foreground import load_background, preparers
+        from tracker.tracking.foreground import load_background, preparers
 
         prepare = preparers(load_background(args.background, rec), smooth)
     else:

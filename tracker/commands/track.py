@@ -119,7 +119,7 @@ def track(args: argparse.Namespace) -> Outcome:
     from tracker.io.stepwrite import step_and_write
     from tracker.keypoints.stream import tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
-    from tracker.track import Tracker, reductions
+    from tracker.tracking.track import Tracker, reductions
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
@@ -167,7 +167,7 @@ def track(args: argparse.Namespace) -> Outcome:
             keeping_grey(tracker.smooth) if shows else tracker.smooth
         )
     else:
-        from tracker.foreground import preparers
+        from tracker.tracking.foreground import preparers
 
         measured = preparers(background, tracker.smooth)
         prepare = [keeping_grey(camera) for camera in measured] if shows else list(measured)
@@ -325,7 +325,7 @@ def _background(args: argparse.Namespace, rec, out: Path):
     """The --background of the run: None, the median of the recording (also saved under ``out``), or a folder."""
     if args.background == "none":
         return None
-    from tracker.foreground import SAMPLES, load_background, median_background, sample_indices, save_background
+    from tracker.tracking.foreground import SAMPLES, load_background, median_background, sample_indices, save_background
 
     if args.background != "median":
         return load_background(args.background, rec)

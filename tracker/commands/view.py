@@ -29,7 +29,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the review until Ctrl-C, or with ``--record`` write the session and return."""
-    from tracker.track import Settings
+    from tracker.tracking.track import Settings
     from tracker.viewer.review import Review
 
     rec, model = options.opened(args)
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     settings = Settings()
     background = None
     if args.background:
-        from tracker.foreground import load_background
+        from tracker.tracking.foreground import load_background
 
         background = load_background(args.background, rec)
     truth = options.truth(rec)

@@ -9,7 +9,7 @@ import numpy as np
 
 from tracker.io.poses import PosesWriter
 from tracker.model import joint_centres
-from tracker.track import FrameResult, Tracker
+from tracker.tracking.track import FrameResult, Tracker
 
 
 def step_and_write(
@@ -28,7 +28,7 @@ def step_and_write(
 
     ``at`` and ``previous`` are the capture times of this frame and of the one tracked before it, in
     seconds (None for a recording without them); their difference is the step's ``dt``.  ``keypoints``:
-    the frame's landmarks, fused with the edges (:meth:`tracker.track.Tracker.step`).  ``check``, if
+    the frame's landmarks, fused with the edges (:meth:`tracker.tracking.track.Tracker.step`).  ``check``, if
     given, sees the result before it is written and may track the frame again (the keypoints' recovery,
     :class:`tracker.keypoints.recovery.Recovery`).  Returns the result and the seconds spent on the frame.
     """

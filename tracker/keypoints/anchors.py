@@ -1,6 +1,6 @@
 """The distances between BlazePose's landmarks that no pose of a body model changes, and how far apart a
 pose can put them (docs/keypoints.md, "Automatic first pose"); the landmarks sit on the model where
-:func:`tracker.keypoint_cue.anchors` puts them.
+:func:`tracker.tracking.keypoint_cue.anchors` puts them.
 """
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from tracker.chain import BALL, FIXED, HINGE
-from tracker.keypoint_cue import LANDMARKS, anchors
 from tracker.model import Model
+from tracker.tracking.keypoint_cue import LANDMARKS, anchors
 
 
 def _fixed_points(model: Model) -> list[list[tuple[int, np.ndarray]]]:

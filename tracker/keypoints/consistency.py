@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.camera import Camera
-from tracker.keypoint_cue import LANDMARKS, left_right_pairs
 from tracker.keypoints.store import Keypoints
+from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
 
 GATE = 0.05
 """Reprojection distance, as a share of the image's short side, within which a view agrees."""

@@ -26,7 +26,7 @@ from tracker.keypoints.fit import fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
 from tracker.model import Model
-from tracker.track import FrameResult, Settings, Tracker
+from tracker.tracking.track import FrameResult, Settings, Tracker
 
 FRAMES = 5
 """Frames, from the first, whose landmarks are triangulated: the body moves a few millimetres in them, while

@@ -29,9 +29,9 @@ from tracker.camera import Camera
 from tracker.chain import BALL, FREE, HINGE, SLIDE
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.keypoint_cue import LANDMARKS, anchors, landmark_world, left_right_pairs
 from tracker.keypoints.triangulation import middle
 from tracker.model import Model
+from tracker.tracking.keypoint_cue import LANDMARKS, anchors, landmark_world, left_right_pairs
 
 ROBUST = 0.03
 """Misfit (metres, per coordinate) beyond which a world point's pull grows linearly (soft L1)."""

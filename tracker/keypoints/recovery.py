@@ -2,7 +2,7 @@
 
 After each frame tracked with landmarks (checked across the views,
 :mod:`tracker.keypoints.consistency`), the tracked pose's landmark points
-(:func:`tracker.keypoint_cue.cue_points`) are projected into every view that has six or more of
+(:func:`tracker.tracking.keypoint_cue.cue_points`) are projected into every view that has six or more of
 them, and their image distances to the detections are taken as shares of the body's size there.
 The pose has strayed when the mean over the views of the median distance exceeds :data:`STRAYED`
 (:data:`DOUBTED` when the edges too found the frame uncertain), or when a single landmark seen in
@@ -42,13 +42,13 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.keypoint_cue import cue_points, landmark_world
 from tracker.keypoints.first_pose import fitted_to_frames, snap_to_edges
 from tracker.keypoints.fit import fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model
 from tracker.status import LOST, RESEEDED, UNCERTAIN
-from tracker.track import FrameResult, Tracker
+from tracker.tracking.keypoint_cue import cue_points, landmark_world
+from tracker.tracking.track import FrameResult, Tracker
 
 STRAYED = 0.10
 """Median image distance between the tracked landmarks and their detections, as a share of the body's size in
@@ -60,9 +60,9 @@ both say the pose is off."""
 
 LANDMARK_STRAYED = 0.2
 """Mean image distance of one landmark from its detections over the views that see it (two or more), as a share of
-the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.track.Tracker.tolerance`), that says its
-limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from the
-truth), the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in
+the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.tracking.track.Tracker.tolerance`), that
+says its limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from
+the truth), the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in
 15 %, and a try costs the tracker about half a second (the fit and the snap): this share and the persistence keep
 such frames from trying one."""
 

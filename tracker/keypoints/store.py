@@ -26,8 +26,8 @@ import numpy as np
 
 from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
-from tracker.keypoint_cue import LANDMARKS
 from tracker.keypoints.detector import DETECTOR
+from tracker.tracking.keypoint_cue import LANDMARKS
 
 
 @dataclass(frozen=True)

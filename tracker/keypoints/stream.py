@@ -5,11 +5,11 @@ The worker either reads the recording itself or is fed by the tracker's reader t
 against each other (:mod:`tracker.keypoints.consistency`) and hands each frame's landmarks over a queue, in frame
 order.  Fed (large views only, :class:`KeypointStream`), it decodes nothing: the readers decode each video once and
 give the scheduled frames also in colour, reduced as the edge search reduces them
-(:func:`tracker.track.reductions`), and the landmarks are taken back to full-size pixels.  On 1080x1920 H.264 that
-saves the second decoding of every frame of every view (3 ms of CPU each).  Colour it must be: in grey the detector
-takes the demo's backdrop photograph of a player for the body it should find (docs/keypoints.md).  The tracker reads
-its frames ``step + LAG`` frames ahead of the one it tracks (:func:`tracked_frames`), so the worker detects a frame
-while the tracker is still on earlier ones.  It is a process, not a thread, so the detector's Python glue never
+(:func:`tracker.tracking.track.reductions`), and the landmarks are taken back to full-size pixels.  On 1080x1920
+H.264 that saves the second decoding of every frame of every view (3 ms of CPU each).  Colour it must be: in grey the
+detector takes the demo's backdrop photograph of a player for the body it should find (docs/keypoints.md).  The tracker
+reads its frames ``step + LAG`` frames ahead of the one it tracks (:func:`tracked_frames`), so the worker detects a
+frame while the tracker is still on earlier ones.  It is a process, not a thread, so the detector's Python glue never
 holds the tracker's interpreter lock; on a machine with two cores the two run side by side.  The tracker asks for a
 frame's landmarks when it reaches that frame and waits only if the worker has not got there yet, so a run's result
 does not depend on timing.  A frame between two detected ones gets their landmarks interpolated (so the tracker

@@ -23,11 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.camera import Camera
-from tracker.keypoint_cue import LANDMARKS, left_right_pairs
 from tracker.keypoints.anchors import reach, rigid_distances
 from tracker.keypoints.consistency import GATE, Reading, readings, undistorted
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model
+from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
 
 LATERAL = ("hip", "shoulder", "ear", "eye_inner", "eye", "eye_outer")
 """Pairs that lie across the body, labelled by the side they lie on."""

@@ -1,7 +1,7 @@
 """The shape fitted to the image edges along the model's outlines (docs/fit-model.md, "From the edges").
 
 An outline sample of quadric q on component c, at contour point X in c's frame, finds its edge at offset m along
-its image normal (:mod:`tracker.measure`); the first three entries g of its Jacobian row are the change of its
+its image normal (:mod:`tracker.tracking.measure`); the first three entries g of its Jacobian row are the change of its
 offset per unit motion of X in c's frame (docs/method-tracking.md, section 3).  A change dx of the shape
 (:class:`tracker.shape.layout.Layout`) moves X
 
@@ -33,7 +33,7 @@ from tracker.geometry import se3
 from tracker.keypoints.fit import Body
 from tracker.model import Model
 from tracker.shape.layout import Layout
-from tracker.track import Inspection
+from tracker.tracking.track import Inspection
 
 
 def stretch_rows(model: Model, factors: np.ndarray, inspection: Inspection) -> np.ndarray:

@@ -28,7 +28,6 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording
 from tracker.io.recording import frames as frames_of
-from tracker.keypoint_cue import LANDMARKS, landmark_points
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.detector import native_logs_muted
@@ -42,7 +41,8 @@ from tracker.shape.edges import FrameRows, bundle_step, frame_rows, moved
 from tracker.shape.landmarks import fit_landmarks
 from tracker.shape.layout import Layout
 from tracker.status import LOST
-from tracker.track import Inspection, Tracker
+from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+from tracker.tracking.track import Inspection, Tracker
 
 FRAMES = 40
 """Frames the fit reads by default, spread evenly over the recording: many poses tell the lengths apart."""

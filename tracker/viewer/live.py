@@ -4,7 +4,7 @@ The tracking loop hands each finished frame to :meth:`LiveView.offer`, which onl
 keeps a reference to the newest one (a lock and an assignment: the tracker never
 waits for the browser).  A thread of the viewer wakes at most ``rate`` times a
 second, takes the newest frame, redoes its edge search at the tracked poses for
-the panels (its own :class:`~tracker.track.Tracker`; the numba kernels release the
+the panels (its own :class:`~tracker.tracking.track.Tracker`; the numba kernels release the
 GIL) and sends the whole update as one batch; frames that arrive in between are
 skipped, not queued.  Plots of status, residual and speed are refreshed twice a
 second over the last ``history`` frames, the camera images and their edge searches ten
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from tracker.model import Model
-from tracker.track import FrameResult, Settings, Tracker
+from tracker.tracking.track import FrameResult, Settings, Tracker
 from tracker.viewer.scene import Frame, Scene, add_run_plots, run_plot_values, write_viser
 
 PLOT_PERIOD = 0.5  # seconds between plot refreshes

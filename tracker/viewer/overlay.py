@@ -1,4 +1,4 @@
-"""Camera images annotated with what the edge search saw (:class:`tracker.track.Inspection`).
+"""Camera images annotated with what the edge search saw (:class:`tracker.tracking.track.Inspection`).
 
 On each camera's image: every sample's search line, coloured by its IRLS weight
 relative to a perfect fit, ``w c = c / (c + |m|)`` (green when the edge lies on
@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from tracker.io.mosaic import MosaicWriter
-from tracker.track import Inspection
+from tracker.tracking.track import Inspection
 
 _SHIFT = 2  # sub-pixel drawing: coordinates in quarter pixels
 _BINS = 6  # weight colours

@@ -24,7 +24,7 @@ from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.keypoints.first_pose import snap_to_edges
 from tracker.model import Model
-from tracker.track import Settings, Tracker
+from tracker.tracking.track import Settings, Tracker
 from tracker.viewer.scene import Frame, Scene
 
 

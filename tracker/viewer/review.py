@@ -2,7 +2,7 @@
 
 The timeline slider, play/pause, single steps and the playback speed pick a row of
 ``poses.npz``; the scene then shows that frame's poses and truth, and each camera's
-image with the edge search redone at those poses (:meth:`tracker.track.Tracker.inspect`),
+image with the edge search redone at those poses (:meth:`tracker.tracking.track.Tracker.inspect`),
 so what the panels show is what the tracker saw.  Plots give each frame's status,
 residual and, for files that record it, the tracker's speed.  Playback keeps to real
 time (times the speed) by skipping frames when drawing is slower than the video.
@@ -15,12 +15,12 @@ import time
 
 import numpy as np
 
-from tracker.foreground import Background
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.status import NAMES
-from tracker.track import Settings, Tracker
+from tracker.tracking.foreground import Background
+from tracker.tracking.track import Settings, Tracker
 from tracker.viewer.scene import Frame, Scene, add_run_plots
 from tracker.viewer.timeline import Timeline
 

@@ -1,7 +1,7 @@
 """The frame loop (docs/method-tracking.md, section 6): render, measure, solve, update, coerce.
 
 Per frame the poses are predicted from the motion model (``Settings.dynamics``: none, constant
-velocity, or the second-order Kalman filter of :mod:`tracker.motion_prior`), then each IRLS
+velocity, or the second-order Kalman filter of :mod:`tracker.tracking.motion_prior`), then each IRLS
 iteration samples the visible outlines in every camera, measures their edges,
 adds a weak Gaussian prior ``P = diag(lt I3, lr I3)`` about the predicted pose
 (so that every ``C_i`` is invertible, section 3, and the iterations of a frame
@@ -10,7 +10,7 @@ information of its predicted covariance, at least P, per component), solves the 
 component (section 4), applies ``E_i <- E_i exp(alpha_i)`` and coerces the
 joints exact (section 5).  Before measuring, each sample's search is cut half way
 to the next predicted edge along its line that is not its own boundary
-(:mod:`tracker.ownership`), so an image edge is only explained by the nearest
+(:mod:`tracker.tracking.ownership`), so an image edge is only explained by the nearest
 predicted outline that can account for it, and the search range shrinks from
 iteration to iteration (coarse to fine).  The frame's status comes from the share of samples
 that found an edge and the robust mean residual.
@@ -29,15 +29,22 @@ import cv2
 import numpy as np
 from numba import njit
 
-from tracker import motion_prior
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
-from tracker.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, learnt_tolerance, left_right_pairs, placers
-from tracker.measure import Statistics, component_misfits, measure_kernel
 from tracker.model import Model
-from tracker.outline import Placed, Rig, Samples, sample_outlines
-from tracker.ownership import Ownership
 from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.tracking import motion_prior
+from tracker.tracking.keypoint_cue import (
+    LANDMARKS,
+    cue_points,
+    keypoint_kernel,
+    learnt_tolerance,
+    left_right_pairs,
+    placers,
+)
+from tracker.tracking.measure import Statistics, component_misfits, measure_kernel
+from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
+from tracker.tracking.ownership import Ownership
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
 NOISE_WINDOW = 30  # tracked frames whose landmark misfits set the keypoints' noise zones
@@ -57,11 +64,11 @@ class Settings:
     prior_translation: float = 1e3  # prior about the predicted pose, per m^2
     prior_rotation: float = 10.0  # per rad^2
     blur_sigma: float = 1.0  # Gaussian smoothing before the edge search, pixels
-    dynamics: str = "constant-velocity"  # or "none", or "kalman" (tracker.motion_prior)
+    dynamics: str = "constant-velocity"  # or "none", or "kalman" (tracker.tracking.motion_prior)
     damping: float = 1.0  # share of the last frame's motion carried into the prediction (constant-velocity)
-    # dynamics = "kalman" (tracker.motion_prior): a second-order Kalman filter per component, translation and rotation
-    # blocks apart; it predicts the poses, and the information s' P^-1 of its predicted covariance is the prior about
-    # them (prior_translation/prior_rotation become its floor).  The defaults below were tuned on rendered
+    # dynamics = "kalman" (tracker.tracking.motion_prior): a second-order Kalman filter per component, translation and
+    # rotation blocks apart; it predicts the poses, and the information s' P^-1 of its predicted covariance is the prior
+    # about them (prior_translation/prior_rotation become its floor).  The defaults below were tuned on rendered
     # recordings at several frame rates and checked on real footage (docs/motion-models.md); treat them as gains
     # rather than physical truths (docs/method-physics.md, section 5).
     frame_rate: float = 60.0  # frames per second of the recording: the filter's time step is 1 / frame_rate
@@ -80,7 +87,7 @@ class Settings:
     work_side: int = 480  # larger images are searched reduced by the largest integer factor that keeps their short
     # side at least this long (:func:`reduction`; their pixel settings still scale with the full size); 0: never
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
-    keypoint_weight: float = 3.0  # s: a landmark's weight against an edge sample's (tracker.keypoint_cue)
+    keypoint_weight: float = 3.0  # s: a landmark's weight against an edge sample's (tracker.tracking.keypoint_cue)
     keypoint_confidence: float = 0.5  # landmarks less confident than this are not used
     keypoint_tolerance: float = 0.03  # detector noise, a share of the body's image size: closer landmarks unused
     keypoint_noise_multiple: float = 1.5  # each landmark's zone grows to this many times its median misfit (0: fixed)
@@ -129,7 +136,7 @@ def smooth(image: np.ndarray, sigma: float, work_side: int = 0) -> np.ndarray:
     The block mean already smooths by (f^2 - 1) / 12 squared full-size pixels, so the Gaussian on the reduced
     image takes the rest; at 1080x1920 and sigma 2.25 (the 480-pixel blur scaled up) this costs 0.9 ms instead
     of 6 ms a view (docs/speed.md).  The search reads the reduced image at full-size coordinates
-    (:func:`tracker.measure.measure_kernel`), so nothing else changes.
+    (:func:`tracker.tracking.measure.measure_kernel`), so nothing else changes.
     """
     f = reduction(min(image.shape[:2]), work_side)
     if f > 1:
@@ -160,7 +167,7 @@ class Inspection:
     """What the edge search saw at one set of poses (for viewers and the shape fit): per sample its camera,
     component, pixel and normal, the searched interval ``[lo, hi]`` along the normal, the edge offset (NaN if
     none) and the IRLS weight, its ``quadric``, its contour ``point`` (3,) in its component's frame and its
-    Jacobian row L (6,) (:class:`tracker.outline.Samples`)."""
+    Jacobian row L (6,) (:class:`tracker.tracking.outline.Samples`)."""
 
     camera: np.ndarray
     component: np.ndarray
@@ -496,7 +503,7 @@ class Tracker:
         )
 
     def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:
-        """Add the landmarks' information to the edges' (:func:`tracker.keypoint_cue.keypoint_kernel`):
+        """Add the landmarks' information to the edges' (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`):
         ``pixels`` (C, 33, 2) and ``confidence`` (C, 33) float64, one row per camera of the rig.  A landmark
         whose placing component the edges did not hold in the last frame (:attr:`edge_misfit` above
         ``keypoint_edge_misfit``) pulls from the floor zone with no fade.  Returns (landmarks used,
@@ -562,14 +569,14 @@ class Tracker:
         return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
 
     def held(self) -> np.ndarray:
-        """Whether the edges hold each landmark's placing component (:func:`tracker.keypoint_cue.placers`; every
-        landmark not at a joint does): its outline fitted them within ``keypoint_edge_misfit`` in the last
+        """Whether the edges hold each landmark's placing component (:func:`tracker.tracking.keypoint_cue.placers`;
+        every landmark not at a joint does): its outline fitted them within ``keypoint_edge_misfit`` in the last
         frame's last iteration (:attr:`edge_misfit`, the median |m| of its samples)."""
         return (self.placer < 0) | (self.edge_misfit[self.placer] <= self.settings.keypoint_edge_misfit)
 
     def learn_keypoint_noise(self) -> None:
         """Add the frame's landmark misfits (the median over the cameras) to the recent ones and set each
-        landmark's noise zone from them (:func:`tracker.keypoint_cue.learnt_tolerance`); called for frames
+        landmark's noise zone from them (:func:`tracker.tracking.keypoint_cue.learnt_tolerance`); called for frames
         whose edges held the body, and only for the landmarks whose limb they held (:meth:`held`): a limb
         that strays from right detections must not widen their zone."""
         st = self.settings
@@ -587,8 +594,8 @@ class Tracker:
         )
 
     def predict_kalman(self, dt: float) -> np.ndarray:
-        """Predict every component ``dt`` ahead independently (:func:`tracker.motion_prior.predict`), coerce the
-        predicted poses onto the joints (the filter's means follow), and set the prior about them to the
+        """Predict every component ``dt`` ahead independently (:func:`tracker.tracking.motion_prior.predict`), coerce
+        the predicted poses onto the joints (the filter's means follow), and set the prior about them to the
         predicted information ``s' P_xx^-1`` (floored at prior_translation/prior_rotation; ``s'`` of the
         previous frame).  Returns the predicted state's ``motion_prior.position_inverse``, which the
         correction reuses."""
@@ -608,7 +615,7 @@ class Tracker:
     def correct_kalman(self, inverse: np.ndarray) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
         (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
-        ``s' = s sigma0_i^2`` (:func:`tracker.motion_prior.variance_factor` of the same samples); ``inverse``
+        ``s' = s sigma0_i^2`` (:func:`tracker.tracking.motion_prior.variance_factor` of the same samples); ``inverse``
         is the predicted state's P_xx^-1 that :meth:`predict_kalman` returned."""
         st = self.settings
         s = float(st.kalman_noise_scale)

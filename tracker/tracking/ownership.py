@@ -27,8 +27,8 @@ point lies inside the quadric's clipping quadric wins.
 Speed (two numba calls per IRLS iteration, no allocation per sample):
 
 * the camera-frame quadrics, clips, bounding spheres and their cones of rays
-  are the ones :func:`tracker.outline.place` made for the outlines (the
-  :class:`~tracker.outline.Placed` buffers the :class:`~tracker.track.Tracker`
+  are the ones :func:`tracker.tracking.outline.place` made for the outlines (the
+  :class:`~tracker.tracking.outline.Placed` buffers the :class:`~tracker.tracking.track.Tracker`
   owns); per call :func:`prepare` only lists, per camera and quadric, the
   quadrics whose cone of rays comes near it (the only ones its samples can meet);
 * per sample only the two ends of the search segment ``p +- (r + 1) n`` are
@@ -55,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tracker.outline import cone_gap
+from tracker.tracking.outline import cone_gap
 
 _UNDISTORT_ITERATIONS = 8
 _UNDISTORT_TOLERANCE = 1e-9
@@ -73,7 +73,7 @@ def prepare(cone, cam_scale, r, o_near, o_near_count):
     """Per camera and quadric ``j``, the quadrics whose bounding sphere's cone of rays comes within the angle
     of a search line (``r + 1`` pixels at most ``cam_scale[k]`` radians each, see :func:`pixel_scale`) of
     quadric ``j``'s: a coarse cull for the samples of ``j``, ``o_near[k, j, :o_near_count[k, j]]``.
-    ``cone`` (C, Q, 6) holds the cones of rays of :func:`tracker.outline.place` (axis, cos, sin, angle)."""
+    ``cone`` (C, Q, 6) holds the cones of rays of :func:`tracker.tracking.outline.place` (axis, cos, sin, angle)."""
     n_cams, n_quadrics = cone.shape[0], cone.shape[1]
     for k in range(n_cams):
         # quadric l is near quadric j when the angle between the cone axes is at most a_j + a_l + a margin
@@ -96,7 +96,7 @@ def prepare(cone, cam_scale, r, o_near, o_near_count):
 
 @njit(cache=True)
 def undistort(k_mat, dist, px, py):
-    """Recorded pixel -> ideal normalised coordinates (x, y): the inverse of :func:`tracker.outline.distort`
+    """Recorded pixel -> ideal normalised coordinates (x, y): the inverse of :func:`tracker.tracking.outline.distort`
     by Newton's method from the distorted point, until the residual is below 1e-9 (about 1e-6 pixels;
     quadratic convergence: two steps for ordinary lenses)."""
     fx, s, cx = k_mat[0, 0], k_mat[0, 1], k_mat[0, 2]
@@ -467,7 +467,7 @@ class Ownership:
     """The search limits of a tracker's samples, with every buffer allocated once for a model and a rig.
 
     ``limits(placed, samples, r)`` fills ``lo``/``hi`` for the first ``samples.count`` samples, from the
-    camera-frame quadrics that the outline stage left in ``placed`` (:class:`tracker.outline.Placed`).
+    camera-frame quadrics that the outline stage left in ``placed`` (:class:`tracker.tracking.outline.Placed`).
     """
 
     def __init__(self, model, rig, capacity: int, max_range: int):

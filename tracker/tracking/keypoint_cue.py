@@ -2,7 +2,7 @@
 
 A detected landmark ``d`` (recorded pixels, in camera k) is the image of a point ``X`` fixed in
 component i's frame.  With ``u(E_i)`` its predicted image (camera_from_world P_k, the lens model of
-:func:`tracker.outline.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
+:func:`tracker.tracking.outline.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
 component's body twist, the same chain as an outline sample's row (docs/method-tracking.md, section 3),
 
     J = J_d (1/Z) [K2 | -(p - c0)] R D(X),   D(X) = [I3 | -[X]x],
@@ -19,10 +19,10 @@ pulled back by the excess.  So one tree solve fuses both cues.  The noise is lea
 (:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
 edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the
 component that places a joint landmark, :func:`placers`, fitted its outline's edges worse than
-``Settings.keypoint_edge_misfit`` in the last frame's last iteration, :func:`tracker.measure.component_misfits`:
-it follows clutter, or nothing), the landmarks it places pull from the floor zone with no fade (``reach``
-inf) until they bring it back (docs/keypoints.md, "Fusion with the edges").  Left/right swaps are
-rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
+``Settings.keypoint_edge_misfit`` in the last frame's last iteration,
+:func:`tracker.tracking.measure.component_misfits`: it follows clutter, or nothing), the landmarks it places pull from
+the floor zone with no fade (``reach`` inf) until they bring it back (docs/keypoints.md, "Fusion with the edges").
+Left/right swaps are rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
 predicted images better the other way round (summed distance), neither is used in that camera.
 """
 
@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from tracker.model import Model
-from tracker.outline import component_row, distort
+from tracker.tracking.outline import component_row, distort
 
 LANDMARKS = (
     "nose",
@@ -103,7 +103,7 @@ the heel behind the foot and the toes in front."""
 
 def anchors(model: Model) -> tuple[np.ndarray, np.ndarray]:
     """Each landmark's component (33,) int (-1 when the model has none) and its point (33, 3) in that
-    component's frame: the joint centres of :data:`tracker.keypoint_cue.SIDES` and the :data:`SURFACE`
+    component's frame: the joint centres of :data:`tracker.tracking.keypoint_cue.SIDES` and the :data:`SURFACE`
     points (where the component's first quadric is an ellipsoid or a sphere).
 
     A shoulder, elbow, wrist, hip, knee or ankle marks the joint centre of a :data:`SIDES` component (its

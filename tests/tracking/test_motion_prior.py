@@ -1,4 +1,4 @@
-"""The second-order Kalman motion prior (tracker/motion_prior.py; docs/method-physics.md, sections 3, 5)."""
+"""The second-order Kalman motion prior (tracker/tracking/motion_prior.py; docs/method-physics.md, sections 3, 5)."""
 
 import itertools
 from pathlib import Path
@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from tracker import motion_prior
 from tracker.evaluate import evaluate
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
@@ -15,16 +14,17 @@ from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST
-from tracker.track import Settings, Tracker
+from tracker.tracking import motion_prior
+from tracker.tracking.track import Settings, Tracker
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
 
 
 def update(state: motion_prior.MotionState, measured: np.ndarray, information: np.ndarray) -> motion_prior.MotionState:
     """The Kalman update from measured poses ``z`` with information ``W = V^-1`` per block (N,2,3,3):
     ``x+ = x + P_xx+ W (z - x)`` (information form of ``x + K (z - H x)``), then
-    :func:`tracker.motion_prior.correct`."""
+    :func:`tracker.tracking.motion_prior.correct`."""
     diff = motion_prior._difference(state.poses, np.asarray(measured, dtype=np.float64))
     posterior = np.linalg.inv(np.linalg.inv(state.covariance[..., :3, :3]) + information)
     step = np.einsum("nbij,nbj->nbi", posterior @ information, diff)
@@ -50,7 +50,7 @@ def fitting_step(
 
     with ``g = H^T V^-1 r`` (``force``) and ``A = H^T V^-1 H`` (``hessian``), both at the current ``x``.
     With ``riccati=False`` and ``P = I`` this is dynamic fitting (eqs. 16/18).  For comparison and tests;
-    the tracker uses the discrete form (:func:`tracker.motion_prior.correct`)."""
+    the tracker uses the discrete form (:func:`tracker.tracking.motion_prior.correct`)."""
     k = np.zeros_like(cov) if stiffness is None else stiffness
     x = x + dt * (cov @ force - k @ x)
     if riccati:

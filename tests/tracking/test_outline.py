@@ -1,4 +1,4 @@
-"""Outline sampling kernel (tracker.outline) against docs/method-tracking.md, sections 2 and 3.
+"""Outline sampling kernel (tracker.tracking.outline) against docs/method-tracking.md, sections 2 and 3.
 
 Every check recomputes the geometry independently in numpy (or with OpenCV
 through Camera.project / Camera.undistort_pixels) from the model's quadrics,
@@ -20,7 +20,7 @@ from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.geometry.quadric import KEEP_ALL
 from tracker.model import load_model, model_from_dict
-from tracker.outline import Rig, Samples, sample_outlines
+from tracker.tracking.outline import Rig, Samples, sample_outlines
 
 SIZE = (640, 480)
 
@@ -594,7 +594,7 @@ def test_camera_project_agrees_with_the_outline_for_a_skewed_camera():
 def test_place_matches_the_matrix_formula():
     """place(): E = P W, Q' = E^-T Q E^-1, clip likewise, bounding sphere centre E c."""
     rng = np.random.default_rng(23)
-    model = load_model(Path(__file__).resolve().parents[1] / "models" / "human.toml")
+    model = load_model(Path(__file__).resolve().parents[2] / "models" / "human.toml")
     poses = np.stack([se3.exp(rng.normal(size=6)) for _ in range(model.size)])
     cams = random_cameras(rng, 2, distorted=False)
     rig = Rig.from_cameras(cams)

@@ -11,11 +11,11 @@ import pytest
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoint_cue import LANDMARKS, anchors, keypoint_kernel, landmark_points, placers, project_point
 from tracker.model import load_model
-from tracker.outline import Rig
+from tracker.tracking.keypoint_cue import LANDMARKS, anchors, keypoint_kernel, landmark_points, placers, project_point
+from tracker.tracking.outline import Rig
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
 
 
@@ -155,7 +155,7 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
     from tracker.io.posefile import load_pose_file
     from tracker.io.recording import frames
     from tracker.model import joint_centres
-    from tracker.track import Tracker
+    from tracker.tracking.track import Tracker
 
     model, rig, component, point, pairs, _, _ = demo_frame
     recording = open_recording(DEMO)
@@ -188,7 +188,7 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
 
 
 def test_each_landmark_zone_is_learnt_from_its_misfits():
-    from tracker.keypoint_cue import learnt_tolerance
+    from tracker.tracking.keypoint_cue import learnt_tolerance
 
     history = np.full((30, 4), np.nan)
     history[:10, 0] = 0.01  # a close landmark: the floor
@@ -204,7 +204,7 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     import itertools
 
     from tracker.io.recording import frames
-    from tracker.track import Tracker
+    from tracker.tracking.track import Tracker
 
     model, rig, component, point, pairs, poses, pixels = demo_frame
     recording = open_recording(DEMO)

@@ -1,4 +1,4 @@
-"""Edge search and IRLS information (tracker.measure) against docs/method-tracking.md, section 3."""
+"""Edge search and IRLS information (tracker.tracking.measure) against docs/method-tracking.md, section 3."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.measure import component_misfits, edge_offset, measure_kernel
+from tracker.tracking.measure import component_misfits, edge_offset, measure_kernel
 
 W, H = 80, 60
 LO, HI = 40.0, 200.0
@@ -336,10 +336,10 @@ def test_component_misfits_are_the_median_offset_of_each_components_found_sample
 
 @pytest.mark.parametrize("factor", [2, 3])
 def test_a_reduced_image_gives_the_full_size_offsets(factor):
-    """The search reads an image reduced by ``factor`` (tracker.track.smooth) from the samples' full-size
+    """The search reads an image reduced by ``factor`` (tracker.tracking.track.smooth) from the samples' full-size
     places: the offsets of samples on straight and oblique edges, in full-size pixels, are those found in the
     full image, to the reduced image's sub-pixel precision."""
-    from tracker.track import smooth
+    from tracker.tracking.track import smooth
 
     size = 240
     raw = np.zeros((size, size), np.uint8)

@@ -2,7 +2,7 @@
 
 Each visible sample searches the (smoothed) grey image along its normal,
 ``p + s n`` for ``s`` in ``[-r, r]`` (or a per-sample sub-interval ``[lo, hi]``
-of it, see :mod:`tracker.ownership`), for the nearest edge: a local maximum of
+of it, see :mod:`tracker.tracking.ownership`), for the nearest edge: a local maximum of
 the directional derivative ``|dI/ds|`` above ``threshold`` (sub-pixel by a
 parabola through the three values around it).  Its signed offset ``m`` (pixels,
 positive along ``+n``) and the sample's Jacobian row ``L`` give, per

@@ -17,9 +17,9 @@ from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synth import synthesize
-from tracker.track import Settings, Tracker, motion_since, smoother
+from tracker.tracking.track import Settings, Tracker, motion_since, smoother
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
 
 
@@ -139,7 +139,7 @@ def test_motion_since_is_the_body_twist_between_poses():
 
 
 def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
-    from tracker.track import scaled_to
+    from tracker.tracking.track import scaled_to
 
     base = Settings()
     assert scaled_to(base, 480) == base and scaled_to(base, 240) == base
@@ -180,8 +180,8 @@ def test_smoother_blurs_as_the_tracker_does(size):
     the short side beyond 480 pixels (sigma 1 at 640x480, 2.25 at HD)."""
     from dataclasses import replace
 
-    model = load_model(Path(__file__).resolve().parents[1] / "models" / "human.toml")
-    demo = load_calibration(Path(__file__).resolve().parents[1] / "recordings" / "demo" / "calibration.toml")
+    model = load_model(Path(__file__).resolve().parents[2] / "models" / "human.toml")
+    demo = load_calibration(Path(__file__).resolve().parents[2] / "recordings" / "demo" / "calibration.toml")
     cameras = [replace(camera, size=size) for camera in demo]
     image = np.random.default_rng(4).integers(0, 256, size[::-1], dtype=np.uint8)
     tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
@@ -194,7 +194,7 @@ def test_large_images_are_searched_reduced_by_a_whole_factor():
     columns past the last whole block, and the tracker's buffer holds the reduced images."""
     from dataclasses import replace
 
-    from tracker.track import reduction, smooth
+    from tracker.tracking.track import reduction, smooth
 
     assert [reduction(side, 480) for side in (240, 480, 720, 959, 960, 1080, 1440, 2160)] == [1, 1, 1, 1, 2, 2, 3, 4]
     assert reduction(2160, 0) == 1

@@ -1,4 +1,4 @@
-"""Search limits from predicted edge ownership (tracker.ownership) against brute force and a simple scene."""
+"""Search limits from predicted edge ownership (tracker.tracking.ownership) against brute force and a simple scene."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import pytest
 
 from tracker.camera import Camera
 from tracker.model import load_model, model_from_dict
-from tracker.outline import Placed, Rig, Samples, place, sample_outlines
-from tracker.ownership import (
+from tracker.synth import demo3_rig, motion_poses
+from tracker.tracking.outline import Placed, Rig, Samples, place, sample_outlines
+from tracker.tracking.ownership import (
     NCOEF,
     Ownership,
     line_labels,
@@ -18,9 +19,8 @@ from tracker.ownership import (
     undistort,
     undistort_grid,
 )
-from tracker.synth import demo3_rig, motion_poses
 
-HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
+HUMAN = Path(__file__).resolve().parents[2] / "models" / "human.toml"
 
 
 def placed_at(model, poses, rig) -> Placed:

@@ -12,7 +12,12 @@ import pytest
 from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.errors import TrackerInputError
-from tracker.foreground import (
+from tracker.io.poses import PosesWriter
+from tracker.io.readers import keeping_grey
+from tracker.io.recording import frames, open_recording
+from tracker.model import joint_centres, load_model, rest_poses
+from tracker.render import Renderer, load_backgrounds
+from tracker.tracking.foreground import (
     Background,
     cleared_background,
     load_background,
@@ -22,11 +27,6 @@ from tracker.foreground import (
     sample_indices,
     save_background,
 )
-from tracker.io.poses import PosesWriter
-from tracker.io.readers import keeping_grey
-from tracker.io.recording import frames, open_recording
-from tracker.model import joint_centres, load_model, rest_poses
-from tracker.render import Renderer, load_backgrounds
 
 WIDTH, HEIGHT, COUNT = 48, 32, 9
 
@@ -195,8 +195,8 @@ def test_missing_background_folder_is_one_line_exit_2(tiny_recording, tmp_path, 
     assert len(err) == 1 and "nowhere: background folder not found" in err[0]
 
 
-BALANCING = Path(__file__).resolve().parents[2] / "shared" / "data" / "pose2sim-balancing"
-MAN = Path(__file__).resolve().parents[1] / "models" / "pose2sim_man.toml"
+BALANCING = Path(__file__).resolve().parents[3] / "shared" / "data" / "pose2sim-balancing"
+MAN = Path(__file__).resolve().parents[2] / "models" / "pose2sim_man.toml"
 
 
 def cap_centres(recording, count: int) -> np.ndarray:
@@ -248,7 +248,7 @@ def test_real_man_head_held_from_every_nudged_first_pose():
     the keypoint cue holds him through all 100 frames (the next test)."""
     from tracker.io.posefile import load_pose_file
     from tracker.model import load_model
-    from tracker.track import Settings, Tracker
+    from tracker.tracking.track import Settings, Tracker
 
     recording = open_recording(BALANCING)
     model = load_model(MAN)
@@ -294,7 +294,7 @@ def test_real_man_held_through_all_frames_without_a_first_pose(tmp_path):
     assert errors.max() < 0.10 and np.median(errors) < 0.045, errors.round(3)
 
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = Path(__file__).resolve().parents[2] / "models"
 STILL = 6  # frames the body stands at the centre; the other three put it far to each side
 
 

@@ -65,7 +65,7 @@ that depend on ``x`` only)
     P_xx+ = (P_xx^-1 + C / s')^-1,
 
 which equals the textbook update ``K = P H^T (H P H^T + V)^-1``, ``H = [I3 0]`` (``update`` in
-tests/test_motion_prior.py does that from a measured pose and is tested against it).  A component's
+tests/tracking/test_motion_prior.py does that from a measured pose and is tested against it).  A component's
 ``C_i`` counts its own edges only, not what its neighbours say through the joints, so its ``P_xx+``
 errs on the large side (its prior on the next frame on the weak side).
 
@@ -75,9 +75,9 @@ raised to them): that keeps every ``C_i`` invertible (docs/method-tracking.md, s
 far the prior can fade while a component has no data; a component without data keeps moving with its
 velocity while its covariance grows (``q dt^3 / 3`` per frame and more).
 
-Relation to docs/method-physics.md, section 5 (``fitting_step`` in tests/test_motion_prior.py): its first-order filter
-runs the Riccati equation over inner iterations of one frame; integrated over unit pseudo-time on a linear measurement
-it gives exactly our discrete update, and with ``P = I`` held (no Riccati step) it is plain dynamic
+Relation to docs/method-physics.md, section 5 (``fitting_step`` in tests/tracking/test_motion_prior.py): its first-order
+filter runs the Riccati equation over inner iterations of one frame; integrated over unit pseudo-time on a linear
+measurement it gives exactly our discrete update, and with ``P = I`` held (no Riccati step) it is plain dynamic
 fitting, ``qdot = H^T V^-1 r - K q`` (eqs. 16/18).  Its "same fixed point" holds for rigid
 blocks (``K = 0``, ours); with stiffness the filter stops where ``P g = K q``, not ``g = K q``.
 """
