@@ -8,7 +8,7 @@ import pytest
 
 from tracker.camera import look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
-from tracker.synth import synthesize
+from tracker.synthetic.synth import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 HUMAN = ROOT / "models" / "human.toml"

@@ -18,7 +18,7 @@ from conftest import HUMAN
 from tracker.camera import look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.commands.batch import jobs, matched
-from tracker.synth import synthesize
+from tracker.synthetic.synth import synthesize
 
 pytest.importorskip("ray", reason="tracker batch needs Ray: pip install -e '.[cluster]'")
 

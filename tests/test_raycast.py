@@ -7,11 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracker import clips, raycast
+from tracker import raycast
 from tracker.camera import look_at_camera
 from tracker.geometry import se3
 from tracker.model import load_model, model_from_dict, rest_poses
 from tracker.raycast import RayCaster
+from tracker.synthetic import clips
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "human.toml"
 

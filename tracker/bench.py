@@ -44,7 +44,7 @@ from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.detector import Detector
 from tracker.keypoints.stream import KeypointStream, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
-from tracker.render import Renderer
+from tracker.synthetic.render import Renderer
 from tracker.tracking.track import STAGES, Settings, StageTimes, Tracker, reductions
 
 DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"

@@ -3,7 +3,7 @@ component each pixel of a camera sees, with its shade and depth.
 
 One ray per pixel (exact lens distortion: the rays go through the undistorted pixel centres) is
 intersected with every clipped quadric (no conics), so a disagreement between this and
-:mod:`tracker.tracking.outline` points at a bug in one of them.  The renderer (:mod:`tracker.render`) shades,
+:mod:`tracker.tracking.outline` points at a bug in one of them.  The renderer (:mod:`tracker.synthetic.render`) shades,
 paints and composites what a :class:`RayCaster` sees; the foreground cue (:mod:`tracker.tracking.foreground`)
 takes the body's pixels from one.
 """

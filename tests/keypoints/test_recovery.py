@@ -104,7 +104,7 @@ def test_a_body_lost_to_half_a_second_of_black_is_found_again(tmp_path):
     every camera: the edges lose the body in the black and, once the images are back, take the room's edges
     (measured: 210-310 mm for good); with the keypoints it is back within 10 frames (measured: 28-44 mm
     from frame 58; 5-8 mm before the black)."""
-    from tracker.synth import Staging, synthesize
+    from tracker.synthetic.synth import Staging, synthesize
 
     root = Path(__file__).resolve().parents[2]
     source = tmp_path / "render"

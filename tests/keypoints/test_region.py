@@ -81,10 +81,10 @@ def test_a_far_body_is_found_where_the_whole_image_shows_nobody(tmp_path):
     person in every view, its joint landmarks a few per cent of the body's size from the true joint centres
     (measured: docs/keypoints.md)."""
     from tracker.io.recording import frames, open_recording
-    from tracker.keypoints.accuracy import accuracy
     from tracker.keypoints.detect import detect_recording
     from tracker.model import load_model
-    from tracker.synth import Staging, synthesize
+    from tracker.synthetic.keypoint_accuracy import accuracy
+    from tracker.synthetic.synth import Staging, synthesize
 
     root = Path(__file__).resolve().parents[2]
     folder = tmp_path / "far"

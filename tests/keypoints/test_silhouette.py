@@ -12,7 +12,7 @@ from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.region import Region
 from tracker.keypoints.silhouette import PersonMask, Segmenter
 from tracker.model import load_model
-from tracker.render import Renderer
+from tracker.synthetic.render import Renderer
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 

@@ -15,7 +15,6 @@ from tracker.geometry.quadric import evaluate
 from tracker.io.posefile import load_pose_file
 from tracker.model import model_from_dict, poses_from_rotations
 from tracker.proportions import stretched
-from tracker.render import Renderer
 from tracker.shape.edges import (
     FrameRows,
     bundle_step,
@@ -26,6 +25,7 @@ from tracker.shape.edges import (
     stretch_rows,
 )
 from tracker.shape.layout import Layout
+from tracker.synthetic.render import Renderer
 from tracker.tomlfile import read_toml
 from tracker.tracking.track import Inspection, Settings, Tracker
 

@@ -16,7 +16,7 @@ from tracker.io.recording import open_recording
 from tracker.model import load_model
 from tracker.proportions import sizes
 from tracker.shape.fit import fit_shape, spread
-from tracker.synth import Staging, synthesize
+from tracker.synthetic.synth import Staging, synthesize
 from tracker.tomlfile import read_toml
 
 

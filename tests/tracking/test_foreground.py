@@ -16,7 +16,7 @@ from tracker.io.poses import PosesWriter
 from tracker.io.readers import keeping_grey
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model, rest_poses
-from tracker.render import Renderer, load_backgrounds
+from tracker.synthetic.render import Renderer, load_backgrounds
 from tracker.tracking.foreground import (
     Background,
     cleared_background,

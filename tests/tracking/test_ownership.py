@@ -9,7 +9,7 @@ import pytest
 
 from tracker.camera import Camera
 from tracker.model import load_model, model_from_dict
-from tracker.synth import demo3_rig, motion_poses
+from tracker.synthetic.synth import demo3_rig, motion_poses
 from tracker.tracking.outline import Placed, Rig, Samples, place, sample_outlines
 from tracker.tracking.ownership import (
     NCOEF,

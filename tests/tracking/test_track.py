@@ -16,7 +16,7 @@ from tracker.io.recording import frames, open_recording
 from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
-from tracker.synth import synthesize
+from tracker.synthetic.synth import synthesize
 from tracker.tracking.track import Settings, Tracker, motion_since, smoother
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _make(args: argparse.Namespace) -> int:
-    from tracker.suite import make, select
+    from tracker.synthetic.suite import make, select
 
     renders = select(options.camera_names(args.only))
     started = time.perf_counter()
@@ -79,7 +79,7 @@ def _make(args: argparse.Namespace) -> int:
 
 
 def _score(args: argparse.Namespace) -> int:
-    from tracker.suite import format_summary, made, score, summary
+    from tracker.synthetic.suite import format_summary, made, score, summary
 
     data = summary(score(args.out, args.results, made(args.out, options.camera_names(args.only))))
     print(json.dumps(data, indent=2) if args.json else format_summary(data))
@@ -87,7 +87,7 @@ def _score(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from tracker.suite import format_summary, made, score, summary
+    from tracker.synthetic.suite import format_summary, made, score, summary
 
     extra = list(args.track)  # argparse drops the "--" right after RESULTS; one further on follows misplaced options
     if "--" in extra:
@@ -102,8 +102,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _landmarks(args: argparse.Namespace) -> int:
-    from tracker.keypoints.accuracy import accuracy_rows, format_accuracy, suite_accuracy
-    from tracker.suite import made
+    from tracker.synthetic.keypoint_accuracy import accuracy_rows, format_accuracy, suite_accuracy
+    from tracker.synthetic.suite import made
 
     scores = suite_accuracy(args.out, args.keypoints, made(args.out, options.camera_names(args.only)))
     print(json.dumps(accuracy_rows(scores), indent=2) if args.json else format_accuracy(scores))

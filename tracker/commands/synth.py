@@ -11,7 +11,7 @@ HELP = "render a recording with ground truth from a model, a rig and a motion"
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker synth``: what to render, and how the render departs from the plain model."""
-    from tracker.texture import CHOICES  # numpy only: cheap at start-up, unlike tracker.synth
+    from tracker.synthetic.texture import CHOICES  # numpy only: cheap at start-up, unlike tracker.synthetic.synth
 
     parser.add_argument("--model", required=True, help="body model TOML")
     parser.add_argument("--calib", required=True, help="camera rig calibration.toml")
@@ -79,7 +79,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Render the recording folder and say where it is."""
-    from tracker.synth import Staging, synthesize
+    from tracker.synthetic.synth import Staging, synthesize
 
     staging = Staging(
         texture=args.texture,

@@ -11,10 +11,10 @@ import pytest
 
 from tracker.camera import load_calibration
 from tracker.io.poses import load_poses
-from tracker.keypoints.accuracy import accuracy
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
-from tracker.synth import table_before
+from tracker.synthetic.keypoint_accuracy import accuracy
+from tracker.synthetic.synth import table_before
 from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
 

@@ -8,15 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracker import render, synth, texture
-from tracker.actor import capsule_body
 from tracker.camera import look_at_camera
-from tracker.face import HAIR, Face, head_coordinates, paint_face
 from tracker.geometry import se3
 from tracker.model import load_model, model_from_dict, rest_poses
+from tracker.synthetic import render, synth, texture
+from tracker.synthetic.actor import capsule_body
+from tracker.synthetic.face import HAIR, Face, head_coordinates, paint_face
 from tracker.tomlfile import read_toml
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "human.toml"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "human.toml"
 SKIN = np.array([0.5, 0.6, 0.8])
 
 

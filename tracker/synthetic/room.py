@@ -12,15 +12,15 @@ board, and decorations, rectangles of (s, z): one door, a window or two (showing
 instead of reflecting the room's) and framed posters. The floor is planks or tiles, with a rug beside the
 capture area at times.
 
-Furniture is built of boxes (:class:`tracker.props.Box`, ray-cast by :func:`tracker.props.cast_boxes`)
-with a finish painted in each box's frame (wood grain, book spines, drawer fronts, fabric, cardboard):
-bookshelves, cabinets, desks with a screen and a chair, chairs, sofas, stacked cartons, floor lamps.
-Pieces are drawn by seeded rejection sampling, against a wall or free-standing, and kept when they
+Furniture is built of boxes (:class:`tracker.synthetic.props.Box`, ray-cast by
+:func:`tracker.synthetic.props.cast_boxes`) with a finish painted in each box's frame (wood grain, book spines, drawer
+fronts, fabric, cardboard): bookshelves, cabinets, desks with a screen and a chair, chairs, sofas, stacked cartons,
+floor lamps. Pieces are drawn by seeded rejection sampling, against a wall or free-standing, and kept when they
 stand inside the room, clear of each other, of the cameras and of the capture volume, and hide no
 point of that volume from any camera (the segments from every camera to a lattice of the volume's
 points, slab-tested against every box). So the room never hides the body.
 
-Surfaces are shaded like the body (ambient + key max(0, n.l) + fill |n.v|, :mod:`tracker.render`),
+Surfaces are shaded like the body (ambient + key max(0, n.l) + fill |n.v|, :mod:`tracker.synthetic.render`),
 darkened near the room's edges and around the furniture's feet (a crude ambient occlusion), and the
 image is softened like the body's edges.
 """
@@ -35,9 +35,9 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.geometry import se3
-from tracker.props import Box, box_corners, cast_boxes
 from tracker.raycast import DEFAULT_LIGHT, pixel_rays
-from tracker.texture import lattice_hash, value_noise
+from tracker.synthetic.props import Box, box_corners, cast_boxes
+from tracker.synthetic.texture import lattice_hash, value_noise
 
 COATS = ("paint", "plaster", "stripes", "bricks")
 """Base coats of a wall."""

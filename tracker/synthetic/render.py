@@ -2,9 +2,9 @@
 of the tracker's outline code) shaded and composited.
 
 :class:`Renderer` shades the hits, softens the edges and
-composites the body over a background (a photo, or a rendered room: :mod:`tracker.room`) with
-sensor noise; optionally it paints clothes on the body (:mod:`tracker.texture`) and a face on its
-head (:mod:`tracker.face`), stands opaque props such as a table in the scene (:mod:`tracker.props`)
+composites the body over a background (a photo, or a rendered room: :mod:`tracker.synthetic.room`) with
+sensor noise; optionally it paints clothes on the body (:mod:`tracker.synthetic.texture`) and a face on its
+head (:mod:`tracker.synthetic.face`), stands opaque props such as a table in the scene (:mod:`tracker.synthetic.props`)
 and averages sub-frame poses into motion blur.
 """
 
@@ -17,11 +17,11 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
-from tracker.face import Face, paint_face
 from tracker.model import Model
-from tracker.props import Box, backdrop
 from tracker.raycast import DEFAULT_LIGHT, RayCaster
-from tracker.texture import Texture, paint
+from tracker.synthetic.face import Face, paint_face
+from tracker.synthetic.props import Box, backdrop
+from tracker.synthetic.texture import Texture, paint
 
 BACKGROUNDS = Path(__file__).resolve().parent / "data" / "backgrounds"
 """Folder of the background photos shipped with the package (OpenCV samples, licence in its README.md)."""

@@ -22,9 +22,9 @@ import copy
 
 import numpy as np
 
-from tracker.clips import lowest_points
 from tracker.model import Model, poses_from_rotations
 from tracker.proportions import stretched
+from tracker.synthetic.clips import lowest_points
 
 
 def part_factors(data: dict, jitter: float = 0.1, seed: int = 0) -> dict[str, np.ndarray]:

@@ -1,10 +1,10 @@
 """The hard suite: renders that do not flatter the tracker, and their scores (docs/suite.md).
 
 :data:`SUITE` lists the renders as data: a rig of ``calib/``, a motion (a CMU clip, the procedural
-turn or the athletic hops, kicks and spins) at some frame rate, and a :class:`tracker.synth.Staging`
+turn or the athletic hops, kicks and spins) at some frame rate, and a :class:`tracker.synthetic.synth.Staging`
 combining a few hardships: clothing textures, capsule bodies of perturbed sizes, tables hiding the
 legs, bodies cut by the image border or far away, motion blur, low frame rates. Every body has a
-face; every render but one stands in an empty furnished room (:mod:`tracker.room`), and that one
+face; every render but one stands in an empty furnished room (:mod:`tracker.synthetic.room`), and that one
 over the background photos, whose people are larger than the body (bystanders). :func:`make` renders
 them into OUT/<name>/ as normal recording folders without an ``init.toml`` (the true first pose is
 ``truth_init.toml``), and :func:`score` reads RESULTS/<name>/poses.npz against each truth.npz.
@@ -20,9 +20,9 @@ from pathlib import Path
 from tracker.errors import TrackerInputError
 from tracker.evaluate import Report, evaluate
 from tracker.io.poses import load_poses
-from tracker.synth import Staging, synthesize
+from tracker.synthetic.synth import Staging, synthesize
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "models" / "human.toml"
 """The tracking model every render plays (and every recording's model.toml)."""
 CALIB = ROOT / "calib"
@@ -188,7 +188,7 @@ def make(
     """Render ``renders`` into ``out``/<name>/ (no init.toml; truth_init.toml holds the first true pose).
 
     ``clips``: the folder holding :data:`CLIPS` (needed by the renders of CMU motion); ``frames``:
-    render only the first ``frames`` of each (a quick look). Returns :func:`tracker.synth.synthesize`'s
+    render only the first ``frames`` of each (a quick look). Returns :func:`tracker.synthetic.synth.synthesize`'s
     summary per render.
     """
     needed = sorted({render.motion for render in renders if render.motion in CLIPS})

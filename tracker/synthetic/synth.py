@@ -2,11 +2,11 @@
 
 Pipeline of :func:`synthesize`::
 
-    motion (BVH clip | procedural | athletic | seated) -> model poses (F, N, 4, 4)        (tracker.clips)
-    staging: the body that plays them         -> the model itself, or capsules  (tracker.actor)
-    per camera, once                          -> the backdrop: photos, or a room (tracker.room)
+    motion (BVH clip | procedural | athletic | seated) -> model poses (F, N, 4, 4)        (tracker.synthetic.clips)
+    staging: the body that plays them         -> the model itself, or capsules  (tracker.synthetic.actor)
+    per camera, once                          -> the backdrop: photos, or a room (tracker.synthetic.room)
     per frame and camera                      -> ray-cast body over the backdrop, props, texture,
-                                                 face, motion blur               (tracker.render)
+                                                 face, motion blur               (tracker.synthetic.render)
     writers -> <cam>.avi (MJPG), calibration.toml, model.toml, init.toml, truth.npz
 
 and the camera rigs of ``calib/``. :class:`Staging` holds what makes a render unlike the tracking
@@ -25,21 +25,28 @@ from typing import Any
 import cv2
 import numpy as np
 
-from tracker import texture as textures
-from tracker.actor import actor_poses, capsule_body, stretched_body
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
-from tracker.clips import athletic_motion, exposure_poses, procedural_motion, retarget, seated_motion, surface_samples
 from tracker.errors import TrackerInputError
-from tracker.face import HAIR, Face
 from tracker.geometry import se3
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh import load_bvh
 from tracker.io.posefile import save_pose_file
 from tracker.model import Model, joint_centres, load_model, model_from_dict, save_model
-from tracker.props import Box, box_corners, cast_boxes
-from tracker.render import Renderer, albedos, load_backgrounds
-from tracker.room import make_room, room_backdrop
+from tracker.synthetic import texture as textures
+from tracker.synthetic.actor import actor_poses, capsule_body, stretched_body
+from tracker.synthetic.clips import (
+    athletic_motion,
+    exposure_poses,
+    procedural_motion,
+    retarget,
+    seated_motion,
+    surface_samples,
+)
+from tracker.synthetic.face import HAIR, Face
+from tracker.synthetic.props import Box, box_corners, cast_boxes
+from tracker.synthetic.render import Renderer, albedos, load_backgrounds
+from tracker.synthetic.room import make_room, room_backdrop
 from tracker.tomlfile import read_toml
 
 # ---------------------------------------------------------------------------------------------
@@ -84,7 +91,7 @@ RIGS = {"demo3": demo3_rig, "ring4": ring4_rig, "corner3": corner3_rig}
 """The rigs of ``calib/``: file stem -> the function that makes it."""
 
 
-def write_rigs(folder: str | os.PathLike = Path(__file__).resolve().parents[1] / "calib") -> list[Path]:
+def write_rigs(folder: str | os.PathLike = Path(__file__).resolve().parents[2] / "calib") -> list[Path]:
     """Write calib/<name>.toml for every rig of :data:`RIGS` (demo3, ring4, corner3)."""
     folder = Path(folder)
     paths = []
@@ -132,10 +139,10 @@ def table_before(camera: Camera, gap: float = 0.75) -> Box:
 class Staging:
     """What makes a render unlike the tracking model (docs/suite.md); the defaults render the model itself.
 
-    ``texture``: clothing pattern (:data:`tracker.texture.CHOICES`); ``body``: ``model``, ``capsules`` or
-    ``stretched`` (:mod:`tracker.actor`, sizes within +-``jitter``); ``tables``: camera names (or ``all``) with a table
-    between them and the body; ``zoom`` and ``distance``: :func:`moved_rig`; ``motion_blur``: sub-frames
-    averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.clips.exposure_poses`);
+    ``texture``: clothing pattern (:data:`tracker.synthetic.texture.CHOICES`); ``body``: ``model``, ``capsules`` or
+    ``stretched`` (:mod:`tracker.synthetic.actor`, sizes within +-``jitter``); ``tables``: camera names (or ``all``)
+    with a table between them and the body; ``zoom`` and ``distance``: :func:`moved_rig`; ``motion_blur``: sub-frames
+    averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.synthetic.clips.exposure_poses`);
     ``backdrop``: ``photos`` (the background photos, people in them) or ``room`` (an empty furnished room
     rendered from the rig, :func:`room_backdrops`); ``face``: paint a face and hair on the head
     (:func:`head_face`).
@@ -188,7 +195,7 @@ BACKDROPS = ("photos", "room")
 def room_backdrops(
     cameras: list[Camera], joints: np.ndarray, props: tuple[Box, ...] = (), *, seed: int = 0, blur: float = 0.7
 ) -> list[np.ndarray]:
-    """Per camera the image (H, W, 3) uint8 of one seeded room (:mod:`tracker.room`) whose furniture keeps
+    """Per camera the image (H, W, 3) uint8 of one seeded room (:mod:`tracker.synthetic.room`) whose furniture keeps
     clear of the volume the body's joints ``joints`` (..., 3) and the props take (0.5 m wider, 0.4 m higher)."""
     points = np.concatenate([np.asarray(joints, float).reshape(-1, 3), *(box_corners(box) for box in props)])
     low = np.array([*(points[:, 0:2].min(axis=0) - 0.5), 0.0])
@@ -289,7 +296,7 @@ def _readme(
     lines = [
         f"# Synthetic recording `{name}`",
         "",
-        "Rendered by `tracker.synth` (ray-cast clipped quadrics of the body model, composited over",
+        "Rendered by `tracker.synthetic.synth` (ray-cast clipped quadrics of the body model, composited over",
         f"{'background photos' if staging.backdrop == 'photos' else 'a rendered room'}, Gaussian edge blur and"
         " sensor noise). Ground truth in `truth.npz`.",
         "",

@@ -3,7 +3,7 @@
 In camera k and frame f, the truth of a joint landmark j (shoulders, elbows, wrists, hips, knees,
 ankles: the origins of the components of :data:`tracker.tracking.keypoint_cue.SIDES`) is the image u of its
 true joint centre. It is scored where the camera sees that joint (inside the image, not behind a
-prop; :func:`tracker.synth.seen_joints`) and the detector gave it a confidence of at least
+prop; :func:`tracker.synthetic.synth.seen_joints`) and the detector gave it a confidence of at least
 ``min_confidence`` (the tracker's default, 0.5). The body's size s in that view is the diagonal of the
 bounding box of every true joint centre's image. With d the detected pixel:
 
@@ -31,9 +31,9 @@ from tracker.errors import TrackerInputError
 from tracker.io.poses import load_poses
 from tracker.keypoints.store import Keypoints, load_keypoints
 from tracker.model import Model, load_model
-from tracker.props import Box
-from tracker.suite import Render
-from tracker.synth import seen_joints, table_before
+from tracker.synthetic.props import Box
+from tracker.synthetic.suite import Render
+from tracker.synthetic.synth import seen_joints, table_before
 from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
 WRONG = 0.1

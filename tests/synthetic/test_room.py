@@ -10,14 +10,14 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker import render, room, synth
 from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
 from tracker.keypoints.detector import Detector, detect_views
 from tracker.model import joint_centres, load_model
-from tracker.props import box_corners, cast_boxes
+from tracker.synthetic import render, room, synth
+from tracker.synthetic.props import box_corners, cast_boxes
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "human.toml"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "human.toml"
 VOLUME = (np.array([-1.0, -1.2, 0.0]), np.array([1.0, 1.2, 2.2]))
 
 
