@@ -47,8 +47,7 @@ LAYERS = (
         "tracker.keypoints",
         "tracker.synthetic.keypoint_accuracy",
         "tracker.shape",
-        "tracker.bench",
-        "tracker.live",
+        "tracker.apps",
     ),
     ("tracker.commands", "tracker.cli"),
 )

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from tracker.bench import HUMAN
+from tracker.apps.bench import HUMAN
 from tracker.calibrate.refine import camera_rows, refine_rig
 from tracker.camera import load_calibration, save_calibration
 from tracker.cli import main

@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from tracker.commands import options, track
+from tracker.commands import options
 from tracker.errors import TrackerInputError
 
 HELP = "track many recording folders, one Ray task each, locally or on a cluster"
@@ -63,7 +63,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="recordings tracked at once (default: the machine's cores locally, the cluster's CPUs with --ray)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    track.add_tracking_options(parser)
+    options.add_tracking_options(parser)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,10 +114,10 @@ def jobs(recordings: list[Path], out: Path, known: dict[str, str]) -> list[Job]:
 
 
 def tracking_options(args: argparse.Namespace) -> dict:
-    """The ``tracker track`` options of ``args`` (the ones :func:`tracker.commands.track.add_tracking_options`
+    """The ``tracker track`` options of ``args`` (the ones :func:`tracker.commands.options.add_tracking_options`
     makes), file names made absolute."""
     parser = argparse.ArgumentParser()
-    track.add_tracking_options(parser)
+    options.add_tracking_options(parser)
     chosen = {key: getattr(args, key) for key in vars(parser.parse_args([]))}
     for key in PATHS:
         if chosen[key] is not None:
@@ -133,15 +133,13 @@ def track_recording(recording: str, name: str, out: str, chosen: dict):
     driver's to retry."""
     import cv2
 
+    from tracker.apps.track import print_summary, track
     from tracker.atomic import ensure_writable_folder
     from tracker.io.batch import DONE, FAILED, Row
     from tracker.status import LOST
 
     cv2.setNumThreads(1)  # as tracker.cli.main: the reader threads run in parallel already
-    parser = argparse.ArgumentParser()
-    track.add_options(parser)
-    args = parser.parse_args([recording, "--out", out, "--quiet"])
-    vars(args).update(chosen)
+    args = argparse.Namespace(recording=recording, **chosen)
     started = time.perf_counter()
     try:
         log = ensure_writable_folder(out) / "track.log"
@@ -149,13 +147,14 @@ def track_recording(recording: str, name: str, out: str, chosen: dict):
         return Row(recording, name, FAILED, seconds=time.perf_counter() - started, error=str(error))
     with open(log, "w") as stream, contextlib.redirect_stdout(stream), contextlib.redirect_stderr(stream):
         try:
-            outcome = track.track(args)
+            rec, tracking = options.tracking(args)
+            outcome = track(rec, tracking, out=Path(out))
         except TrackerInputError as error:
             print(f"tracker: error: {error}", file=sys.stderr)
             return Row(recording, name, FAILED, seconds=time.perf_counter() - started, error=str(error))
         if outcome.interrupted:  # Ctrl-C reached the worker too: not a finished recording
             raise RuntimeError(f"{recording}: interrupted after {outcome.frames} frames")
-        track.print_summary(outcome)
+        print_summary(outcome)
     return Row(
         recording,
         name,

@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     """Print the benchmark's tables (or one JSON object with ``--json``)."""
     import json
 
-    from tracker import bench
+    from tracker.apps import bench
 
     settings = options.settings_from(args)
     print("preparing the numba kernels, then timing (medians of several passes)...", file=sys.stderr, flush=True)

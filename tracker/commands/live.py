@@ -3,7 +3,7 @@
     tracker live --camera /dev/video0 --camera /dev/video2 --calib C --model M --init I
                  [--size WxH] [--fps F] [--record DIR] [--out DIR] [--view]
 
-How cameras are matched, captured, dropped and recorded: :mod:`tracker.live`.
+How cameras are matched, captured, dropped and recorded: :mod:`tracker.apps.live`.
 """
 
 from __future__ import annotations
@@ -69,10 +69,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """``tracker live``: 0 when the sources ended, 130 after Ctrl-C; TrackerInputError for bad input and
     when every camera stopped delivering (after the output is written)."""
+    from tracker.apps.live import DEFAULT_OUT, Recorder, assign_cameras, drops, open_sources, track_live
     from tracker.camera import load_calibration
     from tracker.io.capture import Capture
     from tracker.io.posefile import load_pose_file
-    from tracker.live import DEFAULT_OUT, Recorder, assign_cameras, drops, open_sources, track_live
     from tracker.model import load_model
 
     calibration_path = Path(args.calib)

@@ -11,9 +11,13 @@ import functools
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tracker.errors import TrackerInputError
+
+if TYPE_CHECKING:
+    from tracker.apps.track import Tracking
+    from tracker.io.recording import Recording
 
 TUNING = ("iterations", "spacing", "resample_every", "search_range", "dynamics", "damping", "max_turn", "work_side")
 
@@ -213,6 +217,34 @@ def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
     return Settings(**{key: value for key, value in given.items() if value is not None})
 
 
+def add_tracking_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``tracker track`` that say how a recording is tracked (``tracker batch`` passes them on;
+    :func:`tracking` resolves them)."""
+    parser.add_argument(
+        "--model",
+        help="body model TOML (default: the recording's model.toml, else models/human.toml fitted to the person "
+        "and written to OUT/model.toml)",
+    )
+    parser.add_argument(
+        "--init",
+        help="pose at the first frame (default: the recording's init.toml, else fitted to the keypoints of the "
+        "first frames)",
+    )
+    add_recording_options(parser)
+    parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    parser.add_argument("--frames", type=positive_int, help="number of frames to track (default: all)")
+    add_tuning_options(parser)
+    add_keypoint_options(parser)
+    parser.add_argument(
+        "--background",
+        default="none",
+        metavar="none|median|DIR",
+        help="search edges in the difference from the empty scene instead of the grey image: "
+        "'median' estimates it from the recording (the person must move about), DIR holds "
+        "<camera>.png images of it (default none)",
+    )
+
+
 def add_live_view_options(parser: argparse.ArgumentParser, after: str) -> None:
     """``--view`` and ``--view-rate``: the browser viewer following a run, and ``after`` it what it shows."""
     parser.add_argument(
@@ -254,6 +286,23 @@ def recording(args: argparse.Namespace):
 def output_folder(given: str | None, rec) -> Path:
     """The folder a command writes a recording's results to: ``given`` (``--out``), else out/<recording name>."""
     return Path(given) if given else Path("out") / rec.path.resolve().name
+
+
+def tracking(args: argparse.Namespace) -> tuple[Recording, Tracking]:
+    """The recording that the tracking options of ``args`` (:func:`add_tracking_options`, and ``recording``) name,
+    and how to track it (:func:`tracker.apps.track.track`)."""
+    from tracker.apps.track import Tracking
+
+    rec = recording(args)
+    return rec, Tracking(
+        settings_from(args, rec.fps),
+        keypoint_step_at(args, rec.fps),
+        start=args.start,
+        frames=args.frames,
+        model=args.model,
+        init=args.init,
+        background=args.background,
+    )
 
 
 def opened(args: argparse.Namespace):

@@ -5,7 +5,7 @@ import shutil
 
 import pytest
 
-from tracker.bench import HUMAN, _copies, _side_by_side
+from tracker.apps.bench import HUMAN, _copies, _side_by_side
 from tracker.cli import main
 from tracker.model import model_from_dict
 
@@ -89,7 +89,7 @@ def test_bench_takes_the_model_and_first_pose_from_elsewhere(tiny_recording, tmp
 def test_a_long_run_reads_the_recording_in_a_loop_and_reports_memory(tiny_recording, capsys, monkeypatch):
     """30 frames of a 6-frame recording: five passes, every frame written, memory read before, after the
     settled frame and at the end (Linux reports it; the CI machines are Linux)."""
-    from tracker import bench
+    from tracker.apps import bench
 
     monkeypatch.setattr(bench, "SETTLED", 12)
     assert main(["bench", str(tiny_recording), "--long", "30", "--keypoints", "off", "--json", "--quiet"]) == 0

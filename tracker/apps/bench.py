@@ -33,6 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.apps.stepwrite import step_and_write
 from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
@@ -40,15 +41,14 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import PosesWriter, load_poses
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
-from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.detector import Detector
 from tracker.keypoints.stream import KeypointStream, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.track import STAGES, Settings, StageTimes, Tracker, reductions
 
-DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
-HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+HUMAN = Path(__file__).resolve().parents[2] / "models" / "human.toml"
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,7 @@ from typing import cast
 
 import numpy as np
 
+from tracker.apps.stepwrite import step_and_write
 from tracker.atomic import ensure_writable_folder
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
@@ -49,7 +50,6 @@ from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.poses import PosesWriter
 from tracker.io.recording import VIDEO_SUFFIXES
-from tracker.io.stepwrite import step_and_write
 from tracker.keypoints.live import LiveDetector, transferred
 from tracker.model import Model
 from tracker.tracking.track import Settings, Tracker

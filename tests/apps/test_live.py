@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tracker.apps.live import Recorder, assign_cameras, track_live
 from tracker.camera import load_calibration
 from tracker.cli import build_parser, main
 from tracker.commands.live import run
@@ -22,11 +23,10 @@ from tracker.io.capture import Capture, CaptureError, ReplayClock, ReplaySource
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.live import Recorder, assign_cameras, track_live
 from tracker.model import load_model
 from tracker.tracking.track import Settings
 
-DEMO = Path(__file__).resolve().parents[1] / "recordings" / "demo"
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
 
 def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:

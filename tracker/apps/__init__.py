@@ -1,0 +1,7 @@
+"""The apps: what runs the tracking method on a recording or on cameras, above it and the tools beside it.
+
+track.py      the library form of ``tracker track``: a recording tracked, poses.npz written (``tracker batch`` too)
+live.py       live tracking from cameras (``tracker live``)
+bench.py      stage timings, fps, decode floor, scaling (``tracker bench``)
+stepwrite.py  the step-and-write of a frame that each of them does: track it, append its row to poses.npz
+"""

@@ -1,0 +1,353 @@
+"""The library form of ``tracker track``: track a recording folder and write OUT/poses.npz (:func:`track`).
+
+``tracker track`` and ``tracker batch`` resolve their options to a :class:`Tracking` and call :func:`track`; each
+prints the :class:`Outcome` with :func:`print_summary`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from tracker.errors import TrackerInputError
+
+if TYPE_CHECKING:
+    from tracker.evaluate import Report
+    from tracker.io.recording import Recording
+    from tracker.tracking.track import Settings
+    from tracker.viewer.review import Review
+
+Bar = Callable[..., Callable[..., Any]]
+"""Progress bars: ``bar(desc, unit, leave=False)`` gives the function that wraps an iterable in one."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Tracking:
+    """How a recording is tracked: the tracking options of ``tracker track`` (which ``tracker batch`` passes on),
+    resolved for the recording."""
+
+    settings: Settings  # the tracker's settings, its frame rate the recording's
+    keypoints: int  # the keypoint detector runs on every keypoints-th frame beside the tracker; 0: off
+    start: int = 0  # first frame
+    frames: int | None = None  # frames to track (None: to the end)
+    model: str | None = None  # body model TOML (None: the recording's model.toml, else models/human.toml fitted)
+    init: str | None = None  # pose at the first frame (None: the recording's init.toml, else fitted to the keypoints)
+    background: str = "none"  # none, median, or a folder of <camera>.png: the edges searched in the difference
+
+
+@dataclasses.dataclass(frozen=True)
+class Viewing:
+    """The browser viewer following a run: where it listens, its updates a second, the session file it writes."""
+
+    host: str
+    port: int
+    rate: float
+    record: Path | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """What a run of :func:`track` did: what its summary prints, and the viewer left to review it."""
+
+    poses: Path  # the poses.npz written
+    frames: int  # frames tracked
+    views: int  # cameras tracked in
+    iterations: int  # IRLS iterations per frame
+    fps: float  # frames per second of the tracking loop (decoding included, start-up not)
+    residual: float  # mean residual of the frames, pixels (NaN when no frame found an edge)
+    counts: dict[int, int]  # frames per status (tracker.status)
+    declined: int | None  # re-seeds the edges declined; None without the keypoint cue
+    interrupted: bool  # stopped by Ctrl-C: the frames done are written
+    report: Report | None  # the accuracy against the recording's truth.npz, when it has one
+    review: Callable[[], Review] | None = dataclasses.field(default=None, compare=False)  # view: the review to serve
+
+
+def print_summary(outcome: Outcome) -> None:
+    """What a finished run prints after the file it wrote: speed, residual, status counts and the accuracy."""
+    from tracker.evaluate import format_report
+    from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
+
+    print(f"frames per second: {outcome.fps:.1f} ({outcome.views} views, {outcome.iterations} iterations per frame)")
+    print(f"mean residual: {outcome.residual:.2f} px")
+    counts = outcome.counts
+    reseeded = ""
+    if outcome.declined is not None:
+        reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({outcome.declined} declined by the edges)"
+    print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
+    if outcome.report is not None:
+        print(format_report(outcome.report))
+
+
+def track(
+    rec: Recording,
+    tracking: Tracking,
+    *,
+    out: Path,
+    overlay: str | None = None,
+    view: Viewing | None = None,
+    bar: Bar | None = None,
+) -> Outcome:
+    """Track ``rec`` as ``tracking`` says and write OUT/poses.npz (``out``, with the model, keypoints and background
+    made on the way); after Ctrl-C, the frames done are written and the outcome says it was interrupted.
+
+    ``overlay``: also write a video of every camera with the tracked outlines and edge searches; ``view``: show
+    the run in the browser viewer, which then reviews it (:attr:`Outcome.review`); ``bar(desc, unit, leave=)``
+    gives the progress bars (default none)."""
+    import numpy as np
+
+    from tracker.apps.stepwrite import step_and_write
+    from tracker.evaluate import evaluate
+    from tracker.io.poses import PosesWriter, load_poses
+    from tracker.io.readers import keeping_grey
+    from tracker.io.recording import capture_times
+    from tracker.keypoints.stream import tracked_frames
+    from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
+    from tracker.tracking.track import Tracker, reductions
+
+    bar = bar or _no_bar
+    start, settings, step = tracking.start, tracking.settings, tracking.keypoints
+    if not 0 <= start < rec.frame_count:
+        raise TrackerInputError(
+            f"{rec.path}: --start {start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
+        )
+    stop = rec.frame_count if tracking.frames is None else min(rec.frame_count, start + tracking.frames)
+    model = _model(tracking.model, rec, out, step, bar)
+    background = _background(tracking.background, rec, out, bar)
+    init, begin = _first_pose(tracking.init, start, rec, model, stop, out, settings, step)
+    print(
+        f"tracking {rec.path} frames {begin}..{stop - 1} with {len(rec.cameras)} camera(s) "
+        f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
+        file=sys.stderr,
+    )
+    # the detector starts up while the kernels load; fed the tracker's own images unless they are differences
+    stream = _keypoints(
+        rec, begin, stop, out, step, None if background is not None else reductions(settings, rec.cameras)
+    )
+    recovery = None
+    if stream is not None:
+        from tracker.keypoints.recovery import Recovery
+
+        recovery = Recovery(model, rec.cameras)
+    print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
+    tracker = Tracker(model, rec.cameras, init, settings)
+    tracker.warm_up()
+    truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
+    live = _live_view(view, rec, model, init, settings, truth) if view is not None else None
+    video = None
+    if overlay:
+        from tracker.viewer.overlay import OverlayVideo
+
+        video = OverlayVideo(Path(overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
+    # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
+    # reduced at HD, or colour differences)
+    shows = video is not None or live is not None
+    if background is None:
+        prepare: Callable[[np.ndarray], object] | list[Callable[[np.ndarray], object]] = (
+            keeping_grey(tracker.smooth) if shows else tracker.smooth
+        )
+    else:
+        from tracker.tracking.foreground import preparers
+
+        measured = preparers(background, tracker.smooth)
+        prepare = [keeping_grey(camera) for camera in measured] if shows else list(measured)
+    counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
+    residuals = []
+    interrupted = False
+    times, last = capture_times(rec), None  # a live recording's capture times: its frames' time and time steps
+    progress = bar(None, "frame", leave=True)
+    started = time.perf_counter()
+    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
+        try:
+            read = tracked_frames(stream, rec, begin, stop, prepare=prepare, colour=background is not None)
+            for index, images in progress(read, total=stop - begin):
+                shown = images
+                if shows:
+                    shown, images = zip(*images)
+                at = None if times is None else float(times[index])
+                keypoints = None if stream is None else stream.get(index)
+                result, spent = step_and_write(
+                    tracker, writer, index, images, at=at, previous=last, keypoints=keypoints, check=recovery
+                )
+                last = at
+                if live is not None:
+                    live.offer(index, shown, result, spent)
+                if video is not None:
+                    video.write(shown, tracker.inspect())
+                counts[result.status] += 1
+                residuals.append(result.residual)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            if video is not None:
+                video.close()
+            if stream is not None:
+                stream.close()
+    elapsed = time.perf_counter() - started
+    if live is not None:
+        live.close()
+    done = len(residuals)
+    poses = out / "poses.npz"
+    results = load_poses(poses) if not interrupted and (truth is not None or live is not None) else None
+    report = evaluate(results, truth) if results is not None and truth is not None else None
+    review: Callable[[], Review] | None = None
+    if live is not None and results is not None and done > 0:
+        from tracker.viewer.review import Review
+
+        def shown_review() -> Review:
+            shown = Review(live.scene, rec, model, results, truth, settings)
+            shown.show(done - 1)
+            return shown
+
+        review = shown_review
+
+    return Outcome(
+        poses=poses,
+        frames=done,
+        views=len(rec.cameras),
+        iterations=settings.iterations,
+        fps=done / elapsed if elapsed > 0 else float("inf"),
+        residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
+        counts=counts,
+        declined=None if recovery is None else recovery.declined,
+        interrupted=interrupted,
+        report=report,
+        review=review,
+    )
+
+
+def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
+    """The body model: ``given`` (``--model``), else the recording's model.toml, else models/human.toml fitted to the
+    person (:func:`tracker.shape.fit.fit_and_save`), written to OUT/model.toml."""
+    from tracker.model import load_model
+
+    if given or rec.model_path is not None:
+        return load_model(given or rec.model_path)
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detector import missing
+    from tracker.shape.fit import GENERIC, fit_and_save
+    from tracker.tomlfile import read_toml
+
+    reason = missing() if step else "--keypoints off"
+    if reason is not None:
+        raise TrackerInputError(
+            f"{rec.path}: no model.toml in the recording folder, and fitting one needs the keypoint detector "
+            f"({reason}); pass --model"
+        )
+    path = ensure_writable_folder(out) / "model.toml"
+    print(f"model: no model.toml, fitting {GENERIC.name} to the person in {rec.path}", file=sys.stderr)
+    fit_and_save(
+        rec,
+        read_toml(GENERIC, "model", "reinstall the tracker: models/human.toml is part of it"),
+        path,
+        source=str(GENERIC),
+        cache=path.parent / "keypoints.npz",
+        progress=bar("fitting the model", "step"),
+        say=lambda line: print(line, file=sys.stderr),
+    )
+    print(f"model: wrote {path}; pass it with --model to reuse it", file=sys.stderr)
+    return load_model(path)
+
+
+def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
+    """The pose at the first frame and that frame (``start``, or later): ``given`` (``--init``), else the recording's
+    init.toml, else fitted to the keypoints of the first frames (:func:`tracker.keypoints.first_pose.first_pose`,
+    detections cached in OUT/keypoints.npz).  When they show nobody, the detector keeps trying a second of frames later,
+    and tracking starts where it first finds the person."""
+    from tracker.io.posefile import load_pose_file
+
+    given = given or rec.init_path
+    if given is not None:
+        return load_pose_file(given, model), start
+    if not step:
+        raise TrackerInputError(
+            f"{rec.path}: no init.toml in the recording folder and --keypoints off; pass --init, or let the "
+            "keypoint detector find the first pose (--keypoints every or N)"
+        )
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detect import detect_recording
+    from tracker.keypoints.first_pose import FRAMES, first_pose
+
+    cache = ensure_writable_folder(out) / "keypoints.npz"
+    tries = range(start, max(start + 1, stop - FRAMES + 1), max(1, round(rec.fps)))
+    for begin in tries:
+        last = min(stop, begin + FRAMES)
+        print(
+            f"first pose: no init.toml, fitting the body to the keypoints of frames {begin}..{last - 1}",
+            file=sys.stderr,
+        )
+        keypoints, _ = detect_recording(rec, begin, last, cache=cache)
+        try:
+            return first_pose(rec, model, keypoints, settings=settings), begin
+        except TrackerInputError as error:
+            if len(rec.cameras) < 2 or begin == tries[-1]:
+                raise
+            print(f"first pose: {error}; trying again a second later", file=sys.stderr)
+    raise TrackerInputError(f"{rec.path}: no frames to fit a first pose to; pass --init")
+
+
+def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):
+    """The detector's stream of every ``step``-th frame (``--keypoints``; cached in OUT/keypoints.npz), or None
+    (off); fed the tracker's images, reduced by ``reduction``, unless that is None."""
+    if not step:
+        return None
+    from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.stream import KeypointStream, schedule_words
+
+    stream = KeypointStream(rec, begin, stop, step, ensure_writable_folder(out) / "keypoints.npz", reduction)
+    every = schedule_words(step)
+    source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
+    print(f"keypoints: {every}, {source}", file=sys.stderr)
+    return stream
+
+
+def _background(given: str, rec, out: Path, bar: Bar):
+    """The background of the run (``given``, ``--background``): None, the median of the recording (also saved
+    under ``out``), or a folder."""
+    if given == "none":
+        return None
+    from tracker.tracking.foreground import SAMPLES, load_background, median_background, sample_indices, save_background
+
+    if given != "median":
+        return load_background(given, rec)
+    background = median_background(rec, SAMPLES, bar("background", "frame"))
+    folder = save_background(background, rec, out / "background")
+    print(
+        f"background: per-pixel median of {len(sample_indices(rec.frame_count, SAMPLES))} frames per camera, "
+        f"saved in {folder} "
+        f"(reuse with --background {folder})",
+        file=sys.stderr,
+    )
+    return background
+
+
+def _live_view(view: Viewing, rec, model, init, settings, truth):
+    """The viewer following the run (``--view``, ``--view-rate``, ``--record``), with the truth's joints."""
+    import numpy as np
+
+    from tracker.viewer.live import LiveView
+    from tracker.viewer.review import truth_rows
+    from tracker.viewer.scene import Scene, start_server
+
+    names = None if truth is None else list(truth["joint_names"])
+    return LiveView(
+        Scene(start_server(view.host, view.port), model, rec.cameras, settings.robust_c, names),
+        model,
+        rec.cameras,
+        init,
+        settings,
+        rate=view.rate,
+        truth=truth_rows(truth, np.arange(rec.frame_count)),
+        record=view.record,
+    )
+
+
+def _no_bar(desc: str | None, unit: str, *, leave: bool = False) -> Callable[..., Any]:
+    """No progress bar: a :data:`Bar` that shows nothing."""
+    from tqdm import tqdm
+
+    return functools.partial(tqdm, desc=desc, unit=unit, disable=True, leave=leave)
