@@ -1,5 +1,6 @@
 """The package's layers: a module imports only from its own layer or the ones below, the import
-graph has no cycle, and every module imports alone in a fresh interpreter."""
+graph has no cycle, the tracking method never imports the rendered-data generator (not even through
+another module), and every module imports alone in a fresh interpreter."""
 
 from __future__ import annotations
 
@@ -15,40 +16,12 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = (
     ("tracker.errors", "tracker.status", "tracker.atomic", "tracker.tomlfile", "tracker.geometry"),
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
-    ("tracker.model", "tracker.camera", "tracker.proportions"),
-    (
-        "tracker.tracking.outline",
-        "tracker.tracking.ownership",
-        "tracker.tracking.measure",
-        "tracker.tracking.keypoint_cue",
-        "tracker.tracking.motion_prior",
-        "tracker.raycast",
-        "tracker.synthetic",
-        "tracker.synthetic.render",
-        "tracker.synthetic.texture",
-        "tracker.synthetic.props",
-        "tracker.synthetic.room",
-        "tracker.synthetic.face",
-    ),
-    ("tracker.tracking", "tracker.tracking.track"),
-    (
-        "tracker.io",
-        "tracker.synthetic.clips",
-        "tracker.synthetic.actor",
-        "tracker.synthetic.synth",
-        "tracker.synthetic.suite",
-        "tracker.evaluate",
-        "tracker.tracking.foreground",
-    ),
-    (
-        "tracker.viewer",
-        "tracker.calibrate",
-        "tracker.physics",
-        "tracker.keypoints",
-        "tracker.synthetic.keypoint_accuracy",
-        "tracker.shape",
-        "tracker.apps",
-    ),
+    ("tracker.model", "tracker.camera", "tracker.proportions", "tracker.evaluate"),
+    ("tracker.raycast", "tracker.io"),  # the body's pixels in a camera; files and cameras in and out
+    ("tracker.tracking",),  # the tracking method
+    ("tracker.keypoints", "tracker.shape", "tracker.calibrate", "tracker.physics", "tracker.viewer"),  # beside it
+    ("tracker.synthetic",),  # the rendered-data generator, made to test the method and never imported by it
+    ("tracker.apps",),  # what runs the method: tracker track's library form, live, bench
     ("tracker.commands", "tracker.cli"),
 )
 """Bottom to top; a module belongs to the layer of the longest name here that it starts with."""
@@ -155,6 +128,45 @@ def test_cycles_are_found():
 
 def test_the_import_graph_has_no_cycle():
     assert cycles(GRAPH) == []
+
+
+def reachable(graph: dict[str, set[str]], start: str) -> set[str]:
+    """The modules ``start`` imports, directly or through others."""
+    found: set[str] = set()
+    todo = [start]
+    while todo:
+        for other in graph[todo.pop()] - found:
+            found.add(other)
+            todo.append(other)
+    return found
+
+
+def inside(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+METHOD = sorted(module for module in MODULES if inside(module, "tracker.tracking"))
+
+
+def test_reachable_follows_imports_through_others():
+    assert reachable({"a": {"b"}, "b": {"c", "a"}, "c": set(), "d": {"a"}}, "a") == {"a", "b", "c"}
+    assert reachable({"a": set(), "b": {"a"}}, "a") == set()
+
+
+@pytest.mark.parametrize("module", METHOD)
+def test_the_tracking_method_never_imports_the_generator(module):
+    generator = sorted(name for name in reachable(GRAPH, module) if inside(name, "tracker.synthetic"))
+    assert not generator, f"{module} imports {generator}, directly or through others"
+
+
+def test_importing_the_tracking_method_loads_no_generator_module():
+    """The same at run time: every module of the method imported in a fresh interpreter, none of the generator's
+    is loaded."""
+    code = "import sys; " + "; ".join(f"import {module}" for module in METHOD)
+    code += "; print(' '.join(name for name in sys.modules if name.startswith('tracker.synthetic')))"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr.strip().splitlines()[-1:]
+    assert done.stdout.split() == []
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))
