@@ -223,15 +223,7 @@ class RayCaster:
     towards the key light in world (:func:`render_kernel`).
     """
 
-    def __init__(
-        self,
-        model: Model,
-        camera: Camera,
-        light=DEFAULT_LIGHT,
-        ambient: float = 0.35,
-        key: float = 0.45,
-        fill: float = 0.3,
-    ):
+    def __init__(self, model: Model, camera: Camera, light=DEFAULT_LIGHT, ambient=0.35, key=0.45, fill=0.3):
         self.model, self.camera = model, camera
         self.rays = pixel_rays(camera)
         light = np.asarray(light, dtype=np.float64)
