@@ -213,11 +213,7 @@ class BoardDetector:
             if scale == 1.0
             else cv2.resize(grey, (round(width * scale), round(height * scale)), interpolation=cv2.INTER_AREA)
         )
-        # NOTE: the third positional argument is OpenCV's ``corners`` output, not ``flags``: OpenCV takes the
-        # int as an output array and runs with its default flags (no CALIB_CB_FAST_CHECK). Kept as it is so
-        # results do not change; passing ``flags=_CHESSBOARD_FLAGS`` would be a behaviour change.
-        pattern = (cols, rows)
-        found, corners = cv2.findChessboardCorners(small, pattern, _CHESSBOARD_FLAGS)  # type: ignore[call-overload]
+        found, corners = cv2.findChessboardCorners(small, (cols, rows), flags=_CHESSBOARD_FLAGS)
         if not found:
             return None
         corners = corners.reshape(-1, 2).astype(np.float64)

@@ -19,11 +19,15 @@ pulled back by the excess.  So one tree solve fuses both cues.  The noise is lea
 (:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
 edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the
 component that places a joint landmark, :func:`placers`, fitted its outline's edges worse than
-``Settings.keypoint_edge_misfit`` in the last frame's last iteration,
-:func:`tracker.tracking.measure.component_misfits`: it follows clutter, or nothing), the landmarks it places pull from
-the floor zone with no fade (``reach`` inf) until they bring it back (docs/keypoints.md, "Fusion with the edges").
-Left/right swaps are rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
-predicted images better the other way round (summed distance), neither is used in that camera.
+``Settings.keypoint_edge_misfit`` in the last frame's last iteration, :func:`tracker.tracking.measure.component_misfits`:
+it follows clutter, or nothing), the landmarks it places pull from the floor zone with no fade (``reach``
+inf) until they bring it back (docs/keypoints.md, "Fusion with the edges"); near that limit the zone and the
+fade pass from one to the other over a span (:meth:`tracker.tracking.track.Tracker.held`).  Left/right swaps are
+rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
+predicted images better the other way round (summed distance), neither is used in that camera, and a pair
+that fits barely better as detected counts in part (:data:`SWAP_MARGIN`).  Every one of these choices is
+continuous in the poses, so that a last-bit change of a pose changes the solve by about as much
+(docs/keypoints.md, "The same result on every machine").
 """
 
 from __future__ import annotations
@@ -193,6 +197,11 @@ def learnt_tolerance(history: np.ndarray, floor: float, multiple: float, ceiling
     return np.clip(typical, floor, ceiling)
 
 
+SWAP_MARGIN = 0.02
+"""Share of the body's image size by which a left/right pair must fit better as detected than swapped to count
+in full (:func:`keypoint_kernel`); below it, its weight falls linearly to zero where the two fit alike."""
+
+
 @njit(cache=True)
 def project_point(k_mat, dist, camera_from_component, point):
     """Recorded pixel (2,) of ``point`` (3,) of a component and its Jacobian (2, 6) with respect to the
@@ -242,7 +251,10 @@ def keypoint_kernel(
 
     ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's detections; a landmark is used when
     its component is >= 0, its confidence at least ``min_confidence``, its pixel finite, and it is not
-    half of a left/right pair of ``pairs`` (P, 2) that fits better swapped.  Each residual is shrunk by
+    half of a left/right pair of ``pairs`` (P, 2) that fits better swapped: a pair's weight falls from full,
+    where swapping it would lengthen its two residuals by :data:`SWAP_MARGIN` of the body's size or more, to
+    zero where swapping would not lengthen them, so that a pair on the fence counts a little rather than all or
+    nothing.  Each residual is shrunk by
     the detector's noise, ``tolerance`` (K,) times the predicted body's size in that image (the diagonal
     of its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
     excess e = |r| - radius, w = s q (e / |r|) / ((c + e) (1 + (e / (reach size))^2)), so its pull grows
@@ -257,6 +269,7 @@ def keypoint_kernel(
     predicted = np.full((count, 2), np.nan)
     jacobians = np.zeros((count, 2, 6))
     usable = np.zeros(count, np.bool_)
+    trust = np.ones(count)
     for k in range(cameras):
         low = np.full(2, np.inf)
         high = np.full(2, -np.inf)
@@ -278,16 +291,18 @@ def keypoint_kernel(
                 and np.isfinite(predicted[j, 0])
             )
         size = np.sqrt(((high - low) ** 2).sum()) if high[0] >= low[0] else 0.0
+        trust[:] = 1.0
         for p in range(pairs.shape[0]):
             a, b = pairs[p, 0], pairs[p, 1]
-            if usable[a] and usable[b]:
+            if usable[a] and usable[b] and size > 0.0:
                 straight = np.linalg.norm(pixels[k, a] - predicted[a]) + np.linalg.norm(pixels[k, b] - predicted[b])
                 swapped = np.linalg.norm(pixels[k, a] - predicted[b]) + np.linalg.norm(pixels[k, b] - predicted[a])
-                if swapped < straight:
-                    usable[a] = usable[b] = False
+                margin = (swapped - straight) / (SWAP_MARGIN * size)
+                trust[a] = trust[b] = min(max(margin, 0.0), 1.0)
+                if margin <= 0.0:
                     rejected += 1
         for j in range(count):
-            if not usable[j]:
+            if not usable[j] or trust[j] <= 0.0:
                 continue
             r = pixels[k, j] - predicted[j]
             length = np.sqrt(r[0] * r[0] + r[1] * r[1])
@@ -299,7 +314,7 @@ def keypoint_kernel(
                 continue
             share = excess / length if radius > 0.0 else 1.0
             fade = excess / (reach[j] * size) if size > 0.0 else 0.0
-            w = scale * confidence[k, j] * share / ((robust_c + excess) * (1.0 + fade * fade))
+            w = scale * trust[j] * confidence[k, j] * share / ((robust_c + excess) * (1.0 + fade * fade))
             jac = jacobians[j]
             information[component[j]] += w * (jac.T @ jac)
             eta[component[j]] += w * (jac.T @ r)

@@ -49,6 +49,7 @@ from tracker.tracking.ownership import Ownership
 DYNAMICS = ("none", "constant-velocity", "kalman")
 NOISE_WINDOW = 30  # tracked frames whose landmark misfits set the keypoints' noise zones
 NOISE_LEAST = 5  # misfits a landmark needs before its zone is learnt
+HOLD_SPAN = 0.5  # Tracker.held falls from 1 to 0 over this share of keypoint_edge_misfit about it
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,7 @@ class Settings:
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
     keypoint_weight: float = 3.0  # s: a landmark's weight against an edge sample's (tracker.tracking.keypoint_cue)
     keypoint_confidence: float = 0.5  # landmarks less confident than this are not used
-    keypoint_tolerance: float = 0.03  # detector noise, a share of the body's image size: closer landmarks unused
+    keypoint_tolerance: float = 0.015  # detector noise, a share of the body's image size: closer landmarks unused
     keypoint_noise_multiple: float = 1.5  # each landmark's zone grows to this many times its median misfit (0: fixed)
     keypoint_tolerance_max: float = 0.15  # ... but no further: a body that far off is pulled back
     keypoint_reach: float = 0.1  # a landmark's pull fades beyond this share of the body's size past its zone
@@ -113,6 +114,8 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         blur_sigma=settings.blur_sigma * k,
         threshold=settings.threshold / k,
         keypoint_edge_misfit=settings.keypoint_edge_misfit * k,
+        uncertain_residual=settings.uncertain_residual * k,
+        lost_residual=settings.lost_residual * k,
         reference_size=short_side,
     )
 
@@ -511,6 +514,8 @@ class Tracker:
         st = self.settings
         component, point, pairs = self.landmarks
         held = self.held()
+        with np.errstate(divide="ignore"):
+            reach = st.keypoint_reach / held
         return keypoint_kernel(
             self.poses,
             self.rig.camera_from_world,
@@ -524,8 +529,8 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
-            np.where(held, self.tolerance, st.keypoint_tolerance),
-            np.where(held, st.keypoint_reach, np.inf),
+            held * self.tolerance + (1.0 - held) * st.keypoint_tolerance,
+            reach,
             self.information,
             self.eta,
             self.misfit,
@@ -569,10 +574,14 @@ class Tracker:
         return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
 
     def held(self) -> np.ndarray:
-        """Whether the edges hold each landmark's placing component (:func:`tracker.tracking.keypoint_cue.placers`;
-        every landmark not at a joint does): its outline fitted them within ``keypoint_edge_misfit`` in the last
-        frame's last iteration (:attr:`edge_misfit`, the median |m| of its samples)."""
-        return (self.placer < 0) | (self.edge_misfit[self.placer] <= self.settings.keypoint_edge_misfit)
+        """How firmly the edges hold each landmark's placing component (:func:`tracker.tracking.keypoint_cue.placers`;
+        every landmark not at a joint is held), from 1 to 0 (K,): 1 where its outline fitted them within 3/4 of
+        ``keypoint_edge_misfit`` in the last frame's last iteration (:attr:`edge_misfit`, the median |m| of its
+        samples), 0 beyond 5/4 of it, linear between, so that a misfit near the limit shifts the landmark's zone
+        and fade a little rather than all at once."""
+        limit = self.settings.keypoint_edge_misfit
+        misfit = self.edge_misfit[np.maximum(self.placer, 0)]
+        return np.where(self.placer < 0, 1.0, np.clip(0.5 - (misfit - limit) / (HOLD_SPAN * limit), 0.0, 1.0))
 
     def learn_keypoint_noise(self) -> None:
         """Add the frame's landmark misfits (the median over the cameras) to the recent ones and set each
@@ -586,7 +595,7 @@ class Tracker:
         frame = np.full(self.misfit.shape[1], np.nan)
         for j in np.flatnonzero(seen.any(axis=0)):
             frame[j] = np.median(self.misfit[seen[:, j], j])
-        frame[~self.held()] = np.nan
+        frame[self.held() < 0.5] = np.nan
         self.misfits[self.misfit_row % NOISE_WINDOW] = frame
         self.misfit_row += 1
         self.tolerance = learnt_tolerance(
