@@ -1,8 +1,8 @@
 """The keypoint cue: 2-D landmarks pulling on model points, summed into the edges' information.
 
 A detected landmark ``d`` (recorded pixels, in camera k) is the image of a point ``X`` fixed in
-component i's frame.  With ``u(E_i)`` its predicted image (camera_from_world P_k, the lens model of
-:func:`tracker.outline.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
+component i's frame.  With ``u(E_i)`` its predicted image (camera_from_world P_k, the camera's calibrated
+lens model, :func:`tracker.geometry.lens.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
 component's body twist, the same chain as an outline sample's row (docs/method-tracking.md, section 3),
 
     J = J_d (1/Z) [K2 | -(p - c0)] R D(X),   D(X) = [I3 | -[X]x],
@@ -31,8 +31,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from tracker.geometry.lens import distort
 from tracker.model import Model
-from tracker.outline import component_row, distort
+from tracker.outline import component_row
 
 LANDMARKS = (
     "nose",
@@ -194,9 +195,10 @@ def learnt_tolerance(history: np.ndarray, floor: float, multiple: float, ceiling
 
 
 @njit(cache=True)
-def project_point(k_mat, dist, camera_from_component, point):
+def project_point(k_mat, lens, dist, camera_from_component, point):
     """Recorded pixel (2,) of ``point`` (3,) of a component and its Jacobian (2, 6) with respect to the
-    component's body twist; NaN when the point is behind the camera."""
+    component's body twist, through the lens model ``lens``, ``dist`` (:mod:`tracker.geometry.lens`);
+    NaN when the point is behind the camera."""
     e = camera_from_component
     x_cam = e[:3, :3] @ point + e[:3, 3]
     jac = np.zeros((2, 6))
@@ -205,7 +207,7 @@ def project_point(k_mat, dist, camera_from_component, point):
     depth = x_cam[2]
     px = k_mat[0, 0] * x_cam[0] / depth + k_mat[0, 1] * x_cam[1] / depth + k_mat[0, 2]
     py = k_mat[1, 1] * x_cam[1] / depth + k_mat[1, 2]
-    u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
+    u, v, j00, j01, j10, j11 = distort(k_mat, lens, dist, px, py)
     for row in range(2):
         gx, gy = (j00, j01) if row == 0 else (j10, j11)
         rx, ry, rz = component_row(k_mat, e, px, py, depth, gx, gy)
@@ -223,6 +225,7 @@ def keypoint_kernel(
     poses,
     camera_from_world,
     matrix,
+    lens,
     distortion,
     component,
     point,
@@ -240,6 +243,7 @@ def keypoint_kernel(
 ):
     """Add every usable landmark's w J^T J and w J^T r to ``information`` (N, 6, 6) and ``eta`` (N, 6).
 
+    ``camera_from_world``, ``matrix``, ``lens`` and ``distortion`` are the rig's (:class:`tracker.outline.Rig`);
     ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's detections; a landmark is used when
     its component is >= 0, its confidence at least ``min_confidence``, its pixel finite, and it is not
     half of a left/right pair of ``pairs`` (P, 2) that fits better swapped.  Each residual is shrunk by
@@ -265,7 +269,7 @@ def keypoint_kernel(
             predicted[j] = np.nan
             if i >= 0:
                 predicted[j], jacobians[j] = project_point(
-                    matrix[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
+                    matrix[k], lens[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
                 )
                 if np.isfinite(predicted[j, 0]):
                     low = np.minimum(low, predicted[j])
