@@ -547,6 +547,25 @@ def test_samples_and_rows_follow_the_calibrated_lens(lens):
     assert worst < 1e-5
 
 
+def test_nothing_beyond_the_fold_of_the_lens():
+    """x_d = x (1 - 0.2 r^2) folds over at r = 1.29 (x_d = 0.86): a ball at r = 1.5 would be drawn back inside
+    the image at x_d = 0.83 by the formula, but no pixel's ray reaches it; one at r = 1 is seen."""
+    rot = np.eye(3)
+    cam = Camera(
+        "c",
+        SIZE,
+        np.array([[300.0, 0.0, 319.5], [0.0, 300.0, 239.5], [0.0, 0.0, 1.0]]),
+        [-0.2, 0, 0, 0],
+        rot,
+        np.zeros(3),
+    )
+    model = one_component(dict(shape="sphere", center=[0.0, 0.0, 0.0], radius=0.1))
+    for r, seen in ((1.5, False), (1.0, True)):
+        pose = se3.from_rotvec(np.zeros(3), np.array([2.0 * r, 0.0, 2.0]))
+        assert 0 < cam.project(pose[:3, 3][None])[0, 0] < SIZE[0] - 1
+        assert (sample(model, pose[None], [cam]).count > 0) == seen
+
+
 def outline_conic(cam, pose, q):
     """C_pix = K^-T (c A - b b^T) K^-1 with Q' = E^-T Q E^-1, E = camera-from-component
     (docs/method-tracking.md, section 2)."""

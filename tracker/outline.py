@@ -10,7 +10,8 @@ unit-circle map ``h(theta) = H (cos theta, sin theta, 1)``; line pairs (the
 outlines of cylinders and cones) are sampled along each line inside the
 projected bounding sphere.  Each sample gets the contour-generator point
 ``X_cam = -c x / (b^T x)`` and is dropped when it lies behind the camera,
-outside its clipping quadric, outside the image, or behind another quadric.
+outside its clipping quadric, outside the image, where the lens folds over
+(det J_d <= 0, beyond the widest ray the camera images), or behind another quadric.
 
 Lens distortion: the conic is exact in ideal pixels; each kept sample is
 mapped to the recorded (distorted) image by ``p_d = K d(K^-1 p)``, d the
@@ -293,12 +294,13 @@ def _emit(
     if np.sqrt(g0 * g0 + g1 * g1) <= 1e-9 * conic_scale * (1.0 + abs(px) + abs(py)):
         return n
     u, v, j00, j01, j10, j11 = distort(k_mat, lens, dist, px, py)
-    if u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
+    det = j00 * j11 - j01 * j10
+    # det <= 0: the lens folds over, a ray beyond the widest the camera images lands back inside the image
+    if det <= 0.0 or u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
         return n
     if _occluded(x_cam, occluders, n_occluders, q_cam, clip_cam, sphere):
         return n
     # normal through the distortion: n_d ~ J_d^-T n
-    det = j00 * j11 - j01 * j10
     nx = (j11 * g0 - j10 * g1) / det
     ny = (-j01 * g0 + j00 * g1) / det
     nn = np.sqrt(nx * nx + ny * ny)
