@@ -2,10 +2,12 @@
 
 import argparse
 import shutil
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+import tomli_w
 
 from tracker.cli import main
 from tracker.io.poses import load_poses
@@ -80,6 +82,11 @@ def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
         with open(rec / "init.toml", "a") as f:
             f.write("\n[pose.tail]\nrotation = [0.0, 0.0, 0.0]\n")
         return [], "init.toml"
+    if name == "lens model with six coefficients":
+        document = tomllib.loads((rec / "calibration.toml").read_text())
+        document["cam_0"]["distortions"] = [0.0] * 6  # OpenCV has no such model
+        (rec / "calibration.toml").write_text(tomli_w.dumps(document))
+        return [], "calibration.toml"
     if name == "corrupt video":
         (rec / "cam0.avi").write_bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8).tobytes())
         return [], "cam0.avi"
@@ -96,6 +103,7 @@ def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
         "unknown parent",
         "init names an unknown component",
         "corrupt video",
+        "lens model with six coefficients",
     ],
 )
 def test_bad_input_is_one_line_exit_2(case, tiny_recording, tmp_path, capsys):

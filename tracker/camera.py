@@ -12,6 +12,9 @@ For the pinhole model d is the Brown-Conrady model with OpenCV's coefficients
     x' = x (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2)
     y' = y (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y
 
+plus the thin prism's s1 r^2 + s2 r^4 (x') and s3 r^2 + s4 r^4 (y'), then the tilted sensor's
+projection by tx, ty (tracker/geometry/lens.py writes these out for the tracker's kernels).
+
 For ``fisheye`` cameras d is OpenCV's equidistant model (k1..k4), theta = atan(r):
 x' = x theta_d / r with theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8).
 The pixel centre of the top-left pixel is (0, 0).
@@ -34,10 +37,10 @@ import tomli_w
 
 from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
+from tracker.geometry.lens import FISHEYE_LENGTHS, PINHOLE_LENGTHS
 from tracker.tomlfile import read_toml
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
-_PINHOLE_DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
 _UNIT_TO_METRES = {"m": 1.0, "mm": 1e-3}
 _MM_GUESS_DISTANCE = 50.0  # a median camera distance above this many "metres" is surely millimetres
 _REQUIRED_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation")
@@ -266,7 +269,7 @@ def _parse_camera(path: Path, table: str, values: dict[str, Any]) -> Camera:
     fisheye = values.get("fisheye", False)
     if not isinstance(fisheye, bool):
         raise fail(f"'fisheye' = {fisheye!r} is not a boolean", "write fisheye = true or false")
-    lengths = (4,) if fisheye else _PINHOLE_DISTORTION_LENGTHS
+    lengths = FISHEYE_LENGTHS if fisheye else PINHOLE_LENGTHS
     distortions = array(
         "distortions",
         tuple((n,) for n in lengths),

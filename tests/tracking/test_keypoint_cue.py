@@ -1,8 +1,9 @@
-"""The keypoint cue: the projection Jacobian against finite differences, the left/right swap test, and
-one solve that pulls a far-off body back onto perfect landmarks."""
+"""The keypoint cue: the projection through every lens model and its Jacobian against finite differences,
+the left/right swap test, and one solve that pulls a far-off body back onto perfect landmarks."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,23 +20,38 @@ ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
 
 
-def test_projection_jacobian_matches_finite_differences():
+LENSES = {
+    "brown": ([-0.1, 0.02, 0.001, -0.002, 0.003], False),
+    "rational": ([-0.08, 0.02, 0.001, -0.002, 0.0, 0.05, 0.3, 0.05], False),
+    "tilted": ([-0.08, 0.02, 0.001, -0.002, 0.0, 0.05, 0.3, 0.05, 0.003, -0.002, 0.001, 0.004, 0.02, -0.03], False),
+    "fisheye": ([0.08, -0.02, 0.01, 0.003], True),
+}
+
+
+@pytest.mark.parametrize("lens", sorted(LENSES))
+def test_projection_and_jacobian_match_the_camera(lens):
+    """The landmark's predicted pixel is Camera.project's (the calibrated lens) and its Jacobian the finite
+    differences of it."""
     rng = np.random.default_rng(5)
-    camera = open_recording(DEMO).cameras[1]
+    distortions, fisheye = LENSES[lens]
+    camera = replace(open_recording(DEMO).cameras[1], distortions=distortions, fisheye=fisheye)
     rig = Rig.from_cameras([camera])
-    distortion = rig.distortion[0] + np.array([-0.1, 0.02, 0.001, -0.002, 0.0])
     pose = se3.exp(np.r_[0.1, -0.2, 0.9, rng.normal(scale=0.3, size=3)])
     point = np.array([0.05, -0.02, -0.2])
-    pixel, jac = project_point(rig.matrix[0], distortion, rig.camera_from_world[0] @ pose, point)
+
+    def project(world_from_component):
+        return project_point(
+            rig.matrix[0], rig.lens[0], rig.distortion[0], rig.camera_from_world[0] @ world_from_component, point
+        )
+
+    pixel, jac = project(pose)
+    np.testing.assert_allclose(pixel, camera.project((pose @ np.append(point, 1.0))[:3])[0], rtol=0, atol=1e-9)
     numeric = np.zeros((2, 6))
     for a in range(6):
         step = np.zeros(6)
         step[a] = 1e-6
-        plus = project_point(rig.matrix[0], distortion, rig.camera_from_world[0] @ pose @ se3.exp(step), point)[0]
-        minus = project_point(rig.matrix[0], distortion, rig.camera_from_world[0] @ pose @ se3.exp(-step), point)[0]
-        numeric[:, a] = (plus - minus) / 2e-6
+        numeric[:, a] = (project(pose @ se3.exp(step))[0] - project(pose @ se3.exp(-step))[0]) / 2e-6
     np.testing.assert_allclose(jac, numeric, rtol=1e-5, atol=1e-4)
-    assert np.isfinite(pixel).all()
 
 
 def test_landmarks_map_onto_the_human_model():
@@ -70,6 +86,7 @@ def _add(model, rig, component, point, pairs, poses, pixels, confidence, toleran
         poses,
         rig.camera_from_world,
         rig.matrix,
+        rig.lens,
         rig.distortion,
         component,
         point,
@@ -135,7 +152,9 @@ def test_landmarks_within_the_detector_noise_are_not_used_and_further_ones_pull_
     (used, _), information, eta = _add(model, rig, component, point, pairs, poses, far, confidence, 0.03)
     assert used == 1 and not np.delete(information, shin, axis=0).any()
     # the weight is w = (e / |r|) / (c + e) with the excess e = 2 radius over |r| = 3 radius (s = q = 1)
-    _, jacobian = project_point(rig.matrix[0], rig.distortion[0], rig.camera_from_world[0] @ poses[shin], point[knee])
+    _, jacobian = project_point(
+        rig.matrix[0], rig.lens[0], rig.distortion[0], rig.camera_from_world[0] @ poses[shin], point[knee]
+    )
     w = (2.0 / 3.0) / (2.0 + 2.0 * radius)
     np.testing.assert_allclose(information[shin], w * jacobian.T @ jacobian, rtol=1e-9)
     np.testing.assert_allclose(eta[shin], w * jacobian.T @ np.array([3.0 * radius, 0.0]), rtol=1e-9, atol=1e-12)

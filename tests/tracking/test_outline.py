@@ -505,6 +505,67 @@ def test_jacobian_row_matches_material_point_finite_differences(name):
     assert worst < 1e-5
 
 
+LENSES = {  # name: (distortions, fisheye), the kinds of lens a calibration file can give
+    "fisheye": ([0.08, -0.02, 0.01, 0.003], True),
+    "brown 4": ([-0.1, 0.02, 0.001, -0.002], False),
+    "brown 5": ([-0.1, 0.02, 0.001, -0.002, 0.005], False),
+    "rational 8": ([-0.08, 0.02, 0.001, -0.002, 0.0, 0.05, 0.3, 0.05], False),
+    "thin prism 12": ([-0.08, 0.02, 0.001, -0.002, 0.0, 0.05, 0.3, 0.05, 0.003, -0.002, 0.001, 0.004], False),
+    "tilted 14": ([-0.08, 0.02, 0.001, -0.002, 0.0, 0.05, 0.3, 0.05, 0.003, -0.002, 0.001, 0.004, 0.02, -0.03], False),
+}
+
+
+@pytest.mark.parametrize("lens", list(LENSES))
+def test_samples_and_rows_follow_the_calibrated_lens(lens):
+    """With every lens model, each sample is Camera.project of its contour point (the outline where the
+    calibrated lens images it) and its row is L alpha = n . d/de Camera.project(E exp(e alpha) X_comp)."""
+    rng = np.random.default_rng(31)
+    model = one_component(SHAPES["ellipsoid"][0])
+    distortions, fisheye = LENSES[lens]
+    cams = [
+        dataclasses.replace(cam, distortions=distortions, fisheye=fisheye)
+        for cam in random_cameras(rng, 2, distorted=False)
+    ]
+    poses = random_pose(rng)[None]
+    s = sample(model, poses, cams, spacing=4.0)
+    n = s.count
+    world = world_points(poses.repeat(n, 0), np.zeros(n, int), s.point[:n])
+    eps = 1e-6
+    worst = 0.0
+    for k, cam in enumerate(cams):
+        sel = np.flatnonzero(s.camera[:n] == k)
+        assert len(sel) > 50
+        assert np.abs(cam.project(world[sel]) - s.pixel[sel]).max() < 1e-9
+        for m in sel:
+            alpha = rng.normal(size=6)
+            x = homog(s.point[m][None])[0]
+            plus = (poses[0] @ se3.exp(eps * alpha) @ x)[:3]
+            minus = (poses[0] @ se3.exp(-eps * alpha) @ x)[:3]
+            fd = ((cam.project(plus[None]) - cam.project(minus[None]))[0] / (2 * eps)) @ s.normal[m]
+            scale = max(abs(fd), 0.05 * np.linalg.norm(s.jacobian[m]) * np.linalg.norm(alpha))
+            worst = max(worst, abs(fd - s.jacobian[m] @ alpha) / scale)
+    assert worst < 1e-5
+
+
+def test_nothing_beyond_the_fold_of_the_lens():
+    """x_d = x (1 - 0.2 r^2) folds over at r = 1.29 (x_d = 0.86): a ball at r = 1.5 would be drawn back inside
+    the image at x_d = 0.83 by the formula, but no pixel's ray reaches it; one at r = 1 is seen."""
+    rot = np.eye(3)
+    cam = Camera(
+        "c",
+        SIZE,
+        np.array([[300.0, 0.0, 319.5], [0.0, 300.0, 239.5], [0.0, 0.0, 1.0]]),
+        [-0.2, 0, 0, 0],
+        rot,
+        np.zeros(3),
+    )
+    model = one_component(dict(shape="sphere", center=[0.0, 0.0, 0.0], radius=0.1))
+    for r, seen in ((1.5, False), (1.0, True)):
+        pose = se3.from_rotvec(np.zeros(3), np.array([2.0 * r, 0.0, 2.0]))
+        assert 0 < cam.project(pose[:3, 3][None])[0, 0] < SIZE[0] - 1
+        assert (sample(model, pose[None], [cam]).count > 0) == seen
+
+
 def outline_conic(cam, pose, q):
     """C_pix = K^-T (c A - b b^T) K^-1 with Q' = E^-T Q E^-1, E = camera-from-component
     (docs/method-tracking.md, section 2)."""

@@ -12,11 +12,12 @@ from tracker.model import load_model, model_from_dict
 from tracker.synthetic.synth import demo3_rig, motion_poses
 from tracker.tracking.outline import Placed, Rig, Samples, place, sample_outlines
 from tracker.tracking.ownership import (
+    GRID_MARGIN,
+    GRID_STEP,
     NCOEF,
     Ownership,
     line_labels,
     pixel_scale,
-    undistort,
     undistort_grid,
 )
 
@@ -93,7 +94,9 @@ def rule(labels, own, r):
     return lo, hi
 
 
-def test_undistortion_newton_and_grid_invert_the_lens():
+def test_undistortion_grid_inverts_the_lens():
+    """The grid's nodes are the lens's exact inverse (tracker.geometry.lens.undistort, checked against OpenCV in
+    tests/geometry/test_lens.py), and the pixel scale bounds the rays' spread."""
     rng = np.random.default_rng(3)
     for _ in range(5):
         k = np.array(
@@ -113,11 +116,11 @@ def test_undistortion_newton_and_grid_invert_the_lens():
             ]
         )  # ordinary lenses
         camera = Camera("c", (640, 480), k, d, np.eye(3), np.zeros(3))
-        pixels = rng.uniform([-30, -30], [670, 510], (300, 2))
-        exact = camera.undistort_pixels(pixels)
-        newton = np.array([undistort(k, d, px, py) for px, py in pixels])
-        assert np.abs(newton - exact).max() * k[0, 0] < 1e-4
-        grid = undistort_grid(k[None], d[None], np.array([[640, 480]]))
+        rig = Rig.from_cameras([camera])
+        grid = undistort_grid(rig)
+        nodes = np.stack(np.meshgrid(np.arange(grid.shape[2]), np.arange(grid.shape[1])), axis=2) * GRID_STEP
+        exact = camera.undistort_pixels(nodes.reshape(-1, 2) - GRID_MARGIN)
+        assert np.abs(grid[0].reshape(-1, 2) - exact).max() * k[0, 0] < 1e-6
         assert pixel_scale(grid)[0] >= 1.0 / min(k[0, 0], k[1, 1])
 
 
@@ -143,7 +146,7 @@ def test_fast_labels_match_brute_force(human_views, r):
     reads it, and it is left out."""
     model, cameras, rig, views = human_views
     n_quadrics = model.quadric.shape[0]
-    grid = undistort_grid(rig.matrix, rig.distortion, rig.size)
+    grid = undistort_grid(rig)
     cand = np.zeros(n_quadrics, np.int64)
     coef = np.zeros((n_quadrics, NCOEF))
     total = agree = 0
@@ -160,6 +163,7 @@ def test_fast_labels_match_brute_force(human_views, r):
                 placed.sphere,
                 model.quadric_component,
                 rig.matrix,
+                rig.lens,
                 rig.distortion,
                 grid,
                 k,

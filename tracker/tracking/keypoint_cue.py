@@ -1,8 +1,8 @@
 """The keypoint cue: 2-D landmarks pulling on model points, summed into the edges' information.
 
 A detected landmark ``d`` (recorded pixels, in camera k) is the image of a point ``X`` fixed in
-component i's frame.  With ``u(E_i)`` its predicted image (camera_from_world P_k, the lens model of
-:func:`tracker.tracking.outline.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
+component i's frame.  With ``u(E_i)`` its predicted image (camera_from_world P_k, the camera's calibrated
+lens model, :func:`tracker.geometry.lens.distort`) and ``J = du/dalpha`` (2 x 6) its Jacobian with respect to the
 component's body twist, the same chain as an outline sample's row (docs/method-tracking.md, section 3),
 
     J = J_d (1/Z) [K2 | -(p - c0)] R D(X),   D(X) = [I3 | -[X]x],
@@ -16,18 +16,17 @@ the cue's weight against the edges and ``t`` the detector's noise in that image 
 predicted body's size there): a landmark within ``t`` of its prediction is not used (e <= 0), so a
 detector's scatter and bias never pull against the edges, while a body that has drifted off is
 pulled back by the excess.  So one tree solve fuses both cues.  The noise is learnt per landmark
-(:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the
-edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the
-component that places a joint landmark, :func:`placers`, fitted its outline's edges worse than
-``Settings.keypoint_edge_misfit`` in the last frame's last iteration, :func:`tracker.tracking.measure.component_misfits`:
-it follows clutter, or nothing), the landmarks it places pull from the floor zone with no fade (``reach``
-inf) until they bring it back (docs/keypoints.md, "Fusion with the edges"); near that limit the zone and the
-fade pass from one to the other over a span (:meth:`tracker.tracking.track.Tracker.held`).  Left/right swaps are
-rejected, not fused: for each left/right pair seen in a camera, when the two detections fit the
-predicted images better the other way round (summed distance), neither is used in that camera, and a pair
-that fits barely better as detected counts in part (:data:`SWAP_MARGIN`).  Every one of these choices is
-continuous in the poses, so that a last-bit change of a pose changes the solve by about as much
-(docs/keypoints.md, "The same result on every machine").
+(:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the edges hold it, for
+this detector on this subject.  Where the edges do not hold a limb (the component that places a joint landmark,
+:func:`placers`, fitted its outline's edges worse than ``Settings.keypoint_edge_misfit`` in the last frame's last
+iteration, :func:`tracker.tracking.measure.component_misfits`: it follows clutter, or nothing), the landmarks it
+places pull from the floor zone with no fade (``reach`` inf) until they bring it back (docs/keypoints.md, "Fusion with
+the edges"); near that limit the zone and the fade pass from one to the other over a span
+(:meth:`tracker.tracking.track.Tracker.held`).  Left/right swaps are rejected, not fused: for each left/right pair
+seen in a camera, when the two detections fit the predicted images better the other way round (summed distance),
+neither is used in that camera, and a pair that fits barely better as detected counts in part (:data:`SWAP_MARGIN`).
+Every one of these choices is continuous in the poses, so that a last-bit change of a pose changes the solve by about
+as much (docs/keypoints.md, "The same result on every machine").
 """
 
 from __future__ import annotations
@@ -35,8 +34,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from tracker.geometry.lens import distort
 from tracker.model import Model
-from tracker.tracking.outline import component_row, distort
+from tracker.tracking.outline import component_row
 
 LANDMARKS = (
     "nose",
@@ -203,9 +203,10 @@ in full (:func:`keypoint_kernel`); below it, its weight falls linearly to zero w
 
 
 @njit(cache=True)
-def project_point(k_mat, dist, camera_from_component, point):
+def project_point(k_mat, lens, dist, camera_from_component, point):
     """Recorded pixel (2,) of ``point`` (3,) of a component and its Jacobian (2, 6) with respect to the
-    component's body twist; NaN when the point is behind the camera."""
+    component's body twist, through the lens model ``lens``, ``dist`` (:mod:`tracker.geometry.lens`);
+    NaN when the point is behind the camera."""
     e = camera_from_component
     x_cam = e[:3, :3] @ point + e[:3, 3]
     jac = np.zeros((2, 6))
@@ -214,7 +215,7 @@ def project_point(k_mat, dist, camera_from_component, point):
     depth = x_cam[2]
     px = k_mat[0, 0] * x_cam[0] / depth + k_mat[0, 1] * x_cam[1] / depth + k_mat[0, 2]
     py = k_mat[1, 1] * x_cam[1] / depth + k_mat[1, 2]
-    u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
+    u, v, j00, j01, j10, j11 = distort(k_mat, lens, dist, px, py)
     for row in range(2):
         gx, gy = (j00, j01) if row == 0 else (j10, j11)
         rx, ry, rz = component_row(k_mat, e, px, py, depth, gx, gy)
@@ -232,6 +233,7 @@ def keypoint_kernel(
     poses,
     camera_from_world,
     matrix,
+    lens,
     distortion,
     component,
     point,
@@ -249,18 +251,18 @@ def keypoint_kernel(
 ):
     """Add every usable landmark's w J^T J and w J^T r to ``information`` (N, 6, 6) and ``eta`` (N, 6).
 
-    ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's detections; a landmark is used when
-    its component is >= 0, its confidence at least ``min_confidence``, its pixel finite, and it is not
-    half of a left/right pair of ``pairs`` (P, 2) that fits better swapped: a pair's weight falls from full,
-    where swapping it would lengthen its two residuals by :data:`SWAP_MARGIN` of the body's size or more, to
-    zero where swapping would not lengthen them, so that a pair on the fence counts a little rather than all or
-    nothing.  Each residual is shrunk by
-    the detector's noise, ``tolerance`` (K,) times the predicted body's size in that image (the diagonal
-    of its landmarks' bounding box): a landmark within it is not used, one further is weighted by its
-    excess e = |r| - radius, w = s q (e / |r|) / ((c + e) (1 + (e / (reach size))^2)), so its pull grows
-    from zero at the zone's edge and fades again beyond ``reach`` (K,) times the body's size (a wrong
-    detection, or a body that far off, is left to the recovery; inf: no fade).  ``misfit`` (C, K) receives
-    |r| over the body's size for every usable landmark, NaN for the others.  Returns (landmarks used, pairs
+    ``camera_from_world``, ``matrix``, ``lens`` and ``distortion`` are the rig's
+    (:class:`tracker.tracking.outline.Rig`); ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's
+    detections; a landmark is used when its component is >= 0, its confidence at least ``min_confidence``, its pixel
+    finite, and it is not half of a left/right pair of ``pairs`` (P, 2) that fits better swapped: a pair's weight
+    falls from full, where swapping it would lengthen its two residuals by :data:`SWAP_MARGIN` of the body's size or
+    more, to zero where swapping would not lengthen them, so that a pair on the fence counts a little rather than all
+    or nothing.  Each residual is shrunk by the detector's noise, ``tolerance`` (K,) times the predicted body's size
+    in that image (the diagonal of its landmarks' bounding box): a landmark within it is not used, one further is
+    weighted by its excess e = |r| - radius, w = s q (e / |r|) / ((c + e) (1 + (e / (reach size))^2)), so its pull
+    grows from zero at the zone's edge and fades again beyond ``reach`` (K,) times the body's size (a wrong detection,
+    or a body that far off, is left to the recovery; inf: no fade).  ``misfit`` (C, K) receives |r| over the body's
+    size for every usable landmark, NaN for the others.  Returns (landmarks used, pairs
     rejected)."""
     cameras, count = pixels.shape[0], pixels.shape[1]
     misfit[:] = np.nan
@@ -278,7 +280,7 @@ def keypoint_kernel(
             predicted[j] = np.nan
             if i >= 0:
                 predicted[j], jacobians[j] = project_point(
-                    matrix[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
+                    matrix[k], lens[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
                 )
                 if np.isfinite(predicted[j, 0]):
                     low = np.minimum(low, predicted[j])

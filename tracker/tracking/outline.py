@@ -10,10 +10,12 @@ unit-circle map ``h(theta) = H (cos theta, sin theta, 1)``; line pairs (the
 outlines of cylinders and cones) are sampled along each line inside the
 projected bounding sphere.  Each sample gets the contour-generator point
 ``X_cam = -c x / (b^T x)`` and is dropped when it lies behind the camera,
-outside its clipping quadric, outside the image, or behind another quadric.
+outside its clipping quadric, outside the image, where the lens folds over
+(det J_d <= 0, beyond the widest ray the camera images), or behind another quadric.
 
 Lens distortion: the conic is exact in ideal pixels; each kept sample is
-mapped to the recorded (distorted) image by ``p_d = K d(K^-1 p)`` and its
+mapped to the recorded (distorted) image by ``p_d = K d(K^-1 p)``, d the
+camera's calibrated lens model (:mod:`tracker.geometry.lens`), and its
 normal by the inverse transpose of that map's Jacobian ``J_d``.  The Jacobian
 row of a sample (section 3) is
 
@@ -33,31 +35,48 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from tracker.errors import TrackerInputError
+from tracker.geometry.lens import COEFFICIENTS, FISHEYE, FISHEYE_LENGTHS, PINHOLE, PINHOLE_LENGTHS, distort
+
 _TANGENT_EPS = 1e-3
 _MAX_STEPS = 4096
 
 
 @dataclass(frozen=True)
 class Rig:
-    """Flat camera arrays: intrinsics ``matrix`` (C,3,3), ``camera_from_world`` (C,4,4),
-    ``distortion`` (C,5) as k1 k2 p1 p2 k3, ``size`` (C,2) width and height."""
+    """Flat camera arrays: intrinsics ``matrix`` (C,3,3), ``camera_from_world`` (C,4,4), the lens model
+    as ``lens`` (C,) int64 kind and ``distortion`` (C,14) coefficients (:mod:`tracker.geometry.lens`),
+    ``size`` (C,2) width and height."""
 
     names: tuple[str, ...]
     matrix: np.ndarray
     camera_from_world: np.ndarray
+    lens: np.ndarray
     distortion: np.ndarray
     size: np.ndarray
 
     @classmethod
     def from_cameras(cls, cameras) -> Rig:
-        distortion = np.zeros((len(cameras), 5))
+        """The rig of ``cameras``; TrackerInputError for a camera whose lens model the kernels do not know
+        (a calibration file cannot give one: :func:`tracker.camera.load_calibration` refuses it)."""
+        lens = np.zeros(len(cameras), np.int64)
+        distortion = np.zeros((len(cameras), COEFFICIENTS))
         for k, cam in enumerate(cameras):
-            d = np.asarray(cam.distortions, dtype=np.float64).ravel()[:5]
+            d = np.asarray(cam.distortions, dtype=np.float64).ravel()
+            lengths = FISHEYE_LENGTHS if cam.fisheye else PINHOLE_LENGTHS
+            if len(d) not in lengths:
+                raise TrackerInputError(
+                    f"camera {cam.name!r}: {len(d)} {'fisheye' if cam.fisheye else 'pinhole'} distortion "
+                    f"coefficients are no lens model the tracker knows; give {' or '.join(map(str, lengths))} "
+                    "(OpenCV order)"
+                )
+            lens[k] = FISHEYE if cam.fisheye else PINHOLE
             distortion[k, : len(d)] = d
         return cls(
             names=tuple(c.name for c in cameras),
             matrix=np.array([c.matrix for c in cameras], dtype=np.float64),
             camera_from_world=np.array([c.camera_from_world for c in cameras], dtype=np.float64),
+            lens=lens,
             distortion=distortion,
             size=np.array([c.size for c in cameras], dtype=np.int64),
         )
@@ -96,39 +115,6 @@ class Samples:
     @property
     def capacity(self) -> int:
         return len(self.camera)
-
-
-@njit(cache=True)
-def distort(k_mat, dist, px, py):
-    """Ideal pixel (px, py) -> recorded pixel and the 2x2 Jacobian of that map (Brown-Conrady).
-
-    With x = K^-1 p, r2 = |x|^2, f = 1 + k1 r2 + k2 r2^2 + k3 r2^3:
-    d(x) = x f + (2 p1 x y + p2 (r2 + 2x^2), p1 (r2 + 2y^2) + 2 p2 x y), p_d = K d(x)
-    and J_d = K2 (dd/dx) K2^-1.  Returns (u, v, j00, j01, j10, j11).
-    """
-    fx, s, cx = k_mat[0, 0], k_mat[0, 1], k_mat[0, 2]
-    fy, cy = k_mat[1, 1], k_mat[1, 2]
-    y = (py - cy) / fy
-    x = (px - cx - s * y) / fx
-    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    r2 = x * x + y * y
-    f = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    df = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3)
-    dx = x * f + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    dy = y * f + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    n00 = f + 2.0 * x * x * df + 2.0 * p1 * y + 6.0 * p2 * x
-    n01 = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y
-    n11 = f + 2.0 * y * y * df + 6.0 * p1 * y + 2.0 * p2 * x
-    # K2 N K2^-1 with K2 = [[fx, s], [0, fy]], K2^-1 = [[1/fx, -s/(fx fy)], [0, 1/fy]]
-    a00 = fx * n00 + s * n01
-    a01 = fx * n01 + s * n11
-    a10 = fy * n01
-    a11 = fy * n11
-    j00 = a00 / fx
-    j01 = -a00 * s / (fx * fy) + a01 / fy
-    j10 = a10 / fx
-    j11 = -a10 * s / (fx * fy) + a11 / fy
-    return fx * dx + s * dy + cx, fy * dy + cy, j00, j01, j10, j11
 
 
 @njit(cache=True, inline="always")
@@ -266,6 +252,7 @@ def _emit(
     cam_from_comp,
     k_mat,
     k_inv,
+    lens,
     dist,
     size,
     o_cam,
@@ -306,13 +293,14 @@ def _emit(
     g1 = conic[1, 0] * px + conic[1, 1] * py + conic[1, 2]
     if np.sqrt(g0 * g0 + g1 * g1) <= 1e-9 * conic_scale * (1.0 + abs(px) + abs(py)):
         return n
-    u, v, j00, j01, j10, j11 = distort(k_mat, dist, px, py)
-    if u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
+    u, v, j00, j01, j10, j11 = distort(k_mat, lens, dist, px, py)
+    det = j00 * j11 - j01 * j10
+    # det <= 0: the lens folds over, a ray beyond the widest the camera images lands back inside the image
+    if det <= 0.0 or u < 0.0 or v < 0.0 or u > size[0] - 1.0 or v > size[1] - 1.0:
         return n
     if _occluded(x_cam, occluders, n_occluders, q_cam, clip_cam, sphere):
         return n
     # normal through the distortion: n_d ~ J_d^-T n
-    det = j00 * j11 - j01 * j10
     nx = (j11 * g0 - j10 * g1) / det
     ny = (-j01 * g0 + j00 * g1) / det
     nn = np.sqrt(nx * nx + ny * ny)
@@ -404,6 +392,7 @@ def outline_kernel(
     poses,
     cam_matrix,
     camera_from_world,
+    cam_lens,
     cam_dist,
     cam_size,
     spacing,
@@ -542,6 +531,7 @@ def outline_kernel(
                             cam_from_comp[j],
                             k_mat,
                             k_inv,
+                            cam_lens[k],
                             cam_dist[k],
                             size,
                             o_cam,
@@ -594,6 +584,7 @@ def outline_kernel(
                             cam_from_comp[j],
                             k_mat,
                             k_inv,
+                            cam_lens[k],
                             cam_dist[k],
                             size,
                             o_cam,
@@ -643,6 +634,7 @@ def sample_outlines(
         poses,
         rig.matrix,
         rig.camera_from_world,
+        rig.lens,
         rig.distortion,
         rig.size,
         float(spacing),

@@ -55,10 +55,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from tracker.geometry.lens import undistort
 from tracker.tracking.outline import cone_gap
 
-_UNDISTORT_ITERATIONS = 8
-_UNDISTORT_TOLERANCE = 1e-9
 _SPHERE_MARGIN = 1e-6  # relative, on the bounding spheres (they only cull)
 GRID_STEP = 8.0  # pixels between the nodes of the undistortion grid
 GRID_MARGIN = 48.0  # pixels the grid reaches beyond the image
@@ -94,43 +93,16 @@ def prepare(cone, cam_scale, r, o_near, o_near_count):
             o_near_count[k, j] = count
 
 
-@njit(cache=True)
-def undistort(k_mat, dist, px, py):
-    """Recorded pixel -> ideal normalised coordinates (x, y): the inverse of :func:`tracker.tracking.outline.distort`
-    by Newton's method from the distorted point, until the residual is below 1e-9 (about 1e-6 pixels;
-    quadratic convergence: two steps for ordinary lenses)."""
-    fx, s, cx = k_mat[0, 0], k_mat[0, 1], k_mat[0, 2]
-    fy, cy = k_mat[1, 1], k_mat[1, 2]
-    yd = (py - cy) / fy
-    xd = (px - cx - s * yd) / fx
-    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    x, y = xd, yd
-    for _ in range(_UNDISTORT_ITERATIONS):
-        r2 = x * x + y * y
-        f = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        ex = x * f + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
-        ey = y * f + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-        if abs(ex) + abs(ey) < _UNDISTORT_TOLERANCE:
-            break
-        df = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3)
-        n00 = f + 2.0 * x * x * df + 2.0 * p1 * y + 6.0 * p2 * x
-        n01 = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y
-        n11 = f + 2.0 * y * y * df + 6.0 * p1 * y + 2.0 * p2 * x
-        inv = 1.0 / (n00 * n11 - n01 * n01)
-        x -= (n11 * ex - n01 * ey) * inv
-        y -= (n00 * ey - n01 * ex) * inv
-    return x, y
-
-
-def undistort_grid(cam_matrix, cam_dist, cam_size, step=GRID_STEP, margin=GRID_MARGIN):
-    """Ideal normalised coordinates of the recorded pixels on a grid (C, ny, nx, 2): node (iy, ix) is the pixel
-    (ix step - margin, iy step - margin); it covers every camera's image and ``margin`` pixels around it."""
-    width = int(np.max(cam_size[:, 0]))
-    height = int(np.max(cam_size[:, 1]))
+def undistort_grid(rig, *, step=GRID_STEP, margin=GRID_MARGIN):
+    """Ideal normalised coordinates of the recorded pixels on a grid (C, ny, nx, 2) for the cameras of ``rig``
+    (a :class:`tracker.tracking.outline.Rig`): node (iy, ix) is the pixel (ix step - margin, iy step - margin); it
+    covers every camera's image and ``margin`` pixels around it."""
+    width = int(np.max(rig.size[:, 0]))
+    height = int(np.max(rig.size[:, 1]))
     nx = int(np.ceil((width - 1 + 2 * margin) / step)) + 1
     ny = int(np.ceil((height - 1 + 2 * margin) / step)) + 1
-    grid = np.empty((len(cam_matrix), ny, nx, 2))
-    _fill_grid(cam_matrix, cam_dist, float(step), float(margin), grid)
+    grid = np.empty((len(rig.names), ny, nx, 2))
+    _fill_grid(rig.matrix, rig.lens, rig.distortion, float(step), float(margin), grid)
     return grid
 
 
@@ -144,20 +116,20 @@ def pixel_scale(grid, step=GRID_STEP):
 
 
 @njit(cache=True)
-def _fill_grid(cam_matrix, cam_dist, step, margin, grid):
+def _fill_grid(cam_matrix, cam_lens, cam_dist, step, margin, grid):
     for k in range(grid.shape[0]):
         for iy in range(grid.shape[1]):
             for ix in range(grid.shape[2]):
-                x, y = undistort(cam_matrix[k], cam_dist[k], ix * step - margin, iy * step - margin)
+                x, y = undistort(cam_matrix[k], cam_lens[k], cam_dist[k], ix * step - margin, iy * step - margin)
                 grid[k, iy, ix, 0] = x
                 grid[k, iy, ix, 1] = y
 
 
 @njit(cache=True, inline="always")
-def _undistort_fast(grid, cam_matrix, cam_dist, k, px, py):
-    """:func:`undistort` for camera k by bilinear interpolation in its grid (the map is smooth, so the error
-    is a small fraction of a pixel for ordinary lenses: docs/method-tracking.md, section 3), or exactly
-    outside the grid."""
+def _undistort_fast(grid, cam_matrix, cam_lens, cam_dist, k, px, py):
+    """:func:`tracker.geometry.lens.undistort` for camera k by bilinear interpolation in its grid (the map is
+    smooth, so the error is a small fraction of a pixel for ordinary lenses: docs/method-tracking.md, section 3),
+    or exactly outside the grid."""
     gx = (px + GRID_MARGIN) * (1.0 / GRID_STEP)
     gy = (py + GRID_MARGIN) * (1.0 / GRID_STEP)
     if gx >= 0.0 and gy >= 0.0:
@@ -171,7 +143,7 @@ def _undistort_fast(grid, cam_matrix, cam_dist, k, px, py):
             y0 = grid[k, iy, ix, 1] + fx * (grid[k, iy, ix + 1, 1] - grid[k, iy, ix, 1])
             y1 = grid[k, iy + 1, ix, 1] + fx * (grid[k, iy + 1, ix + 1, 1] - grid[k, iy + 1, ix, 1])
             return x0 + fy * (x1 - x0), y0 + fy * (y1 - y0)
-    return undistort(cam_matrix[k], cam_dist[k], px, py)
+    return undistort(cam_matrix[k], cam_lens[k], cam_dist[k], px, py)
 
 
 @njit(cache=True, inline="always")
@@ -283,10 +255,10 @@ def _candidates(
 
 
 @njit(cache=True, inline="always")
-def _segment(grid, cam_matrix, cam_dist, k, px, py, nx, ny, steps):
+def _segment(grid, cam_matrix, cam_lens, cam_dist, k, px, py, nx, ny, steps):
     """The rays of p -+ steps n (undistorted, z = 1) as the line x(t) = m + t d: (m0, m1, d0, d1)."""
-    ax, ay = _undistort_fast(grid, cam_matrix, cam_dist, k, px - steps * nx, py - steps * ny)
-    bx, by = _undistort_fast(grid, cam_matrix, cam_dist, k, px + steps * nx, py + steps * ny)
+    ax, ay = _undistort_fast(grid, cam_matrix, cam_lens, cam_dist, k, px - steps * nx, py - steps * ny)
+    bx, by = _undistort_fast(grid, cam_matrix, cam_lens, cam_dist, k, px + steps * nx, py + steps * ny)
     return 0.5 * (ax + bx), 0.5 * (ay + by), (bx - ax) / (2.0 * steps), (by - ay) / (2.0 * steps)
 
 
@@ -389,6 +361,7 @@ def search_limits(
     near_count,
     quadric_component,
     cam_matrix,
+    cam_lens,
     cam_dist,
     grid,
     count,
@@ -418,7 +391,16 @@ def search_limits(
         k = s_cam[smp]
         own = s_comp[smp]
         m0, m1, d0, d1 = _segment(
-            grid, cam_matrix, cam_dist, k, s_pixel[smp, 0], s_pixel[smp, 1], s_normal[smp, 0], s_normal[smp, 1], steps
+            grid,
+            cam_matrix,
+            cam_lens,
+            cam_dist,
+            k,
+            s_pixel[smp, 0],
+            s_pixel[smp, 1],
+            s_normal[smp, 0],
+            s_normal[smp, 1],
+            steps,
         )
         n_cand = _candidates(
             q_cam,
@@ -445,7 +427,23 @@ def search_limits(
 
 @njit(cache=True)
 def line_labels(
-    q_cam, clip_cam, sphere, quadric_component, cam_matrix, cam_dist, grid, k, px, py, nx, ny, r, cand_comp, coef, out
+    q_cam,
+    clip_cam,
+    sphere,
+    quadric_component,
+    cam_matrix,
+    cam_lens,
+    cam_dist,
+    grid,
+    k,
+    px,
+    py,
+    nx,
+    ny,
+    r,
+    cand_comp,
+    coef,
+    out,
 ):
     """The labels :func:`search_limits` walks, for one sample in camera k (every quadric a candidate when its
     sphere meets the segment): ``out[t + r + 1]`` for the pixels ``p + t n``, ``t`` in ``[-r - 1, r + 1]``."""
@@ -455,7 +453,7 @@ def line_labels(
     for l in range(n_quadrics):
         near[k, 0, l] = l
     steps = float(r + 1)
-    m0, m1, d0, d1 = _segment(grid, cam_matrix, cam_dist, k, px, py, nx, ny, steps)
+    m0, m1, d0, d1 = _segment(grid, cam_matrix, cam_lens, cam_dist, k, px, py, nx, ny, steps)
     n_cand = _candidates(
         q_cam, clip_cam, sphere, near, near_count, quadric_component, k, 0, m0, m1, d0, d1, steps, cand_comp, coef
     )
@@ -473,7 +471,7 @@ class Ownership:
     def __init__(self, model, rig, capacity: int, max_range: int):
         n_cams, n_quadrics = len(rig.names), model.quadric.shape[0]
         self.model, self.rig = model, rig
-        self.grid = undistort_grid(rig.matrix, rig.distortion, rig.size)
+        self.grid = undistort_grid(rig)
         self.scale = pixel_scale(self.grid)
         self.near = np.zeros((n_cams, n_quadrics, n_quadrics), np.int64)
         self.near_count = np.zeros((n_cams, n_quadrics), np.int64)
@@ -494,6 +492,7 @@ class Ownership:
             self.near_count,
             m.quadric_component,
             rig.matrix,
+            rig.lens,
             rig.distortion,
             self.grid,
             samples.count,

@@ -520,6 +520,7 @@ class Tracker:
             self.poses,
             self.rig.camera_from_world,
             self.rig.matrix,
+            self.rig.lens,
             self.rig.distortion,
             component,
             point,
