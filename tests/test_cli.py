@@ -1,6 +1,7 @@
 """The command line: a tracked run end to end, and one-line errors with exit code 2 for bad input."""
 
 import argparse
+import re
 import shutil
 import tomllib
 from pathlib import Path
@@ -10,6 +11,7 @@ import pytest
 import tomli_w
 
 from tracker.cli import main
+from tracker.evaluate import evaluate
 from tracker.io.poses import load_poses
 
 
@@ -32,13 +34,35 @@ def test_track_writes_poses_and_summary(tiny_recording, tmp_path, capsys):
     assert poses["poses"].shape[0] == 6
     assert np.all(np.isfinite(poses["joints"]))
     out = capsys.readouterr().out
-    assert "frames per second" in out and "MPJPE" in out
+    report = evaluate(poses, load_poses(tiny_recording / "truth.npz"))
+    assert float(_number(r"frames per second: ([\d.]+)", out)) > 0
+    counts = [int(_number(rf"(\d+) {name}", out)) for name in ("tracked", "uncertain", "lost")]
+    assert sum(counts) == 6 and counts[0] == (poses["status"] == 0).sum()
+    assert _number(r"(?m)^MPJPE ([\d.]+) mm", out) == f"{report.mpjpe_mm:.1f}"
+    assert _number(r"PCK@50mm ([\d.]+)%", out) == f"{100 * report.pck:.1f}"
 
 
 def test_eval_prints_report(tiny_recording, capsys):
     truth = str(tiny_recording / "truth.npz")
     assert main(["eval", truth, truth]) == 0
-    assert "MPJPE" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert _number(r"(?m)^MPJPE ([\d.]+) mm", out) == "0.0" and _number(r"PCK@50mm ([\d.]+)%", out) == "100.0"
+    assert _number(r"frames (\d+), lost 0", out) == str(len(load_poses(truth)["joints"]))
+
+
+def test_help_says_what_the_tracker_does(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--help"])
+    assert stop.value.code == 0
+    out = capsys.readouterr().out
+    assert "3-D pose" in out and "no algorithm here" not in out
+
+
+def _number(pattern: str, text: str) -> str:
+    """The first group of ``pattern``'s one match in ``text`` (the test fails when it matches none or several)."""
+    found = re.findall(pattern, text)
+    assert len(found) == 1, (pattern, found)
+    return found[0]
 
 
 def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:

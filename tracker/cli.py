@@ -56,7 +56,12 @@ COMMANDS = {
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``tracker`` parser: one subparser per command, whose ``run`` default is the command's body."""
-    parser = argparse.ArgumentParser(prog="tracker", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="tracker",
+        description="Follow the 3-D pose of a person or other articulated body in calibrated multi-camera video: "
+        "calibrate the cameras, track a recording or live cameras, review it in the browser, export the poses.",
+        epilog="Start with: tracker track RECORDING (docs/own-rig.md); every command's options: tracker COMMAND --help.",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     for name, command in COMMANDS.items():
         subparser = sub.add_parser(name, help=command.HELP)
