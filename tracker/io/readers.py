@@ -10,8 +10,8 @@ Grey images are the video's own luma, never a colour image converted back:
 * other codecs (H.264, ...): PyAV decodes each frame in the calling thread alone
   (one FFmpeg thread: the readers already run one per camera) and the grey image
   is the decoded frame's Y plane, stretched from the video range 16-235 to 0-255
-  unless the video says it is full range.  On 1080x1920 H.264 that costs 3.0 ms of
-  CPU a frame against 7.0 ms for OpenCV's colour frame made grey (docs/speed.md).
+  unless the video says it is full range: less than half the CPU of OpenCV's colour
+  frame made grey (docs/speed.md has the measurements).
 
 Readers asked for colour (the foreground cue and the keypoint detector need it) decode BGR.
 """

@@ -20,18 +20,16 @@ The edges then arbitrate: the tracker starts again from the snapped pose, its st
 tracked pose's did (a frame that is not lost). Landmarks that two views agree on can still be
 wrong, the detector following a bystander or reading an arm the other way round; a re-seed fitted
 to them lands off the body's outlines, and the tracked pose is kept (``declined`` counts these). A
-try costs about half a second (the fit and the snap), so after a declined one, or one whose landmarks cannot
-place the body (the fit alone costs 0.3-0.5 s at HD, and was tried again in every frame), the recovery waits
+try costs the time of many frames (the fit and the snap), so after a declined one, or one whose landmarks cannot
+place the body (which would otherwise be tried again in every frame), the recovery waits
 :data:`WINDOW` frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost
 frame is always tried.
 
 Image distances, not triangulated ones: two views triangulate a detector's few pixels of noise into
 centimetres of depth, while the share of the body's size reads the same in any view; the mean over
-the views, because a body shifted along one camera's axis shows in the others.  Measured at the true
-poses, the statistic is 2.6 % in a median frame and 8.6 % in the worst on the demo (a faceless
-mannequin the detector reads poorly), about 2.5 % and at most 6.5 % on the hard suite's renders
-(faces, rooms); a body lost on the real trial gives 66 % and more, and the demo's body moved 42 cm
-sideways 11 %.
+the views, because a body shifted along one camera's axis shows in the others.  At the true poses the
+statistic stays well below :data:`STRAYED` on the demo and the hard suite's renders, while a lost body gives
+several times it (docs/keypoints.md has the measurements).
 """
 
 from __future__ import annotations
@@ -61,10 +59,9 @@ both say the pose is off."""
 LANDMARK_STRAYED = 0.2
 """Mean image distance of one landmark from its detections over the views that see it (two or more), as a share of
 the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.tracking.track.Tracker.tolerance`), that
-says its limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from
-the truth), the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in
-15 %, and a try costs the tracker about half a second (the fit and the snap): this share and the persistence keep
-such frames from trying one."""
+says its limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  A faceless mannequin's landmarks
+stray this far in a few frames at a time even where it is tracked right, and a try is costly (the fit and the
+snap): this share and the persistence keep such frames from trying one (docs/keypoints.md)."""
 
 BACKOFF = 5
 """Re-seeds declined in a row after which the wait before the next try stops doubling: :data:`WINDOW` frames after

@@ -6,7 +6,7 @@ against each other (:mod:`tracker.keypoints.consistency`) and hands each frame's
 order.  Fed (large views only, :class:`KeypointStream`), it decodes nothing: the readers decode each video once and
 give the scheduled frames also in colour, reduced as the edge search reduces them
 (:func:`tracker.tracking.track.reductions`), and the landmarks are taken back to full-size pixels.  On 1080x1920
-H.264 that saves the second decoding of every frame of every view (3 ms of CPU each).  Colour it must be: in grey the
+H.264 that saves the second decoding of every frame of every view (docs/speed.md).  Colour it must be: in grey the
 detector takes the demo's backdrop photograph of a player for the body it should find (docs/keypoints.md).  The tracker
 reads its frames ``step + LAG`` frames ahead of the one it tracks (:func:`tracked_frames`), so the worker detects a
 frame while the tracker is still on earlier ones.  It is a process, not a thread, so the detector's Python glue never
@@ -63,7 +63,7 @@ _POLL = 0.5
 
 LAG = 6
 """Frames a fed worker gets to detect a frame in before the tracker reaches the frames it is interpolated for
-(six frames at 60 fps is 100 ms: four HD views take the detector 40-60 ms)."""
+(six frames at 60 fps is 100 ms, longer than the detector takes on four HD views, docs/speed.md)."""
 
 
 def schedule(start: int, stop: int, step: int) -> np.ndarray:
@@ -139,10 +139,9 @@ class KeypointStream:
     recording, or, with ``reduction`` (the tracker's, one factor per camera) that reduces some camera's images,
     one fed by the tracker's readers (the frame loop reads through :func:`tracked_frames`).
 
-    Only reduced (large) views are fed: smaller ones decode cheaply (0.5 ms a 640x480 Motion-JPEG view against
-    3 ms a 1080x1920 H.264 one), and a worker that reads them itself detects ahead while the tracker's kernels
-    load, unbounded by the frames the tracker holds.  On the demo that head start is worth 55 against 38 frames a
-    second end to end; on the balancing trial feeding is worth 15 against 11 (docs/keypoints.md)."""
+    Only reduced (large) views are fed: smaller ones decode cheaply (a 640x480 Motion-JPEG view costs a sixth of
+    a 1080x1920 H.264 one), and a worker that reads them itself detects ahead while the tracker's kernels
+    load, unbounded by the frames the tracker holds (docs/speed.md has what either way is worth end to end)."""
 
     def __init__(
         self,
