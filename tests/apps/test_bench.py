@@ -1,6 +1,7 @@
 """`tracker bench`: the JSON keys other tools read, and sane figures (no timing is asserted)."""
 
 import json
+import re
 import shutil
 
 import pytest
@@ -44,8 +45,18 @@ def test_bench_without_the_cue_times_the_edges_only(tiny_recording, capsys):
 def test_bench_table_is_printed(tiny_recording, capsys):
     assert main(["bench", str(tiny_recording), "--repeats", "1"]) == 0
     out = capsys.readouterr().out
-    assert "ratio tracking / decode only" in out and "ms per view per IRLS iteration" in out
-    assert "Keypoint cue: the detector takes" in out
+    stages = [float(ms) for ms in re.findall(r"^\| [a-z][^|]* \| ([\d.]+) \|$", out, re.M)]
+    assert len(stages) >= 6 and all(ms >= 0 for ms in stages)  # decode, grey, outline, ..., output
+    tracking, decoding, ratio = (
+        [float(value) for value in re.findall(rf"^\| {row} \| ([\d.]+) \| ([\d.]+) \|$", out, re.M)[0]]
+        for row in ("tracking, frames per second", "decode only, frames per second", r"ratio tracking / decode only")
+    )
+    for fps, decode_fps, shown in zip(tracking, decoding, ratio):  # the fps are printed rounded to whole frames
+        assert fps > 0 and decode_fps > 0
+        assert (fps - 0.5) / (decode_fps + 0.5) - 0.005 <= shown <= (fps + 0.5) / max(decode_fps - 0.5, 0.5) + 0.005
+    assert float(re.findall(r"([\d.]+) ms per view per IRLS iteration", out)[0]) > 0
+    detector, with_cue = re.findall(r"the detector takes ([\d.]+) ms per view;.*?, ([\d.]+) frames per second", out)[0]
+    assert float(detector) > 0 and float(with_cue) > 0
 
 
 def test_bodies_side_by_side_for_the_scaling_table():
