@@ -210,7 +210,9 @@ def test_loads_the_real_pose2sim_rig() -> None:
 
 
 def test_look_at_camera_centres_target():
-    cam = look_at_camera("x", (3.0, -2.0, 1.5), (0.1, 0.2, 0.9), (640, 480), 500.0, (-0.1, 0.02, 0, 0))
+    cam = look_at_camera(
+        "x", (3.0, -2.0, 1.5), (0.1, 0.2, 0.9), size=(640, 480), focal=500.0, distortions=(-0.1, 0.02, 0, 0)
+    )
     np.testing.assert_allclose(cam.project(np.array([[0.1, 0.2, 0.9]]))[0], [319.5, 239.5], atol=1e-9)
     up = cam.project(np.array([[0.1, 0.2, 1.2]]))[0]
     assert up[1] < 239.5  # world up is image up

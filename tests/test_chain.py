@@ -204,7 +204,7 @@ def test_tree_solve_matches_dense_kkt():
         information = random_information(rng, n)
         mu = rng.normal(size=(n, 6))
         eta = np.einsum("nij,nj->ni", information, mu)
-        alpha = chain.solve(information, eta, model["parent"], model["D"], model["rows"], poses)
+        alpha = chain.solve(information, eta, parent=model["parent"], D=model["D"], rows=model["rows"], poses=poses)
         A = linear_constraints(model["parent"], model["D"], model["rows"], poses)
         expected = kkt_solution(information, eta, A)
         worst_error = max(worst_error, np.abs(alpha - expected).max() / np.abs(expected).max())
@@ -233,7 +233,7 @@ def test_tree_solve_star_with_seven_children_and_free_child_independent():
     poses = np.array([se3.from_rotvec(rng.normal(size=3), rng.normal(size=3)) for _ in range(n)])
     information = random_information(rng, n)
     eta = rng.normal(size=(n, 6))
-    alpha = chain.solve(information, eta, parent, D, rows, poses)
+    alpha = chain.solve(information, eta, parent=parent, D=D, rows=rows, poses=poses)
     expected = kkt_solution(information, eta, linear_constraints(parent, D, rows, poses))
     assert np.abs(alpha - expected).max() < 1e-9 * np.abs(expected).max()
     for free in (5, 8):
@@ -250,7 +250,7 @@ def test_coercion_repairs_joints_exactly(joint, joint_at_origin):
         poses = valid_poses(rng, model)
         moved = np.array([e @ se3.exp(0.05 * rng.normal(size=6)) for e in poses])
         assert max_gap(model, moved) > 1e-4
-        fixed = chain.coerce(moved, model["parent"], model["rest"], model["D"], model["rows"])
+        fixed = chain.coerce(moved, parent=model["parent"], rest=model["rest"], D=model["D"], rows=model["rows"])
         assert max_gap(model, fixed) < 1e-9
         assert np.array_equal(fixed[0], moved[0])
 
@@ -260,7 +260,7 @@ def test_coercion_of_valid_poses_is_identity():
     for _ in range(50):
         model = random_model(rng, int(rng.integers(5, 16)), joint_at_origin=bool(rng.integers(2)))
         poses = valid_poses(rng, model)
-        fixed = chain.coerce(poses, model["parent"], model["rest"], model["D"], model["rows"])
+        fixed = chain.coerce(poses, parent=model["parent"], rest=model["rest"], D=model["D"], rows=model["rows"])
         assert np.abs(fixed - poses).max() < 1e-12
 
 
@@ -278,9 +278,9 @@ def test_coercion_projects_arbitrary_poses():
         )
         for i in range(1, n):
             poses[i] = poses[model["parent"][i]] @ model["rest"][i] @ relative[i]
-        fixed = chain.coerce(poses, model["parent"], model["rest"], model["D"], model["rows"])
+        fixed = chain.coerce(poses, parent=model["parent"], rest=model["rest"], D=model["D"], rows=model["rows"])
         assert max_gap(model, fixed) < 1e-9
-        again = chain.coerce(fixed, model["parent"], model["rest"], model["D"], model["rows"])
+        again = chain.coerce(fixed, parent=model["parent"], rest=model["rest"], D=model["D"], rows=model["rows"])
         assert np.abs(again - fixed).max() < 1e-12
         for i in range(1, n):
             if model["joint"][i] == chain.FREE:
@@ -298,9 +298,9 @@ def test_rejects_parent_after_child():
     eye = np.tile(np.eye(4), (2, 1, 1))
     D, rows, parent = np.zeros((2, 6, 6)), np.zeros(2, dtype=np.int64), np.array([-1, 1])
     with pytest.raises(ValueError):
-        chain.coerce(eye, parent, eye, D, rows)
+        chain.coerce(eye, parent=parent, rest=eye, D=D, rows=rows)
     with pytest.raises(ValueError):
-        chain.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((2, 6)), parent, D, rows, eye)
+        chain.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((2, 6)), parent=parent, D=D, rows=rows, poses=eye)
 
 
 def _single_joint(joint, axis=(1.0, 0.0, 0.0)):
@@ -314,7 +314,15 @@ def test_coercion_clamps_a_hinge_to_its_limits(angle, expected):
     parent, rest, D, rows = _single_joint(chain.HINGE)
     poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.array([0, 0, 0, angle, 0, 0]))])
     fixed = chain.coerce(
-        poses, parent, rest, D, rows, [chain.FREE, chain.HINGE], [[0, 0, 0], [1, 0, 0]], [-np.inf, -0.2], [np.inf, 1.0]
+        poses,
+        parent=parent,
+        rest=rest,
+        D=D,
+        rows=rows,
+        joint_type=[chain.FREE, chain.HINGE],
+        axis=[[0, 0, 0], [1, 0, 0]],
+        lower=[-np.inf, -0.2],
+        upper=[np.inf, 1.0],
     )
     relative = se3.log(np.linalg.inv(rest[1]) @ fixed[1])
     np.testing.assert_allclose(relative, [0, 0, 0, expected, 0, 0], atol=1e-12)
@@ -324,7 +332,15 @@ def test_coercion_clamps_a_slide_to_its_limits():
     parent, rest, D, rows = _single_joint(chain.SLIDE, (0.0, 0.0, 1.0))
     poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.array([0, 0, 0.5, 0, 0, 0]))])
     fixed = chain.coerce(
-        poses, parent, rest, D, rows, [chain.FREE, chain.SLIDE], [[0, 0, 0], [0, 0, 1]], [-np.inf, 0.0], [np.inf, 0.1]
+        poses,
+        parent=parent,
+        rest=rest,
+        D=D,
+        rows=rows,
+        joint_type=[chain.FREE, chain.SLIDE],
+        axis=[[0, 0, 0], [0, 0, 1]],
+        lower=[-np.inf, 0.0],
+        upper=[np.inf, 0.1],
     )
     np.testing.assert_allclose(se3.log(np.linalg.inv(rest[1]) @ fixed[1]), [0, 0, 0.1, 0, 0, 0], atol=1e-12)
 
@@ -336,7 +352,15 @@ def test_coercion_limits_a_ball_joint_rotation():
         w = rng.normal(size=3)
         poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.concatenate([np.zeros(3), w]))])
         fixed = chain.coerce(
-            poses, parent, rest, D, rows, [chain.FREE, chain.BALL], np.zeros((2, 3)), [-np.inf, 0.0], [np.inf, 0.8]
+            poses,
+            parent=parent,
+            rest=rest,
+            D=D,
+            rows=rows,
+            joint_type=[chain.FREE, chain.BALL],
+            axis=np.zeros((2, 3)),
+            lower=[-np.inf, 0.0],
+            upper=[np.inf, 0.8],
         )
         relative = se3.log(np.linalg.inv(rest[1]) @ fixed[1])
         angle = np.linalg.norm(w)

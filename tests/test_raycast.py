@@ -34,7 +34,9 @@ def _cast(model, poses, camera):
 def test_sphere_silhouette_matches_analytic_projection(distortions):
     radius, distance, f = 0.3, 3.0, 200.0
     model = _one_component({"shape": "sphere", "center": [0, 0, 0], "radius": radius})
-    camera = look_at_camera("c", (0.0, -distance, 0.0), (0.0, 0.0, 0.0), (161, 121), f, distortions)
+    camera = look_at_camera(
+        "c", (0.0, -distance, 0.0), (0.0, 0.0, 0.0), size=(161, 121), focal=f, distortions=distortions
+    )
     comp, shade, depth = _cast(model, np.eye(4)[None], camera)
     # the silhouette is the cone of rays tangent to the sphere: a circle of normalised radius rho
     rho = radius / np.sqrt(distance**2 - radius**2)
@@ -49,12 +51,16 @@ def test_sphere_silhouette_matches_analytic_projection(distortions):
 
 
 def test_kernel_matches_pure_render(human):
-    camera = look_at_camera("c", (2.5, -2.5, 1.4), (0, 0, 0.9), (120, 100), 150.0, (-0.08, 0.02, 0, 0))
+    camera = look_at_camera(
+        "c", (2.5, -2.5, 1.4), (0, 0, 0.9), size=(120, 100), focal=150.0, distortions=(-0.08, 0.02, 0, 0)
+    )
     poses = clips.procedural_motion(human, 1, seed=1)[0]
     comp, shade, depth = _cast(human, poses, camera)
     surfaces, planes = raycast.view_quadrics(human, poses, camera)
     light = camera.rotation @ (raycast.DEFAULT_LIGHT / np.linalg.norm(raycast.DEFAULT_LIGHT))
-    comp2, shade2, depth2 = raycast.render(raycast.pixel_rays(camera), surfaces, planes, human.quadric_component, light)
+    comp2, shade2, depth2 = raycast.render(
+        raycast.pixel_rays(camera), surfaces, planes, owner=human.quadric_component, light=light
+    )
     assert np.count_nonzero(comp >= 0) > 500
     assert np.count_nonzero(comp != comp2) <= 2  # root ties at grazing rays only
     same = (comp == comp2) & (comp >= 0)
@@ -64,7 +70,9 @@ def test_kernel_matches_pure_render(human):
 
 def test_rays_through_limbs_hit_them(human):
     poses = rest_poses(human, se3.from_rotvec(np.zeros(3), (0.0, 0.0, 0.92)))
-    camera = look_at_camera("c", (0.3, -3.5, 1.0), (0, 0, 0.9), (320, 240), 260.0, (-0.08, 0.02, 0, 0))
+    camera = look_at_camera(
+        "c", (0.3, -3.5, 1.0), (0, 0, 0.9), size=(320, 240), focal=260.0, distortions=(-0.08, 0.02, 0, 0)
+    )
     comp, _, _ = _cast(human, poses, camera)
     middles = {  # a point on each limb's axis, in its frame
         "upperarm_l": -0.145,
@@ -91,14 +99,14 @@ def test_rays_through_limbs_hit_them(human):
 
 def test_clipped_cylinder_ends_and_open_tube():
     model = _one_component({"shape": "cylinder", "from": [0, 0, 0], "to": [0, 0, -0.4], "radius": 0.05})
-    side = look_at_camera("c", (0.0, -2.0, -0.2), (0.0, 0.0, -0.2), (200, 200), 300.0)
+    side = look_at_camera("c", (0.0, -2.0, -0.2), (0.0, 0.0, -0.2), size=(200, 200), focal=300.0)
     comp, _, _ = _cast(model, np.eye(4)[None], side)
     for z, seen in ((-0.39, True), (-0.41, False), (-0.01, True), (0.01, False)):
         u, v = np.rint(side.project(np.array([[0.0, -0.05, z]]))[0]).astype(int)
         assert (comp[v, u] == 0) == seen, z
     # looking obliquely into the open top: the ray through its centre hits the far inside wall
     eye = np.array([0.0, -1.0, 1.0])
-    into = look_at_camera("c", eye, (0.0, 0.0, 0.0), (201, 201), 300.0)
+    into = look_at_camera("c", eye, (0.0, 0.0, 0.0), size=(201, 201), focal=300.0)
     comp, shade, depth = _cast(model, np.eye(4)[None], into)
     assert comp[100, 100] == 0
     direction = -eye / np.linalg.norm(eye)

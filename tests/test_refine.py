@@ -26,7 +26,7 @@ def test_camera_rows_move_the_body_as_the_camera_moves():
     for _ in range(20):
         k, i = rng.integers(3), rng.integers(4)
         xi = rng.normal(0.0, 0.3, 6)
-        rows = camera_rows(np.eye(6), np.full(6, k), np.full(6, i), rig_pose, poses)
+        rows = camera_rows(np.eye(6), np.full(6, k), np.full(6, i), rig_pose=rig_pose, poses=poses)
         transform = rig_pose[k] @ poses[i]
         np.testing.assert_allclose(transform @ se3.exp(rows @ xi), se3.exp(xi) @ transform, atol=1e-12)
 
@@ -49,7 +49,7 @@ def test_refine_rig_recovers_a_disturbed_camera(tiny_recording):
     smooth = Tracker(model, rig, truth[0]).smooth
     seekers = [FrameSeeker(source) for source in recording.sources]
     frames = [[smooth(seeker.read(index)) for seeker in seekers] for index in range(len(truth))]
-    refined = refine_rig(model, rig, truth, frames, Settings(), fixed=[0], refit=False)
+    refined = refine_rig(model, rig, truth, frames=frames, settings=Settings(), fixed=[0], refit=False)
     fixed, moved = refined.cameras
     assert fixed == rig[0] and refined.rotation_deg[0] == 0.0 and refined.shift_m[0] == 0.0
     joints = np.concatenate([joint_centres(pose) for pose in truth])
@@ -65,7 +65,7 @@ def test_refine_rig_recovers_a_disturbed_camera(tiny_recording):
     assert refined.residual_after[1] < 0.5 * refined.residual_before[1]  # 1.94 -> 0.40 px
     np.testing.assert_allclose(refined.rotation_deg[1], 1.5, atol=1.0)
     # refitting the bodies too: both views fit again (two views let the body and cam1 trade a little)
-    refitted = refine_rig(model, rig, truth, frames, Settings(), rounds=2, fixed=[0])
+    refitted = refine_rig(model, rig, truth, frames=frames, settings=Settings(), rounds=2, fixed=[0])
     assert refitted.residual_after.max() < 0.5 * refined.residual_before[1]  # 1.94 -> 0.53 px measured
     assert offset(refitted.cameras[1]) < 0.8 * offset(rig[1])
 

@@ -141,6 +141,7 @@ def look_at_camera(
     name: str,
     eye,
     target=(0.0, 0.0, 1.0),
+    *,
     size=(640, 480),
     focal: float = 560.0,
     distortions=(0.0, 0.0, 0.0, 0.0),

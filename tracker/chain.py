@@ -288,7 +288,7 @@ def solve_kernel(information, eta, parent, D, rows, poses):
     return alpha
 
 
-def solve(information, eta, parent, D, rows, poses) -> np.ndarray:
+def solve(information, eta, *, parent, D, rows, poses) -> np.ndarray:
     """MAP motions alpha (N, 6) of a kinematic tree (section 4); see :func:`solve_kernel`.
 
     ``information`` (N,6,6) C_i and ``eta`` (N,6) eta_i = C_i mu_i per component,
@@ -352,7 +352,7 @@ def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower,
     return out
 
 
-def coerce(poses, parent, rest, D, rows, joint_type=None, axis=None, lower=None, upper=None) -> np.ndarray:
+def coerce(poses, *, parent, rest, D, rows, joint_type=None, axis=None, lower=None, upper=None) -> np.ndarray:
     """Poses (N,4,4) that satisfy every joint exactly (section 5); see :func:`coerce_kernel`.
 
     ``rest`` (N,4,4) holds T0_i (parent from child at rest).  Also projects arbitrary

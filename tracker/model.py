@@ -136,7 +136,11 @@ def _build_quadric(spec: dict, where: str) -> tuple[np.ndarray, np.ndarray, np.n
         r0, r1 = (_positive(r, f"{where}.radii") for r in radii)
     direction = axis / np.linalg.norm(axis)
     bound = np.append(0.5 * (start + end), np.hypot(0.5 * np.linalg.norm(axis), max(r0, r1)))
-    return quadric.cone(start, end, r0, r1), quadric.slab(direction, direction @ start, direction @ end), bound
+    return (
+        quadric.cone(start, end, radius_start=r0, radius_end=r1),
+        quadric.slab(direction, direction @ start, direction @ end),
+        bound,
+    )
 
 
 def _breadth_first(names: list[str], parents: list[str], path: Path) -> list[int]:

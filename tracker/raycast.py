@@ -165,7 +165,7 @@ _forms = _form.py_func
 """Vectorised X~^T M X~ over arrays x, y, z, w: :func:`_form` itself, run by numpy."""
 
 
-def render(rays, surfaces, clips, owner, light, ambient=0.35, key=0.45, fill=0.3):
+def render(rays, surfaces, clips, *, owner, light, ambient=0.35, key=0.45, fill=0.3):
     """Pure-numpy reference of :func:`render_kernel` (no boxes): (component, shade, depth) per pixel.
 
     Same mathematics, vectorised over pixels one quadric at a time; slow, for tests.

@@ -264,5 +264,5 @@ def test_late_landmarks_move_with_the_tracked_body():
         for j in np.flatnonzero(component >= 0):
             pixels[k, j] = camera.project(then[component[j], :3, 3]) + (3.0, -2.0)  # a misfit of (3, -2) px
             expected[k, j] = camera.project(now[component[j], :3, 3]) + (3.0, -2.0)
-    moved = transferred(pixels, then, now, recording.cameras, component, point)
+    moved = transferred(pixels, then, now, cameras=recording.cameras, component=component, point=point)
     np.testing.assert_allclose(moved, expected, atol=1e-9)

@@ -58,7 +58,7 @@ def tracked(tmp_path: Path, truth: dict[str, np.ndarray]) -> Path:
             if frame == NAN_FRAME:
                 joints[NAN_JOINT] = np.nan
             status = 2 if frame == LOST else 1 if frame == LOST + 1 else 0
-            writer.append(frame, truth["poses"][frame], joints, status, 0.25 * frame)
+            writer.append(frame, truth["poses"][frame], joints, status=status, residual=0.25 * frame)
     return path
 
 
@@ -124,7 +124,7 @@ def test_trc_reader_on_real_files_and_rewrite(
     np.testing.assert_allclose(np.diff(trc.time), 1.0 / rate, atol=1e-3)
     assert np.isfinite(trc.markers).all()
     # our writer keeps real marker names (with dots) and values
-    write_trc(tmp_path / name, trc.names, trc.frame - 1, trc.rate, trc.markers / 1000.0)
+    write_trc(tmp_path / name, trc.names, frame=trc.frame - 1, rate=trc.rate, joints=trc.markers / 1000.0)
     again = read_trc(tmp_path / name)
     assert again.names == trc.names and again.rate == rate
     np.testing.assert_allclose(again.markers, trc.markers, rtol=0, atol=1e-6)
@@ -280,7 +280,7 @@ def test_bvh_of_rest_rotations_hinges_and_slides(tmp_path: Path) -> None:
     poses = toy_poses(model, 30, seed=4)
     channels = motion(model, poses)
     np.testing.assert_allclose(channels[0], 0.0, atol=1e-9)  # rest pose = zero channels
-    write_bvh(tmp_path / "toy.bvh", model, poses, np.zeros(30, np.int8), 30.0)
+    write_bvh(tmp_path / "toy.bvh", model, poses, status=np.zeros(30, np.int8), rate=30.0)
     bvh = load_bvh(tmp_path / "toy.bvh")
     assert bvh.channels[bvh.index("tip")][:3] == ("Xposition", "Yposition", "Zposition")
     assert len(bvh.channels[bvh.index("elbow")]) == 3
@@ -358,7 +358,7 @@ def test_c3d_refuses_frame_numbers_its_16_bit_header_cannot_hold(tmp_path: Path)
 
     joints = np.zeros((3, 2, 3))
     with pytest.raises(TrackerInputError, match="export to TRC or CSV"):
-        write_c3d(tmp_path / "late.c3d", ["a", "b"], 70_000, 60.0, joints)
+        write_c3d(tmp_path / "late.c3d", ["a", "b"], first_frame=70_000, rate=60.0, joints=joints)
     assert not (tmp_path / "late.c3d").exists()
 
 

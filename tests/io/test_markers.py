@@ -84,7 +84,7 @@ def test_c3d_round_trip_keeps_gaps_and_first_frame(tmp_path: Path) -> None:
     rng = np.random.default_rng(3)
     joints = rng.normal(size=(6, 2, 3))
     joints[2, 1] = np.nan
-    write_c3d(tmp_path / "two.c3d", ["a", "b"], 7, 30.0, joints)
+    write_c3d(tmp_path / "two.c3d", ["a", "b"], first_frame=7, rate=30.0, joints=joints)
     markers = read_markers(tmp_path / "two.c3d")
     assert markers.labels == ("a", "b") and markers.first_frame == 7 and markers.rate == 30.0
     assert np.isnan(markers.positions[2, 1]).all()

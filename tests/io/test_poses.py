@@ -25,7 +25,7 @@ def write_frames(writer: PosesWriter, frames: range, seed: int = 0) -> list[tupl
     rows = []
     for frame in frames:
         poses, joints = row(rng)
-        writer.append(frame, poses, joints, frame % 3, 0.5 * frame, 0.001 * frame)
+        writer.append(frame, poses, joints, status=frame % 3, residual=0.5 * frame, elapsed=0.001 * frame)
         rows.append((poses, joints))
     return rows
 
@@ -93,9 +93,9 @@ def test_unwritable_folder(tmp_path: Path) -> None:
 def test_bad_rows_are_rejected(tmp_path: Path) -> None:
     writer = PosesWriter(tmp_path / "poses.npz", COMPONENTS, JOINTS, fps=30.0)
     with pytest.raises(ValueError, match="joints"):
-        writer.append(0, np.tile(np.eye(4), (3, 1, 1)), np.zeros((2, 3)), 0, 0.0)
+        writer.append(0, np.tile(np.eye(4), (3, 1, 1)), np.zeros((2, 3)), status=0, residual=0.0)
     with pytest.raises(ValueError, match="status"):
-        writer.append(0, np.tile(np.eye(4), (3, 1, 1)), np.zeros((4, 3)), 5, 0.0)
+        writer.append(0, np.tile(np.eye(4), (3, 1, 1)), np.zeros((4, 3)), status=5, residual=0.0)
 
 
 def test_truth_with_only_joints_loads(tmp_path: Path) -> None:
@@ -147,7 +147,9 @@ def test_long_runs_flush_geometrically(tmp_path: Path, monkeypatch) -> None:
     flushed_at = []
     monkeypatch.setattr(writer, "flush", lambda: (flushed_at.append(len(writer)), setattr(writer, "_unflushed", 0)))
     for index in range(2000):
-        writer.append(index, np.tile(np.eye(4), (len(COMPONENTS), 1, 1)), np.zeros((len(JOINTS), 3)), 0, 0.5)
+        writer.append(
+            index, np.tile(np.eye(4), (len(COMPONENTS), 1, 1)), np.zeros((len(JOINTS), 3)), status=0, residual=0.5
+        )
     assert flushed_at[:4] == [25, 50, 75, 100]
     assert sum(flushed_at) < 6 * 2000 and len(flushed_at) < 30
 
@@ -159,9 +161,9 @@ def test_rows_with_their_own_times_keep_them(tmp_path: Path) -> None:
     with PosesWriter(path, COMPONENTS, JOINTS, fps=60.0) as writer:
         for frame, at in enumerate((0.05, 0.1, 0.3)):
             poses, joints = row(rng)
-            writer.append(frame, poses, joints, 0, 0.5, 0.01, at)
+            writer.append(frame, poses, joints, status=0, residual=0.5, elapsed=0.01, time=at)
         with pytest.raises(ValueError, match="every frame a time or none"):
-            writer.append(3, poses, joints, 0, 0.5)
+            writer.append(3, poses, joints, status=0, residual=0.5)
     np.testing.assert_array_equal(load_poses(path)["time"], [0.05, 0.1, 0.3])
 
 
@@ -177,7 +179,9 @@ def test_a_long_run_keeps_its_rows_on_disk_and_cleans_up(tmp_path: Path) -> None
     rows = []
     for frame in range(1000):
         poses, joints = row(rng)
-        writer.append(frame, poses, joints, frame % 4, 0.1 * frame, 0.002, time=0.5 + frame / 29.97)
+        writer.append(
+            frame, poses, joints, status=frame % 4, residual=0.1 * frame, elapsed=0.002, time=0.5 + frame / 29.97
+        )
         rows.append((poses, joints))
         if frame == 600:
             assert len(load_poses(path)["frame"]) >= 480  # flushed along the way, a valid file

@@ -147,7 +147,9 @@ def test_perfect_keypoints_give_the_true_joint_centres(demo):
     assert (found.views[known] == 3).all() and found.agree[0][:, known].all()
     fitted = fit_pose(model, found.points)
     assert mean_error(fitted, truth["poses"][0]) < 0.001
-    refined = fit_to_views(model, fitted, recording.cameras, keypoints.pixels[:1], keypoints.confidence[:1])
+    refined = fit_to_views(
+        model, fitted, recording.cameras, pixels=keypoints.pixels[:1], confidence=keypoints.confidence[:1]
+    )
     assert mean_error(refined, truth["poses"][0]) < 0.001
 
 

@@ -102,6 +102,6 @@ def test_a_far_body_is_found_where_the_whole_image_shows_nobody(tmp_path):
     assert not any(plain)
     keypoints, _ = detect_recording(recording)
     truth = load_poses(folder / "truth.npz")["poses"]
-    score = accuracy(keypoints, recording.cameras, truth, load_model(folder / "model.toml"))
+    score = accuracy(keypoints, recording.cameras, truth, model=load_model(folder / "model.toml"))
     assert score.found == score.views == 18
     assert score.median < 0.05 and score.on_body == 18, score

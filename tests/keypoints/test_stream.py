@@ -136,7 +136,9 @@ def test_a_fed_worker_detects_in_the_readers_colour_copies(tmp_path):
         with KeypointStream(recording, 0, 9, 4, tmp_path / f"{name}.npz", reduction) as stream:
             assert (stream.fed is None) == (name == "reading")
             seen = []
-            for index, images in tracked_frames(stream, recording, 0, 9, prepare=lambda image: image[::2, ::2]):
+            for index, images in tracked_frames(
+                stream, recording, start=0, stop=9, prepare=lambda image: image[::2, ::2]
+            ):
                 assert all(isinstance(image, np.ndarray) and image.shape == (240, 320) for image in images)
                 seen.append(index)
                 stream.get(index)
@@ -147,7 +149,7 @@ def test_a_fed_worker_detects_in_the_readers_colour_copies(tmp_path):
     try:
         for row, (index, images) in enumerate(frames(recording, 0, 9, colour=True, step=4)):
             alike = detect_views(detectors, [reduced(image, 2) for image in images])
-            expected = frame_keypoints(index, alike, names, "", np.full(3, 2))
+            expected = frame_keypoints(index, alike, names=names, identity="", reduction=np.full(3, 2))
             np.testing.assert_array_equal(halved.pixels[row], expected.pixels[0])
     finally:
         for detector in detectors:
@@ -166,7 +168,7 @@ def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
     recording = open_recording(DEMO)
     with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2)) as stream:
         assert stream.fed is not None
-        read = tracked_frames(stream, recording, 0, 40)
+        read = tracked_frames(stream, recording, start=0, stop=40)
         index, images = next(read)
         assert index == 0 and len(images) == 3
         read.close()

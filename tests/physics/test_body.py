@@ -51,7 +51,7 @@ def test_quaternion_stays_unit_and_equals_the_minimal_update():
     R(theta) equals the chain of kinematics.retract's Exp([dphi]x) R to 1e-14 (the note: 0);
     R(exp(w / 2)) = Exp([w]x) and R(theta) = R(-theta)."""
     rng = np.random.default_rng(0)
-    body = bd.assemble([_part(MESH), _part(MESH, c=(1.0, 0.0, 0.0))], [MESH] * 2, [], bd.RIGID)
+    body = bd.assemble([_part(MESH), _part(MESH, c=(1.0, 0.0, 0.0))], [MESH] * 2, [], levels=bd.RIGID)
     minimal = list(body.parts)
     index = bd.active(body)
     worst_norm, worst_rotation = 0.0, 0.0
@@ -101,14 +101,14 @@ def test_a_part_without_data_coasts():
     rng = np.random.default_rng(1)
     held = _part(MESH, rotation=exp_so3(rng.normal(size=3)))
     free = _part(MESH, c=(2.0, 0.0, 0.0), rotation=exp_so3(rng.normal(size=3)))
-    body = bd.assemble([held, free], [MESH] * 2, [], bd.RIGID)
+    body = bd.assemble([held, free], [MESH] * 2, [], levels=bd.RIGID)
     data = [bd.Attachment(kin.positions(held), np.arange(len(MESH.u))), None]
     dt, steps = 4e-3, 250
     velocity = np.array([0.3, -0.2, 0.5])
 
     moving, qdots = body, [np.zeros(6), np.concatenate([velocity, np.zeros(3)])]
     for _ in range(steps):
-        moving, qdots = bd.second_order_step(moving, qdots, data, 0.1, [None, None], dt, 6.0)
+        moving, qdots = bd.second_order_step(moving, qdots, data, sigma=0.1, k_nodes=[None, None], dt=dt, a=6.0)
     np.testing.assert_allclose(qdots[1], np.concatenate([velocity, np.zeros(3)]), atol=1e-12)
     np.testing.assert_allclose(moving.parts[1].c, free.c + velocity * dt * steps, atol=1e-9)
     np.testing.assert_allclose(moving.parts[0].c, held.c, atol=1e-12)
@@ -117,7 +117,7 @@ def test_a_part_without_data_coasts():
     spinning, qdots = body, [np.zeros(6), np.concatenate([velocity, [1.0, -2.0, 0.5]])]
     start = _momentum(free, qdots[1])
     for _ in range(steps):
-        spinning, qdots = bd.second_order_step(spinning, qdots, data, 0.1, [None, None], dt, 6.0)
+        spinning, qdots = bd.second_order_step(spinning, qdots, data, sigma=0.1, k_nodes=[None, None], dt=dt, a=6.0)
     drift = np.linalg.norm(_momentum(spinning.parts[1], qdots[1]) - start) / np.linalg.norm(start)
     assert drift < 1.5e-3, drift
     assert np.linalg.norm(spinning.parts[1].c - free.c) > 0.4
@@ -125,7 +125,9 @@ def test_a_part_without_data_coasts():
     damped, qdots = body, [np.zeros(6), np.concatenate([velocity, np.zeros(3)])]
     alpha = 2.0
     for k in range(1, steps + 1):
-        damped, qdots = bd.second_order_step(damped, qdots, data, 0.1, [None, None], dt, 6.0, damping=bd.Damping(alpha))
+        damped, qdots = bd.second_order_step(
+            damped, qdots, data, sigma=0.1, k_nodes=[None, None], dt=dt, a=6.0, damping=bd.Damping(alpha)
+        )
         ratio = np.linalg.norm(qdots[1][:3]) / np.linalg.norm(velocity)
         assert ratio == pytest.approx((1.0 - alpha * dt) ** k, rel=1e-9)
         assert abs(ratio - np.exp(-alpha * dt * k)) < 2e-3
@@ -133,7 +135,7 @@ def test_a_part_without_data_coasts():
     per_part, qdots = body, [np.zeros(6), np.concatenate([velocity, np.zeros(3)])]
     for _ in range(10):  # alpha per part: the held part heavily damped, the free one not at all
         per_part, qdots = bd.second_order_step(
-            per_part, qdots, data, 0.1, [None, None], dt, 6.0, damping=bd.Damping((50.0, 0.0))
+            per_part, qdots, data, sigma=0.1, k_nodes=[None, None], dt=dt, a=6.0, damping=bd.Damping((50.0, 0.0))
         )
         np.testing.assert_allclose(qdots[1], np.concatenate([velocity, np.zeros(3)]), atol=1e-12)
 
@@ -145,7 +147,7 @@ def _second_order_run(body, qdots, data, k_nodes, a, dt, duration):
     history = []
     for _ in range(int(round(duration / dt)) + 1):
         history.append(bd.violation(body))
-        body, qdots = bd.second_order_step(body, qdots, data, 0.2, k_nodes, dt, a)
+        body, qdots = bd.second_order_step(body, qdots, data, sigma=0.2, k_nodes=k_nodes, dt=dt, a=a)
     return np.array(history), cdot0
 
 
@@ -154,7 +156,7 @@ def _second_order_error(dt):
     velocities and data forces pulling the ends elsewhere: max |C - law| / max |law|."""
     rng = np.random.default_rng(2)
     parts, joints = _chain(rng, [SMALL] * 3, gap=0.1)
-    body = bd.assemble(parts, [SMALL] * 3, joints, [bd.RIGID, bd.LOCAL, bd.RIGID])
+    body = bd.assemble(parts, [SMALL] * 3, joints, levels=[bd.RIGID, bd.LOCAL, bd.RIGID])
     qdots = [np.concatenate([0.5 * rng.normal(size=6), 0.05 * rng.normal(size=len(i) - 6)]) for i in bd.active(body)]
     data = [
         bd.Attachment(kin.positions(p) + 0.1 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u))) for p in body.parts
@@ -188,7 +190,7 @@ def test_first_order_body_loop_decays_exponentially():
     with explicit identity blocks."""
     rng = np.random.default_rng(3)
     parts, joints = _chain(rng, [MESH, MESH, MESH], gap=0.1)
-    start = bd.assemble(parts, [MESH] * 3, joints, [bd.LOCAL, bd.GLOBAL, bd.RIGID])
+    start = bd.assemble(parts, [MESH] * 3, joints, levels=[bd.LOCAL, bd.GLOBAL, bd.RIGID])
     data = [
         bd.Attachment(kin.positions(p) + 0.2 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u))) for p in start.parts
     ]
@@ -196,11 +198,11 @@ def test_first_order_body_loop_decays_exponentially():
 
     index = bd.active(start)
     g = bd.constraint_jacobian(start, index)
-    qdot_free = np.concatenate(bd.free_forces(start, data, 1.0, k_nodes, index))
+    qdot_free = np.concatenate(bd.free_forces(start, data, sigma=1.0, k_nodes=k_nodes, index=index))
     identity = [np.eye(len(i)) for i in index]
     for fast, slow in zip(
-        con.first_order_system(g, None, qdot_free, bd.violation(start), 4.0),
-        con.first_order_system(g, identity, qdot_free, bd.violation(start), 4.0),
+        con.first_order_system(g, None, qdot_free, violation=bd.violation(start), a=4.0),
+        con.first_order_system(g, identity, qdot_free, violation=bd.violation(start), a=4.0),
     ):
         np.testing.assert_allclose(fast, slow, atol=1e-12)
 
@@ -211,7 +213,7 @@ def test_first_order_body_loop_decays_exponentially():
         c0 = bd.violation(start)
         for k in range(int(round(1.0 / dt)) + 1):
             worst = max(worst, np.abs(bd.violation(body) - c0 * np.exp(-a * dt * k)).max())
-            body = bd.first_order_step(body, data, 1.0, k_nodes, dt, a)
+            body = bd.first_order_step(body, data, sigma=1.0, k_nodes=k_nodes, dt=dt, a=a)
         errors.append(worst)
     assert np.abs(c0).max() > 0.1
     assert errors[0] < 0.5 * a * 4e-3 * np.abs(c0).max(), errors
@@ -279,13 +281,13 @@ def test_constrained_fit_of_a_three_part_chain_recovers_joints_and_nodes():
     points = np.concatenate(bd.all_positions(truth))
     labels = np.repeat(np.arange(3), len(MESH.u))
 
-    start = bd.initial_body(points, labels, [MESH] * 3, [])
+    start = bd.initial_body(points, labels, meshes=[MESH] * 3, joints=[])
     joints = [facing_poles(start, 0, 1), facing_poles(start, 1, 2)]
     assert joints == list(truth.joints)
     start = bd.assemble(start.parts, start.meshes, joints)
     assert np.abs(bd.violation(start)).max() > 0.2
 
-    fitted, history = bd.fit_frame(start, points, 0.1, 200, 400, labels=labels)
+    fitted, history = bd.fit_frame(start, points, sigma=0.1, n_global=200, n_local=400, labels=labels)
 
     assert np.abs(bd.violation(fitted)).max() < 1e-7
     assert history[-1, 0] < 0.1 * history[0, 0]
@@ -334,16 +336,16 @@ def test_second_order_step_limit(fraction, growth):
     at 2.0)."""
     rng = np.random.default_rng(5)
     parts, joints = _chain(rng, [MESH] * 3, gap=0.0)
-    body = bd.assemble(parts, [MESH] * 3, joints, bd.RIGID)
+    body = bd.assemble(parts, [MESH] * 3, joints, levels=bd.RIGID)
     sigma = 0.3
     data = [bd.Attachment(kin.positions(p) + 0.05 * rng.normal(size=(len(p.u), 3)), np.arange(len(p.u))) for p in parts]
     no_membranes = [None] * 3
-    dt = fraction * bd.second_order_limit(body, data, sigma, no_membranes)
+    dt = fraction * bd.second_order_limit(body, data, sigma=sigma, k_nodes=no_membranes)
     qdots = [np.zeros(6)] * 3
     start = _energy(body, qdots, data, no_membranes, sigma)
     energies = []
     for _ in range(300):
-        body, qdots = bd.second_order_step(body, qdots, data, sigma, no_membranes, dt, 6.0)
+        body, qdots = bd.second_order_step(body, qdots, data, sigma=sigma, k_nodes=no_membranes, dt=dt, a=6.0)
         energies.append(_energy(body, qdots, data, no_membranes, sigma) / start)
         if energies[-1] > 1e3:
             break

@@ -58,9 +58,9 @@ def _constraint_terms(kinematics, sizes, links):
     g = con.stack_jacobian(
         [big_l[a][i] for a, i, _, _ in links],
         [big_l[b][j] for _, _, b, j in links],
-        [a for a, _, _, _ in links],
-        [b for _, _, b, _ in links],
-        sizes,
+        parts_a=[a for a, _, _, _ in links],
+        parts_b=[b for _, _, b, _ in links],
+        sizes=sizes,
     )
     gdot_qdot = con.stack_differences([vp[a][i] for a, i, _, _ in links], [vp[b][j] for _, _, b, j in links])
     return c, g, gdot_qdot
@@ -84,7 +84,7 @@ def _simulate_second_order(parts, qdots, links, a, dt, duration, external):
         history.append(c)
         blocks, forces = _rigid_dynamics(kinematics, external)
         qdot = np.concatenate(qdots)
-        n, r = con.second_order_system(g, blocks, forces, qdot, gdot_qdot, c, a)
+        n, r = con.second_order_system(g, blocks, forces, qdot=qdot, gdot_qdot=gdot_qdot, violation=c, a=a)
         qddot = con.block_solve(blocks, forces + g.T @ con.solve_forces(n, r))
         parts = [kin.retract(p, _pad(p, dt * q)) for p, q in zip(parts, qdots)]
         qdots = list((qdot + dt * qddot).reshape(len(parts), RIGID))
@@ -152,7 +152,9 @@ def test_redundant_closed_loop_uses_least_squares_and_decays():
     kinematics = _kinematics(parts, qdots)
     c, g, gdot_qdot = _constraint_terms(kinematics, [RIGID] * 3, links)
     blocks, forces = _rigid_dynamics(kinematics, external)
-    n, r = con.second_order_system(g, blocks, forces, np.concatenate(qdots), gdot_qdot, c, 6.0)
+    n, r = con.second_order_system(
+        g, blocks, forces, qdot=np.concatenate(qdots), gdot_qdot=gdot_qdot, violation=c, a=6.0
+    )
     assert np.linalg.matrix_rank(n) == 6
     f = con.solve_forces(n, r)
     assert np.abs(n @ f + r).max() < 1e-9 * np.abs(r).max()
@@ -202,7 +204,7 @@ def test_fast_second_order_solve_equals_the_dense_kkt_solve():
     forces = rng.normal(size=g.shape[1])
     qdot = np.concatenate(qdots)
     a = 6.0
-    n, r = con.second_order_system(g, blocks, forces, qdot, gdot_qdot, c, a)
+    n, r = con.second_order_system(g, blocks, forces, qdot=qdot, gdot_qdot=gdot_qdot, violation=c, a=a)
     f = con.solve_forces(n, r)
     _, kkt_f = _kkt_solve(g, blocks, forces, -(gdot_qdot + 2 * a * g @ qdot + a * a * c))
     assert np.abs(f - kkt_f).max() < 1e-9 * max(1.0, np.abs(kkt_f).max())
@@ -218,7 +220,7 @@ def test_fast_first_order_solve_equals_the_dense_kkt_solve():
         [np.eye(parts[0].n_coordinates), spd @ spd.T + np.eye(RIGID), np.eye(RIGID)],
     ):
         forces = rng.normal(size=g.shape[1])
-        n, r = con.first_order_system(g, blocks, con.block_solve(blocks, forces), c, 2.0)
+        n, r = con.first_order_system(g, blocks, con.block_solve(blocks, forces), violation=c, a=2.0)
         f = con.solve_forces(n, r)
         _, kkt_f = _kkt_solve(g, blocks, forces, -2.0 * c)
         assert np.abs(f - kkt_f).max() < 1e-9 * max(1.0, np.abs(kkt_f).max())
@@ -234,7 +236,7 @@ def _first_order_error(parts, links, free, dt, duration, forces, a):
         c0 = c if c0 is None else c0
         worst = max(worst, np.abs(c - c0 * np.exp(-a * dt * step)).max())
         blocks = [np.eye(n) for n in free]
-        n, r = con.first_order_system(g, blocks, forces, c, a)
+        n, r = con.first_order_system(g, blocks, forces, violation=c, a=a)
         qdot = forces + g.T @ con.solve_forces(n, r)
         pieces = np.split(qdot, np.cumsum(free)[:-1])
         parts = [kin.retract(p, _pad(p, dt * q)) for p, q in zip(parts, pieces)]

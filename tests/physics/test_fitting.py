@@ -48,8 +48,8 @@ def target_part(rng):
 def fit_in_two_stages(data, m):
     """Moment initialisation, 300 steps of c, phi, q_s, then 1000 steps of everything."""
     start = fit.initial_part(data, m.u, m.v)
-    rigid_global, _ = fit.fit(start, data, m.triangles, SIGMA, 300, local=False)
-    final, history = fit.fit(rigid_global, data, m.triangles, SIGMA, 1000)
+    rigid_global, _ = fit.fit(start, data, m.triangles, sigma=SIGMA, n_steps=300, local=False)
+    final, history = fit.fit(rigid_global, data, m.triangles, sigma=SIGMA, n_steps=1000)
     return start, final, history
 
 
@@ -69,7 +69,7 @@ def test_data_force_is_l_transpose_r_and_the_note_blocks():
         part = random_part(rng, m)
         points = kin.positions(part)[rng.integers(0, len(m.u), 60)] + 0.1 * rng.normal(size=(60, 3))
         k = fit.nearest_nodes(points, kin.positions(part))
-        f = fit.data_force(part, points, k, SIGMA)
+        f = fit.data_force(part, points, k, sigma=SIGMA)
 
         r = points - kin.positions(part)[k]
         l_transpose_r = np.einsum("jak,ja->k", kin.jacobians(part)[k], r) / SIGMA**2
@@ -105,7 +105,7 @@ def test_data_force_is_minus_the_energy_gradient():
         part = random_part(rng, m)
         points = kin.positions(part)[rng.integers(0, len(m.u), 60)] + 0.1 * rng.normal(size=(60, 3))
         k = fit.nearest_nodes(points, kin.positions(part))
-        f = fit.data_force(part, points, k, SIGMA)
+        f = fit.data_force(part, points, k, sigma=SIGMA)
         gradient = np.empty(part.n_coordinates)
         for i in range(part.n_coordinates):
             dq = np.zeros(part.n_coordinates)
@@ -195,7 +195,7 @@ def test_euler_step_limit_is_real(step_fraction, stable):
     start = fit.initial_part(data, m.u, m.v)
 
     with np.errstate(all="ignore"):
-        _, history = fit.fit(start, data, m.triangles, SIGMA, 60, step_fraction=step_fraction)
+        _, history = fit.fit(start, data, m.triangles, sigma=SIGMA, n_steps=60, step_fraction=step_fraction)
 
     if stable:
         assert np.all(np.diff(history) <= 1e-12)
@@ -212,7 +212,7 @@ def test_stability_limit_bounds_the_largest_eigenvalue():
     part = random_part(rng, m)
     points = kin.positions(part) + 0.05 * rng.normal(size=(len(m.u), 3))
     k = fit.nearest_nodes(points, kin.positions(part))
-    k_node = fit.stiffness(part, m.triangles, 0.1, 0.5)
+    k_node = fit.stiffness(part, m.triangles, w0=0.1, w1=0.5)
 
     jac = kin.jacobians(part)[k]
     a = np.einsum("jak,jal->kl", jac, jac) / SIGMA**2
@@ -220,8 +220,10 @@ def test_stability_limit_bounds_the_largest_eigenvalue():
     free = np.arange(len(a)) != fit.FROZEN
     dense = 2.0 / np.linalg.eigvalsh(a[np.ix_(free, free)])[-1]
 
-    assert fit.stability_limit(part, k, SIGMA, k_node) == pytest.approx(dense, rel=1e-9)
+    assert fit.stability_limit(part, k, sigma=SIGMA, k_node=k_node) == pytest.approx(dense, rel=1e-9)
     for moving in (np.arange(kin.RIGID), np.delete(np.arange(kin.SHAPE.stop), fit.FROZEN)):  # rigid, global
         sub = 2.0 / np.linalg.eigvalsh(a[np.ix_(moving, moving)])[-1]
-        assert fit.stability_limit(part, k, SIGMA, k_node, moving) == pytest.approx(sub, rel=1e-9)
+        assert fit.stability_limit(part, k, sigma=SIGMA, k_node=k_node, coordinates=moving) == pytest.approx(
+            sub, rel=1e-9
+        )
         assert sub > dense  # a part that moves less may take longer steps

@@ -64,12 +64,12 @@ def test_filter_with_identity_covariance_is_dynamic_fitting(local):
     for step in range(200):
         if step % 10 == 0:
             assignment = fit.nearest_nodes(points, kin.positions(fitted))
-            k_node = fit.stiffness(fitted, m.triangles, settings.w0, settings.w1)
-            dt = 0.5 * fit.stability_limit(fitted, assignment, sigma, k_node)
-        force = fit.data_force(filtered, points, assignment, sigma)
-        rate = kf.state_rate(replace(identity, part=filtered), force, k_node, settings)
+            k_node = fit.stiffness(fitted, m.triangles, w0=settings.w0, w1=settings.w1)
+            dt = 0.5 * fit.stability_limit(fitted, assignment, sigma=sigma, k_node=k_node)
+        force = fit.data_force(filtered, points, assignment, sigma=sigma)
+        rate = kf.state_rate(replace(identity, part=filtered), force, k_node, settings=settings)
         filtered = kf.update_part(filtered, rate, dt)
-        fitted = fit.euler_step(fitted, points, assignment, sigma, k_node, dt, local=local)
+        fitted = fit.euler_step(fitted, points, assignment, sigma=sigma, k_node=k_node, dt=dt, local=local)
 
     assert_parts_equal(filtered, fitted, atol=1e-12)
     assert filtered.q_s[0] == start.q_s[0]  # a0 frozen
@@ -108,9 +108,9 @@ def test_shape_block_step_matches_dense_computation():
     settings = kf.Settings(measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0)
     state = kf.initial_state(part)
     state.p_global[kin.RIGID :, kin.RIGID :] = random_spd(rng, kf.N_SHAPE)
-    k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
+    k_node = fit.stiffness(part, m.triangles, w0=settings.w0, w1=settings.w1)
 
-    moved, _ = kf.iteration(state, points, assignment, k_node, settings)
+    moved, _ = kf.iteration(state, points, assignment, k_node=k_node, settings=settings)
 
     free = slice(kin.SHAPE.start + 1, START)
     a_s = dense_information(part, assignment)[free, free]
@@ -119,7 +119,7 @@ def test_shape_block_step_matches_dense_computation():
     k_ss = np.zeros((kf.N_SHAPE, kf.N_SHAPE))
     k_ss[7, 7] = 2.0  # b1
     p = state.p_s
-    dt = kf.step_size(state, kf.information(part, assignment, VARIANCE), k_node, settings)
+    dt = kf.step_size(state, kf.information(part, assignment, VARIANCE), k_node, settings=settings)
     expected_p = p + dt * (-k_ss @ p - p @ k_ss + 0.3 * np.eye(kf.N_SHAPE) - p @ a_s @ p)
     expected_q = sq.clamp(np.concatenate([[part.q_s[0]], part.q_s[1:] + dt * (p @ g_s - k_ss @ part.q_s[1:])]))
 
@@ -145,7 +145,7 @@ def test_covariance_stays_symmetric_positive_definite_and_shrinks_where_data_are
     for frame in range(5):
         moving = replace(target, c=target.c + 0.02 * frame)
         points = kin.positions(moving)[observed] + 0.02 * rng.normal(size=(len(observed), 3))
-        state, done = kf.filter_frame(state, points, m.triangles, settings)
+        state, done = kf.filter_frame(state, points, m.triangles, settings=settings)
         assert done == 100
         for block in (state.p_c, state.p_phi, state.p_s, state.p_node):
             np.testing.assert_array_equal(block, block.T)
@@ -167,14 +167,14 @@ def test_paper_initial_covariance_is_indefinite_and_rejected():
     part = kin.Part(
         np.zeros(3), np.eye(3), np.array([1.0, 0.5, 0.5, 1.0, 1, 1, 0, 0, 0, 0, 0.5]), np.zeros((len(m.u), 3)), m.u, m.v
     )
-    paper = kf.mesh_covariance(m.triangles, len(m.u), 0.4)
+    paper = kf.mesh_covariance(m.triangles, len(m.u), off_diagonal=0.4)
     assert np.linalg.eigvalsh(paper)[0] == pytest.approx(-0.17, abs=0.01)
     element = np.full((3, 3), 0.4) + 0.6 * np.eye(3)
     assert np.linalg.eigvalsh(element)[0] == pytest.approx(0.6)
     with pytest.raises(ValueError, match="not positive definite"):
         kf.initial_state(part, p_node=paper)
 
-    halved = kf.mesh_covariance(m.triangles, len(m.u), 0.2)
+    halved = kf.mesh_covariance(m.triangles, len(m.u), off_diagonal=0.2)
     np.testing.assert_array_equal(kf.initial_state(part, p_node=halved).p_node, halved)
     np.testing.assert_array_equal(kf.initial_state(part).p_node, np.eye(len(m.u)))
     tri = m.triangles
@@ -204,7 +204,9 @@ def test_filter_recovers_a_tapered_superquadric_from_clean_data():
     data = kin.positions(target)
     state = kf.initial_state(fit.initial_part(data, m.u, m.v))
 
-    state, _ = kf.filter_frame(state, data, m.triangles, kf.Settings(max_iterations=1000, tol=0.0, local=False))
+    state, _ = kf.filter_frame(
+        state, data, m.triangles, settings=kf.Settings(max_iterations=1000, tol=0.0, local=False)
+    )
 
     part = state.part
     assert np.linalg.norm(part.c - target.c) < 1e-9
@@ -307,7 +309,9 @@ def test_filter_frame_with_absorb_keeps_d_out_of_the_global_span():
             w1=5.0,
             absorb=absorb,
         )
-        state, done = kf.filter_frame(kf.initial_state(start), data, world.triangles, settings, np.arange(len(data)))
+        state, done = kf.filter_frame(
+            kf.initial_state(start), data, world.triangles, settings=settings, nodes=np.arange(len(data))
+        )
         assert done == 60
         part = state.part
         leftover[absorb] = np.abs(global_leftover(part)).max()
@@ -329,8 +333,8 @@ def test_known_correspondence_recovers_a_turn_the_nearest_nodes_miss():
     data = kin.positions(target)
     settings = kf.Settings(max_iterations=600, tol=0.0, local=False)
 
-    known, _ = kf.filter_frame(kf.initial_state(still), data, m.triangles, settings, np.arange(len(m.u)))
-    nearest, _ = kf.filter_frame(kf.initial_state(still), data, m.triangles, settings)
+    known, _ = kf.filter_frame(kf.initial_state(still), data, m.triangles, settings=settings, nodes=np.arange(len(m.u)))
+    nearest, _ = kf.filter_frame(kf.initial_state(still), data, m.triangles, settings=settings)
 
     assert np.linalg.norm(log_so3(known.part.rotation.T @ target.rotation)) < 1e-9
     np.testing.assert_allclose(kin.positions(known.part), data, atol=1e-9)
@@ -351,7 +355,7 @@ def test_bent_superquadric_leaves_the_slow_cx_b1_b3_mode():
 
     errors = []
     for _ in range(2):
-        state, _ = kf.filter_frame(state, data, m.triangles, settings)
+        state, _ = kf.filter_frame(state, data, m.triangles, settings=settings)
         dc = target.rotation.T @ (state.part.c - target.c)
         errors.append(np.concatenate([dc, state.part.q_s - q_s]))
     slow = [0, 3 + 8, 3 + 9, 3 + 10]  # c_x, b1, b2, b3
@@ -377,30 +381,30 @@ def test_local_block_equals_the_full_covariance():
     part = random_part(rng, m)
     points = noisy_points(rng, part, 40)
     settings = kf.Settings(measurement_variance=VARIANCE, process_noise=0.2)
-    state = kf.initial_state(part, p_node=kf.mesh_covariance(m.triangles, len(m.u), 0.2))
+    state = kf.initial_state(part, p_node=kf.mesh_covariance(m.triangles, len(m.u), off_diagonal=0.2))
     p_full = np.kron(state.p_node, np.eye(3))
     for step in range(30):
         if step % settings.reassign_every == 0:
             assignment = fit.nearest_nodes(points, kin.positions(state.part))
-            k_node = fit.stiffness(state.part, m.triangles, settings.w0, settings.w1)
+            k_node = fit.stiffness(state.part, m.triangles, w0=settings.w0, w1=settings.w1)
             k_full = np.kron(k_node.toarray(), np.eye(3))
         a_full = dense_information(state.part, assignment)[START:, START:]
-        force = fit.data_force(state.part, points, assignment, np.sqrt(VARIANCE))
-        rate = kf.state_rate(state, force, k_node, settings)
+        force = fit.data_force(state.part, points, assignment, sigma=np.sqrt(VARIANCE))
+        rate = kf.state_rate(state, force, k_node, settings=settings)
         np.testing.assert_allclose(
             rate[START:],
             p_full @ force[START:] - k_full @ state.part.d.ravel(),
             rtol=1e-10,
             atol=1e-12 * np.max(np.abs(force)),
         )
-        dt = kf.step_size(state, kf.information(state.part, assignment, VARIANCE), k_node, settings)
-        state, _ = kf.iteration(state, points, assignment, k_node, settings)
+        dt = kf.step_size(state, kf.information(state.part, assignment, VARIANCE), k_node, settings=settings)
+        state, _ = kf.iteration(state, points, assignment, k_node=k_node, settings=settings)
         p_full = p_full + dt * (
             -k_full @ p_full - p_full @ k_full + 0.2 * np.eye(len(p_full)) - p_full @ a_full @ p_full
         )
         p_full = 0.5 * (p_full + p_full.T)
         np.testing.assert_allclose(np.kron(state.p_node, np.eye(3)), p_full, rtol=0, atol=1e-12)
-    assert np.max(np.abs(state.p_node - kf.mesh_covariance(m.triangles, len(m.u), 0.2))) > 0.1
+    assert np.max(np.abs(state.p_node - kf.mesh_covariance(m.triangles, len(m.u), off_diagonal=0.2))) > 0.1
 
 
 def dense_stiffness(state, k_node, settings):
@@ -431,16 +435,16 @@ def test_newton_step_solves_the_dense_gauss_newton_system(prior):
     assignment = fit.nearest_nodes(points, kin.positions(part))
     settings = kf.Settings(measurement_variance=VARIANCE, bend_stiffness=0.5, prior_stiffness=prior)
     state = kf.State(part, random_spd(rng, kf.N_GLOBAL), random_spd(rng, len(m.u)))
-    k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
+    k_node = fit.stiffness(part, m.triangles, w0=settings.w0, w1=settings.w1)
 
     free = np.r_[kf.GLOBAL, START : part.n_coordinates]
     a = dense_information(part, assignment)[np.ix_(free, free)]
     k = dense_stiffness(state, k_node, settings)
-    force = fit.data_force(part, points, assignment, np.sqrt(VARIANCE))[free]
+    force = fit.data_force(part, points, assignment, sigma=np.sqrt(VARIANCE))[free]
     q = np.concatenate([kf.global_vector(part), part.d.ravel()])
     expected = np.linalg.solve(a + k, force - k @ q)
     np.testing.assert_allclose(
-        kf.newton_step(state, points, assignment, k_node, settings),
+        kf.newton_step(state, points, assignment, k_node=k_node, settings=settings),
         expected,
         rtol=1e-8,
         atol=1e-10 * np.max(np.abs(expected)),
@@ -449,7 +453,9 @@ def test_newton_step_solves_the_dense_gauss_newton_system(prior):
     rigid = replace(settings, local=False)
     g = kf.N_GLOBAL
     expected = np.linalg.solve(a[:g, :g] + k[:g, :g], force[:g] - k[:g, :g] @ q[:g])
-    np.testing.assert_allclose(kf.newton_step(state, points, assignment, k_node, rigid), expected, rtol=1e-8)
+    np.testing.assert_allclose(
+        kf.newton_step(state, points, assignment, k_node=k_node, settings=rigid), expected, rtol=1e-8
+    )
 
 
 def test_prior_form_state_and_riccati_steps_match_dense_computation():
@@ -465,22 +471,22 @@ def test_prior_form_state_and_riccati_steps_match_dense_computation():
         measurement_variance=VARIANCE, process_noise=0.3, bend_stiffness=2.0, coupling="joint", prior_stiffness=True
     )
     state = kf.State(part, random_spd(rng, kf.N_GLOBAL), random_spd(rng, len(m.u)))
-    k_node = fit.stiffness(part, m.triangles, settings.w0, settings.w1)
+    k_node = fit.stiffness(part, m.triangles, w0=settings.w0, w1=settings.w1)
     info = kf.information(part, assignment, VARIANCE)
 
-    force = fit.data_force(part, points, assignment, np.sqrt(VARIANCE))
+    force = fit.data_force(part, points, assignment, sigma=np.sqrt(VARIANCE))
     k = dense_stiffness(state, k_node, settings)
     q = np.concatenate([kf.global_vector(part), part.d.ravel()])
     p = np.zeros_like(k)
     p[: kf.N_GLOBAL, : kf.N_GLOBAL] = state.p_global
     p[kf.N_GLOBAL :, kf.N_GLOBAL :] = np.kron(state.p_node, np.eye(3))
     free = np.r_[kf.GLOBAL, START : part.n_coordinates]
-    rate = kf.state_rate(state, force, k_node, settings)
+    rate = kf.state_rate(state, force, k_node, settings=settings)
     np.testing.assert_allclose(rate[free], p @ (force[free] - k @ q), rtol=1e-10, atol=1e-12 * np.max(np.abs(rate)))
     assert rate[kin.SHAPE.start] == 0.0  # a0
 
-    dt = kf.step_size(state, info, k_node, settings)
-    moved = kf.riccati(state, info, k_node, settings, dt)
+    dt = kf.step_size(state, info, k_node, settings=settings)
+    moved = kf.riccati(state, info, k_node, settings=settings, dt=dt)
     k_g = kf.global_stiffness(settings)
     expected = state.p_global + dt * (
         0.3 * np.eye(kf.N_GLOBAL) - state.p_global @ (info.global_ + k_g) @ state.p_global
@@ -504,7 +510,7 @@ def test_decoupled_covariance_stays_block_diagonal_and_cap_bounds_eigenvalues():
     start = fit.initial_part(points, m.u, m.v)
     for coupling in ("decoupled", "joint"):
         settings = kf.Settings(max_iterations=50, tol=0.0, local=False, coupling=coupling, covariance_cap=1.0)
-        state, _ = kf.filter_frame(kf.initial_state(start), points, m.triangles, settings)
+        state, _ = kf.filter_frame(kf.initial_state(start), points, m.triangles, settings=settings)
         off = np.ones((kf.N_GLOBAL, kf.N_GLOBAL), bool)
         for b in kf.BLOCKS["decoupled"]:
             off[b, b] = False
@@ -535,7 +541,7 @@ def test_joint_block_settles_the_slow_mode():
     state = kf.initial_state(fit.initial_part(data, m.u, m.v))
     settings = kf.Settings(max_iterations=1000, tol=0.0, local=False, coupling="joint", covariance_cap=1.0)
 
-    state, _ = kf.filter_frame(state, data, m.triangles, settings)
+    state, _ = kf.filter_frame(state, data, m.triangles, settings=settings)
 
     error = np.concatenate([target.rotation.T @ (state.part.c - target.c), state.part.q_s - q_s])
     slow = [0, 3 + 8, 3 + 10]  # c_x, b1, b3

@@ -88,7 +88,7 @@ def test_synthetic_arm_is_tracked_with_its_joints(dynamics: str) -> None:
     under 3 cm for every part (the second-order hand, lagging its fast bend, reaches 26 mm)."""
     model = _model()
     frames = [_markers(f) for f in range(12)]
-    fits = list(pts.track(frames, model, pts.PointsSettings(dynamics=dynamics), 0.01))
+    fits = list(pts.track(frames, model, settings=pts.PointsSettings(dynamics=dynamics), interval=0.01))
     assert len(fits) == 12
     for f, fitted in enumerate(fits):
         _, true_joints = _truth(f)
@@ -110,7 +110,7 @@ def test_a_part_without_markers_keeps_moving_on_its_joint() -> None:
     for f in range(6, 10):
         frames[f] = frames[f].copy()
         frames[f][model.labels == 2] = np.nan
-    fits = list(pts.track(frames, model, pts.PointsSettings(dynamics="second-order"), 0.01))
+    fits = list(pts.track(frames, model, settings=pts.PointsSettings(dynamics="second-order"), interval=0.01))
     turned = [
         np.linalg.norm(
             log_so3(fit.body.parts[1].rotation.T @ fit.body.parts[2].rotation)
@@ -132,7 +132,7 @@ def test_missing_markers_at_the_start_and_a_frame_without_any(dynamics: str) -> 
     frames = [_markers(f).copy() for f in range(6)]
     frames[0][[0, 9, 18]] = np.nan
     frames[3][:] = np.nan
-    fits = list(pts.track(frames, model, pts.PointsSettings(dynamics=dynamics), 0.01))
+    fits = list(pts.track(frames, model, settings=pts.PointsSettings(dynamics=dynamics), interval=0.01))
     assert np.all(fits[0].seen == len(MARKER_NODES) - 1) and np.isfinite(fits[0].poses).all()
     assert np.isnan(fits[3].rms) and np.all(fits[3].seen == 0) and np.isfinite(fits[3].poses).all()
     if dynamics == "first-order":

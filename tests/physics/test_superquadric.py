@@ -273,7 +273,7 @@ def test_mesh_matches_the_design_note():
     """Section 3/5 figures that depend on the 123-node triangulation."""
     m = sq.mesh()
     points = sq.shape(PAPER_INITIAL, m.u, m.v)
-    k = sq.membrane_stiffness(points, m.triangles, 0.1, 0.5).toarray()
+    k = sq.membrane_stiffness(points, m.triangles, w0=0.1, w1=0.5).toarray()
     # explicit Euler with D = I on qdot = -K q is stable for dt < 2/lambda_max = 0.26
     assert 2 / np.linalg.eigvalsh(k)[-1] == pytest.approx(0.26, abs=0.005)
     # the paper's P(0) (1 on the diagonal, 0.4 on the mesh edges) is indefinite: -0.166
@@ -348,7 +348,7 @@ def test_stiffness_is_the_membrane_energy_and_psd():
     m = sq.mesh()
     for q in _parameters(rng, 5):
         points = sq.shape(q, m.u, m.v)
-        k = sq.membrane_stiffness(points, m.triangles, 0.1, 0.5)
+        k = sq.membrane_stiffness(points, m.triangles, w0=0.1, w1=0.5)
         dense = k.toarray()
         assert abs(dense - dense.T).max() < 1e-12 * abs(dense).max()
         eig = np.linalg.eigvalsh(dense)
@@ -365,7 +365,7 @@ def test_membrane_term_null_space_is_the_rigid_translations():
     rng = np.random.default_rng(10)
     m = sq.mesh()
     for q in _parameters(rng, 5):
-        k = sq.membrane_stiffness(sq.shape(q, m.u, m.v), m.triangles, 0.0, 1.0)
+        k = sq.membrane_stiffness(sq.shape(q, m.u, m.v), m.triangles, w0=0.0, w1=1.0)
         eig = np.linalg.eigvalsh(k.toarray())
         assert abs(eig[0]) < 1e-12 * eig[-1] and eig[1] > 1e-6 * eig[-1]  # exactly one zero mode
         translation = np.tile(rng.normal(size=3), (len(m.u), 1))
@@ -378,5 +378,9 @@ def test_stiffness_converges_to_the_continuum_dirichlet_energy():
     m = sq.mesh(60, 120)
     points = sq.shape(q, m.u, m.v)
     z = points[:, 2]
-    assert z @ (sq.membrane_stiffness(points, m.triangles, 0.0, 1.0) @ z) == pytest.approx(8 * np.pi / 3, rel=2e-3)
-    assert z @ (sq.membrane_stiffness(points, m.triangles, 1.0, 0.0) @ z) == pytest.approx(4 * np.pi / 3, rel=2e-3)
+    assert z @ (sq.membrane_stiffness(points, m.triangles, w0=0.0, w1=1.0) @ z) == pytest.approx(
+        8 * np.pi / 3, rel=2e-3
+    )
+    assert z @ (sq.membrane_stiffness(points, m.triangles, w0=1.0, w1=0.0) @ z) == pytest.approx(
+        4 * np.pi / 3, rel=2e-3
+    )

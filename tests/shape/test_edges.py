@@ -176,7 +176,7 @@ def test_the_rows_predict_how_the_edges_move_in_a_render_of_the_body_reshaped():
 
     base = seen(np.zeros(layout.width))
     every = dataclasses.replace(base, offset=np.zeros_like(base.offset), weight=np.ones_like(base.weight))
-    rows = frame_rows(layout, model, layout.factors(x), poses, every).shape
+    rows = frame_rows(layout, model, factors=layout.factors(x), poses=poses, inspection=every).shape
     changes = [
         ("forearm_l", "joint", 2, -0.03),
         ("shin_l", "joint", 2, -0.03),
@@ -233,5 +233,11 @@ def test_rows_of_samples_without_an_edge_are_left_out(axis):
     rng = np.random.default_rng(5)
     inspection = fake_inspection(surface_points(model, rng, 2))
     inspection.offset[axis::3] = np.nan
-    rows = frame_rows(layout, model, layout.factors(layout.start()), np.tile(np.eye(4), (model.size, 1, 1)), inspection)
+    rows = frame_rows(
+        layout,
+        model,
+        factors=layout.factors(layout.start()),
+        poses=np.tile(np.eye(4), (model.size, 1, 1)),
+        inspection=inspection,
+    )
     assert len(rows.offset) == len(inspection.offset) - len(inspection.offset[axis::3])

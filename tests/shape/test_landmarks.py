@@ -66,7 +66,7 @@ def test_exact_landmarks_of_a_reshaped_body_bring_its_limbs_closer():
     body = reshaped_body(document, rng)
     points, _ = posed_landmarks(model_from_dict(body), rng, 8)
     layout = Layout.of(model_from_dict(document))
-    fit = fit_landmarks(layout, document, points, np.arange(8))
+    fit = fit_landmarks(layout, document, points, frames=np.arange(8))
     fitted = layout.document(fit.x, document)
     errors = [
         (abs(got.metres - true.metres), abs(given.metres - true.metres))
@@ -83,6 +83,6 @@ def test_too_few_frames_with_the_trunk_is_a_one_line_error(one_line_error):
     points, _ = posed_landmarks(model_from_dict(document), np.random.default_rng(1), 4)
     points[:, LANDMARKS.index("left_hip")] = np.nan
     layout = Layout.of(model_from_dict(document))
-    message = one_line_error(lambda: fit_landmarks(layout, document, points, np.arange(4)))
+    message = one_line_error(lambda: fit_landmarks(layout, document, points, frames=np.arange(4)))
     assert "0 of 4 frames" in message and "--frames" in message
     assert issubclass(TrackerInputError, Exception)

@@ -31,7 +31,7 @@ def test_the_start_is_the_given_model_and_tied_sides_mirror():
 def test_the_prior_holds_the_given_model_scaled_and_each_joint_on_its_parents_stretch():
     model = model_from_dict(read_toml(HUMAN, "model", ""))
     layout = Layout.of(model)
-    prior = layout.prior(2.0, 3.0, 5.0)
+    prior = layout.prior(2.0, 3.0, span_weight=5.0)
     x = layout.start()
     assert np.abs(prior @ x).max() < 1e-12
     scaled = x * 1.1  # every joint and factor, and the common scale: the model scaled whole
@@ -57,8 +57,8 @@ def test_a_held_joint_is_pulled_to_the_given_model_as_firmly_as_the_span():
     x[layout.joint[i] + 2] += 0.01
     held = np.zeros(model.size, bool)
     held[[i, model.index("forearm_r")]] = True  # both sides of the tied set
-    residual = layout.prior(2.0, 3.0, 5.0, held=held) @ x
+    residual = layout.prior(2.0, 3.0, span_weight=5.0, held=held) @ x
     np.testing.assert_allclose(np.sort(np.abs(residual[residual != 0])), [0.05, 0.05])
     held[model.index("forearm_r")] = False  # one side seen: the set is measured
-    residual = layout.prior(2.0, 3.0, 5.0, held=held) @ x
+    residual = layout.prior(2.0, 3.0, span_weight=5.0, held=held) @ x
     np.testing.assert_allclose(np.sort(np.abs(residual[residual != 0])), [0.02, 0.05])

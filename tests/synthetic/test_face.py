@@ -41,7 +41,7 @@ def test_head_coordinates_and_colours_at_hand_picked_points():
 
 
 def test_the_face_repaints_only_the_head_and_tells_front_from_back(human):
-    camera = look_at_camera("c", (0.0, -2.0, 1.6), (0.0, 0.0, 1.45), (160, 120), 500.0)
+    camera = look_at_camera("c", (0.0, -2.0, 1.6), (0.0, 0.0, 1.45), size=(160, 120), focal=500.0)
     front = rest_poses(human, se3.from_rotvec(np.zeros(3), (0.0, 0.0, 0.92)))
     back = np.einsum("ab,nbc->nac", se3.from_rotvec((0.0, 0.0, np.pi)), front)
     head = human.index("head")

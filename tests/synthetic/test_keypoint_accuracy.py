@@ -45,13 +45,13 @@ def scene(tiny_recording):
 
 def test_the_truth_scores_zero_and_known_moves_score_their_size(scene):
     cameras, poses, model, exact, size = scene
-    score = accuracy(exact, cameras, poses, model)
+    score = accuracy(exact, cameras, poses, model=model)
     views = len(poses) * len(cameras)
     assert (score.views, score.found, score.scored, score.on_body) == (views, views, 12 * views, views)
     assert score.median == pytest.approx(0.0, abs=1e-9) and score.wrong == 0.0 and score.swapped == 0.0
     for share, wrong, on_body in ((0.05, 0.0, views), (0.15, 1.0, views), (0.3, 1.0, 0)):
         moved = exact.pixels + (share * size)[:, :, None, None] * np.array([0.6, 0.8])  # |offset| = share * size
-        score = accuracy(dataclasses.replace(exact, pixels=moved), cameras, poses, model)
+        score = accuracy(dataclasses.replace(exact, pixels=moved), cameras, poses, model=model)
         assert score.median == pytest.approx(share, rel=1e-9) and score.wrong == wrong and score.on_body == on_body
         assert math.isnan(score.swapped) if on_body == 0 else score.swapped == 0.0
 
@@ -63,9 +63,9 @@ def test_swapped_views_unsure_landmarks_absent_people_and_hidden_joints(scene):
     pixels[0:3, 0][:, pairs.ravel()] = exact.pixels[0:3, 0][:, pairs[:, ::-1].ravel()]  # cam0 mirrored in frames 0-2
     confidence[5, 1, 11:17] = 0.2  # cam1's arms unsure in frame 5
     pixels[4, 1], confidence[4, 1] = np.nan, 0.0  # nobody found by cam1 in frame 4
-    score = accuracy(dataclasses.replace(exact, pixels=pixels, confidence=confidence), cameras, poses, model)
+    score = accuracy(dataclasses.replace(exact, pixels=pixels, confidence=confidence), cameras, poses, model=model)
     views = len(poses) * len(cameras)
     assert (score.found, score.scored) == (views - 1, 12 * (views - 1) - 6)
     assert score.on_body == views - 1 and score.swapped == pytest.approx(3 / (views - 1))
-    hidden = accuracy(exact, cameras, poses, model, props=(table_before(cameras[0], gap=0.5),))
+    hidden = accuracy(exact, cameras, poses, model=model, props=(table_before(cameras[0], gap=0.5),))
     assert 12 * views - 4 * len(poses) <= hidden.scored < 12 * views  # at most the knees and ankles, in cam0

@@ -30,8 +30,10 @@ def _rig(tmp_path) -> Path:
     path = tmp_path / "rig.toml"
     save_calibration(
         [
-            look_at_camera("a", (0.5, -4.0, 1.4), (0, 0, 0.9), (160, 120), 140.0, (-0.05, 0.01, 0, 0)),
-            look_at_camera("b", (4.0, 0.5, 1.2), (0, 0, 0.9), (160, 120), 140.0),
+            look_at_camera(
+                "a", (0.5, -4.0, 1.4), (0, 0, 0.9), size=(160, 120), focal=140.0, distortions=(-0.05, 0.01, 0, 0)
+            ),
+            look_at_camera("b", (4.0, 0.5, 1.2), (0, 0, 0.9), size=(160, 120), focal=140.0),
         ],
         path,
     )
@@ -71,7 +73,7 @@ def test_every_frame_shows_the_one_backdrop_off_the_body_and_the_cameras_see_dif
 
 def test_the_room_is_seeded():
     rig = [_smaller(camera, 8) for camera in synth.ring4_rig()]
-    first, again, other = (room.make_room(rig, *VOLUME, seed) for seed in (3, 3, 4))
+    first, again, other = (room.make_room(rig, *VOLUME, seed=seed) for seed in (3, 3, 4))
     np.testing.assert_array_equal(room.room_backdrop(first, rig[0]), room.room_backdrop(again, rig[0]))
     assert np.abs(room.room_backdrop(first, rig[0]).astype(int) - room.room_backdrop(other, rig[0])).mean() > 10
     assert [d.s0 for d in first.decor] == [d.s0 for d in again.decor] != [d.s0 for d in other.decor]
@@ -82,7 +84,7 @@ def test_the_furniture_stands_in_the_room_clear_of_the_volume_and_hides_none_of_
     cameras = synth.RIGS[rig]()
     targets = np.stack(np.meshgrid(*(np.linspace(VOLUME[0][a], VOLUME[1][a], 7) for a in range(3))), -1).reshape(-1, 3)
     for seed in range(3):
-        made = room.make_room(cameras, *VOLUME, seed)
+        made = room.make_room(cameras, *VOLUME, seed=seed)
         assert len(made.parts) >= 10 and {d.kind for d in made.decor} == {"door", "window", "poster"}
         centres = np.array([camera.center for camera in cameras])
         assert np.all((centres > made.low) & (centres < made.high))  # the cameras are inside

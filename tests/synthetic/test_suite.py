@@ -58,7 +58,7 @@ def _write_poses(path: Path, truth: dict, shift: float) -> None:
     with PosesWriter(path, list(truth["component_names"]), list(truth["joint_names"]), 6.0) as writer:
         for frame, poses in zip(truth["frame"], truth["poses"]):
             joints = poses[:, 0:3, 3] + [shift, 0.0, 0.0]
-            writer.append(int(frame), poses, joints, 0, 0.5)
+            writer.append(int(frame), poses, joints, status=0, residual=0.5)
 
 
 def test_make_then_score_known_errors(tmp_path, capsys):

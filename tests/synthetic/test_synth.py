@@ -207,8 +207,10 @@ def test_renderer_image(human):
 def _rig(tmp_path) -> Path:
     path = tmp_path / "rig.toml"
     cams = [
-        look_at_camera("a", (0.5, -4.0, 1.4), (0, 0, 0.9), (160, 120), 140.0, (-0.05, 0.01, 0, 0)),
-        look_at_camera("b", (4.0, 0.5, 1.2), (0, 0, 0.9), (160, 120), 140.0),
+        look_at_camera(
+            "a", (0.5, -4.0, 1.4), (0, 0, 0.9), size=(160, 120), focal=140.0, distortions=(-0.05, 0.01, 0, 0)
+        ),
+        look_at_camera("b", (4.0, 0.5, 1.2), (0, 0, 0.9), size=(160, 120), focal=140.0),
     ]
     save_calibration(cams, path)
     return path
@@ -288,7 +290,9 @@ def test_committed_rigs_are_the_ones_write_rigs_makes(tmp_path):
 
 
 def _tiny_camera(size=(160, 120), focal=150.0):
-    return look_at_camera("c", (0.6, -3.6, 1.3), (0.0, 0.0, 0.9), size, focal, (-0.05, 0.01, 0.0, 0.0))
+    return look_at_camera(
+        "c", (0.6, -3.6, 1.3), (0.0, 0.0, 0.9), size=size, focal=focal, distortions=(-0.05, 0.01, 0.0, 0.0)
+    )
 
 
 def _moved(camera, world_from_new):
@@ -366,14 +370,14 @@ def test_capsule_render_truth_is_the_rendered_body(tmp_path, human):
 
 
 def test_seen_joints_behind_a_box_or_outside_every_image():
-    camera = look_at_camera("c", (0.0, -4.0, 1.0), (0.0, 0.0, 1.0), (200, 100), 200.0)
+    camera = look_at_camera("c", (0.0, -4.0, 1.0), (0.0, 0.0, 1.0), size=(200, 100), focal=200.0)
     points = np.array([[[0.0, 0.0, 1.0], [0.0, 0.0, 0.3], [3.0, 0.0, 1.0]]])  # centre, low, far off to the side
     np.testing.assert_array_equal(synth.seen_joints(points, [camera]), [[True, True, False]])
     box = props.Box(se3.from_rotvec((0.0, 0.0, 0.0), (0.0, -1.0, 0.25)), np.array([0.5, 0.2, 0.25]))
     np.testing.assert_array_equal(synth.seen_joints(points, [camera], (box,)), [[True, False, False]])
     behind = props.Box(se3.from_rotvec((0.0, 0.0, 0.0), (0.0, 1.0, 0.25)), np.array([0.5, 0.2, 0.25]))
     np.testing.assert_array_equal(synth.seen_joints(points, [camera], (behind,)), [[True, True, False]])
-    side = look_at_camera("s", (4.0, 0.0, 1.0), (0.0, 0.0, 1.0), (200, 100), 200.0)
+    side = look_at_camera("s", (4.0, 0.0, 1.0), (0.0, 0.0, 1.0), size=(200, 100), focal=200.0)
     np.testing.assert_array_equal(synth.seen_joints(points, [camera, side], (box,)), [[True, True, True]])
     # the box's depth along a ray: its near face, 4 - 1 - 0.2 = 2.8 m from the camera
     depth, index, normal = props.cast_boxes([box], camera, np.array([[0.0, 0.75 / 2.8], [0.0, -0.2]]))
@@ -405,13 +409,13 @@ def test_table_hides_the_legs_in_the_images_and_the_truth(tmp_path, human):
 
 def test_exposure_poses_interpolate_between_frames(human):
     poses = clips.procedural_motion(human, 6, fps=30.0, seed=1)
-    exposure = clips.exposure_poses(human, poses, 3, 2.0)  # offsets -1, 0, +1 frame
+    exposure = clips.exposure_poses(human, poses, samples=3, shutter=2.0)  # offsets -1, 0, +1 frame
     np.testing.assert_allclose(exposure[2:5, 0], poses[1:4], atol=1e-9)
     np.testing.assert_allclose(exposure[2:5, 1], poses[2:5], atol=0)
     np.testing.assert_allclose(exposure[2:5, 2], poses[3:6], atol=1e-9)
-    half = clips.exposure_poses(human, poses, 5, 1.0)
+    half = clips.exposure_poses(human, poses, samples=5, shutter=1.0)
     assert joint_gap(human, half) < 1e-9
-    np.testing.assert_array_equal(clips.exposure_poses(human, poses, 1, 1.0)[:, 0], poses)
+    np.testing.assert_array_equal(clips.exposure_poses(human, poses, samples=1, shutter=1.0)[:, 0], poses)
     middle = joint_centres(half[3, 4])  # half a frame on: between frames 3 and 4
     assert np.linalg.norm(middle - 0.5 * (joint_centres(poses[3]) + joint_centres(poses[4])), axis=1).max() < 0.01
 
@@ -419,7 +423,7 @@ def test_exposure_poses_interpolate_between_frames(human):
 def test_motion_blur_changes_only_near_moving_edges(human):
     camera = _tiny_camera()
     poses = clips.athletic_motion(human, 40, fps=30.0, seed=7)
-    exposure = clips.exposure_poses(human, poses, 6, 1.0)[25]
+    exposure = clips.exposure_poses(human, poses, samples=6, shutter=1.0)[25]
     renderer = render.Renderer(human, camera, noise=0.0, blur=0.7)
     sharp = renderer.render(poses[25]).astype(int)
     blurred = renderer.render(exposure).astype(int)
@@ -473,12 +477,12 @@ def test_athletic_motion_is_fast_airborne_turning_and_seeded(human):
     assert abs(float(np.median(low))) < 1e-9 and low.max() > 0.1  # on the floor, and in the air at times
     assert np.ptp(np.unwrap(np.arctan2(poses[:, 0, 1, 0], poses[:, 0, 0, 0]))) > np.pi  # a spin
     speed = np.linalg.norm(np.diff(joint_centres(poses), axis=0), axis=2).max() * 30.0
-    calm = np.linalg.norm(np.diff(joint_centres(clips.procedural_motion(human, 120, 30.0, 0)), axis=0), axis=2)
+    calm = np.linalg.norm(np.diff(joint_centres(clips.procedural_motion(human, 120, fps=30.0, seed=0)), axis=0), axis=2)
     assert speed > 4.0 and speed > 2.0 * calm.max() * 30.0
     kinds = {move for move, *_ in clips.athletic_schedule(4.0, seed=0)}
     assert kinds == set(clips.ATHLETIC_MOVES)
-    np.testing.assert_array_equal(clips.athletic_motion(human, 10, 30.0, seed=0), poses[:10])
-    assert not np.allclose(clips.athletic_motion(human, 10, 30.0, seed=1), poses[:10])
+    np.testing.assert_array_equal(clips.athletic_motion(human, 10, fps=30.0, seed=0), poses[:10])
+    assert not np.allclose(clips.athletic_motion(human, 10, fps=30.0, seed=1), poses[:10])
 
 
 def test_moved_rig_zooms_and_backs_off():

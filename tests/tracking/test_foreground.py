@@ -234,7 +234,7 @@ def test_cleared_background_removes_a_body_that_stands_still(standing_recording)
     plain = median_background(recording).images[0]
     assert body.sum() > 150
     assert np.abs(plain.astype(int) - empty).sum(axis=2)[body].mean() > 60  # the median keeps him
-    cleared = cleared_background(recording, model, np.arange(9), poses, margin=2)
+    cleared = cleared_background(recording, model, frames=np.arange(9), poses=poses, margin=2)
     got = cleared.background.images[0]
     np.testing.assert_array_equal(got[body], empty[body])
     assert (got == empty).all(axis=2).mean() > 0.999
@@ -247,7 +247,7 @@ def test_cleared_background_keeps_the_plain_median_where_the_track_sees_no_body(
     recording = open_recording(folder)
     away = poses.copy()
     away[:, :, 0, 3] += 20.0  # a track that puts him out of view: nothing is masked
-    cleared = cleared_background(recording, model, np.arange(9), away, margin=2)
+    cleared = cleared_background(recording, model, frames=np.arange(9), poses=away, margin=2)
     np.testing.assert_array_equal(cleared.background.images[0], median_background(recording).images[0])
     assert cleared.replaced == (0.0,)
 
@@ -265,7 +265,7 @@ def test_background_command_writes_the_cleared_scene(standing_recording, tmp_pat
     out = tmp_path / "run"
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), 30.0) as writer:
         for index, pose in enumerate(poses):
-            writer.append(index, pose, joint_centres(pose), 0, 1.0)
+            writer.append(index, pose, joint_centres(pose), status=0, residual=1.0)
     assert (
         main(
             [
@@ -302,7 +302,7 @@ def test_background_command_errors(standing_recording, tmp_path, capsys):
     lost = tmp_path / "lost" / "poses.npz"
     with PosesWriter(lost, list(model.names), list(model.joint_names), 30.0) as writer:
         for index, pose in enumerate(poses):
-            writer.append(index, pose, joint_centres(pose), 2, float("nan"))
+            writer.append(index, pose, joint_centres(pose), status=2, residual=float("nan"))
     assert "0 frames with a pose that is not lost" in error("--model", human, "--poses", str(lost))
     other = tmp_path / "other.toml"
     other.write_text((MODELS / "human.toml").read_text().replace('"pelvis"', '"hips"'))
@@ -310,5 +310,5 @@ def test_background_command_errors(standing_recording, tmp_path, capsys):
     good = tmp_path / "good" / "poses.npz"
     with PosesWriter(good, list(model.names), list(model.joint_names), 30.0) as writer:
         for index, pose in enumerate(poses):
-            writer.append(index, pose, joint_centres(pose), 0, 1.0)
+            writer.append(index, pose, joint_centres(pose), status=0, residual=1.0)
     assert "--samples 3: too few" in error("--model", human, "--poses", str(good), "--samples", "3")

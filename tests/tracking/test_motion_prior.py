@@ -98,7 +98,7 @@ def test_discrete_propagation_equals_the_continuous_riccati_solution(dt, q, deca
         k3 = rhs(p + 0.5 * h * k2)
         k4 = rhs(p + h * k3)
         p = p + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    exact = motion_prior.propagate_covariance(p0, dt, q, decay)
+    exact = motion_prior.propagate_covariance(p0, dt, q=q, decay=decay)
     np.testing.assert_allclose(exact, p, rtol=1e-9, atol=1e-14 * np.abs(p).max())
     # the mean's transition is exp(F dt), and the noise term alone is the integral with P0 = 0
     np.testing.assert_allclose(
@@ -233,7 +233,7 @@ def test_a_constant_velocity_trajectory_is_tracked_exactly_without_lag():
     info = np.broadcast_to(np.diag([1e4, 1e4, 1e4]), (4, 2, 3, 3))
     errors = []
     for k in range(1, count):
-        state = motion_prior.predict(state, dt, (1.0, 30.0))
+        state = motion_prior.predict(state, dt, q=(1.0, 30.0))
         errors.append(max(np.abs(state.poses - truth[k]).max() for _ in [0]))
         state = update(state, truth[k], info)
     assert errors[0] > 1e-3  # started at rest: the first prediction lags
@@ -251,10 +251,10 @@ def test_a_component_without_measurements_keeps_moving_and_its_covariance_grows(
     floor = (10.0, 0.1)
     priors, traces = [], []
     for k in range(1, count):
-        state = motion_prior.predict(state, dt, (1.0, 30.0))
+        state = motion_prior.predict(state, dt, q=(1.0, 30.0))
         if k > 100:
             np.testing.assert_allclose(state.poses, truth[k], atol=1e-9)  # still on its trajectory
-            priors.append(motion_prior.prior_information(state, 1.0, floor))
+            priors.append(motion_prior.prior_information(state, scale=1.0, floor=floor))
             traces.append(np.trace(state.covariance, axis1=-2, axis2=-1))
             info[1] = 0.0  # component 1 loses its data
         before = state
@@ -281,14 +281,14 @@ def test_prior_information_is_the_inverse_position_covariance_in_body_twist_coor
     poses = _random_poses(rng, 2)
     cov = np.stack([np.stack([_spd(rng, scale=1e-4), _spd(rng, scale=1e-3)]) for _ in range(2)])
     state = motion_prior.MotionState(poses, np.zeros((2, 2, 3)), cov)
-    prior = motion_prior.prior_information(state, 0.5)
+    prior = motion_prior.prior_information(state, scale=0.5)
     for i in range(2):
         r = poses[i, :3, :3]
         # a body twist (v, 0) moves the origin by R v: its cost is (R v)^T Pt^-1 (R v)
         np.testing.assert_allclose(prior[i, :3, :3], 0.5 * r.T @ np.linalg.inv(cov[i, 0, :3, :3]) @ r, rtol=1e-9)
         np.testing.assert_allclose(prior[i, 3:, 3:], 0.5 * np.linalg.inv(cov[i, 1, :3, :3]), rtol=1e-9)
         np.testing.assert_array_equal(prior[i, :3, 3:], 0.0)
-    floored = motion_prior.prior_information(state, 1e-9, (7.0, 3.0))
+    floored = motion_prior.prior_information(state, scale=1e-9, floor=(7.0, 3.0))
     np.testing.assert_allclose(floored[:, :3, :3], np.broadcast_to(7.0 * np.eye(3), (2, 3, 3)), rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(floored[:, 3:, 3:], np.broadcast_to(3.0 * np.eye(3), (2, 3, 3)), rtol=1e-6, atol=1e-12)
 
@@ -363,7 +363,7 @@ def test_variance_factor_is_the_weighted_residual_variance_per_component():
     offset = np.concatenate([rng.normal(0, 0.5, 400), rng.normal(0, 3.0, 30), rng.normal(0, 1.0, 7)])
     weight = 1.0 / (2.0 + np.abs(offset))
     offset[::10], weight[::10] = np.nan, 0.0
-    factor = motion_prior.variance_factor(component, offset, weight, 4)
+    factor = motion_prior.variance_factor(component, offset, weight, n_components=4)
     found = weight > 0
     sums = np.array([np.sum((weight * offset**2)[found & (component == i)]) for i in range(4)])
     counts = np.array([np.sum(found & (component == i)) for i in range(4)])
@@ -371,7 +371,10 @@ def test_variance_factor_is_the_weighted_residual_variance_per_component():
     np.testing.assert_allclose(factor, (sums + 12 * pooled) / (np.maximum(counts - 6, 0) + 12), rtol=1e-12)
     assert factor[1] > 5 * factor[0]  # the noisy component is trusted less
     assert factor[2] == pytest.approx(pooled)  # no samples: the pooled value
-    np.testing.assert_array_equal(motion_prior.variance_factor(component[:0], offset[:0], weight[:0], 2), 1.0)
     np.testing.assert_array_equal(
-        motion_prior.variance_factor(component[:0], offset[:0], weight[:0], 2, fallback=[0.2, 0.3]), [0.2, 0.3]
+        motion_prior.variance_factor(component[:0], offset[:0], weight[:0], n_components=2), 1.0
+    )
+    np.testing.assert_array_equal(
+        motion_prior.variance_factor(component[:0], offset[:0], weight[:0], n_components=2, fallback=[0.2, 0.3]),
+        [0.2, 0.3],
     )

@@ -111,7 +111,9 @@ def unit(rng):
 
 
 def sample(model, poses, cams, spacing=3.0, capacity=20000):
-    s = sample_outlines(model, np.ascontiguousarray(poses), Rig.from_cameras(cams), spacing, Samples.allocate(capacity))
+    s = sample_outlines(
+        model, np.ascontiguousarray(poses), Rig.from_cameras(cams), spacing=spacing, samples=Samples.allocate(capacity)
+    )
     assert s.count < capacity
     return s
 

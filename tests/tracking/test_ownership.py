@@ -133,7 +133,7 @@ def human_views():
     poses, _, _ = motion_poses(model, "procedural", 60, seed=4)
     views = []
     for f in (0, 25, 59):
-        samples = sample_outlines(model, poses[f], rig, 4.0, Samples.allocate(20000))
+        samples = sample_outlines(model, poses[f], rig, spacing=4.0, samples=Samples.allocate(20000))
         views.append((poses[f], samples))
     return model, cameras, rig, views
 
@@ -244,7 +244,7 @@ def facing(model, focal=500.0):
     )
     rig = Rig.from_cameras([camera])
     poses = np.stack([np.eye(4), np.eye(4)])
-    samples = sample_outlines(model, poses, rig, 2.0, Samples.allocate(2000))
+    samples = sample_outlines(model, poses, rig, spacing=2.0, samples=Samples.allocate(2000))
     return poses, rig, samples
 
 

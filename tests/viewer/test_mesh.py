@@ -36,7 +36,7 @@ def test_clipped_ellipsoid_is_closed_by_caps_inside_the_clip():
 def test_cone_mesh_on_its_surface_with_the_frustum_volume():
     start, end, r0, r1 = np.array([0.0, 0.1, 0.0]), np.array([0.2, 0.1, -0.3]), 0.05, 0.03
     v, f = cone_mesh(start, end, r0, r1, segments=128)
-    side = np.abs(quadric.evaluate(quadric.cone(start, end, r0, r1), v)) < 1e-9
+    side = np.abs(quadric.evaluate(quadric.cone(start, end, radius_start=r0, radius_end=r1), v)) < 1e-9
     assert side[:256].all()  # both rings lie on the cone; the cap centres are on the axis
     length = np.linalg.norm(end - start)
     assert volume(v, f) == pytest.approx(np.pi * length * (r0 * r0 + r0 * r1 + r1 * r1) / 3, rel=2e-3)

@@ -119,7 +119,9 @@ def track_run(
     started = time.perf_counter()
     try:
         with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
-            for index, images in tracked_frames(stream, recording, 0, recording.frame_count, tracker.smooth):
+            for index, images in tracked_frames(
+                stream, recording, start=0, stop=recording.frame_count, prepare=tracker.smooth
+            ):
                 mark = time.perf_counter()
                 keypoints = None if stream is None else stream.get(index)
                 _, spent = step_and_write(tracker, writer, index, images, keypoints=keypoints)
@@ -246,7 +248,7 @@ def long_run(
                 stop = min(recording.frame_count, total - done)
                 stream = _stream(recording, stop, keypoint_step, settings)
                 try:
-                    for index, images in tracked_frames(stream, recording, 0, stop, tracker.smooth):
+                    for index, images in tracked_frames(stream, recording, start=0, stop=stop, prepare=tracker.smooth):
                         keypoints = None if stream is None else stream.get(index)
                         step_and_write(tracker, writer, done, images, keypoints=keypoints)
                         done += 1

@@ -235,7 +235,7 @@ def _landmarks_now(
         return None
     number, pixels, confidence = newest
     component, point, _ = tracker.landmarks
-    moved = transferred(pixels, history[number], tracker.poses, cameras, component, point)
+    moved = transferred(pixels, history[number], tracker.poses, cameras=cameras, component=component, point=point)
     return moved[list(rig)], confidence[list(rig)]
 
 

@@ -38,5 +38,13 @@ def step_and_write(
     if check is not None:
         result = check(tracker, images, keypoints, result)
     spent = time.perf_counter() - begun
-    writer.append(index, result.poses, joint_centres(result.poses), result.status, result.residual, spent, at)
+    writer.append(
+        index,
+        result.poses,
+        joint_centres(result.poses),
+        status=result.status,
+        residual=result.residual,
+        elapsed=spent,
+        time=at,
+    )
     return result, spent

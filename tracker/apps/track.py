@@ -163,7 +163,7 @@ def track(
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
         try:
-            read = tracked_frames(stream, rec, begin, stop, prepare=prepare, colour=background is not None)
+            read = tracked_frames(stream, rec, start=begin, stop=stop, prepare=prepare, colour=background is not None)
             for index, images in progress(read, total=stop - begin):
                 shown = images
                 if shows:

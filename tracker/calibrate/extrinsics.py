@@ -331,6 +331,7 @@ def calibrate_rig(
     board: Board,
     cameras: list[Camera],
     views: list[dict[int, Detection]],
+    *,
     refine_intrinsics: bool = False,
     keep_frames: tuple[int, ...] = (),
     max_frames: int = 300,

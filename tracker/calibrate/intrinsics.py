@@ -87,7 +87,7 @@ def select_views(detections: dict[int, Detection], size: tuple[int, int], limit:
 
 
 def calibrate_intrinsics(
-    board: Board, detections: dict[int, Detection], size: tuple[int, int], max_views: int = 40
+    board: Board, detections: dict[int, Detection], size: tuple[int, int], *, max_views: int = 40
 ) -> Intrinsics:
     """K and distortion of one camera from its board detections (at least MIN_VIEWS; the caller checks)."""
     frames = select_views(detections, size, max_views)

@@ -71,6 +71,7 @@ class Calibration:
 def calibrate(
     folder,
     board: Board,
+    *,
     intrinsics_only: bool = False,
     fixed=None,
     world: str = "first-camera",

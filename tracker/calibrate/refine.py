@@ -47,7 +47,7 @@ class Refined:
 
 
 def camera_rows(
-    jacobian: np.ndarray, camera: np.ndarray, component: np.ndarray, rig_pose: np.ndarray, poses: np.ndarray
+    jacobian: np.ndarray, camera: np.ndarray, component: np.ndarray, *, rig_pose: np.ndarray, poses: np.ndarray
 ) -> np.ndarray:
     """Rows J_s = L_s Ad((P_k E_i)^-1) (S, 6) of samples with rows L_s (S, 6) seen by cameras ``camera`` (S,)
     of components ``component`` (S,), with camera-from-world ``rig_pose`` (K, 4, 4) and world-from-component
@@ -63,7 +63,11 @@ def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], 
     found = seen.weight > 0
     camera, component = seen.camera[found], seen.component[found]
     rows = camera_rows(
-        tracker.samples.jacobian[: len(found)][found], camera, component, tracker.rig.camera_from_world, poses
+        tracker.samples.jacobian[: len(found)][found],
+        camera,
+        component,
+        rig_pose=tracker.rig.camera_from_world,
+        poses=poses,
     )
     return camera, rows, seen.offset[found], seen.weight[found]
 
@@ -86,6 +90,7 @@ def refine_rig(
     model: Model,
     cameras: Sequence[Camera],
     poses: np.ndarray,
+    *,
     frames: Sequence[Sequence[np.ndarray]],
     settings: Settings = Settings(),
     rounds: int = ROUNDS,

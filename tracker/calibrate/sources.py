@@ -97,7 +97,7 @@ def _frames(source: Path, stride: int):
 
 
 def detect_all(
-    board: Board, cameras: list[CameraViews], max_frames: int = 300, workers: int = 2, progress: bool = True
+    board: Board, cameras: list[CameraViews], *, max_frames: int = 300, workers: int = 2, progress: bool = True
 ) -> None:
     """Search every camera's frames for the board (subsampled to about ``max_frames`` per camera),
     filling in each CameraViews; cameras run in parallel threads (OpenCV releases the GIL).  An error in

@@ -53,8 +53,8 @@ def run(args: argparse.Namespace) -> int:
     cleared = cleared_background(
         rec,
         model,
-        results["frame"][usable],
-        results["poses"][usable],
+        frames=results["frame"][usable],
+        poses=results["poses"][usable],
         progress=options.bar(args, "background", "frame"),
         **given,
     )

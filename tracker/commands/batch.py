@@ -127,7 +127,7 @@ def tracking_options(args: argparse.Namespace) -> dict:
     return chosen
 
 
-def track_recording(recording: str, name: str, out: str, chosen: dict):
+def track_recording(recording: str, name: str, out: str, *, chosen: dict):
     """The Ray task: ``tracker track recording --out out`` with the ``chosen`` tracking options, its output in
     OUT/track.log; the recording's row, failed with the error's line for bad input. Any other exception is the
     driver's to retry."""
@@ -271,7 +271,7 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool
         pending: dict = {}  # task -> (job, its try)
 
         def submit(job: Job, attempt: int) -> None:
-            pending[task.remote(str(job.recording), job.name, str(job.out), chosen)] = (job, attempt)
+            pending[task.remote(str(job.recording), job.name, str(job.out), chosen=chosen)] = (job, attempt)
 
         progress = options.bar(args, "recordings", "recording", leave=True)(total=len(todo))
         try:

@@ -31,6 +31,6 @@ def run(args: argparse.Namespace) -> int:
     """Write the file and print ``wrote FILE``."""
     from tracker.io.export import export
 
-    target = export(args.poses, args.to, args.out, args.model, args.fps)
+    target = export(args.poses, args.to, args.out, model=args.model, fps=args.fps)
     print(f"wrote {target}")
     return 0

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     start = Path(args.init) if args.init else rec.init_path
     poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start)
     out = Path(args.out)
-    Placement(scene(args, rec, model, Settings()), rec, model, poses, out, frame=args.start)
+    Placement(scene(args, rec, model, settings=Settings()), rec, model, poses, out, frame=args.start)
     return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
 
 

@@ -107,7 +107,7 @@ def camera_names(text: str | None) -> list[str] | None:
     return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
 
-def choose(given: str | None, found: Path | None, what: str, option: str, rec: Path) -> Path:
+def choose(given: str | None, found: Path | None, *, what: str, option: str, rec: Path) -> Path:
     """The file an option names, else the one found in the recording folder ``rec``."""
     if given:
         return Path(given)
@@ -311,7 +311,7 @@ def opened(args: argparse.Namespace):
     from tracker.model import load_model
 
     rec = recording(args)
-    return rec, load_model(choose(args.model, rec.model_path, "model.toml", "--model", rec.path))
+    return rec, load_model(choose(args.model, rec.model_path, what="model.toml", option="--model", rec=rec.path))
 
 
 def truth(rec):

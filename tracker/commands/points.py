@@ -93,11 +93,15 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with PosesWriter(out / "poses.npz", list(model.parts), list(model.joint_names), markers.rate) as writer:
         try:
-            fits = track((points[f] for f in frames), model, settings, args.every / markers.rate)
+            fits = track((points[f] for f in frames), model, settings=settings, interval=args.every / markers.rate)
             for index, fitted in progress(zip(frames, fits), total=len(frames)):
                 shapes.append(markers.first_frame + index, fitted)  # before poses: see shapes.write below
                 writer.append(
-                    markers.first_frame + index, fitted.poses, fitted.joints, fitted.status, fitted.rms * 1000.0
+                    markers.first_frame + index,
+                    fitted.poses,
+                    fitted.joints,
+                    status=fitted.status,
+                    residual=fitted.rms * 1000.0,
                 )
         except KeyboardInterrupt:
             interrupted = True

@@ -96,12 +96,12 @@ def run(args: argparse.Namespace) -> int:
         model,
         rec.cameras,
         results["poses"][picked],
-        frames,
-        settings,
-        args.rounds or ROUNDS,
-        [names.index(name) for name in fixed],
-        not args.hold_poses,
-        options.bar(args, "refining", "round"),
+        frames=frames,
+        settings=settings,
+        rounds=args.rounds or ROUNDS,
+        fixed=[names.index(name) for name in fixed],
+        refit=not args.hold_poses,
+        progress=options.bar(args, "refining", "round"),
     )
     moved = {camera.name: camera for camera in refined.cameras}
     rig = [

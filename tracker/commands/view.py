@@ -41,7 +41,9 @@ def run(args: argparse.Namespace) -> int:
 
         background = load_background(args.background, rec)
     truth = options.truth(rec)
-    review = Review(scene(args, rec, model, settings, truth), rec, model, results, truth, settings, background)
+    review = Review(
+        scene(args, rec, model, settings=settings, truth=truth), rec, model, results, truth, settings, background
+    )
     review.show(0)
     if args.record:
         review.record(Path(args.record), progress=not args.quiet)

@@ -7,7 +7,7 @@ import sys
 import threading
 
 
-def scene(args: argparse.Namespace, rec, model, settings, truth=None):
+def scene(args: argparse.Namespace, rec, model, *, settings, truth=None):
     """A viewer scene of ``rec``'s cameras and ``model`` on a server at ``--host``/``--port``, with the
     joints of ``truth`` (truth.npz arrays) when given."""
     from tracker.viewer.scene import Scene, start_server

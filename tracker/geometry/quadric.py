@@ -45,7 +45,7 @@ def axis_frame(start, end) -> np.ndarray:
     return out
 
 
-def cone(start, end, radius_start, radius_end) -> np.ndarray:
+def cone(start, end, *, radius_start, radius_end) -> np.ndarray:
     """Truncated cone (a cylinder when the radii are equal) along start -> end.
 
     With s the distance along the axis from ``start`` and k = (r1 - r0)/L, the

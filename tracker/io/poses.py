@@ -107,6 +107,7 @@ class PosesWriter:
         frame_index: int,
         poses: np.ndarray,
         joints: np.ndarray,
+        *,
         status: int,
         residual: float,
         elapsed: float = np.nan,

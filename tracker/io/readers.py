@@ -109,7 +109,7 @@ def keeping_grey(prepare: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.nd
 
 
 def grey_frames(
-    source: Path, start: int = 0, colour: bool = False, step: int = 1, copies: ColourCopies | None = None
+    source: Path, start: int = 0, *, colour: bool = False, step: int = 1, copies: ColourCopies | None = None
 ) -> Generator[Any, None, None]:
     """Grey (or, with ``colour``, BGR) frames start, start + step, ... of one video file or image folder (the
     caller stops); the frames between are skipped undecoded where the container allows.  The frames ``copies``
@@ -292,7 +292,7 @@ class _Reader:
         self.thread.start()
 
     def _run(self) -> None:
-        frames = grey_frames(self.source, self.start, self.colour, self.step, self.copies)
+        frames = grey_frames(self.source, self.start, colour=self.colour, step=self.step, copies=self.copies)
         try:
             for image in itertools.islice(frames, self.count):
                 if not self._put(self._prepared(image)):
@@ -333,6 +333,7 @@ def read_frames(
     sources: list[Path],
     start: int,
     stop: int,
+    *,
     queue_size: int = 4,
     prepare=None,
     colour: bool = False,

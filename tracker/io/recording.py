@@ -129,6 +129,7 @@ def frames(
     recording: Recording,
     start: int = 0,
     stop: int | None = None,
+    *,
     prepare=None,
     colour: bool = False,
     step: int = 1,

@@ -79,8 +79,8 @@ def readings(
     cameras: list[Camera],
     pixels: np.ndarray,
     normalised: np.ndarray,
-    limits: np.ndarray,
     *,
+    limits: np.ndarray,
     swaps: bool = False,
     among: np.ndarray | None = None,
 ) -> list[Reading]:

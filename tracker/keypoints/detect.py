@@ -84,7 +84,7 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
     )
 
 
-def detections(recording: Recording, start: int, stop: int, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
+def detections(recording: Recording, start: int, stop: int, *, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
     """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
     camera in video mode (so each follows its person from detected frame to detected frame).  MediaPipe's
     native logs are muted the whole time (:func:`tracker.keypoints.detector.native_logs_muted`): a progress bar
@@ -97,11 +97,11 @@ def detections(recording: Recording, start: int, stop: int, step: int = 1) -> It
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):
-            yield index, frame_keypoints(index, detect_views(detectors, images), names, identity)
+            yield index, frame_keypoints(index, detect_views(detectors, images), names=names, identity=identity)
 
 
 def frame_keypoints(
-    index: int, found: list[Detection], names: tuple[str, ...], identity: str, reduction: np.ndarray | None = None
+    index: int, found: list[Detection], *, names: tuple[str, ...], identity: str, reduction: np.ndarray | None = None
 ) -> Keypoints:
     """One frame's keypoints from its views' detections; with ``reduction`` (one integer factor per camera) the
     detections were made in images reduced by it (:func:`tracker.io.readers.reduced`), and their pixels are taken
@@ -152,7 +152,7 @@ def detect_recording(
     wanted = np.arange(start, stop, step)
     if (reused := holding(old, wanted)) is not None:
         return reused, True
-    keypoints = stacked([row for _, row in progress(detections(recording, start, stop, step), total=len(wanted))])
+    keypoints = stacked([row for _, row in progress(detections(recording, start, stop, step=step), total=len(wanted))])
     if cache is not None:
         save_keypoints(cache, merged(old, keypoints))
     return keypoints, False

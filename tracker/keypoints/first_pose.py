@@ -44,8 +44,8 @@ def snap_to_edges(
     model: Model,
     cameras: list[Camera],
     poses: np.ndarray,
-    images: list[np.ndarray],
     *,
+    images: list[np.ndarray],
     keypoints: tuple[np.ndarray, np.ndarray] | None = None,
     settings: Settings = SNAP,
     rounds: int = SNAP_ROUNDS,
@@ -84,7 +84,7 @@ def fitted_to_frames(
     row_of = {int(frame): row for row, frame in enumerate(keypoints.frame)}
     rows = np.array([row_of[int(frame)] for frame in found.frames], np.int64)
     agreeing = np.where(found.agree, keypoints.confidence[rows], 0.0)
-    return fit_to_views(model, fitted, cameras, keypoints.pixels[rows], agreeing)
+    return fit_to_views(model, fitted, cameras, pixels=keypoints.pixels[rows], confidence=agreeing)
 
 
 def first_pose(
@@ -120,4 +120,4 @@ def first_pose(
     checked = consistent(keypoints.rows(slice(0, 1)), recording.cameras)[0]
     snap = dataclasses.replace(settings, iterations=SNAP.iterations)
     landmarks = (checked.pixels[0], checked.confidence[0])
-    return snap_to_edges(model, recording.cameras, poses, images, keypoints=landmarks, settings=snap).poses
+    return snap_to_edges(model, recording.cameras, poses, images=images, keypoints=landmarks, settings=snap).poses

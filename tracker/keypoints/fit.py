@@ -312,9 +312,9 @@ def fit_to_views(
     model: Model,
     poses: np.ndarray,
     cameras: list[Camera],
+    *,
     pixels: np.ndarray,
     confidence: np.ndarray,
-    *,
     min_confidence: float = 0.5,
 ) -> np.ndarray:
     """``poses`` (N, 4, 4) refined so that the model's landmark points project onto their detections, ``pixels``

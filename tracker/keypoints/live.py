@@ -117,6 +117,7 @@ def transferred(
     pixels: np.ndarray,
     then: np.ndarray,
     now: np.ndarray,
+    *,
     cameras: list[Camera],
     component: np.ndarray,
     point: np.ndarray,

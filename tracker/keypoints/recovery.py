@@ -131,7 +131,7 @@ class Recovery:
                 (confidence[0, 0] >= self.min_confidence) & np.isfinite(pixels[0, 0]).all(axis=1)
             ).sum() < MIN_LANDMARKS:
                 return None
-            return fit_to_views(self.model, start, self.cameras, pixels[:1], confidence[:1])
+            return fit_to_views(self.model, start, self.cameras, pixels=pixels[:1], confidence=confidence[:1])
         names = tuple(camera.name for camera in self.cameras)
         frames = np.arange(len(self.recent))  # row numbers: the newest is row 0
         recent = Keypoints(frames, names, pixels, confidence, np.full((*pixels.shape[:3], 3), np.nan))
@@ -171,7 +171,7 @@ class Recovery:
             self.back_off()
             return result
         snapped = snap_to_edges(
-            self.model, self.cameras, seed, images, keypoints=keypoints, settings=tracker.settings, smoothed=True
+            self.model, self.cameras, seed, images=images, keypoints=keypoints, settings=tracker.settings, smoothed=True
         )
         if result.status != LOST and snapped.share < result.share:
             self.declined += 1

@@ -84,7 +84,7 @@ def _work(recording: Recording, start: int, stop: int, step: int, results, fed=N
             else:
                 runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
                 for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-                    for _, raw in detections(recording, first, last, every):
+                    for _, raw in detections(recording, first, last, step=every):
                         results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
@@ -98,7 +98,9 @@ def _detect_fed(recording: Recording, fed, reduction, results) -> None:
     try:
         while (item := fed.get()) is not None:
             index, images = item
-            raw = frame_keypoints(index, detect_views(detectors, images), names, identity, reduction)
+            raw = frame_keypoints(
+                index, detect_views(detectors, images), names=names, identity=identity, reduction=reduction
+            )
             results.put((raw, consistent(raw, recording.cameras)[0]))
     finally:
         for detector in detectors:
@@ -106,7 +108,7 @@ def _detect_fed(recording: Recording, fed, reduction, results) -> None:
 
 
 def tracked_frames(
-    stream: KeypointStream | None, recording: Recording, start: int, stop: int, prepare=None, colour: bool = False
+    stream: KeypointStream | None, recording: Recording, *, start: int, stop: int, prepare=None, colour: bool = False
 ) -> Iterator[tuple[int, list]]:
     """:func:`tracker.io.recording.frames` for the frame loop beside ``stream``: a fed stream gets the scheduled
     frames' colour images from the readers (:func:`_fed_ahead`)."""

@@ -94,7 +94,7 @@ def frame_by_frame(
     agree = np.zeros(pixels.shape[:3], bool)
     for row in range(len(rows)):
         points[row], views[row], read_as = frame_points(
-            cameras, pixels[row], normalised[row], limits, distances, farthest
+            cameras, pixels[row], normalised[row], limits=limits, distances=distances, farthest=farthest
         )
         points[row] = within_reach(points[row], farthest)
         kept = np.isfinite(points[row]).all(axis=1)
@@ -153,6 +153,7 @@ def frame_points(
     cameras: list[Camera],
     pixels: np.ndarray,
     normalised: np.ndarray,
+    *,
     limits: np.ndarray,
     distances: np.ndarray,
     farthest: np.ndarray,
@@ -169,11 +170,11 @@ def frame_points(
 
     def read(pixels: np.ndarray, normalised: np.ndarray) -> dict[tuple[int, ...], list[Reading]]:
         return {
-            group: readings(cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2)
+            group: readings(cameras, pixels[:, group], normalised[:, group], limits=limits, swaps=len(group) == 2)
             for group in lateral + limbs + singles
         }
 
-    stray = strays(cameras, pixels, normalised, limits, lateral + limbs + singles)
+    stray = strays(cameras, pixels, normalised, limits=limits, groups=lateral + limbs + singles)
     found = read(np.where(stray[:, None, None], np.nan, pixels), np.where(stray[:, None, None], np.nan, normalised))
     points = np.full((len(LANDMARKS), 3), np.nan)
     views = np.zeros(len(LANDMARKS), np.int64)
@@ -211,6 +212,7 @@ def strays(
     cameras: list[Camera],
     pixels: np.ndarray,
     normalised: np.ndarray,
+    *,
     limits: np.ndarray,
     groups: list[tuple[int, ...]],
 ) -> np.ndarray:
@@ -227,7 +229,7 @@ def strays(
         agreeing = np.zeros(len(cameras))
         for group in groups:
             found = readings(
-                cameras, pixels[:, group], normalised[:, group], limits, swaps=len(group) == 2, among=among
+                cameras, pixels[:, group], normalised[:, group], limits=limits, swaps=len(group) == 2, among=among
             )
             agreeing += found[0].agree.sum(axis=1) if found else 0
         if agreeing.sum() > best.sum():

@@ -150,6 +150,7 @@ def assemble(
     parts: Sequence[kin.Part],
     meshes: Sequence[sq.Mesh],
     joints: Sequence[Joint],
+    *,
     levels: int | Sequence[int] = LOCAL,
 ) -> Body:
     """A body from parts (whose u, v are their mesh's nodes), joints and levels (one or per part).
@@ -252,7 +253,11 @@ def constraint_jacobian(body: Body, index: Sequence[np.ndarray]) -> np.ndarray:
     jac_a = [jacobians[j.a][row] for j, row in zip(body.joints, body.rows[:, 0])]
     jac_b = [jacobians[j.b][row] for j, row in zip(body.joints, body.rows[:, 1])]
     return con.stack_jacobian(
-        jac_a, jac_b, [j.a for j in body.joints], [j.b for j in body.joints], [len(i) for i in index]
+        jac_a,
+        jac_b,
+        parts_a=[j.a for j in body.joints],
+        parts_b=[j.b for j in body.joints],
+        sizes=[len(i) for i in index],
     )
 
 
@@ -309,7 +314,7 @@ def residuals(body: Body, points: np.ndarray, labels: np.ndarray | None = None) 
 def stiffnesses(body: Body, w0: float, w1: float) -> list[sp.csr_matrix | None]:
     """K_node of every LOCAL part over its current shell (``fitting.stiffness``), None otherwise."""
     return [
-        fit.stiffness(p, m.triangles, w0, w1) if level == LOCAL else None
+        fit.stiffness(p, m.triangles, w0=w0, w1=w1) if level == LOCAL else None
         for p, m, level in zip(body.parts, body.meshes, body.levels)
     ]
 
@@ -317,6 +322,7 @@ def stiffnesses(body: Body, w0: float, w1: float) -> list[sp.csr_matrix | None]:
 def free_forces(
     body: Body,
     attachments: Sequence[Attachment | None],
+    *,
     sigma: float,
     k_nodes: Sequence[sp.spmatrix | None],
     index: Sequence[np.ndarray],
@@ -327,7 +333,7 @@ def free_forces(
     for part, att, k_node, idx in zip(body.parts, attachments, k_nodes, index):
         f = np.zeros(part.n_coordinates)
         if att is not None and len(att.points):
-            f = fit.data_force(part, att.points, att.nodes, sigma)
+            f = fit.data_force(part, att.points, att.nodes, sigma=sigma)
         if k_node is not None:
             f[_LOCAL_START:] -= (k_node @ part.d).ravel()
         out.append(f[idx])
@@ -342,6 +348,7 @@ def _constraint_forces(n: np.ndarray, r: np.ndarray) -> np.ndarray:
 def first_order_step(
     body: Body,
     attachments: Sequence[Attachment | None],
+    *,
     sigma: float,
     k_nodes: Sequence[sp.spmatrix | None],
     dt: float,
@@ -355,9 +362,9 @@ def first_order_step(
 
     so Cdot = -a C and C(t) = C0 e^{-at}.  ``cap`` limits the levels (GLOBAL freezes d)."""
     index = active(body, cap)
-    qdot_free = np.concatenate(free_forces(body, attachments, sigma, k_nodes, index))
+    qdot_free = np.concatenate(free_forces(body, attachments, sigma=sigma, k_nodes=k_nodes, index=index))
     g = constraint_jacobian(body, index)
-    n, r = con.first_order_system(g, None, qdot_free, violation(body), a)
+    n, r = con.first_order_system(g, None, qdot_free, violation=violation(body), a=a)
     qdot = qdot_free + g.T @ _constraint_forces(n, r)
     return advance(body, _split(dt * qdot, index), index)
 
@@ -365,6 +372,7 @@ def first_order_step(
 def first_order_limit(
     body: Body,
     attachments: Sequence[Attachment | None],
+    *,
     sigma: float,
     k_nodes: Sequence[sp.spmatrix | None],
     cap: int = LOCAL,
@@ -379,13 +387,14 @@ def first_order_limit(
         nodes = att.nodes if att is not None else np.zeros(0, dtype=np.int64)
         if len(nodes) or k_node is not None:
             k = k_node if k_node is not None else sp.csr_matrix((len(part.u),) * 2)
-            limits.append(fit.stability_limit(part, nodes, sigma, k, idx))
+            limits.append(fit.stability_limit(part, nodes, sigma=sigma, k_node=k, coordinates=idx))
     return min(limits)
 
 
 def fit_frame(
     body: Body,
     points: np.ndarray,
+    *,
     sigma: float,
     n_global: int,
     n_local: int,
@@ -413,9 +422,9 @@ def fit_frame(
         if step % reassign_every == 0 or step == n_global:
             attachments = attach(body, points, labels)
             k_nodes = stiffnesses(body, w0, w1) if cap == LOCAL else [None] * len(body.parts)
-            dt = step_fraction * first_order_limit(body, attachments, sigma, k_nodes, cap)
+            dt = step_fraction * first_order_limit(body, attachments, sigma=sigma, k_nodes=k_nodes, cap=cap)
         history.append(_progress(body, attachments))
-        body = first_order_step(body, attachments, sigma, k_nodes, dt, decay / dt, cap)
+        body = first_order_step(body, attachments, sigma=sigma, k_nodes=k_nodes, dt=dt, a=decay / dt, cap=cap)
     history.append(_progress(body, attach(body, points, labels)))
     return body, np.array(history)
 
@@ -433,6 +442,7 @@ def _progress(body: Body, attachments: Sequence[Attachment]) -> tuple[float, flo
 def initial_body(
     points: np.ndarray,
     labels: np.ndarray,
+    *,
     meshes: Sequence[sq.Mesh],
     joints: Sequence[Joint],
     levels: int | Sequence[int] = LOCAL,
@@ -443,7 +453,7 @@ def initial_body(
     seen = np.isfinite(points).all(axis=1)
     labels = np.where(seen, labels, -1)
     parts = [fit.initial_part(points[labels == p], m.u, m.v) for p, m in enumerate(meshes)]
-    return assemble(parts, meshes, joints, levels)
+    return assemble(parts, meshes, joints, levels=levels)
 
 
 def material_points(part: kin.Part, mesh: sq.Mesh, points: Sequence[tuple[float, float]]) -> np.ndarray:
@@ -456,7 +466,7 @@ def node_jacobians(body: Body, index: Sequence[np.ndarray]) -> list[np.ndarray]:
     return [kin.active_jacobians(p, idx) for p, idx in zip(body.parts, index)]
 
 
-def lumped_masses(body: Body, jacobians: Sequence[np.ndarray], mass: float, regularizer: float) -> list[np.ndarray]:
+def lumped_masses(body: Body, jacobians: Sequence[np.ndarray], *, mass: float, regularizer: float) -> list[np.ndarray]:
     """M per part on its active coordinates: sum_i m_i L_i^T L_i with m_i = mass / n (each part
     weighs ``mass``), plus regularizer * mass * I for non-rigid parts (``kinematics.lumped_mass``;
     section 3).  Their M alone is singular: q_s and d can move the nodes alike (rank <= 3 n),
@@ -486,6 +496,7 @@ def second_order_step(
     body: Body,
     qdots: Sequence[np.ndarray],
     attachments: Sequence[Attachment | None],
+    *,
     sigma: float,
     k_nodes: Sequence[sp.spmatrix | None],
     dt: float,
@@ -505,16 +516,18 @@ def second_order_step(
     coasts.  Returns the moved body and the new velocities."""
     index = active(body)
     jacobians = node_jacobians(body, index)
-    masses = lumped_masses(body, jacobians, mass, regularizer)
+    masses = lumped_masses(body, jacobians, mass=mass, regularizer=regularizer)
     full = [_scatter(p, q, idx) for p, q, idx in zip(body.parts, qdots, index)]
-    forces = free_forces(body, attachments, sigma, k_nodes, index)
+    forces = free_forces(body, attachments, sigma=sigma, k_nodes=k_nodes, index=index)
     for p, (part, l, m, qdot) in enumerate(zip(body.parts, jacobians, masses, qdots)):
         g_q = -np.einsum("iak,ia->k", l, kin.velocity_products(part, full[p])) * (mass / len(part.u))
         forces[p] = forces[p] + g_q - damping.rate(p) * (m @ qdot) - damping.beta * qdot
     force = np.concatenate(forces)
     qdot = np.concatenate(qdots)
     g = constraint_jacobian(body, index)
-    n, r = con.second_order_system(g, masses, force, qdot, constraint_velocity_products(body, full), violation(body), a)
+    n, r = con.second_order_system(
+        g, masses, force, qdot=qdot, gdot_qdot=constraint_velocity_products(body, full), violation=violation(body), a=a
+    )
     new = _split(qdot + dt * con.block_solve(masses, force + g.T @ _constraint_forces(n, r)), index)
     return advance(body, [dt * q for q in new], index), new
 
@@ -522,6 +535,7 @@ def second_order_step(
 def second_order_limit(
     body: Body,
     attachments: Sequence[Attachment | None],
+    *,
     sigma: float,
     k_nodes: Sequence[sp.spmatrix | None],
     damping: Damping = Damping(),
@@ -539,7 +553,14 @@ def second_order_limit(
     jacobians = node_jacobians(body, index)
     limits = []
     for p, (part, att, k_node, idx, l, m) in enumerate(
-        zip(body.parts, attachments, k_nodes, index, jacobians, lumped_masses(body, jacobians, mass, regularizer))
+        zip(
+            body.parts,
+            attachments,
+            k_nodes,
+            index,
+            jacobians,
+            lumped_masses(body, jacobians, mass=mass, regularizer=regularizer),
+        )
     ):
         stiff = np.zeros((len(idx),) * 2)
         if att is not None and len(att.points):

@@ -19,6 +19,7 @@ import scipy.linalg as sla
 def stack_jacobian(
     jacobians_a: list[np.ndarray],
     jacobians_b: list[np.ndarray],
+    *,
     parts_a: list[int],
     parts_b: list[int],
     sizes: list[int],
@@ -54,6 +55,7 @@ def second_order_system(
     g: np.ndarray,
     mass_blocks: list[np.ndarray],
     forces: np.ndarray,
+    *,
     qdot: np.ndarray,
     gdot_qdot: np.ndarray,
     violation: np.ndarray,
@@ -75,6 +77,7 @@ def first_order_system(
     g: np.ndarray,
     damping_blocks: list[np.ndarray] | None,
     qdot_free: np.ndarray,
+    *,
     violation: np.ndarray,
     a: float,
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -256,13 +256,13 @@ def track(world: Truth, observed: np.ndarray, noise: np.ndarray) -> tuple[np.nda
         kf.initial_state(part),
         first,
         world.triangles,
-        replace(SETTINGS, max_iterations=FIRST_FRAME_ITERATIONS, local=False),
-        observed,
+        settings=replace(SETTINGS, max_iterations=FIRST_FRAME_ITERATIONS, local=False),
+        nodes=observed,
     )
     errors, capped = [], 0
     for f, true in enumerate(world.parts):
         points = kin.positions(true)[observed] + noise[f]
-        state, done = kf.filter_frame(state, points, world.triangles, SETTINGS, observed)
+        state, done = kf.filter_frame(state, points, world.triangles, settings=SETTINGS, nodes=observed)
         iterations += done
         capped += done == SETTINGS.max_iterations
         errors.append(frame_errors(state.part, true))
@@ -272,6 +272,7 @@ def track(world: Truth, observed: np.ndarray, noise: np.ndarray) -> tuple[np.nda
 def run(
     densities: Sequence[int] = DENSITIES,
     variances: Sequence[float] = VARIANCES,
+    *,
     frames: int = 20,
     seed: int = 0,
     progress: Callable[[dict], None] | None = None,

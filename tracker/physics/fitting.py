@@ -51,7 +51,7 @@ def node_residuals(part: kin.Part, points: np.ndarray, assignment: np.ndarray) -
     return out
 
 
-def data_force(part: kin.Part, points: np.ndarray, assignment: np.ndarray, sigma: float) -> np.ndarray:
+def data_force(part: kin.Part, points: np.ndarray, assignment: np.ndarray, *, sigma: float) -> np.ndarray:
     """f_q = sum_j L_k(j)^T r_j / sigma^2 (section 3, eq 16), shape (part.n_coordinates,).
 
     Evaluated by blocks from the per-node sums g_i (``node_residuals``) without forming L:
@@ -67,14 +67,15 @@ def data_force(part: kin.Part, points: np.ndarray, assignment: np.ndarray, sigma
     return f / sigma**2
 
 
-def stiffness(part: kin.Part, triangles: np.ndarray, w0: float, w1: float) -> sp.csr_matrix:
+def stiffness(part: kin.Part, triangles: np.ndarray, *, w0: float, w1: float) -> sp.csr_matrix:
     """K_node = w0 M_h + w1 K_h over the part's current reference shell s(q_s) (section 3)."""
-    return sq.membrane_stiffness(sq.shape(part.q_s, part.u, part.v), triangles, w0, w1)
+    return sq.membrane_stiffness(sq.shape(part.q_s, part.u, part.v), triangles, w0=w0, w1=w1)
 
 
 def stability_limit(
     part: kin.Part,
     assignment: np.ndarray,
+    *,
     sigma: float,
     k_node: sp.spmatrix,
     coordinates: np.ndarray | None = None,
@@ -104,6 +105,7 @@ def euler_step(
     part: kin.Part,
     points: np.ndarray,
     assignment: np.ndarray,
+    *,
     sigma: float,
     k_node: sp.spmatrix,
     dt: float,
@@ -114,7 +116,7 @@ def euler_step(
     K q is zero except K_dd q_d = (K_node d).ravel(); (+) is ``kinematics.retract``.  With
     ``local=False`` d is frozen too (only c, phi and q_s move).
     """
-    qdot = data_force(part, points, assignment, sigma)
+    qdot = data_force(part, points, assignment, sigma=sigma)
     if local:
         qdot[kin.SHAPE.stop :] -= (k_node @ part.d).ravel()
     else:
@@ -133,6 +135,7 @@ def fit(
     part: kin.Part,
     points: np.ndarray,
     triangles: np.ndarray,
+    *,
     sigma: float,
     n_steps: int,
     reassign_every: int = 10,
@@ -155,10 +158,10 @@ def fit(
     for step in range(n_steps):
         if step % reassign_every == 0:
             assignment = nearest_nodes(points, kin.positions(part))
-            k_node = stiffness(part, triangles, w0, w1)
-            dt = step_fraction * stability_limit(part, assignment, sigma, k_node)
+            k_node = stiffness(part, triangles, w0=w0, w1=w1)
+            dt = step_fraction * stability_limit(part, assignment, sigma=sigma, k_node=k_node)
         history.append(mean_residual(part, points))
-        part = euler_step(part, points, assignment, sigma, k_node, dt, local)
+        part = euler_step(part, points, assignment, sigma=sigma, k_node=k_node, dt=dt, local=local)
     history.append(mean_residual(part, points))
     return part, np.array(history)
 

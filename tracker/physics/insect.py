@@ -186,7 +186,7 @@ def sparse_nodes(rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([[0], rings, [len(MESH.u) - 1]])
 
 
-def data(sparse: bool, frames: int, seed: int = 0, noise: float = 0.0) -> tuple[list[np.ndarray], np.ndarray]:
+def data(sparse: bool, frames: int, *, seed: int = 0, noise: float = 0.0) -> tuple[list[np.ndarray], np.ndarray]:
     """Per frame the data points and their part labels: every node of every part (dense) or the
     same ``sparse_nodes`` of each part in every frame (sparse), plus Gaussian noise of standard
     deviation ``noise`` per coordinate."""
@@ -212,6 +212,7 @@ def position_error(fitted: bd.Body, true: bd.Body) -> float:
 def run(
     sparse: bool,
     frames: int = PERIOD,
+    *,
     seed: int = 0,
     progress: Callable[[int, float, float], None] | None = None,
     noise: float = 0.0,
@@ -224,12 +225,12 @@ def run(
     Frame 0: ``first_steps`` = (global, local) steps of ``body.fit_frame`` from the moment
     initialisation; later frames: ``steps`` local steps each from the previous fit.  ``progress``
     is called after each frame with (frame, max |C|, position error)."""
-    points, labels = data(sparse, frames, seed, noise)
-    fitted = bd.initial_body(points[0], labels, [MESH] * 5, JOINTS)
+    points, labels = data(sparse, frames, seed=seed, noise=noise)
+    fitted = bd.initial_body(points[0], labels, meshes=[MESH] * 5, joints=JOINTS)
     violation, error, bodies = [], [], []
     for f, frame_points in enumerate(points):
         n_global, n_local = first_steps if f == 0 else (0, steps)
-        fitted, _ = bd.fit_frame(fitted, frame_points, sigma, n_global, n_local, labels=labels)
+        fitted, _ = bd.fit_frame(fitted, frame_points, sigma=sigma, n_global=n_global, n_local=n_local, labels=labels)
         violation.append(float(np.abs(bd.violation(fitted)).max()))
         error.append(position_error(fitted, true_body(f)))
         bodies.append(fitted)

@@ -192,7 +192,7 @@ def check_covariance(p: np.ndarray, name: str = "covariance") -> np.ndarray:
     return p
 
 
-def mesh_covariance(triangles: np.ndarray, n_nodes: int, off_diagonal: float, diagonal: float = 1.0) -> np.ndarray:
+def mesh_covariance(triangles: np.ndarray, n_nodes: int, *, off_diagonal: float, diagonal: float = 1.0) -> np.ndarray:
     """The paper's P_node(0): ``diagonal`` on the diagonal, ``off_diagonal`` between the nodes
     of a common triangle (the sparsity pattern of K_node), zero elsewhere (section 5).
 
@@ -291,7 +291,7 @@ def _spectral_radius(m: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(m))))
 
 
-def step_size(state: State, info: Information, k_node: sp.spmatrix, settings: Settings) -> float:
+def step_size(state: State, info: Information, k_node: sp.spmatrix, *, settings: Settings) -> float:
     """dt = kappa / max_b rho(rate matrix of block b) (section 5).
 
     The rate matrix is P_b A_b + K_b (dynamics form) or P_b (A_b + K_b) (prior form): the
@@ -311,7 +311,7 @@ def step_size(state: State, info: Information, k_node: sp.spmatrix, settings: Se
     return settings.kappa / max(rates)
 
 
-def state_rate(state: State, force: np.ndarray, k_node: sp.spmatrix, settings: Settings) -> np.ndarray:
+def state_rate(state: State, force: np.ndarray, k_node: sp.spmatrix, *, settings: Settings) -> np.ndarray:
     """qdot by blocks, shape (part.n_coordinates,), from g = ``fitting.data_force`` (eq 37).
 
     Dynamics form: P_g g_g - K_g theta and (P_node G - K_node d).ravel(); prior form: P_g (g_g -
@@ -342,6 +342,7 @@ def riccati_block(
     p: np.ndarray,
     a: np.ndarray,
     k: np.ndarray | sp.spmatrix | None,
+    *,
     q: float,
     dt: float,
     prior: bool = False,
@@ -373,21 +374,21 @@ def cap_eigenvalues(p: np.ndarray, cap: float) -> np.ndarray:
     return 0.5 * (out + out.T)
 
 
-def riccati(state: State, info: Information, k_node: sp.spmatrix, settings: Settings, dt: float) -> State:
+def riccati(state: State, info: Information, k_node: sp.spmatrix, *, settings: Settings, dt: float) -> State:
     """The Riccati step of every block of P_g (``riccati_block``, then ``cap_eigenvalues``) and
     of P_node (kept if d is frozen)."""
     q, prior = settings.process_noise, settings.prior_stiffness
     k_g = global_stiffness(settings)
     p_g = np.zeros_like(state.p_global)
     for b in BLOCKS[settings.coupling]:
-        block = riccati_block(state.p_global[b, b], info.global_[b, b], k_g[b, b], q, dt, prior)
+        block = riccati_block(state.p_global[b, b], info.global_[b, b], k_g[b, b], q=q, dt=dt, prior=prior)
         p_g[b, b] = cap_eigenvalues(block, settings.covariance_cap)
-    p_node = riccati_block(state.p_node, info.node, k_node, q, dt, prior) if settings.local else state.p_node
+    p_node = riccati_block(state.p_node, info.node, k_node, q=q, dt=dt, prior=prior) if settings.local else state.p_node
     return replace(state, p_global=p_g, p_node=p_node)
 
 
 def newton_step(
-    state: State, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings
+    state: State, points: np.ndarray, assignment: np.ndarray, *, k_node: sp.spmatrix, settings: Settings
 ) -> np.ndarray:
     """The Gauss-Newton estimate of the way from the current q to the filter's fixed point on
     this frame: delta (16 + 3n, or 16 with d frozen) over (c, phi, q_s without a0, q_d).
@@ -404,7 +405,7 @@ def newton_step(
     Directions A + K' does not see at all (b2, b3 at b1 = 0) get no step (least squares).
     """
     part, v = state.part, settings.measurement_variance
-    force = fit.data_force(part, points, assignment, np.sqrt(v))
+    force = fit.data_force(part, points, assignment, sigma=np.sqrt(v))
     counts = np.bincount(assignment, minlength=len(part.u)).astype(np.float64)
     jac = global_jacobians(part)
     weighted = counts[:, None, None] * jac / v
@@ -430,17 +431,17 @@ def newton_step(
 
 
 def iteration(
-    state: State, points: np.ndarray, assignment: np.ndarray, k_node: sp.spmatrix, settings: Settings
+    state: State, points: np.ndarray, assignment: np.ndarray, *, k_node: sp.spmatrix, settings: Settings
 ) -> tuple[State, float]:
     """One inner iteration (section 5): forces and information at the current estimate, the
     step dt, the state update, the Riccati update.  Returns the new state and the largest
     coordinate change max |dt qdot|."""
     variance = settings.measurement_variance
-    force = fit.data_force(state.part, points, assignment, np.sqrt(variance))
+    force = fit.data_force(state.part, points, assignment, sigma=np.sqrt(variance))
     info = information(state.part, assignment, variance)
-    dt = step_size(state, info, k_node, settings)
-    rate = state_rate(state, force, k_node, settings)
-    moved = riccati(replace(state, part=update_part(state.part, rate, dt)), info, k_node, settings, dt)
+    dt = step_size(state, info, k_node, settings=settings)
+    rate = state_rate(state, force, k_node, settings=settings)
+    moved = riccati(replace(state, part=update_part(state.part, rate, dt)), info, k_node, settings=settings, dt=dt)
     return moved, float(np.max(np.abs(dt * rate)))
 
 
@@ -448,6 +449,7 @@ def filter_frame(
     state: State,
     points: np.ndarray,
     triangles: np.ndarray,
+    *,
     settings: Settings,
     nodes: np.ndarray | None = None,
 ) -> tuple[State, int]:
@@ -467,10 +469,10 @@ def filter_frame(
             if absorbing:
                 state = replace(state, part=absorb_global(state.part, settings.absorb_damping))
             assignment = fit.nearest_nodes(points, kin.positions(state.part)) if nodes is None else nodes
-            k_node = fit.stiffness(state.part, triangles, settings.w0, settings.w1)
-            if np.max(np.abs(newton_step(state, points, assignment, k_node, settings))) < settings.tol:
+            k_node = fit.stiffness(state.part, triangles, w0=settings.w0, w1=settings.w1)
+            if np.max(np.abs(newton_step(state, points, assignment, k_node=k_node, settings=settings))) < settings.tol:
                 return state, done
-        state, _ = iteration(state, points, assignment, k_node, settings)
+        state, _ = iteration(state, points, assignment, k_node=k_node, settings=settings)
     if absorbing:
         state = replace(state, part=absorb_global(state.part, settings.absorb_damping))
     return state, settings.max_iterations

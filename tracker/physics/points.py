@@ -262,11 +262,18 @@ def first_fit(points: np.ndarray, model: PointsModel, settings: PointsSettings) 
     initialisation, whose long axis is every part's z, so its poles are a limb's ends; a free fit
     first could turn a short axis into the long one and move the ends off the poles."""
     meshes = [model.mesh] * len(model.parts)
-    start = bd.initial_body(points, model.labels, meshes, [], bd.GLOBAL)
+    start = bd.initial_body(points, model.labels, meshes=meshes, joints=[], levels=bd.GLOBAL)
     joints = [joint_to_parent(start, child, model.parents[child]) for child in model.jointed]
-    body = bd.assemble(start.parts, meshes, joints, bd.GLOBAL)
+    body = bd.assemble(start.parts, meshes, joints, levels=bd.GLOBAL)
     body, _ = bd.fit_frame(
-        body, points, settings.sigma, settings.first_steps, 0, labels=model.labels, w0=settings.w0, w1=settings.w1
+        body,
+        points,
+        sigma=settings.sigma,
+        n_global=settings.first_steps,
+        n_local=0,
+        labels=model.labels,
+        w0=settings.w0,
+        w1=settings.w1,
     )
     return body
 
@@ -345,6 +352,7 @@ def second_order_frame(
     body: bd.Body,
     velocities: list[np.ndarray],
     points: np.ndarray,
+    *,
     model: PointsModel,
     settings: PointsSettings,
     seconds: float,
@@ -355,18 +363,26 @@ def second_order_frame(
     attachments = bd.attach(body, points, model.labels)
     k_nodes = bd.stiffnesses(body, settings.w0, settings.w1)  # None for parts below LOCAL
     d = damping(seen_per_part(points, model), settings)
-    limit = bd.second_order_limit(body, attachments, settings.sigma, k_nodes, d, MASS)
+    limit = bd.second_order_limit(body, attachments, sigma=settings.sigma, k_nodes=k_nodes, damping=d, mass=MASS)
     substeps = max(1, int(np.ceil(seconds / (STEP_FRACTION * limit))))
     dt = seconds / substeps
     for _ in range(substeps):
         body, velocities = bd.second_order_step(
-            body, velocities, attachments, settings.sigma, k_nodes, dt, DECAY / dt, d, MASS
+            body,
+            velocities,
+            attachments,
+            sigma=settings.sigma,
+            k_nodes=k_nodes,
+            dt=dt,
+            a=DECAY / dt,
+            damping=d,
+            mass=MASS,
         )
     return body, velocities
 
 
 def track(
-    frames: Iterable[np.ndarray], model: PointsModel, settings: PointsSettings, interval: float
+    frames: Iterable[np.ndarray], model: PointsModel, *, settings: PointsSettings, interval: float
 ) -> Iterator[FrameFit]:
     """Fit ``frames`` (each (M, 3), the first the start frame, ``interval`` seconds apart) one after
     another (module docstring)."""
@@ -379,9 +395,18 @@ def track(
             velocities = [np.zeros(len(index)) for index in bd.active(body)]
         elif settings.dynamics == "second-order":
             assert velocities is not None  # set with body on the first frame
-            body, velocities = second_order_frame(body, velocities, points, model, settings, interval)
+            body, velocities = second_order_frame(
+                body, velocities, points, model=model, settings=settings, seconds=interval
+            )
         elif np.isfinite(points).all(axis=1).any():  # first order: without any marker nothing moves
             body, _ = bd.fit_frame(
-                body, points, settings.sigma, 0, settings.steps, labels=model.labels, w0=settings.w0, w1=settings.w1
+                body,
+                points,
+                sigma=settings.sigma,
+                n_global=0,
+                n_local=settings.steps,
+                labels=model.labels,
+                w0=settings.w0,
+                w1=settings.w1,
             )  # every part at its own level
         yield measure(body, points, model)

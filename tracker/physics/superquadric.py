@@ -208,7 +208,7 @@ def jacobian(q_s: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return j
 
 
-def normals(q_s: np.ndarray, u: np.ndarray, v: np.ndarray, step: float = 1e-6) -> np.ndarray:
+def normals(q_s: np.ndarray, u: np.ndarray, v: np.ndarray, *, step: float = 1e-6) -> np.ndarray:
     """Outward unit normals of the reference shape at (u, v), shape (..., 3).
 
     n ~ s_v x s_u from central differences with the given step in u and v (section 1,
@@ -329,7 +329,7 @@ def interpolation_matrix(m: Mesh, u: np.ndarray, v: np.ndarray) -> sp.csr_matrix
     return out
 
 
-def membrane_stiffness(points: np.ndarray, triangles: np.ndarray, w0: float, w1: float) -> sp.csr_matrix:
+def membrane_stiffness(points: np.ndarray, triangles: np.ndarray, *, w0: float, w1: float) -> sp.csr_matrix:
     """K_node = w0 M_h + w1 K_h (n x n), the loaded membrane on linear triangles (section 3).
 
     It discretises E(d) = 1/2 int [w0 |d|^2 + w1 (|d_u|^2 + |d_v|^2)] dA = 1/2 tr(d^T K_node d)

@@ -109,7 +109,7 @@ def joint_twists(model: Model, poses: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def frame_rows(
-    layout: Layout, model: Model, factors: np.ndarray, poses: np.ndarray, inspection: Inspection
+    layout: Layout, model: Model, *, factors: np.ndarray, poses: np.ndarray, inspection: Inspection
 ) -> FrameRows:
     """The rows (module docstring) of the samples in ``inspection`` that found an edge, the model at ``poses``
     (N, 4, 4) with stretch ``factors`` (N, 3)."""
@@ -135,7 +135,7 @@ POSE_DAMPING = 1.0
 
 
 def bundle_step(
-    frames: list[FrameRows], prior: np.ndarray, x: np.ndarray, damping: float = 0.0
+    frames: list[FrameRows], prior: np.ndarray, x: np.ndarray, *, damping: float = 0.0
 ) -> tuple[np.ndarray, list[np.ndarray]]:
     """The shape x + dx and each frame's joint motions dp (P,) that minimise the robust cost of the ``frames``'
     rows with the ``prior`` rows (R, width) (module docstring): one Gauss-Newton step of shape and poses together,

@@ -142,14 +142,14 @@ def fit_shape(
     keypoints, greys, masks = _on_person(recording, keypoints, step, progress)
     found = frame_by_frame(keypoints, recording.cameras, model)
     say(f"landmarks: {len(found.rows)} of {len(keypoints.frame)} frames show the body in two views or more")
-    landmarks = fit_landmarks(layout, document, found.points, keypoints.frame[found.rows], progress=progress)
+    landmarks = fit_landmarks(layout, document, found.points, frames=keypoints.frame[found.rows], progress=progress)
     model = model_from_dict(layout.document(landmarks.x, document))
     images = [greys[row] for row in np.searchsorted(keypoints.frame, landmarks.frames)]
     poses, held = [], []
     for k, row in enumerate(progress(np.searchsorted(keypoints.frame, landmarks.frames), total=len(images))):
         marks = consistent(keypoints.rows(slice(row, row + 1)), recording.cameras)[0]
         landmarks_now = (marks.pixels[0], marks.confidence[0])
-        result = snap_to_edges(model, recording.cameras, landmarks.poses[k], images[k], keypoints=landmarks_now)
+        result = snap_to_edges(model, recording.cameras, landmarks.poses[k], images=images[k], keypoints=landmarks_now)
         poses.append(result.poses)
         held.append(result.status != LOST)
     kept = np.flatnonzero(held)
@@ -162,7 +162,9 @@ def fit_shape(
     start = _State(np.inf, landmarks.x, model, [poses[k] for k in kept], [], np.zeros(model.size, np.int64))
     rows = np.searchsorted(keypoints.frame, landmarks.frames[kept])
     hidden = [unseen_parts(model, keypoints.confidence[row]) for row in rows]
-    prior = layout.prior(EDGE_PRIOR, EDGE_PRIOR, SPAN_PRIOR, held=unseen_joints(model, keypoints.confidence[rows]))
+    prior = layout.prior(
+        EDGE_PRIOR, EDGE_PRIOR, span_weight=SPAN_PRIOR, held=unseen_joints(model, keypoints.confidence[rows])
+    )
     views = [(images[k], masks[row], unseen) for k, row, unseen in zip(kept, rows, hidden)]
     best, residuals = _edge_rounds(layout, document, start, views, prior, recording.cameras, progress)
     return ShapeFit(
@@ -212,7 +214,9 @@ def _edge_rounds(
         for pose, (images, masks, unseen) in zip(now.poses, views):
             seen_here = tracker.inspect(images, poses=pose, search_range=scaled)
             hidden = unseen | off_person(seen_here, masks, now.model.size)
-            measured.append(frame_rows(layout, now.model, factors, pose, seen_here).without(hidden))
+            measured.append(
+                frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here).without(hidden)
+            )
         seen = np.bincount(np.concatenate([frame.component for frame in measured]), minlength=now.model.size)
         rows = held_rows(measured, now.model.size)
         weight = np.concatenate([frame.weight for frame in rows])
@@ -223,8 +227,8 @@ def _edge_rounds(
             best = _State(residual, now.x, now.model, now.poses, rows, seen)
             damping = max(damping / 3.0, DAMPING[0])
         residuals.append(best.residual)
-        target, motions = bundle_step(best.rows, prior, best.x, damping)
-        x, motions = trusted(layout, best.x, target, motions)
+        target, motions = bundle_step(best.rows, prior, best.x, damping=damping)
+        x, motions = trusted(layout, best.x, target, motions=motions)
         model = model_from_dict(layout.document(x, document))
         poses = [moved(model, pose, motion) for pose, motion in zip(best.poses, motions)]
         now = _State(np.nan, x, model, poses, [], np.zeros(model.size, np.int64))
@@ -232,7 +236,7 @@ def _edge_rounds(
 
 
 def trusted(
-    layout: Layout, x: np.ndarray, step: np.ndarray, motions: list[np.ndarray]
+    layout: Layout, x: np.ndarray, step: np.ndarray, *, motions: list[np.ndarray]
 ) -> tuple[np.ndarray, list[np.ndarray]]:
     """The step from x to ``step`` and the frames' ``motions``, shortened (all by one factor) so that no joint moves
     more than :data:`JOINT_STEP` and no factor changes by more than :data:`FACTOR_STEP`; then every factor kept

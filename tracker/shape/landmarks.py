@@ -108,8 +108,8 @@ def fit_landmarks(
     layout: Layout,
     document: dict,
     points: np.ndarray,
-    frames: np.ndarray,
     *,
+    frames: np.ndarray,
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
 ) -> LandmarkFit:
     """The shape of the model TOML ``document`` (parsed; ``layout`` made of it) that best fits the landmarks' world
@@ -131,15 +131,15 @@ def fit_landmarks(
         poses = np.stack([fit_pose(model, frame) for frame in progress(points, total=len(points))])
         matrix = design(layout, model, poses[:, :, :3, :3])
         if np.isnan(before):
-            before = misfit(matrix, x, poses, points)
+            before = misfit(matrix, x, poses=poses, points=points)
         x = solve(matrix, points, prior)
         model = model_from_dict(layout.document(x, document))
     poses = np.stack([fit_pose(model, frame) for frame in points])
-    after = misfit(design(layout, model, poses[:, :, :3, :3]), x, poses, points)
+    after = misfit(design(layout, model, poses[:, :, :3, :3]), x, poses=poses, points=points)
     return LandmarkFit(x, frames, poses, before, after)
 
 
-def misfit(matrix: np.ndarray, x: np.ndarray, poses: np.ndarray, points: np.ndarray) -> float:
+def misfit(matrix: np.ndarray, x: np.ndarray, *, poses: np.ndarray, points: np.ndarray) -> float:
     """Median distance (metres) between the known joint landmarks ``points`` (F, 33, 3) and the model's under x
     at ``poses`` (F, N, 4, 4), through ``matrix`` (:func:`design`)."""
     placed = matrix @ x + poses[:, :1, :3, 3]

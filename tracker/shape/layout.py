@@ -83,7 +83,7 @@ class Layout:
         return np.stack([x[f : f + 3] for f in self.factor])
 
     def prior(
-        self, joint_weight: float, factor_weight: float, span_weight: float = 0.0, held: np.ndarray | None = None
+        self, joint_weight: float, factor_weight: float, *, span_weight: float = 0.0, held: np.ndarray | None = None
     ) -> np.ndarray:
         """The prior's rows (R, width) (module docstring), each set once; the joints ``held`` (N,) bool (those no
         measurement reaches: every component of their set held) are pulled to the given model scaled with

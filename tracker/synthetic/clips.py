@@ -148,6 +148,7 @@ def alignments(bvh: Bvh, model: Model, path: object = "<bvh>") -> tuple[np.ndarr
 def retarget(
     bvh: Bvh,
     model: Model,
+    *,
     start: int = 0,
     frames: int | None = None,
     stride: int = 1,
@@ -266,7 +267,7 @@ def _forward(model: Model, local: dict[str, np.ndarray]) -> np.ndarray:
     return poses
 
 
-def procedural_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 0) -> np.ndarray:
+def procedural_motion(model: Model, frames: int, *, fps: float = 60.0, seed: int = 0) -> np.ndarray:
     """Smooth model poses (frames, N, 4, 4): turning on the spot, knee bends, arm swings and a wave.
 
     Built by forward kinematics from per-joint rotations relative to the rest pose
@@ -358,7 +359,7 @@ def athletic_schedule(seconds: float, seed: int = 0) -> list[tuple[str, float, f
     return schedule
 
 
-def athletic_motion(model: Model, frames: int, fps: float = 30.0, seed: int = 0) -> np.ndarray:
+def athletic_motion(model: Model, frames: int, *, fps: float = 30.0, seed: int = 0) -> np.ndarray:
     """Fast model poses (frames, N, 4, 4): hops, front kicks and jump spins (:func:`athletic_schedule`).
 
     With u in [0, 1] the progress through a move and b(v) = sin^2(pi v) on [0, 1]:
@@ -422,7 +423,7 @@ def athletic_motion(model: Model, frames: int, fps: float = 30.0, seed: int = 0)
     return out
 
 
-def seated_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 0) -> np.ndarray:
+def seated_motion(model: Model, frames: int, *, fps: float = 60.0, seed: int = 0) -> np.ndarray:
     """Model poses (frames, N, 4, 4) of a person seated at a desk: thighs level, shins upright, feet flat.
 
     The seat is as high as the shin plus the foot; the legs hardly move (a slow knee sway of 0.1 rad).
@@ -463,7 +464,7 @@ def seated_motion(model: Model, frames: int, fps: float = 60.0, seed: int = 0) -
     return out
 
 
-def exposure_poses(model: Model, poses: np.ndarray, samples: int, shutter: float) -> np.ndarray:
+def exposure_poses(model: Model, poses: np.ndarray, *, samples: int, shutter: float) -> np.ndarray:
     """Sub-frame poses (F, S, N, 4, 4) of an exposure of ``shutter`` frame intervals centred on each frame.
 
     Sub-frame k of frame f is at time f + shutter (k / (S - 1) - 1/2) (f alone when S = 1), between the

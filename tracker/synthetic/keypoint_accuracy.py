@@ -61,8 +61,8 @@ def accuracy(
     keypoints: Keypoints,
     cameras: list[Camera],
     poses: np.ndarray,
-    model: Model,
     *,
+    model: Model,
     props: tuple[Box, ...] = (),
     min_confidence: float = 0.5,
 ) -> Accuracy:
@@ -129,7 +129,7 @@ def suite_accuracy(
         truth = load_poses(folder / "truth.npz")
         found = load_keypoints(path)
         scores.append(
-            (render, accuracy(found, cameras, truth["poses"], load_model(folder / "model.toml"), props=props))
+            (render, accuracy(found, cameras, truth["poses"], model=load_model(folder / "model.toml"), props=props))
         )
     return scores
 

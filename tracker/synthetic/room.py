@@ -138,7 +138,7 @@ def wall_frame(room: Room, wall: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
 # Making a room
 
 
-def make_room(cameras: list[Camera], clear_low, clear_high, seed: int = 0) -> Room:
+def make_room(cameras: list[Camera], clear_low, clear_high, *, seed: int = 0) -> Room:
     """A seeded room holding ``cameras`` and the capture volume ``clear_low`` .. ``clear_high`` (3,) metres,
     with walls 0.7-1.9 m behind the outermost camera or the volume, decorations and furniture that
     stands clear of that volume and hides none of it from any camera (see the module)."""

@@ -81,9 +81,20 @@ def corner3_rig() -> list[Camera]:
     """calib/corner3.toml: three 800x600 cameras mounted high (2.4-2.7 m) in the corners of a room, looking
     down at the body; wider lenses (f = 470-520) with stronger barrel distortion."""
     return [
-        look_at_camera("cam0", (-3.2, -3.4, 2.6), (0.0, 0.0, 0.8), (800, 600), 500.0, (-0.14, 0.035, 0.0, 0.0)),
-        look_at_camera("cam1", (3.5, -2.9, 2.4), (0.0, 0.0, 0.8), (800, 600), 470.0, (-0.12, 0.03, 0.0, 0.0)),
-        look_at_camera("cam2", (0.6, 4.1, 2.7), (0.0, 0.0, 0.8), (800, 600), 520.0, (-0.15, 0.04, 0.0, 0.0)),
+        look_at_camera(
+            "cam0",
+            (-3.2, -3.4, 2.6),
+            (0.0, 0.0, 0.8),
+            size=(800, 600),
+            focal=500.0,
+            distortions=(-0.14, 0.035, 0.0, 0.0),
+        ),
+        look_at_camera(
+            "cam1", (3.5, -2.9, 2.4), (0.0, 0.0, 0.8), size=(800, 600), focal=470.0, distortions=(-0.12, 0.03, 0.0, 0.0)
+        ),
+        look_at_camera(
+            "cam2", (0.6, 4.1, 2.7), (0.0, 0.0, 0.8), size=(800, 600), focal=520.0, distortions=(-0.15, 0.04, 0.0, 0.0)
+        ),
     ]
 
 
@@ -200,7 +211,7 @@ def room_backdrops(
     points = np.concatenate([np.asarray(joints, float).reshape(-1, 3), *(box_corners(box) for box in props)])
     low = np.array([*(points[:, 0:2].min(axis=0) - 0.5), 0.0])
     high = np.array([*(points[:, 0:2].max(axis=0) + 0.5), points[:, 2].max() + 0.4])
-    room = make_room(cameras, low, high, seed)
+    room = make_room(cameras, low, high, seed=seed)
     return [room_backdrop(room, camera, blur=blur) for camera in cameras]
 
 
@@ -230,7 +241,7 @@ DEFAULT_QUALITY = 70
 
 
 def motion_poses(
-    model: Model, motion: str, frames: int, start: int = 0, stride: int = 2, fps: float = 60.0, seed: int = 0
+    model: Model, motion: str, frames: int, *, start: int = 0, stride: int = 2, fps: float = 60.0, seed: int = 0
 ) -> tuple[np.ndarray, float, Path | None]:
     """Poses (F, N, 4, 4), frame rate and the BVH path (or None) for a motion spec.
 
@@ -240,15 +251,15 @@ def motion_poses(
     if motion.startswith("bvh:"):
         path = Path(motion[4:])
         bvh = load_bvh(path)
-        poses = retarget(bvh, model, start, frames, stride, path=path)
+        poses = retarget(bvh, model, start=start, frames=frames, stride=stride, path=path)
         rate = 1.0 / (bvh.frame_time * stride)
         return poses, float(round(rate)) if abs(rate - round(rate)) < 0.01 else rate, path
     if motion == "procedural":
-        return procedural_motion(model, frames, fps, seed), float(fps), None
+        return procedural_motion(model, frames, fps=fps, seed=seed), float(fps), None
     if motion == "athletic":
-        return athletic_motion(model, frames, fps, seed), float(fps), None
+        return athletic_motion(model, frames, fps=fps, seed=seed), float(fps), None
     if motion == "seated":
-        return seated_motion(model, frames, fps, seed), float(fps), None
+        return seated_motion(model, frames, fps=fps, seed=seed), float(fps), None
     raise TrackerInputError(
         f"motion {motion!r} is not known; use --motion bvh:PATH/TO/CLIP.bvh, procedural, athletic or seated"
     )
@@ -258,6 +269,7 @@ def write_truth(
     path: str | os.PathLike,
     model: Model,
     poses: np.ndarray,
+    *,
     frame: np.ndarray | None = None,
     seen: np.ndarray | None = None,
 ) -> None:
@@ -366,6 +378,7 @@ def synthesize(
     model_path: str | os.PathLike,
     calib_path: str | os.PathLike,
     out_dir: str | os.PathLike,
+    *,
     motion: str = "procedural",
     frames: int = 160,
     start: int = 0,
@@ -378,7 +391,6 @@ def synthesize(
     noise: float = 3.0,
     blur: float = 0.7,
     progress: bool = True,
-    *,
     staging: Staging = Staging(),
     write_init: bool = True,
 ) -> dict:
@@ -416,7 +428,7 @@ def synthesize(
     staging.check(cameras)
     if staging.zoom != 1.0 or staging.distance != 1.0:
         cameras = moved_rig(cameras, zoom=staging.zoom, distance=staging.distance)
-    poses, rate, bvh_path = motion_poses(model, motion, frames, start, stride, fps, seed)
+    poses, rate, bvh_path = motion_poses(model, motion, frames, start=start, stride=stride, fps=fps, seed=seed)
     body, shown = model, poses  # the body rendered and its poses
     actor = None  # the rendered body's model TOML document, when it is not the model
     if staging.body != "model":
@@ -426,10 +438,16 @@ def synthesize(
         shown = actor_poses(body, model, poses)
     props = tuple(table_before(camera) for camera in staging.table_cameras(cameras))
     texture = (
-        None if staging.texture == "none" else textures.make_texture(staging.texture, body.names, albedos(body), seed)
+        None
+        if staging.texture == "none"
+        else textures.make_texture(staging.texture, body.names, albedos(body), seed=seed)
     )
     face = head_face(body) if staging.face else None
-    exposures = exposure_poses(body, shown, staging.motion_blur, staging.shutter) if staging.motion_blur > 1 else None
+    exposures = (
+        exposure_poses(body, shown, samples=staging.motion_blur, shutter=staging.shutter)
+        if staging.motion_blur > 1
+        else None
+    )
     if staging.backdrop == "room" and backgrounds is not None:
         raise TrackerInputError("background photos and the room backdrop exclude each other; give only one")
     ensure_writable_folder(out)
@@ -541,7 +559,7 @@ def seen_joints(joints: np.ndarray, cameras: list[Camera], props: tuple[Box, ...
     return seen.reshape(joints.shape[:-1])
 
 
-def visibility(model: Model, poses: np.ndarray, cameras: list[Camera], margin: float = 2.0) -> np.ndarray:
+def visibility(model: Model, poses: np.ndarray, cameras: list[Camera], *, margin: float = 2.0) -> np.ndarray:
     """(F, C) bool: every sampled surface point of the body projects inside camera c's image (with ``margin`` px)."""
     out = np.zeros((len(poses), len(cameras)), dtype=bool)
     pieces = [

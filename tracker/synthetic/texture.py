@@ -42,7 +42,7 @@ class Texture:
     salt: np.ndarray
 
 
-def make_texture(kind: str, names: tuple[str, ...], albedo: np.ndarray, seed: int) -> Texture:
+def make_texture(kind: str, names: tuple[str, ...], albedo: np.ndarray, *, seed: int) -> Texture:
     """A texture of ``kind`` (one of :data:`KINDS` or ``mixed``) for components ``names`` with albedos (N, 3)."""
     if kind not in (*KINDS, "mixed"):
         raise ValueError(f"texture {kind!r} is not one of {', '.join(CHOICES[1:])}")

@@ -166,7 +166,7 @@ def reduced_camera(camera: Camera, factor: float) -> Camera:
 
 
 def silhouettes(
-    caster: RayCaster, size: tuple[int, int], factor: float, margin: int
+    caster: RayCaster, size: tuple[int, int], *, factor: float, margin: int
 ) -> Callable[[np.ndarray], np.ndarray]:
     """The function from poses to the pixels (H, W) bool of a ``size`` = (W, H) image that the body
     covers, widened by a disc of radius ``margin`` pixels: ray cast by a caster of the camera reduced
@@ -187,6 +187,7 @@ def silhouettes(
 def cleared_background(
     recording: Recording,
     model: Model,
+    *,
     frames: np.ndarray,
     poses: np.ndarray,
     samples: int = CLEARED_SAMPLES,
@@ -216,8 +217,8 @@ def cleared_background(
         silhouette = silhouettes(
             RayCaster(model, reduced_camera(camera, factor)),
             camera.size,
-            factor,
-            round(margin * max(1.0, short / Settings.reference_size)),
+            factor=factor,
+            margin=round(margin * max(1.0, short / Settings.reference_size)),
         )
         masks = np.stack([silhouette(poses[i]) for i in chosen])
         covered = masks.sum(axis=0)

@@ -162,7 +162,7 @@ def noise_integral(dt: float, decay: float = 0.0) -> np.ndarray:
     return np.array([[cc, cb], [cb, bb]])
 
 
-def propagate_covariance(covariance: np.ndarray, dt: float, q, decay: float = 0.0) -> np.ndarray:
+def propagate_covariance(covariance: np.ndarray, dt: float, *, q, decay: float = 0.0) -> np.ndarray:
     """``Phi P Phi^T + q Bq (x) I3``: the Riccati equation without data over ``dt``, solved exactly.
 
     ``covariance`` (..., 6, 6); ``q`` a scalar or an array broadcasting against its leading axes.
@@ -180,7 +180,7 @@ def _block_matrices(dt: float, decay: float) -> tuple[np.ndarray, np.ndarray]:
     return np.kron(transition(dt, decay), eye), np.kron(noise_integral(dt, decay), eye)
 
 
-def predict(state: MotionState, dt: float, q=(1.0, 10.0), decay: float = 0.0) -> MotionState:
+def predict(state: MotionState, dt: float, *, q=(1.0, 10.0), decay: float = 0.0) -> MotionState:
     """Every component ``dt`` seconds ahead: ``t <- t + c v``, ``v <- b v``, ``R <- R Exp(c w)``,
     ``w <- b w``, covariances by :func:`propagate_covariance` (``q = (q_t, q_r)``), the rotation block
     re-expressed about the new reference."""
@@ -190,7 +190,7 @@ def predict(state: MotionState, dt: float, q=(1.0, 10.0), decay: float = 0.0) ->
     poses[:, :3, 3] += c * state.velocity[:, TRANSLATION]
     step = exp_so3_many(np.ascontiguousarray(c * state.velocity[:, ROTATION]))
     poses[:, :3, :3] = state.poses[:, :3, :3] @ step
-    cov = propagate_covariance(state.covariance, dt, np.asarray(q, dtype=np.float64)[None, :], decay)
+    cov = propagate_covariance(state.covariance, dt, q=np.asarray(q, dtype=np.float64)[None, :], decay=decay)
     cov[:, ROTATION] = _rotate_block(cov[:, ROTATION], step)
     return MotionState(poses, velocity, cov)
 
@@ -225,7 +225,7 @@ def position_inverse(state: MotionState) -> np.ndarray:
     return np.linalg.inv(state.covariance[:, :, :3, :3])
 
 
-def prior_information(state: MotionState, scale=1.0, floor=(0.0, 0.0), p_xx_inv=None) -> np.ndarray:
+def prior_information(state: MotionState, *, scale=1.0, floor=(0.0, 0.0), p_xx_inv=None) -> np.ndarray:
     """The tracker's prior (N,6,6) about ``state.poses`` in body twist coordinates (translation first):
     ``s blockdiag(R^T Pt_xx^-1 R, Pr_xx^-1)``, each 3x3 block's eigenvalues raised to at least
     ``floor = (per m^2, per rad^2)``; ``scale`` s a scalar or one per component.  (A body twist ``(v, w)``
@@ -272,6 +272,7 @@ def variance_factor(
     component: np.ndarray,
     offset: np.ndarray,
     weight: np.ndarray,
+    *,
     n_components: int,
     pooled_weight: float = 12.0,
     fallback=1.0,
@@ -302,7 +303,7 @@ def _difference(poses: np.ndarray, target: np.ndarray) -> np.ndarray:
     return diff
 
 
-def correct(state: MotionState, poses: np.ndarray, information: np.ndarray, p_xx_inv=None) -> MotionState:
+def correct(state: MotionState, poses: np.ndarray, information: np.ndarray, *, p_xx_inv=None) -> MotionState:
     """The measurement update given the posterior poses ``x+`` (the tracked poses) and the data's
     information per block ``W = C / s'`` (N,2,3,3, from :func:`block_information` divided by ``s'``;
     ``p_xx_inv``: :func:`position_inverse` of ``state`` if at hand):

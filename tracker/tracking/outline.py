@@ -621,7 +621,7 @@ class Placed:
 
 
 def sample_outlines(
-    model, poses: np.ndarray, rig: Rig, spacing: float, samples: Samples, placed: Placed | None = None
+    model, poses: np.ndarray, rig: Rig, *, spacing: float, samples: Samples, placed: Placed | None = None
 ) -> Samples:
     """Fill ``samples`` with the visible outline of ``model`` at ``poses`` (N,4,4) seen by ``rig``
     (and ``placed``, if given, with the camera-frame quadrics)."""

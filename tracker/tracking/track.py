@@ -437,7 +437,7 @@ class Tracker:
         """Sample the visible outlines at the current poses and limit each one's search (ownership)."""
         s, m, st = self.samples, self.model, self.settings
         started = time.perf_counter()
-        sample_outlines(m, self.poses, self.rig, st.spacing, s, self.placed)
+        sample_outlines(m, self.poses, self.rig, spacing=st.spacing, samples=s, placed=self.placed)
         started = self.times.add("outline", started)
         if st.ownership:
             self.lo, self.hi = self.ownership.limits(self.placed, s, search_range)
@@ -612,13 +612,13 @@ class Tracker:
         st = self.settings
         assert self.motion_state is not None  # dynamics "kalman"
         predicted = motion_prior.predict(
-            self.motion_state, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
+            self.motion_state, dt, q=(st.kalman_q_translation, st.kalman_q_rotation), decay=st.kalman_decay
         )
         self.poses = self.model.coerce(predicted.poses)
         self.motion_state = motion_prior.rereference(predicted, self.poses)
         inverse = motion_prior.position_inverse(self.motion_state)
         self.prior = motion_prior.prior_information(
-            self.motion_state, self.noise_scale, (st.prior_translation, st.prior_rotation), inverse
+            self.motion_state, scale=self.noise_scale, floor=(st.prior_translation, st.prior_rotation), p_xx_inv=inverse
         )
         return inverse
 
@@ -635,13 +635,13 @@ class Tracker:
                 self.samples.component[:n],
                 self.offset[:n],
                 self.weight[:n],
-                self.model.size,
+                n_components=self.model.size,
                 fallback=self.noise_scale / s,
             )
         data = self.information - self.prior
         assert self.motion_state is not None  # dynamics "kalman"
         information = motion_prior.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
-        self.motion_state = motion_prior.correct(self.motion_state, self.poses, information, inverse)
+        self.motion_state = motion_prior.correct(self.motion_state, self.poses, information, p_xx_inv=inverse)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings

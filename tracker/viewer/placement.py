@@ -122,7 +122,7 @@ class Placement:
                 self.model,
                 self.recording.cameras,
                 self.poses,
-                self.smoothed,
+                images=self.smoothed,
                 settings=self.settings,
                 rounds=rounds,
                 smoothed=True,

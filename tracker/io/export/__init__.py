@@ -128,6 +128,7 @@ def export(
     poses: str | os.PathLike,
     fmt: str,
     out: str | os.PathLike | None = None,
+    *,
     model: str | os.PathLike | None = None,
     fps: float | None = None,
 ) -> Path:
@@ -148,22 +149,30 @@ def export(
     if fmt == "trc":
         from tracker.io.export.trc import write_trc
 
-        write_trc(target, rows.joint_names, rows.frame, rows.rate, rows.joints)
+        write_trc(target, rows.joint_names, frame=rows.frame, rate=rows.rate, joints=rows.joints)
     elif fmt == "c3d":
         from tracker.io.export.c3d import write_c3d
 
-        write_c3d(target, rows.joint_names, int(rows.frame[0]), rows.rate, rows.joints)
+        write_c3d(target, rows.joint_names, first_frame=int(rows.frame[0]), rate=rows.rate, joints=rows.joints)
     elif fmt == "csv":
         from tracker.io.export.csv import write_csv
 
-        write_csv(target, rows.joint_names, rows.frame, rows.time, rows.status, rows.residual, rows.joints)
+        write_csv(
+            target,
+            rows.joint_names,
+            frame=rows.frame,
+            time=rows.time,
+            status=rows.status,
+            residual=rows.residual,
+            joints=rows.joints,
+        )
     else:
         from tracker.io.export.bvh import write_bvh
         from tracker.model import load_model
 
         assert model is not None  # checked above for BVH
         body = load_model(model)
-        write_bvh(target, body, _bvh_poses(rows, poses, body.names, Path(model)), rows.status, rows.rate)
+        write_bvh(target, body, _bvh_poses(rows, poses, body.names, Path(model)), status=rows.status, rate=rows.rate)
     return target
 
 

@@ -176,7 +176,7 @@ def hierarchy_lines(model: Model, rest: np.ndarray) -> list[str]:
     return ["HIERARCHY"] + joint(0, 0)
 
 
-def bvh_lines(model: Model, poses: np.ndarray, status: np.ndarray, rate: float) -> list[str]:
+def bvh_lines(model: Model, poses: np.ndarray, status: np.ndarray, *, rate: float) -> list[str]:
     """The lines (without newlines) of the BVH of ``poses`` (F, N, 4, 4, model order) at ``rate`` frames per second."""
     rest = rest_poses(model, np.eye(4))
     values = motion(model, hold_lost(poses, status), rest)
@@ -191,11 +191,11 @@ def bvh_lines(model: Model, poses: np.ndarray, status: np.ndarray, rate: float) 
     )
 
 
-def write_bvh(path: str | os.PathLike, model: Model, poses: np.ndarray, status: np.ndarray, rate: float) -> None:
+def write_bvh(path: str | os.PathLike, model: Model, poses: np.ndarray, *, status: np.ndarray, rate: float) -> None:
     """Write the BVH file ``path`` (atomically) of ``poses`` (F, N, 4, 4) world-from-component in model order.
 
     At least one frame must be :func:`usable` and the component names single words (BVH splits on white space).
     """
-    text = "\n".join(bvh_lines(model, poses, status, rate)) + "\n"
+    text = "\n".join(bvh_lines(model, poses, status, rate=rate)) + "\n"
 
     atomic_write(path, lambda file: file.write(text.encode()))

@@ -25,7 +25,9 @@ from tracker.io.export.units import MM_PER_M
 _C3D_MAX_FRAMES = 65535  # the header's first and last frame are 16-bit
 
 
-def write_c3d(path: str | os.PathLike, names: Sequence[str], first_frame: int, rate: float, joints: np.ndarray) -> None:
+def write_c3d(
+    path: str | os.PathLike, names: Sequence[str], *, first_frame: int, rate: float, joints: np.ndarray
+) -> None:
     """Write ``joints`` (F, M, 3) metres, NaN for gaps, as the C3D file ``path`` (mm, atomically)."""
     import ezc3d
 

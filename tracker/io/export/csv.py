@@ -24,6 +24,7 @@ from tracker.atomic import atomic_write
 
 def csv_lines(
     names: Sequence[str],
+    *,
     frame: np.ndarray,
     time: np.ndarray,
     status: np.ndarray,
@@ -42,6 +43,7 @@ def csv_lines(
 def write_csv(
     path: str | os.PathLike,
     names: Sequence[str],
+    *,
     frame: np.ndarray,
     time: np.ndarray,
     status: np.ndarray,
@@ -49,6 +51,6 @@ def write_csv(
     joints: np.ndarray,
 ) -> None:
     """Write the CSV file ``path`` (atomically): one row per frame, joints (F, J, 3) in metres."""
-    text = "\n".join(csv_lines(names, frame, time, status, residual, joints)) + "\n"
+    text = "\n".join(csv_lines(names, frame=frame, time=time, status=status, residual=residual, joints=joints)) + "\n"
 
     atomic_write(path, lambda file: file.write(text.encode()))

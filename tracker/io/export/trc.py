@@ -67,7 +67,7 @@ class Trc:
         return self.header["Units"]
 
 
-def trc_lines(file_name: str, names: Sequence[str], frame: np.ndarray, rate: float, joints: np.ndarray) -> list[str]:
+def trc_lines(file_name: str, names: Sequence[str], *, frame: np.ndarray, rate: float, joints: np.ndarray) -> list[str]:
     """The lines (without newlines) of a TRC file of ``joints`` (F, M, 3) metres, written in mm.
 
     ``frame`` (F,) are recording frame indices (written plus one); rows are ``rate`` apart in time.
@@ -92,11 +92,11 @@ def trc_lines(file_name: str, names: Sequence[str], frame: np.ndarray, rate: flo
 
 
 def write_trc(
-    path: str | os.PathLike, names: Sequence[str], frame: np.ndarray, rate: float, joints: np.ndarray
+    path: str | os.PathLike, names: Sequence[str], *, frame: np.ndarray, rate: float, joints: np.ndarray
 ) -> None:
     """Write ``joints`` (F, M, 3) metres, NaN for gaps, as the TRC file ``path`` (mm, atomically)."""
     path = Path(path)
-    text = "\n".join(trc_lines(path.name, names, frame, rate, joints)) + "\n"
+    text = "\n".join(trc_lines(path.name, names, frame=frame, rate=rate, joints=joints)) + "\n"
 
     atomic_write(path, lambda file: file.write(text.encode()))
 
