@@ -60,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tracker",
         description="Follow the 3-D pose of a person or other articulated body in calibrated multi-camera video: "
         "calibrate the cameras, track a recording or live cameras, review it in the browser, export the poses.",
-        epilog="Start with: tracker track RECORDING (docs/own-rig.md); every command's options: tracker COMMAND --help.",
+        epilog="Start with: tracker track RECORDING (docs/own-rig.md); options: tracker COMMAND --help.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     for name, command in COMMANDS.items():
