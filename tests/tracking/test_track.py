@@ -191,6 +191,19 @@ def test_motion_since_is_the_body_twist_between_poses():
     np.testing.assert_allclose(motion_since(sampled, current), twist, atol=1e-12)
 
 
+def test_a_tracker_for_other_cameras_carries_the_motion_and_the_learnt_noise_whole():
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    tracker = Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), Settings(dynamics="kalman"))
+    for _, images in itertools.islice(frames(rec), 3):
+        tracker.step(images)
+    other = tracker.with_cameras(rec.cameras[:2])
+    assert other.motion is tracker.motion and other.noise is tracker.noise  # whole, never field by field
+    assert other.motion.previous is not None and other.motion.kalman is not None
+    assert len(other.rig.names) == 2
+    np.testing.assert_allclose(other.poses, tracker.poses, atol=1e-12)
+
+
 def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
     from tracker.tracking.track import scaled_to
 

@@ -60,11 +60,11 @@ both say the pose is off."""
 
 LANDMARK_STRAYED = 0.2
 """Mean image distance of one landmark from its detections over the views that see it (two or more), as a share of
-the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.tracking.track.Tracker.tolerance`), that
-says its limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from
-the truth), the worst landmark lies beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in
-15 %, and a try costs the tracker about half a second (the fit and the snap): this share and the persistence keep
-such frames from trying one."""
+the body's size, beyond the landmark's learnt noise zone
+(:attr:`tracker.tracking.landmark_noise.LandmarkNoise.tolerance`), that says its limb has strayed when it lasts
+:data:`PERSISTENCE` frames in a row.  At the demo's tracked poses (4.9 mm from the truth), the worst landmark lies
+beyond 0.1 in half the frames the faceless mannequin is read in and beyond 0.2 in 15 %, and a try costs the tracker
+about half a second (the fit and the snap): this share and the persistence keep such frames from trying one."""
 
 BACKOFF = 5
 """Re-seeds declined in a row after which the wait before the next try stops doubling: :data:`WINDOW` frames after
@@ -161,7 +161,7 @@ class Recovery:
         pixels, confidence = keypoints
         self.recent = [keypoints, *self.recent[: WINDOW - 1]]
         body, each = self.misfit(result.poses, pixels, confidence)
-        self.streak = np.where(each > LANDMARK_STRAYED + tracker.tolerance, self.streak + 1, 0)
+        self.streak = np.where(each > LANDMARK_STRAYED + tracker.noise.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
         strayed = body > limit or bool((self.streak >= PERSISTENCE).any())
         if result.status != LOST and (self.wait > 0 or not strayed):

@@ -34,22 +34,14 @@ from tracker.geometry.se3 import between, exp, log
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
-from tracker.tracking.keypoint_cue import (
-    LANDMARKS,
-    cue_points,
-    keypoint_kernel,
-    learnt_tolerance,
-    left_right_pairs,
-    placers,
-)
+from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, placers
+from tracker.tracking.landmark_noise import LandmarkNoise
 from tracker.tracking.measure import Statistics, component_misfits, measure_kernel
+from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
-NOISE_WINDOW = 30  # tracked frames whose landmark misfits set the keypoints' noise zones
-NOISE_LEAST = 5  # misfits a landmark needs before its zone is learnt
-HOLD_SPAN = 0.5  # Tracker.held falls from 1 to 0 over this share of keypoint_edge_misfit about it
 
 
 @dataclass(frozen=True)
@@ -308,9 +300,6 @@ class Tracker:
         height = int(self.search_size[:, 1].max())
         width = int(self.search_size[:, 0].max())
         self.images = np.zeros((len(cameras), height, width), np.uint8)
-        self.previous: np.ndarray | None = None
-        self.motion_state: motion_prior.MotionState | None = None
-        self.noise_scale = np.full(n, float(settings.kalman_noise_scale))  # s' per component (kalman)
         self.restart(initial_poses)
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
@@ -321,46 +310,39 @@ class Tracker:
         self.placer = placers(model, *self.landmarks[:2])
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
-        self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark
-        self.edge_misfit = np.zeros(n)  # per component, px, in the last frame's last iteration (none yet: held)
-        self.misfit_row = 0
-        self.tolerance = np.full(len(LANDMARKS), settings.keypoint_tolerance)
+        self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
-        settings, from the current poses, with the previous frame's poses (constant velocity) and the motion
-        filter's state and noise scales (kalman) and the keypoints' learnt noise and edge fits (in the old rig's
-        pixels); buffers and timings start afresh."""
+        settings, from the current poses, with its motion (:class:`~tracker.tracking.motion_prior.Motion`) and the
+        keypoints' learnt noise (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`, in the old rig's pixels),
+        each carried whole; buffers and timings start afresh."""
         other = Tracker(self.model, cameras, self.poses, self.settings)
-        other.previous = self.previous
-        other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
-        other.landmarks, other.misfits, other.misfit_row = self.landmarks, self.misfits.copy(), self.misfit_row
-        other.tolerance = self.tolerance.copy()
-        other.edge_misfit = self.edge_misfit.copy()
+        other.motion, other.noise = self.motion, self.noise
         return other
 
     def restart(self, poses: np.ndarray) -> None:
         """Go on from ``poses`` (coerced) as from a first pose: no motion carried over, the motion filter
         (kalman) started afresh about them."""
         self.poses = self.model.coerce(poses)
-        self.previous = None
         self.anchor = self.poses
-        if self.settings.dynamics == "kalman":
-            st = self.settings
-            s = st.kalman_noise_scale
-            self.motion_state = motion_prior.initial_state(
+        st = self.settings
+        s = st.kalman_noise_scale
+        kalman = None
+        if st.dynamics == "kalman":
+            kalman = motion_prior.initial_state(
                 self.poses, position_variance=(s / st.prior_translation, s / st.prior_rotation)
             )
-            self.noise_scale = np.full(self.model.size, float(s))
+        self.motion = Motion(None, kalman, np.full(self.model.size, float(s)))
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
-        poses, previous, anchor = self.poses.copy(), self.previous, self.anchor
+        poses, anchor = self.poses.copy(), self.anchor
         constant_velocity(poses, poses, self.settings.damping)
         self.iterate(0)
         self.iterate(1)
         component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
-        self.poses, self.previous, self.anchor = poses, previous, anchor
+        self.poses, self.anchor = poses, anchor
 
     def smooth(self, image: np.ndarray) -> np.ndarray:
         """The edge search's input: a grey image reduced and smoothed by a Gaussian of ``blur_sigma`` pixels
@@ -508,12 +490,12 @@ class Tracker:
     def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:
         """Add the landmarks' information to the edges' (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`):
         ``pixels`` (C, 33, 2) and ``confidence`` (C, 33) float64, one row per camera of the rig.  A landmark
-        whose placing component the edges did not hold in the last frame (:attr:`edge_misfit` above
-        ``keypoint_edge_misfit``) pulls from the floor zone with no fade.  Returns (landmarks used,
-        left/right pairs rejected)."""
+        whose placing component the edges did not hold in the last frame (:meth:`LandmarkNoise.held
+        <tracker.tracking.landmark_noise.LandmarkNoise.held>`) pulls from the floor zone with no fade.  Returns
+        (landmarks used, left/right pairs rejected)."""
         st = self.settings
         component, point, pairs = self.landmarks
-        held = self.held()
+        held = self.noise.held(self.placer, st.keypoint_edge_misfit)
         with np.errstate(divide="ignore"):
             reach = st.keypoint_reach / held
         return keypoint_kernel(
@@ -530,7 +512,7 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
-            held * self.tolerance + (1.0 - held) * st.keypoint_tolerance,
+            held * self.noise.tolerance + (1.0 - held) * st.keypoint_tolerance,
             reach,
             self.information,
             self.eta,
@@ -557,8 +539,8 @@ class Tracker:
         self.load_images(images, smoothed)
         current = self.poses
         st = self.settings
-        if st.dynamics == "constant-velocity" and self.previous is not None:
-            self.poses = self.model.coerce(constant_velocity(self.previous, current, st.damping))
+        if st.dynamics == "constant-velocity" and self.motion.previous is not None:
+            self.poses = self.model.coerce(constant_velocity(self.motion.previous, current, st.damping))
         elif st.dynamics == "kalman":
             inverse = self.predict_kalman(1.0 / st.frame_rate if dt is None else dt)
         self.anchor = self.poses
@@ -566,42 +548,20 @@ class Tracker:
             stats = self.iterate(iteration)
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
-        self.previous = current
-        self.edge_misfit = component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
+        self.motion = dataclasses.replace(self.motion, previous=current)
+        edge_misfit = component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
+        self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
         if self.keypoints is not None and status == TRACKED:
-            self.learn_keypoint_noise()
+            self.noise = self.noise.learnt(
+                self.misfit,
+                self.noise.held(self.placer, st.keypoint_edge_misfit),
+                floor=st.keypoint_tolerance,
+                multiple=st.keypoint_noise_multiple,
+                ceiling=st.keypoint_tolerance_max,
+            )
         return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
-
-    def held(self) -> np.ndarray:
-        """How firmly the edges hold each landmark's placing component (:func:`tracker.tracking.keypoint_cue.placers`;
-        every landmark not at a joint is held), from 1 to 0 (K,): 1 where its outline fitted them within 3/4 of
-        ``keypoint_edge_misfit`` in the last frame's last iteration (:attr:`edge_misfit`, the median |m| of its
-        samples), 0 beyond 5/4 of it, linear between, so that a misfit near the limit shifts the landmark's zone
-        and fade a little rather than all at once."""
-        limit = self.settings.keypoint_edge_misfit
-        misfit = self.edge_misfit[np.maximum(self.placer, 0)]
-        return np.where(self.placer < 0, 1.0, np.clip(0.5 - (misfit - limit) / (HOLD_SPAN * limit), 0.0, 1.0))
-
-    def learn_keypoint_noise(self) -> None:
-        """Add the frame's landmark misfits (the median over the cameras) to the recent ones and set each
-        landmark's noise zone from them (:func:`tracker.tracking.keypoint_cue.learnt_tolerance`); called for frames
-        whose edges held the body, and only for the landmarks whose limb they held (:meth:`held`): a limb
-        that strays from right detections must not widen their zone."""
-        st = self.settings
-        if st.keypoint_noise_multiple <= 0:
-            return
-        seen = np.isfinite(self.misfit)
-        frame = np.full(self.misfit.shape[1], np.nan)
-        for j in np.flatnonzero(seen.any(axis=0)):
-            frame[j] = np.median(self.misfit[seen[:, j], j])
-        frame[self.held() < 0.5] = np.nan
-        self.misfits[self.misfit_row % NOISE_WINDOW] = frame
-        self.misfit_row += 1
-        self.tolerance = learnt_tolerance(
-            self.misfits, st.keypoint_tolerance, st.keypoint_noise_multiple, st.keypoint_tolerance_max, NOISE_LEAST
-        )
 
     def predict_kalman(self, dt: float) -> np.ndarray:
         """Predict every component ``dt`` ahead independently (:func:`tracker.tracking.motion_prior.predict`), coerce
@@ -609,16 +569,17 @@ class Tracker:
         predicted information ``s' P_xx^-1`` (floored at prior_translation/prior_rotation; ``s'`` of the
         previous frame).  Returns the predicted state's ``motion_prior.position_inverse``, which the
         correction reuses."""
-        st = self.settings
-        assert self.motion_state is not None  # dynamics "kalman"
+        st, motion = self.settings, self.motion
+        assert motion.kalman is not None  # dynamics "kalman"
         predicted = motion_prior.predict(
-            self.motion_state, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
+            motion.kalman, dt, (st.kalman_q_translation, st.kalman_q_rotation), st.kalman_decay
         )
         self.poses = self.model.coerce(predicted.poses)
-        self.motion_state = motion_prior.rereference(predicted, self.poses)
-        inverse = motion_prior.position_inverse(self.motion_state)
+        kalman = motion_prior.rereference(predicted, self.poses)
+        self.motion = dataclasses.replace(motion, kalman=kalman)
+        inverse = motion_prior.position_inverse(kalman)
         self.prior = motion_prior.prior_information(
-            self.motion_state, self.noise_scale, (st.prior_translation, st.prior_rotation), inverse
+            kalman, motion.noise_scale, (st.prior_translation, st.prior_rotation), inverse
         )
         return inverse
 
@@ -627,21 +588,23 @@ class Tracker:
         (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
         ``s' = s sigma0_i^2`` (:func:`tracker.tracking.motion_prior.variance_factor` of the same samples); ``inverse``
         is the predicted state's P_xx^-1 that :meth:`predict_kalman` returned."""
-        st = self.settings
+        st, motion = self.settings, self.motion
         s = float(st.kalman_noise_scale)
+        noise_scale = motion.noise_scale
         if st.kalman_residual_variance:  # without any edge the last frame's values stay
             n = self.samples.count
-            self.noise_scale = s * motion_prior.variance_factor(
+            noise_scale = s * motion_prior.variance_factor(
                 self.samples.component[:n],
                 self.offset[:n],
                 self.weight[:n],
                 self.model.size,
-                fallback=self.noise_scale / s,
+                fallback=noise_scale / s,
             )
         data = self.information - self.prior
-        assert self.motion_state is not None  # dynamics "kalman"
-        information = motion_prior.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
-        self.motion_state = motion_prior.correct(self.motion_state, self.poses, information, inverse)
+        assert motion.kalman is not None  # dynamics "kalman"
+        information = motion_prior.block_information(data, self.poses) / noise_scale[:, None, None, None]
+        kalman = motion_prior.correct(motion.kalman, self.poses, information, inverse)
+        self.motion = dataclasses.replace(motion, kalman=kalman, noise_scale=noise_scale)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings
