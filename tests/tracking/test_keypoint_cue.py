@@ -220,7 +220,9 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     images = next(itertools.islice(frames(recording), 1))[1]
     tracker.step(images)  # the demo's frame 0 from its true pose: every visible component's edges fit
     forearm, hand, wrist = model.index("forearm_l"), model.index("hand_l"), LANDMARKS.index("left_wrist")
-    assert 0.0 < tracker.noise.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit  # measured, not the start's 0
+    assert (
+        0.0 < tracker.noise.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit
+    )  # measured, not the start's 0
 
     def fitted(misfit: float) -> None:
         """The forearm's edges fitted with median |m| ``misfit`` in the last frame."""
@@ -235,34 +237,34 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     confidence = np.ones(pixels.shape[:2])
 
     def pull() -> float:
-        tracker.information[:] = 0.0
-        tracker.eta[:] = 0.0
+        tracker.work.information[:] = 0.0
+        tracker.work.eta[:] = 0.0
         assert tracker.add_keypoints(far, confidence) == (1, 0)
-        return float(np.linalg.norm(tracker.eta[hand]))
+        return float(np.linalg.norm(tracker.work.eta[hand]))
 
     held = pull()
     fitted(2.0 * tracker.settings.keypoint_edge_misfit)
     loose = pull()
     st = tracker.settings
     assert tracker.noise.tolerance[wrist] == st.keypoint_tolerance  # nothing learnt yet: both at the floor zone
-    excess = tracker.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
+    excess = tracker.work.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
     assert excess > 2 * st.keypoint_reach
     np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoint_reach) ** 2) * held, rtol=1e-9)  # no fade
     tolerance = tracker.noise.tolerance.copy()
-    tolerance[wrist] = 2.0 * tracker.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
+    tolerance[wrist] = 2.0 * tracker.work.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
     tracker.noise = replace(tracker.noise, tolerance=tolerance)
     assert pull() > 0.0  # ... but a limb the edges do not hold is pulled from the floor zone
     fitted(0.0)
-    tracker.information[:] = 0.0
-    tracker.eta[:] = 0.0
+    tracker.work.information[:] = 0.0
+    tracker.work.eta[:] = 0.0
     tracker.add_keypoints(far, confidence)
-    assert not tracker.eta.any()  # held: the learnt zone stands
+    assert not tracker.work.eta.any()  # held: the learnt zone stands
     # and a limb the edges do not hold does not teach its landmark's zone
     for fit, learnt in ((0.0, True), (2.0 * st.keypoint_edge_misfit, False)):
         fitted(fit)
         held_now = tracker.noise.held(tracker.placer, st.keypoint_edge_misfit)
         taught = tracker.noise.learnt(
-            tracker.misfit, held_now, floor=st.keypoint_tolerance, multiple=1.5, ceiling=st.keypoint_tolerance_max
+            tracker.work.misfit, held_now, floor=st.keypoint_tolerance, multiple=1.5, ceiling=st.keypoint_tolerance_max
         )
         assert taught.row == tracker.noise.row + 1
         assert np.isfinite(taught.misfits[tracker.noise.row % len(taught.misfits), wrist]) == learnt

@@ -114,7 +114,7 @@ def track_run(
     stream = _stream(recording, recording.frame_count, keypoint_step, settings)
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
-    tracker.times = StageTimes()
+    tracker.work.times = StageTimes()
     output = 0.0
     started = time.perf_counter()
     try:
@@ -129,7 +129,7 @@ def track_run(
             stream.close()
     elapsed = time.perf_counter() - started
     count = recording.frame_count
-    stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.times.seconds.items()}
+    stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.work.times.seconds.items()}
     stage_ms["output"] = output * 1e3 / count
     return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
 
@@ -359,10 +359,10 @@ def _core_ms(tracker: Tracker, repeats: int, poses) -> tuple[float, int]:
     times = []
     for _ in range(repeats):
         tracker.poses = poses.copy()
-        tracker.times = StageTimes()
+        tracker.work.times = StageTimes()
         tracker.iterate()
-        times.append(sum(v for k, v in tracker.times.seconds.items() if k != "grey") * 1e3)
-    return _median(times), tracker.samples.count
+        times.append(sum(v for k, v in tracker.work.times.seconds.items() if k != "grey") * 1e3)
+    return _median(times), tracker.work.samples.count
 
 
 def _side_by_side(model: Model, single: Model, copies: int) -> np.ndarray:

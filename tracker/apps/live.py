@@ -51,8 +51,7 @@ from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySou
 from tracker.io.poses import PosesWriter
 from tracker.io.recording import VIDEO_SUFFIXES
 from tracker.keypoints.live import LiveDetector, transferred
-from tracker.model import Model
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.track import Tracker
 
 DEFAULT_OUT = Path("out") / "live"
 STATUS_PERIOD = 1.0  # seconds between status lines
@@ -246,24 +245,24 @@ def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
 
 def track_live(
     capture: Capture,
+    tracker: Tracker,
+    *,
     cameras: list[Camera],
-    model: Model,
-    init: np.ndarray,
-    settings: Settings,
     out: Path,
     recorder: Recorder | None = None,
     view=None,
     detector: LiveDetector | None = None,
 ) -> Summary:
-    """Track the sets ``capture`` delivers until its sources end, no camera is left, or Ctrl-C.
+    """Track the sets ``capture`` delivers with ``tracker`` (at its first pose) until its sources end, no camera is
+    left, or Ctrl-C.
 
-    ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order; ``recorder`` and
-    ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the recorder
-    until a camera drops) and stay open for the caller to close.  ``detector``, if given, is offered every
+    ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order (``tracker``'s rig);
+    ``recorder`` and ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the
+    recorder until a camera drops) and stay open for the caller to close.  ``detector``, if given, is offered every
     frame set and its newest landmarks are fused with the edges (moved to the frame by the tracked motion
     since their capture, :func:`tracker.keypoints.live.transferred`); it stays open too.  Closes ``capture``.
     """
-    tracker = Tracker(model, cameras, init, settings)
+    model = tracker.model
     rig = tuple(range(len(cameras)))
     blanks = [np.zeros((camera.size[1], camera.size[0]), np.uint8) for camera in cameras]  # viewer, dropped cameras
     recording = recorder is not None

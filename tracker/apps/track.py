@@ -137,7 +137,7 @@ def track(
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
     truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
-    live = _live_view(view, rec, model, init, settings, truth) if view is not None else None
+    live = _live_view(view, rec, tracker, truth) if view is not None else None
     video = None
     if overlay:
         from tracker.viewer.overlay import OverlayVideo
@@ -199,7 +199,7 @@ def track(
         from tracker.viewer.review import Review
 
         def shown_review() -> Review:
-            shown = Review(live.scene, rec, model, results, truth, settings)
+            shown = Review(live.scene, rec, tracker, results, truth)
             shown.show(done - 1)
             return shown
 
@@ -325,8 +325,9 @@ def _background(given: str, rec, out: Path, bar: Bar):
     return background
 
 
-def _live_view(view: Viewing, rec, model, init, settings, truth):
-    """The viewer following the run (``--view``, ``--view-rate``, ``--record``), with the truth's joints."""
+def _live_view(view: Viewing, rec, tracker, truth):
+    """The viewer following the run of ``tracker`` (``--view``, ``--view-rate``, ``--record``), with the truth's
+    joints."""
     import numpy as np
 
     from tracker.viewer.live import LiveView
@@ -335,11 +336,8 @@ def _live_view(view: Viewing, rec, model, init, settings, truth):
 
     names = None if truth is None else list(truth["joint_names"])
     return LiveView(
-        Scene(start_server(view.host, view.port), model, rec.cameras, settings.robust_c, names),
-        model,
-        rec.cameras,
-        init,
-        settings,
+        Scene(start_server(view.host, view.port), tracker.model, rec.cameras, tracker.settings.robust_c, names),
+        tracker,
         rate=view.rate,
         truth=truth_rows(truth, np.arange(rec.frame_count)),
         record=view.record,

@@ -259,6 +259,54 @@ class StageTimes:
         return now
 
 
+@dataclass
+class Workspace:
+    """The buffers an edge search fills, and the seconds it spent in them: each camera's image as the search reads
+    it, ``images`` (C, H, W) uint8; the outline ``samples`` and their camera-frame quadrics ``placed``; the search
+    limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each
+    sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
+    them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)).
+
+    A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
+    (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
+
+    images: np.ndarray
+    ownership: Ownership
+    samples: Samples
+    placed: Placed
+    offset: np.ndarray
+    weight: np.ndarray
+    information: np.ndarray
+    eta: np.ndarray
+    misfit: np.ndarray
+    times: StageTimes
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+
+    @classmethod
+    def around(cls, images: np.ndarray, ownership: Ownership) -> Workspace:
+        """Fresh buffers for a search in ``images`` with the search limits of ``ownership``, whose model, rig and
+        capacity size the others."""
+        capacity, n = len(ownership.lo), ownership.model.size
+        return cls(
+            images,
+            ownership,
+            Samples.allocate(capacity),
+            Placed.allocate(len(ownership.rig.names), ownership.model.quadric.shape[0]),
+            np.zeros(capacity),
+            np.zeros(capacity),
+            np.zeros((n, 6, 6)),
+            np.zeros((n, 6)),
+            np.full((len(ownership.rig.names), len(LANDMARKS)), np.nan),
+            StageTimes(),
+        )
+
+    def spare(self, images: np.ndarray) -> Workspace:
+        """Buffers of the same sizes for a search in ``images`` beside this one's (:meth:`Ownership.spare
+        <tracker.tracking.ownership.Ownership.spare>`)."""
+        return Workspace.around(images, self.ownership.spare())
+
+
 class Tracker:
     """Tracks one body in a fixed rig, frame after frame."""
 
@@ -280,16 +328,7 @@ class Tracker:
         self.rig = Rig.from_cameras(cameras)
         settings = scaled_to(settings, int(self.rig.size.min(axis=1).max()))
         self.settings = settings
-        self.samples = Samples.allocate(settings.capacity)
-        self.offset = np.zeros(settings.capacity)
-        self.weight = np.zeros(settings.capacity)
-        self.placed = Placed.allocate(len(cameras), model.quadric.shape[0])
-        self.ownership = Ownership(
-            model, self.rig, settings.capacity, max(settings.search_range, settings.final_search_range)
-        )
         n = model.size
-        self.information = np.zeros((n, 6, 6))
-        self.eta = np.zeros((n, 6))
         self.prior = np.ascontiguousarray(
             np.broadcast_to(
                 np.diag(np.array([settings.prior_translation] * 3 + [settings.prior_rotation] * 3, float)), (n, 6, 6)
@@ -299,17 +338,16 @@ class Tracker:
         self.search_size = self.rig.size // self.reduction[:, None]  # each camera's image as the edge search reads it
         height = int(self.search_size[:, 1].max())
         width = int(self.search_size[:, 0].max())
-        self.images = np.zeros((len(cameras), height, width), np.uint8)
+        self.work = Workspace.around(
+            np.zeros((len(cameras), height, width), np.uint8),
+            Ownership(model, self.rig, settings.capacity, max(settings.search_range, settings.final_search_range)),
+        )
         self.restart(initial_poses)
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
-        self.lo: np.ndarray | None = None  # each sample's search limits, set by sample()
-        self.hi: np.ndarray | None = None
-        self.times = StageTimes()
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
-        self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
 
     def with_cameras(self, cameras) -> Tracker:
@@ -341,7 +379,7 @@ class Tracker:
         constant_velocity(poses, poses, self.settings.damping)
         self.iterate(0)
         self.iterate(1)
-        component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
+        component_misfits(self.work.offset, self.work.samples.component, self.work.samples.count, self.model.size)
         self.poses, self.anchor = poses, anchor
 
     def smooth(self, image: np.ndarray) -> np.ndarray:
@@ -355,12 +393,16 @@ class Tracker:
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, reduced and smoothed (:meth:`smooth`) unless
         ``smoothed`` says they already are."""
+        self._load(self.work, images, smoothed)
+
+    def _load(self, work: Workspace, images, smoothed: bool) -> None:
+        """:meth:`load_images` into the images of ``work``."""
         started = time.perf_counter()
         for k, image in enumerate(images):
             searched = image if smoothed else self.smooth(image)
             h, w = searched.shape
-            self.images[k, :h, :w] = searched
-        self.times.add("grey", started)
+            work.images[k, :h, :w] = searched
+        work.times.add("grey", started)
 
     def search_range(self, iteration: int) -> int:
         """Coarse to fine when final_search_range > 0 (:func:`narrowing` over the iterations)."""
@@ -376,21 +418,21 @@ class Tracker:
         iterations between reuse them, each sample moved along its normal by its Jacobian row times its
         component's motion since (first order, section 3), which costs a few flops instead of a render.
         """
-        st = self.settings
+        st, work = self.settings, self.work
         search_range = self.search_range(iteration)
         if iteration % max(st.resample_every, 1) == 0:
-            self.sample(search_range)
+            self.sample(work, self.poses, search_range)
             self.sampled_poses = self.poses
             twist = self.still
         else:
             twist = motion_since(self.sampled_poses, self.poses)
         started = time.perf_counter()
-        visible, found, sum_wm, sum_w = self.measure(search_range, twist)
+        visible, found, sum_wm, sum_w = self.measure(work, search_range, twist)
         if self.keypoints is not None:
             self.add_keypoints(*self.keypoints)
-        started = self.times.add("measure", started)
+        started = work.times.add("measure", started)
         self.poses = self.update(self.poses)
-        self.times.add("solve", started)
+        work.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(visible, found, residual)
 
@@ -398,8 +440,8 @@ class Tracker:
         """Prior, tree solve, step and coercion (:func:`update_kernel`) with the information gathered."""
         m, st = self.model, self.settings
         return update_kernel(
-            self.information,
-            self.eta,
+            self.work.information,
+            self.work.eta,
             self.prior,
             poses,
             self.anchor,
@@ -415,26 +457,27 @@ class Tracker:
             st.max_turn,
         )
 
-    def sample(self, search_range: int) -> None:
-        """Sample the visible outlines at the current poses and limit each one's search (ownership)."""
-        s, m, st = self.samples, self.model, self.settings
+    def sample(self, work: Workspace, poses: np.ndarray, search_range: int) -> None:
+        """Sample the visible outlines at ``poses`` into ``work`` and limit each one's search (ownership)."""
+        s, m, st = work.samples, self.model, self.settings
         started = time.perf_counter()
-        sample_outlines(m, self.poses, self.rig, st.spacing, s, self.placed)
-        started = self.times.add("outline", started)
+        sample_outlines(m, poses, self.rig, st.spacing, s, work.placed)
+        started = work.times.add("outline", started)
         if st.ownership:
-            self.lo, self.hi = self.ownership.limits(self.placed, s, search_range)
+            work.lo, work.hi = work.ownership.limits(work.placed, s, search_range)
         else:
-            self.lo = self.ownership.lo[: s.count]
-            self.hi = self.ownership.hi[: s.count]
-            self.lo[:] = -search_range
-            self.hi[:] = search_range
-        self.times.add("ownership", started)
+            work.lo = work.ownership.lo[: s.count]
+            work.hi = work.ownership.hi[: s.count]
+            work.lo[:] = -search_range
+            work.hi[:] = search_range
+        work.times.add("ownership", started)
 
-    def measure(self, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
-        """Search every sample's edge (moved by ``twist`` since sampling) and fill C_i, eta_i (measure_kernel)."""
-        s, st = self.samples, self.settings
+    def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
+        """Search the edge of every sample in ``work`` (moved by ``twist`` since sampling) in its images and fill
+        its C_i, eta_i (measure_kernel)."""
+        s, st = work.samples, self.settings
         return measure_kernel(
-            self.images,
+            work.images,
             self.search_size,
             self.reduction,
             s.count,
@@ -448,40 +491,48 @@ class Tracker:
             st.threshold,
             st.robust_c,
             self.model.size,
-            self.offset,
-            self.weight,
-            self.information,
-            self.eta,
-            self.lo,
-            self.hi,
+            work.offset,
+            work.weight,
+            work.information,
+            work.eta,
+            work.lo,
+            work.hi,
         )
 
     def inspect(
-        self, images=None, smoothed: bool = False, poses: np.ndarray | None = None, search_range: int | None = None
+        self,
+        images=None,
+        *,
+        smoothed: bool = False,
+        poses: np.ndarray | None = None,
+        search_range: int | None = None,
     ) -> Inspection:
-        """Sample and measure every outline, as the last iteration would (or with ``search_range``), without
-        moving the poses: at ``poses`` if given (else the current ones), in ``images`` if given (else the
-        frame just tracked)."""
-        s = self.samples
-        if poses is not None:
-            self.poses = poses
+        """Sample and measure every outline as the last iteration would (or with ``search_range``): at ``poses`` if
+        given (else the current ones), in ``images`` if given (one grey image per camera, rig order, already
+        :meth:`smooth`-ed if ``smoothed``; else the frame just tracked).
+
+        A query: it searches in buffers of its own (:meth:`Workspace.spare`) and leaves the tracker as it was (its
+        poses, the frame's images, its motion and learnt noise), so a viewer may inspect with the tracker it shows,
+        also from a thread of its own while the tracker steps (given ``images`` and ``poses``)."""
+        frame = self.work.images
+        work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
-            self.load_images(images, smoothed)
+            self._load(work, images, smoothed)
         if search_range is None:
             search_range = self.search_range(self.settings.iterations - 1)
-        self.sample(search_range)
-        self.measure(search_range, self.still)
-        n = s.count
-        assert self.lo is not None and self.hi is not None  # set by sample()
+        self.sample(work, self.poses if poses is None else poses, search_range)
+        self.measure(work, search_range, self.still)
+        s, n = work.samples, work.samples.count
+        assert work.lo is not None and work.hi is not None  # set by sample()
         return Inspection(
             s.camera[:n].copy(),
             s.component[:n].copy(),
             s.pixel[:n].copy(),
             s.normal[:n].copy(),
-            self.lo.copy(),
-            self.hi.copy(),
-            self.offset[:n].copy(),
-            self.weight[:n].copy(),
+            work.lo.copy(),
+            work.hi.copy(),
+            work.offset[:n].copy(),
+            work.weight[:n].copy(),
             s.quadric[:n].copy(),
             s.point[:n].copy(),
             s.jacobian[:n].copy(),
@@ -514,9 +565,9 @@ class Tracker:
             st.keypoint_weight,
             held * self.noise.tolerance + (1.0 - held) * st.keypoint_tolerance,
             reach,
-            self.information,
-            self.eta,
-            self.misfit,
+            self.work.information,
+            self.work.eta,
+            self.work.misfit,
         )
 
     def step(
@@ -549,13 +600,14 @@ class Tracker:
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
         self.motion = dataclasses.replace(self.motion, previous=current)
-        edge_misfit = component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
+        work = self.work
+        edge_misfit = component_misfits(work.offset, work.samples.component, work.samples.count, self.model.size)
         self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
         if self.keypoints is not None and status == TRACKED:
             self.noise = self.noise.learnt(
-                self.misfit,
+                work.misfit,
                 self.noise.held(self.placer, st.keypoint_edge_misfit),
                 floor=st.keypoint_tolerance,
                 multiple=st.keypoint_noise_multiple,
@@ -585,22 +637,22 @@ class Tracker:
 
     def correct_kalman(self, inverse: np.ndarray) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
-        (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
+        (the workspace's ``information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
         ``s' = s sigma0_i^2`` (:func:`tracker.tracking.motion_prior.variance_factor` of the same samples); ``inverse``
         is the predicted state's P_xx^-1 that :meth:`predict_kalman` returned."""
-        st, motion = self.settings, self.motion
+        st, motion, work = self.settings, self.motion, self.work
         s = float(st.kalman_noise_scale)
         noise_scale = motion.noise_scale
         if st.kalman_residual_variance:  # without any edge the last frame's values stay
-            n = self.samples.count
+            n = work.samples.count
             noise_scale = s * motion_prior.variance_factor(
-                self.samples.component[:n],
-                self.offset[:n],
-                self.weight[:n],
+                work.samples.component[:n],
+                work.offset[:n],
+                work.weight[:n],
                 self.model.size,
                 fallback=noise_scale / s,
             )
-        data = self.information - self.prior
+        data = work.information - self.prior
         assert motion.kalman is not None  # dynamics "kalman"
         information = motion_prior.block_information(data, self.poses) / noise_scale[:, None, None, None]
         kalman = motion_prior.correct(motion.kalman, self.poses, information, inverse)
