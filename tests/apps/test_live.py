@@ -24,7 +24,7 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
-from tracker.tracking.track import Settings
+from tracker.tracking.track import Settings, Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
@@ -94,7 +94,8 @@ def _live(rec: Path, tmp_path: Path, wrap=lambda camera, source: source, record:
     capture = Capture(sources, [camera.name for camera in cameras])
     copies = {name: rec / name for name in ("calibration.toml", "model.toml", "init.toml")}
     with Recorder(tmp_path / "rec", cameras, 60.0, copies) as recorder:
-        return track_live(capture, cameras, model, init, Settings(), tmp_path / "out", recorder)
+        tracker = Tracker(model, cameras, init, Settings())
+        return track_live(capture, tracker, cameras=cameras, out=tmp_path / "out", recorder=recorder)
 
 
 def test_a_live_run_records_what_it_tracked_and_tracker_track_replays_it(tiny_recording, tmp_path, capsys):

@@ -206,17 +206,6 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
     assert fused[10:].max() < 10.0 and fused[:10].mean() < 50.0, fused.round(1)
 
 
-def test_each_landmark_zone_is_learnt_from_its_misfits():
-    from tracker.tracking.keypoint_cue import learnt_tolerance
-
-    history = np.full((30, 4), np.nan)
-    history[:10, 0] = 0.01  # a close landmark: the floor
-    history[:10, 1] = np.linspace(0.04, 0.06, 10)  # median 0.05: twice that
-    history[:10, 2] = 0.5  # far off: the ceiling
-    history[:3, 3] = 0.1  # seen too rarely: the floor
-    np.testing.assert_allclose(learnt_tolerance(history, 0.03, 2.0, 0.15, 5), [0.03, 0.10, 0.15, 0.03])
-
-
 def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zone_without_fading(demo_frame):
     """A wrist detection far off its predicted image (beyond the fade) barely pulls while the forearm's
     edges fit; when they fit worse than ``keypoint_edge_misfit``, it pulls at full strength."""
@@ -231,7 +220,16 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     images = next(itertools.islice(frames(recording), 1))[1]
     tracker.step(images)  # the demo's frame 0 from its true pose: every visible component's edges fit
     forearm, hand, wrist = model.index("forearm_l"), model.index("hand_l"), LANDMARKS.index("left_wrist")
-    assert 0.0 < tracker.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit  # measured, not the start's 0
+    assert (
+        0.0 < tracker.noise.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit
+    )  # measured, not the start's 0
+
+    def fitted(misfit: float) -> None:
+        """The forearm's edges fitted with median |m| ``misfit`` in the last frame."""
+        edge_misfit = tracker.noise.edge_misfit.copy()
+        edge_misfit[forearm] = misfit
+        tracker.noise = replace(tracker.noise, edge_misfit=edge_misfit)
+
     tracker.poses = poses
     far = np.full_like(pixels, np.nan)
     extent = np.linalg.norm(np.ptp(pixels[0][component >= 0], axis=0))
@@ -239,28 +237,34 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     confidence = np.ones(pixels.shape[:2])
 
     def pull() -> float:
-        tracker.information[:] = 0.0
-        tracker.eta[:] = 0.0
+        tracker.work.information[:] = 0.0
+        tracker.work.eta[:] = 0.0
         assert tracker.add_keypoints(far, confidence) == (1, 0)
-        return float(np.linalg.norm(tracker.eta[hand]))
+        return float(np.linalg.norm(tracker.work.eta[hand]))
 
     held = pull()
-    tracker.edge_misfit[forearm] = 2.0 * tracker.settings.keypoint_edge_misfit
+    fitted(2.0 * tracker.settings.keypoint_edge_misfit)
     loose = pull()
     st = tracker.settings
-    assert tracker.tolerance[wrist] == st.keypoint_tolerance  # nothing learnt yet: both at the floor zone
-    excess = tracker.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
+    assert tracker.noise.tolerance[wrist] == st.keypoint_tolerance  # nothing learnt yet: both at the floor zone
+    excess = tracker.work.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
     assert excess > 2 * st.keypoint_reach
     np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoint_reach) ** 2) * held, rtol=1e-9)  # no fade
-    tracker.tolerance[wrist] = 2.0 * tracker.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
+    tolerance = tracker.noise.tolerance.copy()
+    tolerance[wrist] = 2.0 * tracker.work.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
+    tracker.noise = replace(tracker.noise, tolerance=tolerance)
     assert pull() > 0.0  # ... but a limb the edges do not hold is pulled from the floor zone
-    tracker.edge_misfit[forearm] = 0.0
-    tracker.information[:] = 0.0
-    tracker.eta[:] = 0.0
+    fitted(0.0)
+    tracker.work.information[:] = 0.0
+    tracker.work.eta[:] = 0.0
     tracker.add_keypoints(far, confidence)
-    assert not tracker.eta.any()  # held: the learnt zone stands
+    assert not tracker.work.eta.any()  # held: the learnt zone stands
     # and a limb the edges do not hold does not teach its landmark's zone
     for fit, learnt in ((0.0, True), (2.0 * st.keypoint_edge_misfit, False)):
-        tracker.edge_misfit[forearm] = fit
-        tracker.learn_keypoint_noise()
-        assert np.isfinite(tracker.misfits[(tracker.misfit_row - 1) % len(tracker.misfits), wrist]) == learnt
+        fitted(fit)
+        held_now = tracker.noise.held(tracker.placer, st.keypoint_edge_misfit)
+        taught = tracker.noise.learnt(
+            tracker.work.misfit, held_now, floor=st.keypoint_tolerance, multiple=1.5, ceiling=st.keypoint_tolerance_max
+        )
+        assert taught.row == tracker.noise.row + 1
+        assert np.isfinite(taught.misfits[tracker.noise.row % len(taught.misfits), wrist]) == learnt

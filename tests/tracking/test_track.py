@@ -191,6 +191,52 @@ def test_motion_since_is_the_body_twist_between_poses():
     np.testing.assert_allclose(motion_since(sampled, current), twist, atol=1e-12)
 
 
+def test_a_tracker_for_other_cameras_carries_the_motion_and_the_learnt_noise_whole():
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    tracker = Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), Settings(dynamics="kalman"))
+    for _, images in itertools.islice(frames(rec), 3):
+        tracker.step(images)
+    other = tracker.with_cameras(rec.cameras[:2])
+    assert other.motion is tracker.motion and other.noise is tracker.noise  # whole, never field by field
+    assert other.motion.previous is not None and other.motion.kalman is not None
+    assert len(other.rig.names) == 2
+    np.testing.assert_allclose(other.poses, tracker.poses, atol=1e-12)
+
+
+def test_inspect_leaves_the_tracker_as_it_was():
+    """Inspections between two frames, at other poses and in other images, change nothing: the poses, the frame's
+    images, the motion, the learnt noise and the stage times stay, and the next step gives bit for bit what it gives
+    a tracker that was never inspected."""
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    read = [images for _, images in itertools.islice(frames(rec), 3)]
+    plain, inspected = (
+        Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), Settings(dynamics="kalman")) for _ in range(2)
+    )
+    plain.step(read[0])
+    inspected.step(read[0])
+    poses, images, motion, noise = (
+        inspected.poses.copy(),
+        inspected.work.images.copy(),
+        inspected.motion,
+        inspected.noise,
+    )
+    seconds = dict(inspected.work.times.seconds)
+    elsewhere = poses.copy()
+    elsewhere[:, 0:3, 3] += [0.05, 0.0, 0.0]
+    moved = inspected.inspect(read[2], poses=elsewhere, search_range=3)
+    here = inspected.inspect()
+    assert len(moved.offset) > 100 and np.isfinite(here.offset).sum() > 100
+    np.testing.assert_array_equal(inspected.poses, poses)
+    np.testing.assert_array_equal(inspected.work.images, images)
+    assert inspected.motion is motion and inspected.noise is noise
+    assert inspected.work.times.seconds == seconds
+    after, expected = inspected.step(read[1]), plain.step(read[1])
+    assert after.poses.tobytes() == expected.poses.tobytes()
+    assert (after.status, after.residual, after.samples) == (expected.status, expected.residual, expected.samples)
+
+
 def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
     from tracker.tracking.track import scaled_to
 
@@ -261,8 +307,8 @@ def test_large_images_are_searched_reduced_by_a_whole_factor():
     tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
     np.testing.assert_array_equal(tracker.reduction, [2, 1])
     np.testing.assert_array_equal(tracker.search_size, [[960, 540], [640, 480]])
-    assert tracker.images.shape == (2, 540, 960)
-    assert Tracker(model, cameras, tracker.poses, Settings(work_side=0)).images.shape == (2, 1080, 1920)
+    assert tracker.work.images.shape == (2, 540, 960)
+    assert Tracker(model, cameras, tracker.poses, Settings(work_side=0)).work.images.shape == (2, 1080, 1920)
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
-from tracker.tracking.track import Settings
+from tracker.tracking.track import Tracker
 from tracker.viewer.placement import Placement
 from tracker.viewer.review import Review
 from tracker.viewer.scene import BODY, Scene
@@ -72,7 +72,7 @@ def test_viewer_draws_the_body_and_the_camera_images(server, page, tmp_path, tra
     model = load_model(rec.model_path)
     truth = load_poses(rec.truth_path)
     scene = Scene(server, model, rec.cameras, truth_names=list(truth["joint_names"]))
-    review = Review(scene, rec, model, tracked_demo, truth, Settings())
+    review = Review(scene, rec, Tracker(model, rec.cameras, tracked_demo["poses"][0]), tracked_demo, truth)
     try:
         review.show(40)
         _open(page, server, 3)
@@ -119,7 +119,7 @@ def test_recorded_session_plays_in_viser_static_client(server, page, tracked, tm
     recording, results = tracked
     rec = open_recording(recording)
     model = load_model(rec.model_path)
-    review = Review(Scene(server, model, rec.cameras), rec, model, results, None, Settings())
+    review = Review(Scene(server, model, rec.cameras), rec, Tracker(model, rec.cameras, results["poses"][0]), results)
     site = tmp_path / "site"
     shutil.copytree(Path(viser.__file__).parent / "client" / "build", site)
     try:

@@ -16,7 +16,7 @@ def test_live_view_shows_the_newest_frame_and_records_the_session(server, tiny_r
     init = load_pose_file(rec.init_path, model)
     tracker = Tracker(model, rec.cameras, init)
     scene = Scene(server, model, rec.cameras)
-    live = LiveView(scene, model, rec.cameras, init, tracker.settings, rate=30.0, record=tmp_path / "live.viser")
+    live = LiveView(scene, tracker, rate=30.0, record=tmp_path / "live.viser")
     last = None
     for index, images in itertools.islice(frames(rec, prepare=tracker.smooth), 6):
         last = tracker.step(images, smoothed=True)

@@ -3,5 +3,5 @@
 track.py      the library form of ``tracker track``: a recording tracked, poses.npz written (``tracker batch`` too)
 live.py       live tracking from cameras (``tracker live``)
 bench.py      stage timings, fps, decode floor, scaling (``tracker bench``)
-stepwrite.py  the step-and-write of a frame that each of them does: track it, append its row to poses.npz
+loop.py       the frame loop that each of them runs: every frame tracked, checked, written to poses.npz, handed on
 """

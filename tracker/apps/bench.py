@@ -21,24 +21,26 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import statistics
 import tempfile
 import time
 import tomllib
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from tracker.apps.stepwrite import step_and_write
+from tracker.apps.loop import Tracked, track_frames
 from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
-from tracker.io.poses import PosesWriter, load_poses
+from tracker.io.poses import load_poses
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.keypoints.detector import Detector
@@ -114,25 +116,25 @@ def track_run(
     stream = _stream(recording, recording.frame_count, keypoint_step, settings)
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
-    tracker.times = StageTimes()
-    output = 0.0
+    tracker.work.times = StageTimes()
     started = time.perf_counter()
     try:
-        with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), recording.fps) as writer:
-            for index, images in tracked_frames(
-                stream, recording, start=0, stop=recording.frame_count, prepare=tracker.smooth
-            ):
-                mark = time.perf_counter()
-                keypoints = None if stream is None else stream.get(index)
-                _, spent = step_and_write(tracker, writer, index, images, keypoints=keypoints)
-                output += time.perf_counter() - mark - spent
+        run = track_frames(
+            tracker,
+            tracked_frames(stream, recording, start=0, stop=recording.frame_count, prepare=tracker.smooth),
+            out / "poses.npz",
+            fps=recording.fps,
+            keypoints=None if stream is None else stream.get,
+        )
     finally:
         if stream is not None:
             stream.close()
+    if run.interrupted:
+        raise KeyboardInterrupt  # the benchmark stops at Ctrl-C
     elapsed = time.perf_counter() - started
     count = recording.frame_count
-    stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.times.seconds.items()}
-    stage_ms["output"] = output * 1e3 / count
+    stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.work.times.seconds.items()}
+    stage_ms["output"] = run.writing * 1e3 / count
     return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
 
 
@@ -238,35 +240,28 @@ def long_run(
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     memory = {"start": resident_mb(), "settled": float("nan")}
-    done = 0
-    started = time.perf_counter()
-    with tempfile.TemporaryDirectory() as folder:
+    passes = _Passes(recording, total, keypoint_step, settings, tracker.smooth)
+    bar = iter(progress(range(total), total=total))
+
+    def counted(frame: Tracked) -> None:
+        """Advance the bar; take the memory after frame :data:`SETTLED`."""
+        next(bar, None)
+        if frame.index + 1 == SETTLED:
+            memory["settled"] = resident_mb()
+
+    with tempfile.TemporaryDirectory() as folder, contextlib.closing(passes.frames()) as frames:
         out = Path(folder) / "poses.npz"
-        bar = iter(progress(range(total), total=total))
-        with PosesWriter(out, list(model.names), list(model.joint_names), recording.fps) as writer:
-            while done < total:
-                stop = min(recording.frame_count, total - done)
-                stream = _stream(recording, stop, keypoint_step, settings)
-                try:
-                    for index, images in tracked_frames(stream, recording, start=0, stop=stop, prepare=tracker.smooth):
-                        keypoints = None if stream is None else stream.get(index)
-                        step_and_write(tracker, writer, done, images, keypoints=keypoints)
-                        done += 1
-                        next(bar, None)
-                        if done == SETTLED:
-                            memory["settled"] = resident_mb()
-                finally:
-                    if stream is not None:
-                        stream.close()
-        elapsed = time.perf_counter() - started
+        run = track_frames(tracker, frames, out, fps=recording.fps, keypoints=passes.landmarks, each=counted)
+        if run.interrupted:
+            raise KeyboardInterrupt  # the benchmark stops at Ctrl-C
         memory["end"] = resident_mb()
         written = len(load_poses(out)["frame"])
     return {
         "recording": str(path),
         "views": len(recording.cameras),
-        "frames": done,
+        "frames": run.frames,
         "frames_written": written,
-        "fps": done / elapsed,
+        "fps": run.frames / run.seconds,
         "keypoint_step": keypoint_step,
         "resident_mb_start": memory["start"],
         "settled_frame": SETTLED,
@@ -274,6 +269,38 @@ def long_run(
         "resident_mb_end": memory["end"],
         "resident_mb_growth_after_settled": memory["end"] - memory["settled"],
     }
+
+
+@dataclass
+class _Passes:
+    """The frames of a long run: ``total`` frames numbered 0, 1, ..., the recording read again and again from its
+    first frame (``prepare``-d), each pass with a fresh keypoint worker at ``keypoint_step`` (0: none) beside it."""
+
+    recording: Recording
+    total: int
+    keypoint_step: int
+    settings: Settings
+    prepare: Callable
+    stream: KeypointStream | None = None  # the pass's worker
+    first: int = 0  # the number of the pass's first frame
+
+    def frames(self) -> Generator[tuple[int, list], None, None]:
+        """(number, images) of every frame of every pass, each pass's worker closed as it ends."""
+        done = 0
+        while done < self.total:
+            stop = min(self.recording.frame_count, self.total - done)
+            self.stream, self.first = _stream(self.recording, stop, self.keypoint_step, self.settings), done
+            try:
+                for _, images in tracked_frames(self.stream, self.recording, start=0, stop=stop, prepare=self.prepare):
+                    yield done, images
+                    done += 1
+            finally:
+                if self.stream is not None:
+                    self.stream.close()
+
+    def landmarks(self, number: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The landmarks of frame ``number`` from its pass's worker, or None."""
+        return None if self.stream is None else self.stream.get(number - self.first)
 
 
 def format_long(result: dict) -> str:
@@ -361,10 +388,10 @@ def _core_ms(tracker: Tracker, repeats: int, poses) -> tuple[float, int]:
     times = []
     for _ in range(repeats):
         tracker.poses = poses.copy()
-        tracker.times = StageTimes()
+        tracker.work.times = StageTimes()
         tracker.iterate()
-        times.append(sum(v for k, v in tracker.times.seconds.items() if k != "grey") * 1e3)
-    return _median(times), tracker.samples.count
+        times.append(sum(v for k, v in tracker.work.times.seconds.items() if k != "grey") * 1e3)
+    return _median(times), tracker.work.samples.count
 
 
 def _side_by_side(model: Model, single: Model, copies: int) -> np.ndarray:

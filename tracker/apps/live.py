@@ -36,23 +36,22 @@ import shutil
 import signal
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
 import numpy as np
 
-from tracker.apps.stepwrite import step_and_write
+from tracker.apps.loop import Tracked, track_frames
 from tracker.atomic import ensure_writable_folder
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
-from tracker.io.poses import PosesWriter
 from tracker.io.recording import VIDEO_SUFFIXES
 from tracker.keypoints.live import LiveDetector, transferred
-from tracker.model import Model
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.track import Tracker
 
 DEFAULT_OUT = Path("out") / "live"
 STATUS_PERIOD = 1.0  # seconds between status lines
@@ -239,96 +238,143 @@ def _landmarks_now(
     return moved[list(rig)], confidence[list(rig)]
 
 
-def _rebuilt(tracker: Tracker, cameras: list[Camera]) -> Tracker:
-    """A tracker for ``cameras`` that goes on from ``tracker``'s poses and motion with its (pixel-scaled) settings."""
-    return tracker.with_cameras(cameras)
+class _Session:
+    """What ``tracker live`` adds to the frame loop (:func:`tracker.apps.loop.track_frames`): the sets taken from
+    ``capture`` until it ends or ``stop`` is requested, each recorded and offered to the detector (:meth:`sets`), the
+    tracker rebuilt for the cameras still delivering (:meth:`retarget`), the set's capture time (:meth:`time`), the
+    detector's newest landmarks moved to the present (:meth:`landmarks`), and each tracked frame kept and shown
+    (:meth:`tracked`)."""
+
+    def __init__(
+        self,
+        capture: Capture,
+        cameras: list[Camera],
+        stop: _StopRequest,
+        recorder: Recorder | None,
+        view,
+        detector: LiveDetector | None,
+    ):
+        self.capture, self.cameras, self.stop = capture, cameras, stop
+        self.recorder, self.view, self.detector = recorder, view, detector
+        self.recording = recorder is not None
+        self.rig = tuple(range(len(cameras)))  # the cameras of the set in hand
+        self.blanks = [np.zeros((camera.size[1], camera.size[0]), np.uint8) for camera in cameras]  # dropped, viewer
+        self.history: dict[int, np.ndarray] = {}  # tracked poses of the recent frames, by frame number
+        self.frames = 0  # frames tracked
+        self.taken: FrameSet | None = None  # the set in hand, and its capture time
+        self.at = 0.0
+        self.tracker: Tracker | None = None  # the tracker for the set in hand (retarget)
+
+    def sets(self) -> Iterator[tuple[int, list[np.ndarray]]]:
+        """(frame number, smoothed images of the cameras delivering) of each set taken, the newest complete one."""
+        status = _Status(self.capture)
+        cameras, recorder = self.cameras, self.recorder
+        while not self.stop.requested:
+            frame_set = self.capture.take(TAKE_WAIT)
+            status.tick(self.frames)
+            if frame_set is None:
+                if self.capture.finished:
+                    break
+                continue
+            if frame_set.cameras != self.rig:
+                self.rig = frame_set.cameras
+                print(
+                    f"tracker: tracking goes on with {', '.join(cameras[camera].name for camera in self.rig)} "
+                    f"from frame {self.frames} (tracker rebuilt at the current poses)",
+                    file=sys.stderr,
+                )
+                if self.recording:
+                    assert recorder is not None  # recording only with a recorder
+                    print(
+                        f"tracker: the recording ends at its {recorder.frames} frames: a recording "
+                        "folder needs every camera in every frame",
+                        file=sys.stderr,
+                    )
+                    self.recording = False
+            self.taken = frame_set
+            self.at = float(f"{frame_set.frames[0].time - self.capture.started:.6f}")  # as timestamps.csv has it
+            if self.recording and recorder is not None and not recorder.write(frame_set, self.capture.started):
+                print(
+                    f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
+                    "the 1 GiB an AVI file can hold; tracking goes on",
+                    file=sys.stderr,
+                )
+                self.recording = False
+            if self.detector is not None:
+                jpegs: list[np.ndarray | None] = [None] * len(cameras)
+                for camera, frame in zip(frame_set.cameras, frame_set.frames):
+                    jpegs[camera] = frame.jpeg
+                self.detector.offer(self.frames, jpegs)
+            yield self.frames, [frame.image for frame in frame_set.frames]
+
+    def retarget(self, tracker: Tracker) -> Tracker:
+        """The tracker for the set in hand: ``tracker``, or when cameras dropped one for those still delivering that
+        goes on from its poses, motion and learnt noise (:meth:`~tracker.tracking.track.Tracker.with_cameras`)."""
+        delivering = [self.cameras[camera] for camera in self.rig]
+        if tracker.rig.names != tuple(camera.name for camera in delivering):
+            tracker = tracker.with_cameras(delivering)
+        self.tracker = tracker
+        return tracker
+
+    def time(self, frame: int) -> float:
+        """The capture time of the set in hand, frame ``frame``, in seconds since capture started."""
+        return self.at
+
+    def landmarks(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The detector's newest landmarks for frame ``frame`` (:func:`_landmarks_now`), for the cameras of the set."""
+        assert self.detector is not None and self.tracker is not None  # with a detector; after retarget
+        return _landmarks_now(self.detector, self.history, self.tracker, self.cameras, self.rig)
+
+    def tracked(self, frame: Tracked) -> None:
+        """Keep the frame's poses for late landmarks, and show it (every camera, blank where one dropped)."""
+        self.history[frame.index] = frame.result.poses
+        self.history.pop(frame.index - HISTORY, None)
+        if self.view is not None:
+            assert self.taken is not None  # the set just tracked
+            shown = list(self.blanks)
+            for camera, image in zip(self.taken.cameras, frame.images):
+                shown[camera] = image
+            self.view.offer(frame.index, shown, frame.result, frame.spent)
+        self.frames += 1
 
 
 def track_live(
     capture: Capture,
+    tracker: Tracker,
+    *,
     cameras: list[Camera],
-    model: Model,
-    init: np.ndarray,
-    settings: Settings,
     out: Path,
     recorder: Recorder | None = None,
     view=None,
     detector: LiveDetector | None = None,
 ) -> Summary:
-    """Track the sets ``capture`` delivers until its sources end, no camera is left, or Ctrl-C.
+    """Track the sets ``capture`` delivers with ``tracker`` (at its first pose) until its sources end, no camera is
+    left, or Ctrl-C.
 
-    ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order; ``recorder`` and
-    ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the recorder
-    until a camera drops) and stay open for the caller to close.  ``detector``, if given, is offered every
+    ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order (``tracker``'s rig);
+    ``recorder`` and ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the
+    recorder until a camera drops) and stay open for the caller to close.  ``detector``, if given, is offered every
     frame set and its newest landmarks are fused with the edges (moved to the frame by the tracked motion
     since their capture, :func:`tracker.keypoints.live.transferred`); it stays open too.  Closes ``capture``.
     """
-    tracker = Tracker(model, cameras, init, settings)
-    rig = tuple(range(len(cameras)))
-    blanks = [np.zeros((camera.size[1], camera.size[0]), np.uint8) for camera in cameras]  # viewer, dropped cameras
-    recording = recorder is not None
-    frames = 0
-    history: dict[int, np.ndarray] = {}  # tracked poses of the recent frames, by frame number
     try:
-        with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), capture.fps) as writer:
-            print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
-            tracker.warm_up()
-            last = None  # capture time of the last set tracked
-            with _StopRequest() as stop:
-                capture.start(tracker.smooth)
-                status = _Status(capture)
-                while not stop.requested:
-                    frame_set = capture.take(TAKE_WAIT)
-                    status.tick(frames)
-                    if frame_set is None:
-                        if capture.finished:
-                            break
-                        continue
-                    if frame_set.cameras != rig:
-                        rig = frame_set.cameras
-                        tracker = _rebuilt(tracker, [cameras[camera] for camera in rig])
-                        print(
-                            f"tracker: tracking goes on with {', '.join(cameras[camera].name for camera in rig)} "
-                            f"from frame {frames} (tracker rebuilt at the current poses)",
-                            file=sys.stderr,
-                        )
-                        if recording:
-                            assert recorder is not None  # recording only with a recorder
-                            print(
-                                f"tracker: the recording ends at its {recorder.frames} frames: a recording "
-                                "folder needs every camera in every frame",
-                                file=sys.stderr,
-                            )
-                            recording = False
-                    at = float(f"{frame_set.frames[0].time - capture.started:.6f}")  # as timestamps.csv has it
-                    images = [frame.image for frame in frame_set.frames]
-                    if recording and recorder is not None and not recorder.write(frame_set, capture.started):
-                        print(
-                            f"tracker: the recording ends at its {recorder.frames} frames: its videos reached "
-                            "the 1 GiB an AVI file can hold; tracking goes on",
-                            file=sys.stderr,
-                        )
-                        recording = False
-                    keypoints = None
-                    if detector is not None:
-                        jpegs: list[np.ndarray | None] = [None] * len(cameras)
-                        for camera, frame in zip(frame_set.cameras, frame_set.frames):
-                            jpegs[camera] = frame.jpeg
-                        detector.offer(frames, jpegs)
-                        keypoints = _landmarks_now(detector, history, tracker, cameras, rig)
-                    result, spent = step_and_write(
-                        tracker, writer, frames, images, at=at, previous=last, keypoints=keypoints
-                    )
-                    history[frames] = result.poses
-                    history.pop(frames - HISTORY, None)
-                    last = at
-                    if view is not None:
-                        shown = list(blanks)
-                        for camera, frame in zip(frame_set.cameras, frame_set.frames):
-                            shown[camera] = frame.image
-                        view.offer(frames, shown, result, spent)
-                    frames += 1
-            seconds = time.monotonic() - capture.started
+        print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
+        tracker.warm_up()
+        with _StopRequest() as stop:
+            capture.start(tracker.smooth)
+            session = _Session(capture, cameras, stop, recorder, view, detector)
+            run = track_frames(
+                tracker,
+                session.sets(),
+                out / "poses.npz",
+                fps=capture.fps,
+                keypoints=None if detector is None else session.landmarks,
+                times=session.time,
+                retarget=session.retarget,
+                each=session.tracked,
+            )
+        seconds = time.monotonic() - capture.started
     finally:
         capture.close()  # also settles the counters
-    return Summary(frames, recorder.frames if recorder is not None else 0, capture.counts(), seconds, stop.requested)
+    recorded = recorder.frames if recorder is not None else 0
+    return Summary(run.frames, recorded, capture.counts(), seconds, stop.requested or run.interrupted)

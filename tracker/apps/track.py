@@ -9,8 +9,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import sys
-import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -100,9 +99,9 @@ def track(
     gives the progress bars (default none)."""
     import numpy as np
 
-    from tracker.apps.stepwrite import step_and_write
+    from tracker.apps.loop import Tracked, track_frames
     from tracker.evaluate import evaluate
-    from tracker.io.poses import PosesWriter, load_poses
+    from tracker.io.poses import load_poses
     from tracker.io.readers import keeping_grey
     from tracker.io.recording import capture_times
     from tracker.keypoints.stream import tracked_frames
@@ -137,7 +136,7 @@ def track(
     tracker = Tracker(model, rec.cameras, init, settings)
     tracker.warm_up()
     truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
-    live = _live_view(view, rec, model, init, settings, truth) if view is not None else None
+    live = _live_view(view, rec, tracker, truth) if view is not None else None
     video = None
     if overlay:
         from tracker.viewer.overlay import OverlayVideo
@@ -157,49 +156,57 @@ def track(
         prepare = [keeping_grey(camera) for camera in measured] if shows else list(measured)
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
     residuals = []
-    interrupted = False
-    times, last = capture_times(rec), None  # a live recording's capture times: its frames' time and time steps
+    times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
+    grey: Sequence[np.ndarray] = ()  # the frame in hand as recorded, for the overlay and the viewer
+
+    def searched(read):
+        """The frames as the edge search reads them, the frames as recorded kept aside in ``grey``."""
+        nonlocal grey
+        for index, images in read:
+            if shows:
+                grey, images = zip(*images)
+            yield index, images
+
+    def counted_and_shown(frame: Tracked) -> None:
+        """Count the frame's status and residual, and draw it in the overlay and the viewer."""
+        images = grey if shows else frame.images
+        if live is not None:
+            live.offer(frame.index, images, frame.result, frame.spent)
+        if video is not None:
+            video.write(images, tracker.inspect())
+        counts[frame.result.status] += 1
+        residuals.append(frame.result.residual)
+
     progress = bar(None, "frame", leave=True)
-    started = time.perf_counter()
-    with PosesWriter(out / "poses.npz", list(model.names), list(model.joint_names), rec.fps) as writer:
-        try:
-            read = tracked_frames(stream, rec, start=begin, stop=stop, prepare=prepare, colour=background is not None)
-            for index, images in progress(read, total=stop - begin):
-                shown = images
-                if shows:
-                    shown, images = zip(*images)
-                at = None if times is None else float(times[index])
-                keypoints = None if stream is None else stream.get(index)
-                result, spent = step_and_write(
-                    tracker, writer, index, images, at=at, previous=last, keypoints=keypoints, check=recovery
-                )
-                last = at
-                if live is not None:
-                    live.offer(index, shown, result, spent)
-                if video is not None:
-                    video.write(shown, tracker.inspect())
-                counts[result.status] += 1
-                residuals.append(result.residual)
-        except KeyboardInterrupt:
-            interrupted = True
-        finally:
-            if video is not None:
-                video.close()
-            if stream is not None:
-                stream.close()
-    elapsed = time.perf_counter() - started
+    try:
+        read = tracked_frames(stream, rec, start=begin, stop=stop, prepare=prepare, colour=background is not None)
+        run = track_frames(
+            tracker,
+            progress(searched(read), total=stop - begin),
+            out / "poses.npz",
+            fps=rec.fps,
+            keypoints=None if stream is None else stream.get,
+            check=recovery,
+            times=None if times is None else lambda index: float(times[index]),
+            each=counted_and_shown,
+        )
+    finally:
+        if video is not None:
+            video.close()
+        if stream is not None:
+            stream.close()
     if live is not None:
         live.close()
-    done = len(residuals)
+    done = run.frames
     poses = out / "poses.npz"
-    results = load_poses(poses) if not interrupted and (truth is not None or live is not None) else None
+    results = load_poses(poses) if not run.interrupted and (truth is not None or live is not None) else None
     report = evaluate(results, truth) if results is not None and truth is not None else None
     review: Callable[[], Review] | None = None
     if live is not None and results is not None and done > 0:
         from tracker.viewer.review import Review
 
         def shown_review() -> Review:
-            shown = Review(live.scene, rec, model, results, truth, settings)
+            shown = Review(live.scene, rec, tracker, results, truth)
             shown.show(done - 1)
             return shown
 
@@ -210,11 +217,11 @@ def track(
         frames=done,
         views=len(rec.cameras),
         iterations=settings.iterations,
-        fps=done / elapsed if elapsed > 0 else float("inf"),
+        fps=done / run.seconds if run.seconds > 0 else float("inf"),
         residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
         counts=counts,
         declined=None if recovery is None else recovery.declined,
-        interrupted=interrupted,
+        interrupted=run.interrupted,
         report=report,
         review=review,
     )
@@ -325,8 +332,9 @@ def _background(given: str, rec, out: Path, bar: Bar):
     return background
 
 
-def _live_view(view: Viewing, rec, model, init, settings, truth):
-    """The viewer following the run (``--view``, ``--view-rate``, ``--record``), with the truth's joints."""
+def _live_view(view: Viewing, rec, tracker, truth):
+    """The viewer following the run of ``tracker`` (``--view``, ``--view-rate``, ``--record``), with the truth's
+    joints."""
     import numpy as np
 
     from tracker.viewer.live import LiveView
@@ -335,11 +343,8 @@ def _live_view(view: Viewing, rec, model, init, settings, truth):
 
     names = None if truth is None else list(truth["joint_names"])
     return LiveView(
-        Scene(start_server(view.host, view.port), model, rec.cameras, settings.robust_c, names),
-        model,
-        rec.cameras,
-        init,
-        settings,
+        Scene(start_server(view.host, view.port), tracker.model, rec.cameras, tracker.settings.robust_c, names),
+        tracker,
         rate=view.rate,
         truth=truth_rows(truth, np.arange(rec.frame_count)),
         record=view.record,

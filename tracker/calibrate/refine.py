@@ -62,13 +62,7 @@ def _measure(tracker: Tracker, poses: np.ndarray, images: Sequence[np.ndarray], 
     seen = tracker.inspect(images, smoothed=True, poses=poses, search_range=search_range)
     found = seen.weight > 0
     camera, component = seen.camera[found], seen.component[found]
-    rows = camera_rows(
-        tracker.samples.jacobian[: len(found)][found],
-        camera,
-        component,
-        rig_pose=tracker.rig.camera_from_world,
-        poses=poses,
-    )
+    rows = camera_rows(seen.jacobian[found], camera, component, rig_pose=tracker.rig.camera_from_world, poses=poses)
     return camera, rows, seen.offset[found], seen.weight[found]
 
 

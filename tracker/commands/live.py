@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.io.capture import Capture
     from tracker.io.posefile import load_pose_file
     from tracker.model import load_model
+    from tracker.tracking.track import Tracker
 
     calibration_path = Path(args.calib)
     rig = assign_cameras(args.camera, load_calibration(calibration_path), calibration_path)
@@ -84,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     with ExitStack() as stack:
         sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
-        settings = options.settings_from(args, capture.fps)
+        tracker = Tracker(model, cameras, init, options.settings_from(args, capture.fps))
         print(
             "live: "
             + ", ".join(
@@ -108,9 +109,7 @@ def run(args: argparse.Namespace) -> int:
 
             server = start_server(args.host, args.port)
             stack.callback(server.stop)
-            view = LiveView(
-                Scene(server, model, cameras, settings.robust_c), model, cameras, init, settings, rate=args.view_rate
-            )
+            view = LiveView(Scene(server, model, cameras, tracker.settings.robust_c), tracker, rate=args.view_rate)
             stack.callback(view.close)
         detector = None
         step = options.keypoint_step_at(args, capture.fps)
@@ -119,7 +118,9 @@ def run(args: argparse.Namespace) -> int:
 
             detector = LiveDetector(cameras, step)
             stack.callback(detector.close)
-        summary = track_live(capture, cameras, model, init, settings, out, recorder, view, detector)
+        summary = track_live(
+            capture, tracker, cameras=cameras, out=out, recorder=recorder, view=view, detector=detector
+        )
     counts = summary.counts
     print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
     if recorder is not None:

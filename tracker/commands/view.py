@@ -29,7 +29,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the review until Ctrl-C, or with ``--record`` write the session and return."""
-    from tracker.tracking.track import Settings
+    from tracker.tracking.track import Settings, Tracker
     from tracker.viewer.review import Review
 
     rec, model = options.opened(args)
@@ -41,9 +41,8 @@ def run(args: argparse.Namespace) -> int:
 
         background = load_background(args.background, rec)
     truth = options.truth(rec)
-    review = Review(
-        scene(args, rec, model, settings=settings, truth=truth), rec, model, results, truth, settings, background
-    )
+    tracker = Tracker(model, rec.cameras, results["poses"][0], settings)
+    review = Review(scene(args, rec, model, settings=settings, truth=truth), rec, tracker, results, truth, background)
     review.show(0)
     if args.record:
         review.record(Path(args.record), progress=not args.quiet)

@@ -58,10 +58,11 @@ both say the pose is off."""
 
 LANDMARK_STRAYED = 0.2
 """Mean image distance of one landmark from its detections over the views that see it (two or more), as a share of
-the body's size, beyond the landmark's learnt noise zone (:attr:`tracker.tracking.track.Tracker.tolerance`), that
-says its limb has strayed when it lasts :data:`PERSISTENCE` frames in a row.  A faceless mannequin's landmarks
-stray this far in a few frames at a time even where it is tracked right, and a try is costly (the fit and the
-snap): this share and the persistence keep such frames from trying one (docs/keypoints.md)."""
+the body's size, beyond the landmark's learnt noise zone
+(:attr:`tracker.tracking.landmark_noise.LandmarkNoise.tolerance`), that says its limb has strayed when it lasts
+:data:`PERSISTENCE` frames in a row.  A faceless mannequin's landmarks stray this far in a few frames at a time even
+where it is tracked right, and a try is costly (the fit and the snap): this share and the persistence keep such
+frames from trying one (docs/keypoints.md)."""
 
 BACKOFF = 5
 """Re-seeds declined in a row after which the wait before the next try stops doubling: :data:`WINDOW` frames after
@@ -158,7 +159,7 @@ class Recovery:
         pixels, confidence = keypoints
         self.recent = [keypoints, *self.recent[: WINDOW - 1]]
         body, each = self.misfit(result.poses, pixels, confidence)
-        self.streak = np.where(each > LANDMARK_STRAYED + tracker.tolerance, self.streak + 1, 0)
+        self.streak = np.where(each > LANDMARK_STRAYED + tracker.noise.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
         strayed = body > limit or bool((self.streak >= PERSISTENCE).any())
         if result.status != LOST and (self.wait > 0 or not strayed):

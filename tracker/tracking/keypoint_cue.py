@@ -16,17 +16,17 @@ the cue's weight against the edges and ``t`` the detector's noise in that image 
 predicted body's size there): a landmark within ``t`` of its prediction is not used (e <= 0), so a
 detector's scatter and bias never pull against the edges, while a body that has drifted off is
 pulled back by the excess.  So one tree solve fuses both cues.  The noise is learnt per landmark
-(:func:`learnt_tolerance`): how far the detector's landmark lies from the tracked body's while the edges hold it, for
-this detector on this subject.  Where the edges do not hold a limb (the component that places a joint landmark,
-:func:`placers`, fitted its outline's edges worse than ``Settings.keypoint_edge_misfit`` in the last frame's last
-iteration, :func:`tracker.tracking.measure.component_misfits`: it follows clutter, or nothing), the landmarks it
-places pull from the floor zone with no fade (``reach`` inf) until they bring it back (docs/keypoints.md, "Fusion with
-the edges"); near that limit the zone and the fade pass from one to the other over a span
-(:meth:`tracker.tracking.track.Tracker.held`).  Left/right swaps are rejected, not fused: for each left/right pair
-seen in a camera, when the two detections fit the predicted images better the other way round (summed distance),
-neither is used in that camera, and a pair that fits barely better as detected counts in part (:data:`SWAP_MARGIN`).
-Every one of these choices is continuous in the poses, so that a last-bit change of a pose changes the solve by about
-as much (docs/keypoints.md, "The same result on every machine").
+(:mod:`tracker.tracking.landmark_noise`): how far the detector's landmark lies from the tracked body's while the
+edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the component that places a
+joint landmark, :func:`placers`, fitted its outline's edges worse than ``Settings.keypoint_edge_misfit`` in the last
+frame's last iteration, :func:`tracker.tracking.measure.component_misfits`: it follows clutter, or nothing), the
+landmarks it places pull from the floor zone with no fade (``reach`` inf) until they bring it back (docs/keypoints.md,
+"Fusion with the edges"); near that limit the zone and the fade pass from one to the other over a span
+(:meth:`tracker.tracking.landmark_noise.LandmarkNoise.held`).  Left/right swaps are rejected, not fused: for each
+left/right pair seen in a camera, when the two detections fit the predicted images better the other way round (summed
+distance), neither is used in that camera, and a pair that fits barely better as detected counts in part
+(:data:`SWAP_MARGIN`).  Every one of these choices is continuous in the poses, so that a last-bit change of a pose
+changes the solve by about as much (docs/keypoints.md, "The same result on every machine").
 """
 
 from __future__ import annotations
@@ -183,18 +183,6 @@ def left_right_pairs(landmarks: tuple[str, ...]) -> np.ndarray:
         if name.startswith("left_") and "right_" + name[5:] in landmarks
     ]
     return np.array(pairs, np.int64).reshape(-1, 2)
-
-
-def learnt_tolerance(history: np.ndarray, floor: float, multiple: float, ceiling: float, least: int) -> np.ndarray:
-    """Each landmark's noise zone (K,), a share of the body's image size: ``multiple`` times the median of its
-    recent misfits ``history`` (W, K) (NaN: not seen), between ``floor`` and ``ceiling``; ``floor`` for a
-    landmark seen fewer than ``least`` times."""
-    seen = np.isfinite(history).sum(axis=0)
-    typical = np.full(history.shape[1], floor)
-    known = seen >= least
-    if known.any():
-        typical[known] = multiple * np.nanmedian(history[:, known], axis=0)
-    return np.clip(typical, floor, ceiling)
 
 
 SWAP_MARGIN = 0.02

@@ -80,6 +80,9 @@ filter runs the Riccati equation over inner iterations of one frame; integrated 
 measurement it gives exactly our discrete update, and with ``P = I`` held (no Riccati step) it is plain dynamic
 fitting, ``qdot = H^T V^-1 r - K q`` (eqs. 16/18).  Its "same fixed point" holds for rigid
 blocks (``K = 0``, ours); with stiffness the filter stops where ``P g = K q``, not ``g = K q``.
+
+**Between frames.**  :class:`Motion` is all a tracker carries from frame to frame for its motion model: this filter's
+state and noise scales, and for constant velocity the poses of the frame before.
 """
 
 from __future__ import annotations
@@ -110,6 +113,18 @@ class MotionState:
     poses: np.ndarray
     velocity: np.ndarray
     covariance: np.ndarray
+
+
+@dataclass(frozen=True)
+class Motion:
+    """What a tracker carries from frame to frame for its motion model (``Settings.dynamics``), whole to a tracker
+    for other cameras: the poses it tracked in the frame before the last (constant velocity carries the motion
+    between them on; None after a start), and with dynamics "kalman" the filter's state (None otherwise) and each
+    component's measurement noise scale ``s'`` (N,) (module docstring, "Measurement")."""
+
+    previous: np.ndarray | None
+    kalman: MotionState | None
+    noise_scale: np.ndarray
 
 
 def initial_state(

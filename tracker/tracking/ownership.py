@@ -468,10 +468,12 @@ class Ownership:
     camera-frame quadrics that the outline stage left in ``placed`` (:class:`tracker.tracking.outline.Placed`).
     """
 
-    def __init__(self, model, rig, capacity: int, max_range: int):
+    def __init__(self, model, rig, capacity: int, max_range: int, grid: np.ndarray | None = None):
+        """Buffers for ``capacity`` samples searched at most ``max_range`` pixels either side, over the rig's
+        :func:`undistort_grid` (``grid``, when it is already made for ``rig``)."""
         n_cams, n_quadrics = len(rig.names), model.quadric.shape[0]
-        self.model, self.rig = model, rig
-        self.grid = undistort_grid(rig)
+        self.model, self.rig, self.max_range = model, rig, max_range
+        self.grid = undistort_grid(rig) if grid is None else grid
         self.scale = pixel_scale(self.grid)
         self.near = np.zeros((n_cams, n_quadrics, n_quadrics), np.int64)
         self.near_count = np.zeros((n_cams, n_quadrics), np.int64)
@@ -480,6 +482,11 @@ class Ownership:
         self.covered = np.zeros(2 * max_range + 3, np.bool_)
         self.lo = np.zeros(capacity, np.int64)
         self.hi = np.zeros(capacity, np.int64)
+
+    def spare(self) -> Ownership:
+        """Buffers of its own for a search beside this one's, over the same model, rig and grid (the grid only
+        depends on the rig, and costs the most to make)."""
+        return Ownership(self.model, self.rig, len(self.lo), self.max_range, self.grid)
 
     def limits(self, placed, samples, r: int) -> tuple[np.ndarray, np.ndarray]:
         m, rig = self.model, self.rig

@@ -34,22 +34,14 @@ from tracker.geometry.se3 import between, exp, log
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
-from tracker.tracking.keypoint_cue import (
-    LANDMARKS,
-    cue_points,
-    keypoint_kernel,
-    learnt_tolerance,
-    left_right_pairs,
-    placers,
-)
+from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, placers
+from tracker.tracking.landmark_noise import LandmarkNoise
 from tracker.tracking.measure import Statistics, component_misfits, measure_kernel
+from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
-NOISE_WINDOW = 30  # tracked frames whose landmark misfits set the keypoints' noise zones
-NOISE_LEAST = 5  # misfits a landmark needs before its zone is learnt
-HOLD_SPAN = 0.5  # Tracker.held falls from 1 to 0 over this share of keypoint_edge_misfit about it
 
 
 @dataclass(frozen=True)
@@ -267,6 +259,54 @@ class StageTimes:
         return now
 
 
+@dataclass
+class Workspace:
+    """The buffers an edge search fills, and the seconds it spent in them: each camera's image as the search reads
+    it, ``images`` (C, H, W) uint8; the outline ``samples`` and their camera-frame quadrics ``placed``; the search
+    limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each
+    sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
+    them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)).
+
+    A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
+    (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
+
+    images: np.ndarray
+    ownership: Ownership
+    samples: Samples
+    placed: Placed
+    offset: np.ndarray
+    weight: np.ndarray
+    information: np.ndarray
+    eta: np.ndarray
+    misfit: np.ndarray
+    times: StageTimes
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+
+    @classmethod
+    def around(cls, images: np.ndarray, ownership: Ownership) -> Workspace:
+        """Fresh buffers for a search in ``images`` with the search limits of ``ownership``, whose model, rig and
+        capacity size the others."""
+        capacity, n = len(ownership.lo), ownership.model.size
+        return cls(
+            images,
+            ownership,
+            Samples.allocate(capacity),
+            Placed.allocate(len(ownership.rig.names), ownership.model.quadric.shape[0]),
+            np.zeros(capacity),
+            np.zeros(capacity),
+            np.zeros((n, 6, 6)),
+            np.zeros((n, 6)),
+            np.full((len(ownership.rig.names), len(LANDMARKS)), np.nan),
+            StageTimes(),
+        )
+
+    def spare(self, images: np.ndarray) -> Workspace:
+        """Buffers of the same sizes for a search in ``images`` beside this one's (:meth:`Ownership.spare
+        <tracker.tracking.ownership.Ownership.spare>`)."""
+        return Workspace.around(images, self.ownership.spare())
+
+
 class Tracker:
     """Tracks one body in a fixed rig, frame after frame."""
 
@@ -288,16 +328,7 @@ class Tracker:
         self.rig = Rig.from_cameras(cameras)
         settings = scaled_to(settings, int(self.rig.size.min(axis=1).max()))
         self.settings = settings
-        self.samples = Samples.allocate(settings.capacity)
-        self.offset = np.zeros(settings.capacity)
-        self.weight = np.zeros(settings.capacity)
-        self.placed = Placed.allocate(len(cameras), model.quadric.shape[0])
-        self.ownership = Ownership(
-            model, self.rig, settings.capacity, max(settings.search_range, settings.final_search_range)
-        )
         n = model.size
-        self.information = np.zeros((n, 6, 6))
-        self.eta = np.zeros((n, 6))
         self.prior = np.ascontiguousarray(
             np.broadcast_to(
                 np.diag(np.array([settings.prior_translation] * 3 + [settings.prior_rotation] * 3, float)), (n, 6, 6)
@@ -307,60 +338,49 @@ class Tracker:
         self.search_size = self.rig.size // self.reduction[:, None]  # each camera's image as the edge search reads it
         height = int(self.search_size[:, 1].max())
         width = int(self.search_size[:, 0].max())
-        self.images = np.zeros((len(cameras), height, width), np.uint8)
-        self.previous: np.ndarray | None = None
-        self.motion_state: motion_prior.MotionState | None = None
-        self.noise_scale = np.full(n, float(settings.kalman_noise_scale))  # s' per component (kalman)
+        self.work = Workspace.around(
+            np.zeros((len(cameras), height, width), np.uint8),
+            Ownership(model, self.rig, settings.capacity, max(settings.search_range, settings.final_search_range)),
+        )
         self.restart(initial_poses)
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
-        self.lo: np.ndarray | None = None  # each sample's search limits, set by sample()
-        self.hi: np.ndarray | None = None
-        self.times = StageTimes()
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
-        self.misfit = np.full((len(cameras), len(LANDMARKS)), np.nan)  # the last solve's, per camera and landmark
-        self.misfits = np.full((NOISE_WINDOW, len(LANDMARKS)), np.nan)  # recent tracked frames', per landmark
-        self.edge_misfit = np.zeros(n)  # per component, px, in the last frame's last iteration (none yet: held)
-        self.misfit_row = 0
-        self.tolerance = np.full(len(LANDMARKS), settings.keypoint_tolerance)
+        self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
-        settings, from the current poses, with the previous frame's poses (constant velocity) and the motion
-        filter's state and noise scales (kalman) and the keypoints' learnt noise and edge fits (in the old rig's
-        pixels); buffers and timings start afresh."""
+        settings, from the current poses, with its motion (:class:`~tracker.tracking.motion_prior.Motion`) and the
+        keypoints' learnt noise (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`, in the old rig's pixels),
+        each carried whole; buffers and timings start afresh."""
         other = Tracker(self.model, cameras, self.poses, self.settings)
-        other.previous = self.previous
-        other.motion_state, other.noise_scale = self.motion_state, self.noise_scale
-        other.landmarks, other.misfits, other.misfit_row = self.landmarks, self.misfits.copy(), self.misfit_row
-        other.tolerance = self.tolerance.copy()
-        other.edge_misfit = self.edge_misfit.copy()
+        other.motion, other.noise = self.motion, self.noise
         return other
 
     def restart(self, poses: np.ndarray) -> None:
         """Go on from ``poses`` (coerced) as from a first pose: no motion carried over, the motion filter
         (kalman) started afresh about them."""
         self.poses = self.model.coerce(poses)
-        self.previous = None
         self.anchor = self.poses
-        if self.settings.dynamics == "kalman":
-            st = self.settings
-            s = st.kalman_noise_scale
-            self.motion_state = motion_prior.initial_state(
+        st = self.settings
+        s = st.kalman_noise_scale
+        kalman = None
+        if st.dynamics == "kalman":
+            kalman = motion_prior.initial_state(
                 self.poses, position_variance=(s / st.prior_translation, s / st.prior_rotation)
             )
-            self.noise_scale = np.full(self.model.size, float(s))
+        self.motion = Motion(None, kalman, np.full(self.model.size, float(s)))
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
-        poses, previous, anchor = self.poses.copy(), self.previous, self.anchor
+        poses, anchor = self.poses.copy(), self.anchor
         constant_velocity(poses, poses, self.settings.damping)
         self.iterate(0)
         self.iterate(1)
-        component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
-        self.poses, self.previous, self.anchor = poses, previous, anchor
+        component_misfits(self.work.offset, self.work.samples.component, self.work.samples.count, self.model.size)
+        self.poses, self.anchor = poses, anchor
 
     def smooth(self, image: np.ndarray) -> np.ndarray:
         """The edge search's input: a grey image reduced and smoothed by a Gaussian of ``blur_sigma`` pixels
@@ -373,12 +393,16 @@ class Tracker:
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, reduced and smoothed (:meth:`smooth`) unless
         ``smoothed`` says they already are."""
+        self._load(self.work, images, smoothed)
+
+    def _load(self, work: Workspace, images, smoothed: bool) -> None:
+        """:meth:`load_images` into the images of ``work``."""
         started = time.perf_counter()
         for k, image in enumerate(images):
             searched = image if smoothed else self.smooth(image)
             h, w = searched.shape
-            self.images[k, :h, :w] = searched
-        self.times.add("grey", started)
+            work.images[k, :h, :w] = searched
+        work.times.add("grey", started)
 
     def search_range(self, iteration: int) -> int:
         """Coarse to fine when final_search_range > 0 (:func:`narrowing` over the iterations)."""
@@ -394,21 +418,21 @@ class Tracker:
         iterations between reuse them, each sample moved along its normal by its Jacobian row times its
         component's motion since (first order, section 3), which costs a few flops instead of a render.
         """
-        st = self.settings
+        st, work = self.settings, self.work
         search_range = self.search_range(iteration)
         if iteration % max(st.resample_every, 1) == 0:
-            self.sample(search_range)
+            self.sample(work, self.poses, search_range)
             self.sampled_poses = self.poses
             twist = self.still
         else:
             twist = motion_since(self.sampled_poses, self.poses)
         started = time.perf_counter()
-        visible, found, sum_wm, sum_w = self.measure(search_range, twist)
+        visible, found, sum_wm, sum_w = self.measure(work, search_range, twist)
         if self.keypoints is not None:
             self.add_keypoints(*self.keypoints)
-        started = self.times.add("measure", started)
+        started = work.times.add("measure", started)
         self.poses = self.update(self.poses)
-        self.times.add("solve", started)
+        work.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
         return Statistics(visible, found, residual)
 
@@ -416,8 +440,8 @@ class Tracker:
         """Prior, tree solve, step and coercion (:func:`update_kernel`) with the information gathered."""
         m, st = self.model, self.settings
         return update_kernel(
-            self.information,
-            self.eta,
+            self.work.information,
+            self.work.eta,
             self.prior,
             poses,
             self.anchor,
@@ -433,26 +457,27 @@ class Tracker:
             st.max_turn,
         )
 
-    def sample(self, search_range: int) -> None:
-        """Sample the visible outlines at the current poses and limit each one's search (ownership)."""
-        s, m, st = self.samples, self.model, self.settings
+    def sample(self, work: Workspace, poses: np.ndarray, search_range: int) -> None:
+        """Sample the visible outlines at ``poses`` into ``work`` and limit each one's search (ownership)."""
+        s, m, st = work.samples, self.model, self.settings
         started = time.perf_counter()
-        sample_outlines(m, self.poses, self.rig, spacing=st.spacing, samples=s, placed=self.placed)
-        started = self.times.add("outline", started)
+        sample_outlines(m, poses, self.rig, spacing=st.spacing, samples=s, placed=work.placed)
+        started = work.times.add("outline", started)
         if st.ownership:
-            self.lo, self.hi = self.ownership.limits(self.placed, s, search_range)
+            work.lo, work.hi = work.ownership.limits(work.placed, s, search_range)
         else:
-            self.lo = self.ownership.lo[: s.count]
-            self.hi = self.ownership.hi[: s.count]
-            self.lo[:] = -search_range
-            self.hi[:] = search_range
-        self.times.add("ownership", started)
+            work.lo = work.ownership.lo[: s.count]
+            work.hi = work.ownership.hi[: s.count]
+            work.lo[:] = -search_range
+            work.hi[:] = search_range
+        work.times.add("ownership", started)
 
-    def measure(self, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
-        """Search every sample's edge (moved by ``twist`` since sampling) and fill C_i, eta_i (measure_kernel)."""
-        s, st = self.samples, self.settings
+    def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
+        """Search the edge of every sample in ``work`` (moved by ``twist`` since sampling) in its images and fill
+        its C_i, eta_i (measure_kernel)."""
+        s, st = work.samples, self.settings
         return measure_kernel(
-            self.images,
+            work.images,
             self.search_size,
             self.reduction,
             s.count,
@@ -466,40 +491,48 @@ class Tracker:
             st.threshold,
             st.robust_c,
             self.model.size,
-            self.offset,
-            self.weight,
-            self.information,
-            self.eta,
-            self.lo,
-            self.hi,
+            work.offset,
+            work.weight,
+            work.information,
+            work.eta,
+            work.lo,
+            work.hi,
         )
 
     def inspect(
-        self, images=None, smoothed: bool = False, poses: np.ndarray | None = None, search_range: int | None = None
+        self,
+        images=None,
+        *,
+        smoothed: bool = False,
+        poses: np.ndarray | None = None,
+        search_range: int | None = None,
     ) -> Inspection:
-        """Sample and measure every outline, as the last iteration would (or with ``search_range``), without
-        moving the poses: at ``poses`` if given (else the current ones), in ``images`` if given (else the
-        frame just tracked)."""
-        s = self.samples
-        if poses is not None:
-            self.poses = poses
+        """Sample and measure every outline as the last iteration would (or with ``search_range``): at ``poses`` if
+        given (else the current ones), in ``images`` if given (one grey image per camera, rig order, already
+        :meth:`smooth`-ed if ``smoothed``; else the frame just tracked).
+
+        A query: it searches in buffers of its own (:meth:`Workspace.spare`) and leaves the tracker as it was (its
+        poses, the frame's images, its motion and learnt noise), so a viewer may inspect with the tracker it shows,
+        also from a thread of its own while the tracker steps (given ``images`` and ``poses``)."""
+        frame = self.work.images
+        work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
-            self.load_images(images, smoothed)
+            self._load(work, images, smoothed)
         if search_range is None:
             search_range = self.search_range(self.settings.iterations - 1)
-        self.sample(search_range)
-        self.measure(search_range, self.still)
-        n = s.count
-        assert self.lo is not None and self.hi is not None  # set by sample()
+        self.sample(work, self.poses if poses is None else poses, search_range)
+        self.measure(work, search_range, self.still)
+        s, n = work.samples, work.samples.count
+        assert work.lo is not None and work.hi is not None  # set by sample()
         return Inspection(
             s.camera[:n].copy(),
             s.component[:n].copy(),
             s.pixel[:n].copy(),
             s.normal[:n].copy(),
-            self.lo.copy(),
-            self.hi.copy(),
-            self.offset[:n].copy(),
-            self.weight[:n].copy(),
+            work.lo.copy(),
+            work.hi.copy(),
+            work.offset[:n].copy(),
+            work.weight[:n].copy(),
             s.quadric[:n].copy(),
             s.point[:n].copy(),
             s.jacobian[:n].copy(),
@@ -508,12 +541,12 @@ class Tracker:
     def add_keypoints(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[int, int]:
         """Add the landmarks' information to the edges' (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`):
         ``pixels`` (C, 33, 2) and ``confidence`` (C, 33) float64, one row per camera of the rig.  A landmark
-        whose placing component the edges did not hold in the last frame (:attr:`edge_misfit` above
-        ``keypoint_edge_misfit``) pulls from the floor zone with no fade.  Returns (landmarks used,
-        left/right pairs rejected)."""
+        whose placing component the edges did not hold in the last frame (:meth:`LandmarkNoise.held
+        <tracker.tracking.landmark_noise.LandmarkNoise.held>`) pulls from the floor zone with no fade.  Returns
+        (landmarks used, left/right pairs rejected)."""
         st = self.settings
         component, point, pairs = self.landmarks
-        held = self.held()
+        held = self.noise.held(self.placer, st.keypoint_edge_misfit)
         with np.errstate(divide="ignore"):
             reach = st.keypoint_reach / held
         return keypoint_kernel(
@@ -530,11 +563,11 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
-            held * self.tolerance + (1.0 - held) * st.keypoint_tolerance,
+            held * self.noise.tolerance + (1.0 - held) * st.keypoint_tolerance,
             reach,
-            self.information,
-            self.eta,
-            self.misfit,
+            self.work.information,
+            self.work.eta,
+            self.work.misfit,
         )
 
     def step(
@@ -557,8 +590,8 @@ class Tracker:
         self.load_images(images, smoothed)
         current = self.poses
         st = self.settings
-        if st.dynamics == "constant-velocity" and self.previous is not None:
-            self.poses = self.model.coerce(constant_velocity(self.previous, current, st.damping))
+        if st.dynamics == "constant-velocity" and self.motion.previous is not None:
+            self.poses = self.model.coerce(constant_velocity(self.motion.previous, current, st.damping))
         elif st.dynamics == "kalman":
             inverse = self.predict_kalman(1.0 / st.frame_rate if dt is None else dt)
         self.anchor = self.poses
@@ -566,42 +599,21 @@ class Tracker:
             stats = self.iterate(iteration)
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
-        self.previous = current
-        self.edge_misfit = component_misfits(self.offset, self.samples.component, self.samples.count, self.model.size)
+        self.motion = dataclasses.replace(self.motion, previous=current)
+        work = self.work
+        edge_misfit = component_misfits(work.offset, work.samples.component, work.samples.count, self.model.size)
+        self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
         if self.keypoints is not None and status == TRACKED:
-            self.learn_keypoint_noise()
+            self.noise = self.noise.learnt(
+                work.misfit,
+                self.noise.held(self.placer, st.keypoint_edge_misfit),
+                floor=st.keypoint_tolerance,
+                multiple=st.keypoint_noise_multiple,
+                ceiling=st.keypoint_tolerance_max,
+            )
         return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
-
-    def held(self) -> np.ndarray:
-        """How firmly the edges hold each landmark's placing component (:func:`tracker.tracking.keypoint_cue.placers`;
-        every landmark not at a joint is held), from 1 to 0 (K,): 1 where its outline fitted them within 3/4 of
-        ``keypoint_edge_misfit`` in the last frame's last iteration (:attr:`edge_misfit`, the median |m| of its
-        samples), 0 beyond 5/4 of it, linear between, so that a misfit near the limit shifts the landmark's zone
-        and fade a little rather than all at once."""
-        limit = self.settings.keypoint_edge_misfit
-        misfit = self.edge_misfit[np.maximum(self.placer, 0)]
-        return np.where(self.placer < 0, 1.0, np.clip(0.5 - (misfit - limit) / (HOLD_SPAN * limit), 0.0, 1.0))
-
-    def learn_keypoint_noise(self) -> None:
-        """Add the frame's landmark misfits (the median over the cameras) to the recent ones and set each
-        landmark's noise zone from them (:func:`tracker.tracking.keypoint_cue.learnt_tolerance`); called for frames
-        whose edges held the body, and only for the landmarks whose limb they held (:meth:`held`): a limb
-        that strays from right detections must not widen their zone."""
-        st = self.settings
-        if st.keypoint_noise_multiple <= 0:
-            return
-        seen = np.isfinite(self.misfit)
-        frame = np.full(self.misfit.shape[1], np.nan)
-        for j in np.flatnonzero(seen.any(axis=0)):
-            frame[j] = np.median(self.misfit[seen[:, j], j])
-        frame[self.held() < 0.5] = np.nan
-        self.misfits[self.misfit_row % NOISE_WINDOW] = frame
-        self.misfit_row += 1
-        self.tolerance = learnt_tolerance(
-            self.misfits, st.keypoint_tolerance, st.keypoint_noise_multiple, st.keypoint_tolerance_max, NOISE_LEAST
-        )
 
     def predict_kalman(self, dt: float) -> np.ndarray:
         """Predict every component ``dt`` ahead independently (:func:`tracker.tracking.motion_prior.predict`), coerce
@@ -609,39 +621,42 @@ class Tracker:
         predicted information ``s' P_xx^-1`` (floored at prior_translation/prior_rotation; ``s'`` of the
         previous frame).  Returns the predicted state's ``motion_prior.position_inverse``, which the
         correction reuses."""
-        st = self.settings
-        assert self.motion_state is not None  # dynamics "kalman"
+        st, motion = self.settings, self.motion
+        assert motion.kalman is not None  # dynamics "kalman"
         predicted = motion_prior.predict(
-            self.motion_state, dt, q=(st.kalman_q_translation, st.kalman_q_rotation), decay=st.kalman_decay
+            motion.kalman, dt, q=(st.kalman_q_translation, st.kalman_q_rotation), decay=st.kalman_decay
         )
         self.poses = self.model.coerce(predicted.poses)
-        self.motion_state = motion_prior.rereference(predicted, self.poses)
-        inverse = motion_prior.position_inverse(self.motion_state)
+        kalman = motion_prior.rereference(predicted, self.poses)
+        self.motion = dataclasses.replace(motion, kalman=kalman)
+        inverse = motion_prior.position_inverse(kalman)
         self.prior = motion_prior.prior_information(
-            self.motion_state, scale=self.noise_scale, floor=(st.prior_translation, st.prior_rotation), p_xx_inv=inverse
+            kalman, scale=motion.noise_scale, floor=(st.prior_translation, st.prior_rotation), p_xx_inv=inverse
         )
         return inverse
 
     def correct_kalman(self, inverse: np.ndarray) -> None:
         """Update the filters with the tracked poses and the data information C_i of the last iteration
-        (``self.information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
+        (the workspace's ``information`` holds C_i plus the prior added by :func:`add_prior`) over the noise scale
         ``s' = s sigma0_i^2`` (:func:`tracker.tracking.motion_prior.variance_factor` of the same samples); ``inverse``
         is the predicted state's P_xx^-1 that :meth:`predict_kalman` returned."""
-        st = self.settings
+        st, motion, work = self.settings, self.motion, self.work
         s = float(st.kalman_noise_scale)
+        noise_scale = motion.noise_scale
         if st.kalman_residual_variance:  # without any edge the last frame's values stay
-            n = self.samples.count
-            self.noise_scale = s * motion_prior.variance_factor(
-                self.samples.component[:n],
-                self.offset[:n],
-                self.weight[:n],
+            n = work.samples.count
+            noise_scale = s * motion_prior.variance_factor(
+                work.samples.component[:n],
+                work.offset[:n],
+                work.weight[:n],
                 n_components=self.model.size,
-                fallback=self.noise_scale / s,
+                fallback=noise_scale / s,
             )
-        data = self.information - self.prior
-        assert self.motion_state is not None  # dynamics "kalman"
-        information = motion_prior.block_information(data, self.poses) / self.noise_scale[:, None, None, None]
-        self.motion_state = motion_prior.correct(self.motion_state, self.poses, information, p_xx_inv=inverse)
+        data = work.information - self.prior
+        assert motion.kalman is not None  # dynamics "kalman"
+        information = motion_prior.block_information(data, self.poses) / noise_scale[:, None, None, None]
+        kalman = motion_prior.correct(motion.kalman, self.poses, information, p_xx_inv=inverse)
+        self.motion = dataclasses.replace(motion, kalman=kalman, noise_scale=noise_scale)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings

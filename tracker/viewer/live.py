@@ -4,8 +4,9 @@ The tracking loop hands each finished frame to :meth:`LiveView.offer`, which onl
 keeps a reference to the newest one (a lock and an assignment: the tracker never
 waits for the browser).  A thread of the viewer wakes at most ``rate`` times a
 second, takes the newest frame, redoes its edge search at the tracked poses for
-the panels (its own :class:`~tracker.tracking.track.Tracker`; the numba kernels release the
-GIL) and sends the whole update as one batch; frames that arrive in between are
+the panels (:meth:`~tracker.tracking.track.Tracker.inspect` of the run's tracker, a query in buffers of
+its own that may run beside the tracker's steps; the numba kernels release the GIL) and sends the whole
+update as one batch; frames that arrive in between are
 skipped, not queued.  Plots of status, residual and speed are refreshed twice a
 second over the last ``history`` frames, the camera images and their edge searches ten
 times a second (encoding, sending and decoding images is most of a viewer's cost).
@@ -20,8 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.model import Model
-from tracker.tracking.track import FrameResult, Settings, Tracker
+from tracker.tracking.track import FrameResult, Tracker
 from tracker.viewer.scene import Frame, Scene, add_run_plots, run_plot_values, write_viser
 
 PLOT_PERIOD = 0.5  # seconds between plot refreshes
@@ -38,17 +38,17 @@ class LiveView:
     def __init__(
         self,
         scene: Scene,
-        model: Model,
-        cameras,
-        initial_poses: np.ndarray,
-        settings: Settings = Settings(),
+        tracker: Tracker,
+        *,
         rate: float = 30.0,
         truth: np.ndarray | None = None,
         record: Path | None = None,
         history: int = 600,
     ):
-        self.scene, self.rate, self.truth_joints, self.record_path = scene, rate, truth, record
-        self.inspector = Tracker(model, cameras, initial_poses, settings)
+        """``tracker``: the run's, at its first pose; its :meth:`~tracker.tracking.track.Tracker.inspect` redoes
+        the edge search of the frames offered, in every camera of its rig (a camera that stopped gets a blank
+        image)."""
+        self.scene, self.tracker, self.rate, self.truth_joints, self.record_path = scene, tracker, rate, truth, record
         self.serializer = scene.server.get_scene_serializer() if record is not None else None
         self.latest: tuple[int, list[np.ndarray], FrameResult] | None = None
         self.lock = threading.Lock()
@@ -62,7 +62,7 @@ class LiveView:
         gui = scene.server.gui
         with gui.add_folder("Live", order=20):
             self.plots = add_run_plots(gui, np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2))
-        scene.look_at_body(initial_poses)
+        scene.look_at_body(tracker.poses)
         self.thread = threading.Thread(target=self._run, name="viewer live", daemon=True)
         self.thread.start()
 
@@ -103,7 +103,7 @@ class LiveView:
     def _show(self, index: int, images: list[np.ndarray], result: FrameResult, with_images: bool = True) -> None:
         inspection = None
         if with_images:
-            inspection = self.inspector.inspect(images, smoothed=True, poses=result.poses)
+            inspection = self.tracker.inspect(images, smoothed=True, poses=result.poses)
         truth = None
         if self.truth_joints is not None and 0 <= index < len(self.truth_joints):
             truth = self.truth_joints[index]

@@ -11,6 +11,7 @@ red or grey lines, and the white dots show which edge pulled it.
 from __future__ import annotations
 
 import colorsys
+from collections.abc import Sequence
 from typing import cast
 
 import cv2
@@ -74,7 +75,7 @@ class OverlayVideo:
         self.colours = component_colours(components)
         self.robust_c = robust_c
 
-    def write(self, images: list[np.ndarray], inspection: Inspection) -> None:
+    def write(self, images: Sequence[np.ndarray], inspection: Inspection) -> None:
         self.writer.write([draw(image, inspection, k, self.robust_c, self.colours) for k, image in enumerate(images)])
 
     def close(self) -> None:

@@ -72,9 +72,9 @@ class Placement:
         for seeker in seekers:
             seeker.close()
         self.settings = Settings(dynamics="none", iterations=snap_iterations)
-        self.inspector = Tracker(model, recording.cameras, poses, self.settings)
-        self.smoothed = [self.inspector.smooth(image) for image in self.images]  # the frame never changes:
-        self.inspector.load_images(self.smoothed, smoothed=True)  # smoothed and loaded once for every redraw
+        self.tracker = Tracker(model, recording.cameras, poses, self.settings)  # redraws the frame's edge search
+        self.smoothed = [self.tracker.smooth(image) for image in self.images]  # the frame never changes:
+        self.tracker.load_images(self.smoothed, smoothed=True)  # smoothed and loaded once for every redraw
         self.poses = model.coerce(poses)
         self.lock = threading.RLock()
         self.saved = threading.Event()
@@ -144,5 +144,5 @@ class Placement:
         for gizmo, pose in zip(self.gizmos, self.poses):
             gizmo.wxyz = vtf.SO3.from_matrix(pose[0:3, 0:3]).wxyz
             gizmo.position = pose[0:3, 3]
-        inspection = self.inspector.inspect(poses=self.poses)
+        inspection = self.tracker.inspect(poses=self.poses)
         self.scene.show(Frame(self.poses, self.images, inspection, label=f"frame {self.frame}"))

@@ -2,8 +2,9 @@
 
 The timeline slider, play/pause, single steps and the playback speed pick a row of
 ``poses.npz``; the scene then shows that frame's poses and truth, and each camera's
-image with the edge search redone at those poses (:meth:`tracker.tracking.track.Tracker.inspect`),
-so what the panels show is what the tracker saw.  Plots give each frame's status,
+image with the edge search redone at those poses by the run's tracker
+(:meth:`tracker.tracking.track.Tracker.inspect`, a query that leaves it as it was), so what the panels show is what
+the tracker saw.  Plots give each frame's status,
 residual and, for files that record it, the tracker's speed.  Playback keeps to real
 time (times the speed) by skipping frames when drawing is slower than the video.
 """
@@ -17,10 +18,9 @@ import numpy as np
 
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
-from tracker.model import Model
 from tracker.status import NAMES
 from tracker.tracking.foreground import Background
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.track import Tracker
 from tracker.viewer.scene import Frame, Scene, add_run_plots
 from tracker.viewer.timeline import Timeline
 
@@ -47,21 +47,22 @@ class Review(Timeline):
         self,
         scene: Scene,
         recording: Recording,
-        model: Model,
+        tracker: Tracker,
         results: dict,
         truth: dict | None = None,
-        settings: Settings = Settings(),
         background: Background | None = None,
     ):
-        """``background``: the run's empty scene (``tracker track --background``), so the panels show and
-        search the same difference images the tracker did; None: grey images."""
+        """``tracker``: one for the recording's cameras with the run's settings, which redoes each row's edge
+        search (:meth:`~tracker.tracking.track.Tracker.inspect`, which never moves it); ``background``: the run's
+        empty scene (``tracker track --background``), so the panels show and search the same difference images the
+        tracker did; None: grey images."""
         super().__init__(scene.server, len(results["frame"]), recording.fps)
         self.scene, self.recording, self.results = scene, recording, results
         self.frames = results["frame"]
         self.truth = truth_rows(truth, self.frames)
         self.background = background
         self.seekers = [FrameSeeker(source, colour=background is not None) for source in recording.sources]
-        self.inspector = Tracker(model, recording.cameras, results["poses"][0], settings)
+        self.tracker = tracker
         self.stopping = threading.Event()
         gui = scene.server.gui
         with gui.add_folder("Timeline", order=0):
@@ -101,7 +102,7 @@ class Review(Timeline):
         if self.background is not None:
             images = [self.background.difference(k, image) for k, image in enumerate(images)]
         poses = self.results["poses"][row]
-        inspection = self.inspector.inspect(images, poses=poses)
+        inspection = self.tracker.inspect(images, poses=poses)
         status = NAMES[int(self.results["status"][row])]
         label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
         truth = None if self.truth is None else self.truth[row]
