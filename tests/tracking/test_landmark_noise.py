@@ -12,7 +12,9 @@ def test_each_landmark_zone_is_learnt_from_its_misfits():
     history[:10, 1] = np.linspace(0.04, 0.06, 10)  # median 0.05: twice that
     history[:10, 2] = 0.5  # far off: the ceiling
     history[:3, 3] = 0.1  # seen too rarely: the floor
-    np.testing.assert_allclose(learnt_tolerance(history, 0.03, 2.0, 0.15, 5), [0.03, 0.10, 0.15, 0.03])
+    np.testing.assert_allclose(
+        learnt_tolerance(history, floor=0.03, multiple=2.0, ceiling=0.15, least=5), [0.03, 0.10, 0.15, 0.03]
+    )
 
 
 def test_held_falls_from_one_to_zero_about_the_limit():

@@ -20,7 +20,7 @@ def test_live_view_shows_the_newest_frame_and_records_the_session(server, tiny_r
     last = None
     for index, images in itertools.islice(frames(rec, prepare=tracker.smooth), 6):
         last = tracker.step(images, smoothed=True)
-        live.offer(index, images, last, 0.01)
+        live.offer(index, images, last, elapsed=0.01)
     live.close()
     assert live.shown >= 1
     assert scene.status.content.startswith("frame 5:")  # close() shows the newest frame

@@ -25,7 +25,7 @@ def test_ellipsoid_mesh_lies_on_the_surface_and_encloses_its_volume():
 
 def test_clipped_ellipsoid_is_closed_by_caps_inside_the_clip():
     centre, radii, clip = np.zeros(3), np.array([0.1, 0.1, 0.2]), (-0.05, 0.1)
-    v, f = ellipsoid_mesh(centre, radii, clip, segments=128)
+    v, f = ellipsoid_mesh(centre, radii, clip=clip, segments=128)
     keep = quadric.slab([0, 0, 1], clip[0], clip[1])
     assert quadric.evaluate(keep, v).max() < 1e-12
     z0, z1 = clip
@@ -35,7 +35,7 @@ def test_clipped_ellipsoid_is_closed_by_caps_inside_the_clip():
 
 def test_cone_mesh_on_its_surface_with_the_frustum_volume():
     start, end, r0, r1 = np.array([0.0, 0.1, 0.0]), np.array([0.2, 0.1, -0.3]), 0.05, 0.03
-    v, f = cone_mesh(start, end, r0, r1, segments=128)
+    v, f = cone_mesh(start, end, radius_start=r0, radius_end=r1, segments=128)
     side = np.abs(quadric.evaluate(quadric.cone(start, end, radius_start=r0, radius_end=r1), v)) < 1e-9
     assert side[:256].all()  # both rings lie on the cone; the cap centres are on the axis
     length = np.linalg.norm(end - start)

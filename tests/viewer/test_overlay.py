@@ -19,7 +19,7 @@ def test_search_lines_are_coloured_by_weight_and_missing_edges_grey():
         point=np.zeros((3, 3)),
         jacobian=np.zeros((3, 6)),
     )
-    out = draw(image, inspection, 0, 2.0, component_colours(2))
+    out = draw(image, inspection, 0, robust_c=2.0, colours=component_colours(2))
     assert out.shape == (60, 80, 3) and out.dtype == np.uint8
     green = np.array(weight_colour(1.0))
     # sample 0 (perfect fit, w c = 1) draws a green line left of its dot; sample 1 (no edge) a grey one

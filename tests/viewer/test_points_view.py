@@ -49,7 +49,7 @@ def test_points_run_is_rebuilt_and_recorded_for_the_viewer(tmp_path: Path) -> No
     markers = read_markers(VICON).select([str(name) for name in shapes["marker_names"]])
     mesh = sq.mesh(*shapes["mesh"])
     for row, frame in enumerate(results["frame"]):
-        nodes = node_positions(results["poses"][row], shapes["q_s"][row], shapes["d"][row], mesh)
+        nodes = node_positions(results["poses"][row], shapes["q_s"][row], shapes["d"][row], mesh=mesh)
         for p, part_nodes in enumerate(nodes):
             mine = markers[frame][shapes["marker_part"] == p]
             distances = cKDTree(part_nodes).query(mine)[0]

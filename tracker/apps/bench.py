@@ -108,7 +108,7 @@ def _stream(recording: Recording, stop: int, keypoint_step: int, settings: Setti
 
 
 def track_run(
-    recording: Recording, model: Model, start: np.ndarray, settings: Settings, out: Path, keypoint_step: int = 0
+    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, out: Path, keypoint_step: int = 0
 ) -> TrackRun:
     """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
     with ``keypoint_step`` the detector's worker on every keypoint_step-th frame beside them, started before the
@@ -157,6 +157,7 @@ def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tup
 def run(
     path: Path = DEMO,
     settings: Settings = Settings(),
+    *,
     repeats: int = 3,
     keypoint_step: int | None = None,
     model_path: Path | None = None,
@@ -174,10 +175,11 @@ def run(
         decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
         floor_all = [decode_only_fps(every) for _ in range(repeats)]
         floor_one = [decode_only_fps(first) for _ in range(repeats)]
-        runs_all = [track_run(every, model, start, settings, out) for _ in range(repeats)]
-        runs_one = [track_run(first, model, start, settings, out) for _ in range(repeats)]
+        runs_all = [track_run(every, model, start, settings=settings, out=out) for _ in range(repeats)]
+        runs_one = [track_run(first, model, start, settings=settings, out=out) for _ in range(repeats)]
         runs_cue = [
-            track_run(every, model, start, settings, out, keypoint_step) for _ in range(repeats if keypoint_step else 0)
+            track_run(every, model, start, settings=settings, out=out, keypoint_step=keypoint_step)
+            for _ in range(repeats if keypoint_step else 0)
         ]
         detector = detector_ms(every) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}
@@ -224,6 +226,7 @@ def long_run(
     path: Path,
     total: int,
     settings: Settings = Settings(),
+    *,
     keypoint_step: int | None = None,
     model_path: Path | None = None,
     init_path: Path | None = None,

@@ -91,7 +91,7 @@ def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> l
 
 
 def open_sources(
-    devices: list[str], cameras: list[Camera], size: tuple[int, int] | None, fps: float | None, calibration: Path
+    devices: list[str], cameras: list[Camera], *, size: tuple[int, int] | None, fps: float | None, calibration: Path
 ) -> list[Source]:
     """One source per camera: a video file is replayed (all files on one clock), anything else is opened as
     a V4L2 device asked for ``size`` (default: the camera's) and ``fps``.  Each must give its camera's

@@ -104,7 +104,7 @@ def refine_rig(
     first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
     before = _residuals(tracker, poses, frames, len(cameras), last)
     for round_ in progress(range(rounds)):
-        search_range = narrowing(first, last, round_, rounds)
+        search_range = narrowing(first, last, step=round_, steps=rounds)
         information, eta = np.zeros((len(cameras), 6, 6)), np.zeros((len(cameras), 6))
         for frame_poses, images in zip(poses, frames):
             camera, rows, offset, weight = _measure(tracker, frame_poses, images, search_range)

@@ -51,16 +51,19 @@ def run(args: argparse.Namespace) -> int:
     recording = Path(args.recording) if args.recording else bench.DEMO
     if args.long:
         bar = options.bar(args, None, "frame")
-        long = bench.long_run(recording, args.long, settings, args.keypoints, model, init, bar)
+        long = bench.long_run(
+            recording,
+            args.long,
+            settings,
+            keypoint_step=args.keypoints,
+            model_path=model,
+            init_path=init,
+            progress=bar,
+        )
         print(json.dumps(long, indent=2) if args.json else bench.format_long(long))
         return 0
     result = bench.run(
-        recording,
-        settings,
-        args.repeats,
-        args.keypoints,
-        model,
-        init,
+        recording, settings, repeats=args.repeats, keypoint_step=args.keypoints, model_path=model, init_path=init
     )
     print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
     return 0

@@ -83,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
     init = load_pose_file(args.init, model)
     out = Path(args.out) if args.out else DEFAULT_OUT
     with ExitStack() as stack:
-        sources = open_sources([device for _, device in rig], cameras, args.size, args.fps, calibration_path)
+        sources = open_sources(
+            [device for _, device in rig], cameras, size=args.size, fps=args.fps, calibration=calibration_path
+        )
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
         tracker = Tracker(model, cameras, init, options.settings_from(args, capture.fps))
         print(

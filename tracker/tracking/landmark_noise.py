@@ -21,7 +21,7 @@ NOISE_LEAST = 5  # misfits a landmark needs before its zone is learnt
 HOLD_SPAN = 0.5  # LandmarkNoise.held falls from 1 to 0 over this share of keypoint_edge_misfit about it
 
 
-def learnt_tolerance(history: np.ndarray, floor: float, multiple: float, ceiling: float, least: int) -> np.ndarray:
+def learnt_tolerance(history: np.ndarray, *, floor: float, multiple: float, ceiling: float, least: int) -> np.ndarray:
     """Each landmark's noise zone (K,), a share of the body's image size: ``multiple`` times the median of its
     recent misfits ``history`` (W, K) (NaN: not seen), between ``floor`` and ``ceiling``; ``floor`` for a
     landmark seen fewer than ``least`` times."""
@@ -77,5 +77,5 @@ class LandmarkNoise:
         frame[held < 0.5] = np.nan
         misfits = self.misfits.copy()
         misfits[self.row % NOISE_WINDOW] = frame
-        tolerance = learnt_tolerance(misfits, floor, multiple, ceiling, NOISE_LEAST)
+        tolerance = learnt_tolerance(misfits, floor=floor, multiple=multiple, ceiling=ceiling, least=NOISE_LEAST)
         return dataclasses.replace(self, misfits=misfits, row=self.row + 1, tolerance=tolerance)

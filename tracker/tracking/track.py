@@ -215,7 +215,7 @@ def update_kernel(
     return coerce_kernel(moved, parent, rest, projector, rows, joint_type, axis, lower, upper)
 
 
-def narrowing(first: int, last: int, step: int, steps: int) -> int:
+def narrowing(first: int, last: int, *, step: int, steps: int) -> int:
     """Search range of step ``step`` of ``steps`` narrowing geometrically from ``first`` to ``last``:
     r_i = r_0 (r_last / r_0)^(i / (n - 1)), rounded, at least 1; ``last`` when there is a single step."""
     if steps < 2:
@@ -409,7 +409,9 @@ class Tracker:
         st = self.settings
         if st.final_search_range <= 0 or st.iterations < 2:
             return st.search_range
-        return narrowing(st.search_range, st.final_search_range, min(iteration, st.iterations - 1), st.iterations)
+        return narrowing(
+            st.search_range, st.final_search_range, step=min(iteration, st.iterations - 1), steps=st.iterations
+        )
 
     def iterate(self, iteration: int = 0) -> Statistics:
         """One IRLS iteration at the current poses: sample, limit the searches, measure, solve, update, coerce.
@@ -573,6 +575,7 @@ class Tracker:
     def step(
         self,
         images,
+        *,
         smoothed: bool = False,
         dt: float | None = None,
         keypoints: tuple[np.ndarray, np.ndarray] | None = None,

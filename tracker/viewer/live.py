@@ -61,12 +61,14 @@ class LiveView:
         self.trajectory: deque[np.ndarray] = deque(maxlen=history)
         gui = scene.server.gui
         with gui.add_folder("Live", order=20):
-            self.plots = add_run_plots(gui, np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2))
+            self.plots = add_run_plots(
+                gui, frames=np.zeros(2), status=np.zeros(2), residual=np.zeros(2), elapsed=np.zeros(2)
+            )
         scene.look_at_body(tracker.poses)
         self.thread = threading.Thread(target=self._run, name="viewer live", daemon=True)
         self.thread.start()
 
-    def offer(self, index: int, images: list[np.ndarray], result: FrameResult, elapsed: float) -> None:
+    def offer(self, index: int, images: list[np.ndarray], result: FrameResult, *, elapsed: float) -> None:
         """Hand over a tracked frame (``images`` smoothed grey, as the tracker got them); never blocks."""
         with self.lock:
             self.latest = (index, images, result)

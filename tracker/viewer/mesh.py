@@ -35,7 +35,7 @@ def _cap(ring: np.ndarray, centre: np.ndarray, offset: int, outward: bool) -> tu
     return np.vstack([ring, centre]), faces if outward else faces[:, ::-1]
 
 
-def ellipsoid_mesh(centre, radii, clip=None, segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
+def ellipsoid_mesh(centre, radii, *, clip=None, segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of an ellipsoid, optionally cut to ``zmin <= z - centre_z <= zmax`` (``clip``)."""
     a, b, c = (float(r) for r in radii)
     zmin, zmax = (-c, c) if clip is None else (max(clip[0], -c), min(clip[1], c))
@@ -56,7 +56,7 @@ def ellipsoid_mesh(centre, radii, clip=None, segments: int = 24) -> tuple[np.nda
     return np.vstack(parts_v) + np.asarray(centre, float), np.vstack(parts_f)
 
 
-def cone_mesh(start, end, radius_start, radius_end, segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
+def cone_mesh(start, end, *, radius_start, radius_end, segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of a truncated cone (a cylinder when the radii are equal), closed at both ends."""
     frame = axis_frame(start, end)
     length = float(np.linalg.norm(np.asarray(end, float) - np.asarray(start, float)))
@@ -77,9 +77,9 @@ def quadric_mesh(shape: str, params: dict, segments: int = 24) -> tuple[np.ndarr
     """The mesh of one ``[[component.quadric]]`` table (formats.md) in its component's frame."""
     if shape in ("sphere", "ellipsoid"):
         radii = [params["radius"]] * 3 if shape == "sphere" else params["radii"]
-        return ellipsoid_mesh(params.get("center", (0.0, 0.0, 0.0)), radii, params.get("clip"), segments)
+        return ellipsoid_mesh(params.get("center", (0.0, 0.0, 0.0)), radii, clip=params.get("clip"), segments=segments)
     radii = (params["radius"], params["radius"]) if shape == "cylinder" else params["radii"]
-    return cone_mesh(params["from"], params["to"], radii[0], radii[1], segments)
+    return cone_mesh(params["from"], params["to"], radius_start=radii[0], radius_end=radii[1], segments=segments)
 
 
 def component_meshes(model: Model, segments: int = 24) -> list[tuple[np.ndarray, np.ndarray]]:

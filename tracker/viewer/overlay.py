@@ -41,7 +41,7 @@ def _fixed(points: np.ndarray) -> np.ndarray:
     return np.round(points * (1 << _SHIFT)).astype(np.int32)
 
 
-def draw(image: np.ndarray, inspection: Inspection, camera: int, robust_c: float, colours: np.ndarray) -> np.ndarray:
+def draw(image: np.ndarray, inspection: Inspection, camera: int, *, robust_c: float, colours: np.ndarray) -> np.ndarray:
     """RGB uint8 copy of a grey (or RGB) ``image`` with camera ``camera``'s search lines, outline and edges."""
     out = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) if image.ndim == 2 else image.copy()
     mine = inspection.camera == camera
@@ -76,7 +76,9 @@ class OverlayVideo:
         self.robust_c = robust_c
 
     def write(self, images: Sequence[np.ndarray], inspection: Inspection) -> None:
-        self.writer.write([draw(image, inspection, k, self.robust_c, self.colours) for k, image in enumerate(images)])
+        self.writer.write(
+            [draw(image, inspection, k, robust_c=self.robust_c, colours=self.colours) for k, image in enumerate(images)]
+        )
 
     def close(self) -> None:
         self.writer.close()

@@ -19,7 +19,7 @@ from tracker.viewer.overlay import component_colours
 from tracker.viewer.timeline import Timeline
 
 
-def node_positions(poses: np.ndarray, q_s: np.ndarray, d: np.ndarray, mesh: sq.Mesh) -> np.ndarray:
+def node_positions(poses: np.ndarray, q_s: np.ndarray, d: np.ndarray, *, mesh: sq.Mesh) -> np.ndarray:
     """World node positions (P, n, 3) of one frame's parts: poses (P, 4, 4), q_s (P, 11), d (P, n, 3)."""
     return np.stack(
         [
@@ -42,7 +42,7 @@ class PointsView(Timeline):
         colours = np.array(component_colours(len(names)))
         scene = server.scene
         scene.add_grid("/ground", width=4.0, height=4.0, plane="xy", cell_size=0.25)
-        first = node_positions(results["poses"][0], shapes["q_s"][0], shapes["d"][0], self.mesh)
+        first = node_positions(results["poses"][0], shapes["q_s"][0], shapes["d"][0], mesh=self.mesh)
         self.parts = [
             scene.add_mesh_simple(
                 f"/parts/{name}",
@@ -77,7 +77,9 @@ class PointsView(Timeline):
 
     def draw(self, row: int) -> None:
         """Draw row ``row`` of the run: its parts, the markers seen and the joints."""
-        nodes = node_positions(self.results["poses"][row], self.shapes["q_s"][row], self.shapes["d"][row], self.mesh)
+        nodes = node_positions(
+            self.results["poses"][row], self.shapes["q_s"][row], self.shapes["d"][row], mesh=self.mesh
+        )
         with self.server.atomic():
             for handle, part_nodes in zip(self.parts, nodes):
                 handle.vertices = part_nodes.astype(np.float32)

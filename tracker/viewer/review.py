@@ -85,10 +85,10 @@ class Review(Timeline):
         with gui.add_folder("Plots", order=20, expand_by_default=False):
             add_run_plots(
                 gui,
-                self.frames,
-                results.get("status", np.zeros(len(self.frames))),
-                results.get("residual", unknown),
-                results.get("elapsed", unknown),
+                frames=self.frames,
+                status=results.get("status", np.zeros(len(self.frames))),
+                residual=results.get("residual", unknown),
+                elapsed=results.get("elapsed", unknown),
             )
 
     def step(self, delta: int) -> None:

@@ -51,7 +51,14 @@ def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False)
 
 
 def add_plot(
-    gui, title: str, label: str, colour: str, x: np.ndarray, y: np.ndarray, y_range: tuple[float, float] | None = None
+    gui,
+    title: str,
+    *,
+    label: str,
+    colour: str,
+    x: np.ndarray,
+    y: np.ndarray,
+    y_range: tuple[float, float] | None = None,
 ):
     """A uPlot line chart of ``y`` against frame numbers ``x`` in the GUI panel (``y_range`` fixes its axis)."""
     scales: dict[str, dict[str, object]] = {"x": {"time": False}}
@@ -84,11 +91,12 @@ def run_plot_values(status: np.ndarray, residual: np.ndarray, elapsed: np.ndarra
     }
 
 
-def add_run_plots(gui, frames, status, residual, elapsed) -> dict:
+def add_run_plots(gui, *, frames, status, residual, elapsed) -> dict:
     """The status, residual and speed plots of a run, keyed as :data:`PLOTS`."""
     values = run_plot_values(status, residual, elapsed)
     return {
-        key: add_plot(gui, key, label, colour, frames, values[key], y_range) for key, label, colour, y_range in PLOTS
+        key: add_plot(gui, key, label=label, colour=colour, x=frames, y=values[key], y_range=y_range)
+        for key, label, colour, y_range in PLOTS
     }
 
 
@@ -209,7 +217,7 @@ class Scene:
         images = None
         if frame.images is not None:
             images = [
-                draw(image, frame.inspection, k, self.robust_c, self.colours)
+                draw(image, frame.inspection, k, robust_c=self.robust_c, colours=self.colours)
                 if frame.inspection is not None
                 else cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
                 for k, image in enumerate(frame.images)
