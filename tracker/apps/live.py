@@ -334,7 +334,7 @@ class _Session:
             shown = list(self.blanks)
             for camera, image in zip(self.taken.cameras, frame.images):
                 shown[camera] = image
-            self.view.offer(frame.index, shown, frame.result, frame.spent)
+            self.view.offer(frame.index, shown, frame.result, elapsed=frame.spent)
         self.frames += 1
 
 

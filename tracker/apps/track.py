@@ -171,7 +171,7 @@ def track(
         """Count the frame's status and residual, and draw it in the overlay and the viewer."""
         images = grey if shows else frame.images
         if live is not None:
-            live.offer(frame.index, images, frame.result, frame.spent)
+            live.offer(frame.index, images, frame.result, elapsed=frame.spent)
         if video is not None:
             video.write(images, tracker.inspect())
         counts[frame.result.status] += 1
