@@ -129,9 +129,9 @@ def smooth(image: np.ndarray, sigma: float, work_side: int = 0) -> np.ndarray:
     about ``sigma`` full-size pixels (none for sigma 0).
 
     The block mean already smooths by (f^2 - 1) / 12 squared full-size pixels, so the Gaussian on the reduced
-    image takes the rest; at 1080x1920 and sigma 2.25 (the 480-pixel blur scaled up) this costs 0.9 ms instead
-    of 6 ms a view (docs/speed.md).  The search reads the reduced image at full-size coordinates
-    (:func:`tracker.tracking.measure.measure_kernel`), so nothing else changes.
+    image takes the rest, at a fraction of the cost of blurring the full-size image (docs/speed.md).  The search
+    reads the reduced image at full-size coordinates (:func:`tracker.tracking.measure.measure_kernel`), so nothing
+    else changes.
     """
     f = reduction(min(image.shape[:2]), work_side)
     if f > 1:
