@@ -102,7 +102,7 @@ def track(
     from tracker.apps.loop import Tracked, track_frames
     from tracker.evaluate import evaluate
     from tracker.io.poses import load_poses
-    from tracker.io.readers import keeping_grey
+    from tracker.io.readers import keeping_grey, split_kept
     from tracker.io.recording import capture_times
     from tracker.keypoints.stream import tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
@@ -164,7 +164,7 @@ def track(
         nonlocal grey
         for index, images in read:
             if shows:
-                grey, images = zip(*images)
+                grey, images = zip(*(split_kept(image) for image in images))
             yield index, images
 
     def counted_and_shown(frame: Tracked) -> None:
@@ -179,7 +179,15 @@ def track(
 
     progress = bar(None, "frame", leave=True)
     try:
-        read = tracked_frames(stream, rec, start=begin, stop=stop, prepare=prepare, colour=background is not None)
+        read = tracked_frames(
+            stream,
+            rec,
+            start=begin,
+            stop=stop,
+            prepare=prepare,
+            colour=background is not None,
+            chroma=settings.region and background is None,
+        )
         run = track_frames(
             tracker,
             progress(searched(read), total=stop - begin),

@@ -19,7 +19,18 @@ if TYPE_CHECKING:
     from tracker.apps.track import Tracking
     from tracker.io.recording import Recording
 
-TUNING = ("iterations", "spacing", "resample_every", "search_range", "dynamics", "damping", "max_turn", "work_side")
+TUNING = (
+    "iterations",
+    "spacing",
+    "resample_every",
+    "search_range",
+    "dynamics",
+    "damping",
+    "max_turn",
+    "work_side",
+    "region",
+    "region_weight",
+)
 
 
 def positive_int(text: str) -> int:
@@ -44,6 +55,13 @@ def positive_float(text: str) -> float:
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return value
+
+
+def on_off(text: str) -> bool:
+    """Argument type: on or off."""
+    if text not in ("on", "off"):
+        raise argparse.ArgumentTypeError(f"must be on or off, got {text}")
+    return text == "on"
 
 
 def share(text: str) -> float:
@@ -171,6 +189,23 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 metavar="PIXELS",
                 help="search larger images reduced by the largest whole factor that keeps their short side at least "
                 "this long (default 480: 1080p is searched at half size; 0: always at full size)",
+            ),
+        ),
+        "region": (
+            ["--region"],
+            dict(
+                type=on_off,
+                metavar="on|off",
+                help="read the colours along the outline too, learnt as the run goes, to tell the body from the room "
+                "(default on; docs/method-tracking.md, section 7)",
+            ),
+        ),
+        "region_weight": (
+            ["--region-weight"],
+            dict(
+                type=positive_float,
+                metavar="W",
+                help="the colour cue's weight beside the edges' (default 1)",
             ),
         ),
         "damping": (

@@ -13,7 +13,10 @@ Grey images are the video's own luma, never a colour image converted back:
   unless the video says it is full range: less than half the CPU of OpenCV's colour
   frame made grey (docs/speed.md has the measurements).
 
-Readers asked for colour (the foreground cue and the keypoint detector need it) decode BGR.
+Readers asked for colour (the foreground cue and the keypoint detector need it) decode BGR.  Readers asked for
+chroma (the region cue needs it) give each grey frame with a half-size colour image (:class:`WithChroma`) at
+little extra cost: PyAV's decoded planes as they are (4:2:0 video: the chroma planes are already half size), or
+libjpeg's decoding of the JPEG at half scale.
 """
 
 from __future__ import annotations
@@ -56,6 +59,26 @@ class WithColour:
 
     image: Any
     colour: np.ndarray
+
+
+@dataclass(frozen=True)
+class WithChroma:
+    """A grey frame (or what ``prepare`` made of it) with its colour at half size, ``chroma`` (H // 2, W // 2, 3)
+    uint8, in the video's own colour space (YUV from PyAV, BGR from JPEG and image files): each pixel the colour of
+    a block of 2 x 2 full-size pixels."""
+
+    image: Any
+    chroma: np.ndarray
+
+
+def half_size(image: np.ndarray, full_shape: tuple[int, ...]) -> np.ndarray:
+    """``image`` (already about half of ``full_shape``, or full size) as exactly (H // 2, W // 2, 3)."""
+    height, width = full_shape[0] // 2, full_shape[1] // 2
+    if image.shape[0] >= 2 * height and image.shape[1] >= 2 * width:
+        image = reduced(image, 2)
+    if image.shape[:2] != (height, width):
+        image = image[:height, :width]
+    return np.ascontiguousarray(image)
 
 
 def reduced(image: np.ndarray, factor: int) -> np.ndarray:
@@ -108,12 +131,28 @@ def keeping_grey(prepare: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.nd
     return lambda frame: (grey(frame), prepare(frame))
 
 
+def split_kept(frame) -> tuple[np.ndarray, Any]:
+    """A frame that :func:`keeping_grey`'s preparation made, as (the grey frame as recorded, what ``prepare`` made),
+    the latter :class:`WithChroma` when the frame came with its colour."""
+    if isinstance(frame, WithChroma):
+        grey_frame, searched = frame.image
+        return grey_frame, WithChroma(searched, frame.chroma)
+    return frame
+
+
 def grey_frames(
-    source: Path, start: int = 0, *, colour: bool = False, step: int = 1, copies: ColourCopies | None = None
+    source: Path,
+    start: int = 0,
+    *,
+    colour: bool = False,
+    step: int = 1,
+    copies: ColourCopies | None = None,
+    chroma: bool = False,
 ) -> Generator[Any, None, None]:
     """Grey (or, with ``colour``, BGR) frames start, start + step, ... of one video file or image folder (the
-    caller stops); the frames between are skipped undecoded where the container allows.  The frames ``copies``
-    names come as :class:`WithColour`, their colour image decoded from the same frame."""
+    caller stops); the frames between are skipped undecoded where the container allows.  With ``chroma`` each
+    comes as :class:`WithChroma`.  The frames ``copies`` names come as :class:`WithColour`, their colour image
+    decoded from the same frame (around the :class:`WithChroma` with ``chroma``)."""
     copies = copies or ColourCopies(frozenset())
     if source.is_dir():
         flags = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
@@ -124,18 +163,19 @@ def grey_frames(
                     f"{source}: image folder ended before the recording's last frame; add the missing images"
                 )
             image = read_image(files[index], index, flags)
-            if index in copies.frames:
-                yield WithColour(image, reduced(read_image(files[index], index), copies.factor))
-            else:
-                yield image
+            bgr = read_image(files[index], index) if chroma or index in copies.frames else image
+            frame = WithChroma(image, half_size(bgr, bgr.shape)) if chroma else image
+            yield WithColour(frame, reduced(bgr, copies.factor)) if index in copies.frames else frame
     video = open_frames(source, colour)
     try:
         for index in range(start):
             video.skip(index)
         for index in itertools.count(start, step):
             if index in copies.frames:
-                image, bgr = video.read_with_colour(index)
-                yield WithColour(image, reduced(bgr, copies.factor))
+                image, bgr, half = video.read_with_colour(index, chroma=chroma)
+                yield WithColour(WithChroma(image, half) if chroma else image, reduced(bgr, copies.factor))
+            elif chroma:
+                yield WithChroma(*video.read_with_chroma(index))
             else:
                 yield video.read(index)
             for skipped in range(index + 1, index + step):
@@ -163,10 +203,18 @@ class _MotionJpeg:
     def read(self, index: int) -> np.ndarray:
         return self._decoded(self._data(index), self.flags, index)
 
-    def read_with_colour(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """The frame as :meth:`read` gives it and in BGR colour, both decoded from its JPEG."""
+    def read_with_colour(self, index: int, *, chroma: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The frame as :meth:`read` gives it, in BGR colour, and (with ``chroma``) at half size in colour, all
+        decoded from its JPEG."""
         data = self._data(index)
-        return self._decoded(data, self.flags, index), self._decoded(data, cv2.IMREAD_COLOR, index)
+        image, bgr = self._decoded(data, self.flags, index), self._decoded(data, cv2.IMREAD_COLOR, index)
+        return image, bgr, half_size(bgr, bgr.shape) if chroma else None
+
+    def read_with_chroma(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """The frame as :meth:`read` gives it and its colour at half size, which libjpeg decodes at half scale."""
+        data = self._data(index)
+        image = self._decoded(data, self.flags, index)
+        return image, half_size(self._decoded(data, cv2.IMREAD_REDUCED_COLOR_2, index), image.shape)
 
     def _data(self, index: int) -> np.ndarray:
         ok, data = self.capture.read()
@@ -218,11 +266,16 @@ class _Decoded:
         frame = self._next(index)
         return frame.to_ndarray(format="bgr24") if self.colour else luma(frame)
 
-    def read_with_colour(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """The frame as :meth:`read` gives it and in BGR colour."""
+    def read_with_colour(self, index: int, *, chroma: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The frame as :meth:`read` gives it, in BGR colour, and (with ``chroma``) at half size in colour."""
         frame = self._next(index)
         bgr = frame.to_ndarray(format="bgr24")
-        return (bgr if self.colour else luma(frame)), bgr
+        return (bgr if self.colour else luma(frame)), bgr, half_colour(frame) if chroma else None
+
+    def read_with_chroma(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """The frame as :meth:`read` gives it and its colour at half size (:func:`half_colour`)."""
+        frame = self._next(index)
+        return (frame.to_ndarray(format="bgr24") if self.colour else luma(frame)), half_colour(frame)
 
     def skip(self, index: int) -> None:
         self._next(index)
@@ -260,6 +313,20 @@ def luma(frame: av.VideoFrame) -> np.ndarray:
     return rows.copy() if full else cv2.LUT(rows, VIDEO_TO_FULL)
 
 
+def half_colour(frame: av.VideoFrame) -> np.ndarray:
+    """A decoded frame's colour at half size (H // 2, W // 2, 3): for 8-bit 4:2:0 video its luma reduced and its
+    two chroma planes as decoded (YUV); any other format converted to BGR and reduced."""
+    height, width = frame.height, frame.width
+    if frame.format.name not in ("yuv420p", "yuvj420p"):
+        return half_size(frame.to_ndarray(format="bgr24"), (height, width))
+    planes = []
+    for plane, rows in zip(frame.planes, (height, (height + 1) // 2, (height + 1) // 2)):
+        planes.append(np.frombuffer(memoryview(plane), np.uint8).reshape(rows, plane.line_size))
+    y = reduced(planes[0][:, :width], 2)
+    h2, w2 = height // 2, width // 2
+    return np.ascontiguousarray(np.dstack([y[:h2, :w2], planes[1][:h2, :w2], planes[2][:h2, :w2]]))
+
+
 def open_frames(source: Path, colour: bool = False) -> _MotionJpeg | _Decoded:
     """The frames of a video file, read in order (``read``/``skip`` each take the frame's index for errors) or
     from anywhere (``seek``), grey (or BGR with ``colour``)."""
@@ -283,16 +350,19 @@ class _Reader:
         colour: bool = False,
         step: int = 1,
         copies: ColourCopies | None = None,
+        chroma: bool = False,
     ):
         self.source, self.start, self.count, self.prepare, self.colour = source, start, count, prepare, colour
-        self.step, self.copies = step, copies
+        self.step, self.copies, self.chroma = step, copies, chroma
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
         self.thread.start()
 
     def _run(self) -> None:
-        frames = grey_frames(self.source, self.start, colour=self.colour, step=self.step, copies=self.copies)
+        frames = grey_frames(
+            self.source, self.start, colour=self.colour, step=self.step, copies=self.copies, chroma=self.chroma
+        )
         try:
             for image in itertools.islice(frames, self.count):
                 if not self._put(self._prepared(image)):
@@ -306,7 +376,9 @@ class _Reader:
         if self.prepare is None:
             return image
         if isinstance(image, WithColour):
-            return WithColour(self.prepare(image.image), image.colour)
+            return WithColour(self._prepared(image.image), image.colour)
+        if isinstance(image, WithChroma):
+            return WithChroma(self.prepare(image.image), image.chroma)
         return self.prepare(image)
 
     def _put(self, item) -> bool:
@@ -339,15 +411,17 @@ def read_frames(
     colour: bool = False,
     step: int = 1,
     copies: list[ColourCopies] | None = None,
+    chroma: bool = False,
 ) -> Iterator[tuple[int, list]]:
     """(index, one grey image per source) for frames start, start + step, ... before stop, each source decoded
     by its own thread (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that
     thread too (e.g. the tracker's smoothing); a list of them gives each source its own.  With ``copies`` (one
-    per source) the frames they name come as :class:`WithColour` (``prepare`` applied to the image)."""
+    per source) the frames they name come as :class:`WithColour` (``prepare`` applied to the image); with
+    ``chroma`` every frame comes as :class:`WithChroma` (``prepare`` applied to its grey image)."""
     preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
     indices = range(start, stop, step)
     readers = [
-        _Reader(source, start, len(indices), queue_size, each, colour, step, copy)
+        _Reader(source, start, len(indices), queue_size, each, colour, step, copy, chroma)
         for source, each, copy in zip(sources, preparers, copies or [ColourCopies(frozenset())] * len(sources))
     ]
     try:

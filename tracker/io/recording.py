@@ -134,13 +134,15 @@ def frames(
     colour: bool = False,
     step: int = 1,
     copies: list[ColourCopies] | None = None,
+    chroma: bool = False,
 ) -> Iterator[tuple[int, list]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1 (every
     ``step``-th of them: the others are skipped undecoded where the container allows).
 
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
     with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given; the frames
-    ``copies`` (one per camera) names also come with their reduced colour image (:class:`WithColour`). A frame that
+    ``copies`` (one per camera) names also come with their reduced colour image (:class:`WithColour`), and with
+    ``chroma`` every frame with its half-size colour image (:class:`WithChroma`). A frame that
     fails to decode raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop
@@ -149,7 +151,9 @@ def frames(
             f"{recording.path}: frames {start}..{stop} are outside the recording's 0..{recording.frame_count}; "
             "pick a range inside it"
         )
-    return read_frames(recording.sources, start, stop, prepare=prepare, colour=colour, step=step, copies=copies)
+    return read_frames(
+        recording.sources, start, stop, prepare=prepare, colour=colour, step=step, copies=copies, chroma=chroma
+    )
 
 
 def capture_times(recording: Recording) -> np.ndarray | None:

@@ -108,13 +108,23 @@ def _detect_fed(recording: Recording, fed, reduction, results) -> None:
 
 
 def tracked_frames(
-    stream: KeypointStream | None, recording: Recording, *, start: int, stop: int, prepare=None, colour: bool = False
+    stream: KeypointStream | None,
+    recording: Recording,
+    *,
+    start: int,
+    stop: int,
+    prepare=None,
+    colour: bool = False,
+    chroma: bool = False,
 ) -> Iterator[tuple[int, list]]:
     """:func:`tracker.io.recording.frames` for the frame loop beside ``stream``: a fed stream gets the scheduled
     frames' colour images from the readers (:func:`_fed_ahead`)."""
     if stream is None or stream.fed is None:
-        return frames(recording, start, stop, prepare=prepare, colour=colour)
-    return _fed_ahead(stream, frames(recording, start, stop, prepare=prepare, colour=colour, copies=stream.copies()))
+        return frames(recording, start, stop, prepare=prepare, colour=colour, chroma=chroma)
+    return _fed_ahead(
+        stream,
+        frames(recording, start, stop, prepare=prepare, colour=colour, copies=stream.copies(), chroma=chroma),
+    )
 
 
 def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Iterator[tuple[int, list]]:

@@ -376,9 +376,15 @@ def search_limits(
     covered,
     o_lo,
     o_hi,
+    o_outside,
+    o_depth,
+    depths,
 ):
     """Per sample, the search interval ``[lo, hi]`` (within ``[-r, r]``) that ends half way to the next
-    predicted edge along its line that is not the sample's own boundary pair.
+    predicted edge along its line that is not the sample's own boundary pair, and the label just outside it
+    (``o_outside``: the component seen at ``t = +1``, -1 for the background).  With ``depths``, also how far in
+    the sample's own component reaches along the line (``o_depth``: the first ``t >= 1`` at which ``-t`` is not
+    its label, ``r + 1`` if none within ``r``): the width of a limb across its outline.
 
     ``q_cam``, ``clip_cam``, ``sphere``, ``near``, ``near_count`` come from :func:`prepare` (with the same
     ``r``), ``grid`` from :func:`undistort_grid`; ``cand_comp`` (Q,) int, ``coef`` (Q, NCOEF) and ``covered``
@@ -420,6 +426,14 @@ def search_limits(
             coef,
         )
         outside = _label_at(1.0, n_cand, cand_comp, coef)
+        o_outside[smp] = outside
+        if depths:
+            depth = r + 1
+            for t in range(1, r + 1):
+                if _label_at(-float(t), n_cand, cand_comp, coef) != own:
+                    depth = t
+                    break
+            o_depth[smp] = depth
         _coverage(n_cand, cand_comp, coef, own, outside, r, covered)
         o_hi[smp] = _side(1, r, n_cand, cand_comp, coef, own, outside, outside, covered)
         o_lo[smp] = -_side(-1, r, n_cand, cand_comp, coef, own, outside, _UNKNOWN, covered)
@@ -482,13 +496,17 @@ class Ownership:
         self.covered = np.zeros(2 * max_range + 3, np.bool_)
         self.lo = np.zeros(capacity, np.int64)
         self.hi = np.zeros(capacity, np.int64)
+        self.outside = np.zeros(capacity, np.int64)
+        self.depth = np.zeros(capacity, np.int64)
 
     def spare(self) -> Ownership:
         """Buffers of its own for a search beside this one's, over the same model, rig and grid (the grid only
         depends on the rig, and costs the most to make)."""
         return Ownership(self.model, self.rig, len(self.lo), self.max_range, self.grid)
 
-    def limits(self, placed, samples, r: int) -> tuple[np.ndarray, np.ndarray]:
+    def limits(self, placed, samples, r: int, *, depths: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Fill ``lo``/``hi`` and ``outside`` (and, with ``depths``, ``depth``) of the first ``samples.count``
+        samples (:func:`search_limits`); returns ``lo`` and ``hi``."""
         m, rig = self.model, self.rig
         prepare(placed.cone, self.scale, r, self.near, self.near_count)
         search_limits(
@@ -514,5 +532,8 @@ class Ownership:
             self.covered,
             self.lo,
             self.hi,
+            self.outside,
+            self.depth,
+            depths,
         )
         return self.lo[: samples.count], self.hi[: samples.count]

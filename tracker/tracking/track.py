@@ -31,6 +31,7 @@ from numba import njit
 
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
+from tracker.io.readers import WithChroma
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
@@ -40,6 +41,7 @@ from tracker.tracking.measure import Statistics, component_misfits, measure_kern
 from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
+from tracker.tracking.region import FACTOR, Histograms, blend, learn_kernel, region_kernel
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
 
@@ -89,6 +91,16 @@ class Settings:
     keypoint_edge_misfit: float = 0.8  # px: where a component's edges fit worse (median |m|), the joint landmarks it
     # places (keypoint_cue.placers) pull from the floor zone (keypoint_tolerance) with no fade
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
+    # the region cue (tracker.tracking.region), used where the frames come with their colour (WithChroma)
+    region: bool = True  # read the colours along the samples' lines too
+    region_weight: float = 1.0  # lambda: a line's weight is lambda / max(sigma^2, region_sigma^2)
+    region_sigma: float = 1.0  # full-size pixels: the smallest standard deviation a line's offset is given
+    region_amplitude: float = 0.43  # a: the smoothed step H(x) = 1/2 - a tanh(x / 2s) between inside and outside
+    region_slope: float = 0.5  # s, half-size pixels
+    region_learning_rate: float = 0.2  # h <- (1 - rate) h + rate h_new per frame
+    region_every: int = 1  # use every k-th sample's line
+    region_inside: int = 4  # pixels in from the outline whose colours are learnt as the part's
+    region_outside: int = 10  # ... and out to which they are learnt as the background's (from 4)
 
 
 def scaled_to(settings: Settings, short_side: int) -> Settings:
@@ -106,6 +118,10 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         blur_sigma=settings.blur_sigma * k,
         threshold=settings.threshold / k,
         keypoint_edge_misfit=settings.keypoint_edge_misfit * k,
+        region_sigma=settings.region_sigma * k,
+        region_slope=settings.region_slope * k,
+        region_inside=max(1, round(settings.region_inside * k)),
+        region_outside=max(2, round(settings.region_outside * k)),
         uncertain_residual=settings.uncertain_residual * k,
         lost_residual=settings.lost_residual * k,
         reference_size=short_side,
@@ -242,14 +258,15 @@ def constant_velocity(previous, current, damping):
     return out
 
 
-STAGES = ("grey", "outline", "ownership", "measure", "solve")
+STAGES = ("grey", "outline", "ownership", "measure", "region", "solve")
 
 
 @dataclass
 class StageTimes:
     """Seconds spent per stage since creation: copying the grey images into the frame buffer (with their
     smoothing unless reader threads smoothed them, ``step(..., smoothed=True)``), outline sampling and
-    visibility, search limits (ownership), edge search and Jacobians, prior + chain solve + coercion."""
+    visibility, search limits (ownership), edge search and Jacobians (with the landmarks), the region cue (its lines
+    and the colours learnt), prior + chain solve + coercion."""
 
     seconds: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
 
@@ -265,7 +282,9 @@ class Workspace:
     it, ``images`` (C, H, W) uint8; the outline ``samples`` and their camera-frame quadrics ``placed``; the search
     limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each
     sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
-    them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)).
+    them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); each camera's
+    half-size colour image ``chroma`` (C, H', W', 3) when the frame came with one (``coloured``), and the region
+    cue's mean, variance and inside colour per sample (:func:`tracker.tracking.region.region_kernel`).
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
     (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
@@ -280,14 +299,22 @@ class Workspace:
     eta: np.ndarray
     misfit: np.ndarray
     times: StageTimes
+    chroma: np.ndarray
+    region_mean: np.ndarray
+    region_variance: np.ndarray
+    region_inside: np.ndarray
+    coloured: bool = False
     lo: np.ndarray | None = None
     hi: np.ndarray | None = None
+    outside: np.ndarray | None = None
+    depth: np.ndarray | None = None
 
     @classmethod
     def around(cls, images: np.ndarray, ownership: Ownership) -> Workspace:
         """Fresh buffers for a search in ``images`` with the search limits of ``ownership``, whose model, rig and
         capacity size the others."""
         capacity, n = len(ownership.lo), ownership.model.size
+        half = ownership.rig.size // FACTOR
         return cls(
             images,
             ownership,
@@ -299,6 +326,10 @@ class Workspace:
             np.zeros((n, 6)),
             np.full((len(ownership.rig.names), len(LANDMARKS)), np.nan),
             StageTimes(),
+            np.zeros((len(half), int(half[:, 1].max()), int(half[:, 0].max()), 3), np.uint8),
+            np.zeros(capacity),
+            np.zeros(capacity),
+            np.zeros(capacity),
         )
 
     def spare(self, images: np.ndarray) -> Workspace:
@@ -349,6 +380,8 @@ class Tracker:
         self.placer = placers(model, *self.landmarks[:2])
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
+        self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
+        self.histograms = Histograms.empty(len(cameras), n)
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
@@ -398,10 +431,18 @@ class Tracker:
     def _load(self, work: Workspace, images, smoothed: bool) -> None:
         """:meth:`load_images` into the images of ``work``."""
         started = time.perf_counter()
+        coloured = True
         for k, image in enumerate(images):
+            if isinstance(image, WithChroma):
+                h, w = image.chroma.shape[:2]
+                work.chroma[k, :h, :w] = image.chroma
+                image = image.image
+            else:
+                coloured = False
             searched = image if smoothed else self.smooth(image)
             h, w = searched.shape
             work.images[k, :h, :w] = searched
+        work.coloured = coloured and len(images) > 0
         work.times.add("grey", started)
 
     def search_range(self, iteration: int) -> int:
@@ -433,6 +474,9 @@ class Tracker:
         if self.keypoints is not None:
             self.add_keypoints(*self.keypoints)
         started = work.times.add("measure", started)
+        if self.regions:
+            self.add_regions(work, twist)
+            started = work.times.add("region", started)
         self.poses = self.update(self.poses)
         work.times.add("solve", started)
         residual = sum_wm / sum_w if sum_w > 0 else float("nan")
@@ -466,13 +510,92 @@ class Tracker:
         sample_outlines(m, poses, self.rig, spacing=st.spacing, samples=s, placed=work.placed)
         started = work.times.add("outline", started)
         if st.ownership:
-            work.lo, work.hi = work.ownership.limits(work.placed, s, search_range)
+            work.lo, work.hi = work.ownership.limits(work.placed, s, search_range, depths=st.region and work.coloured)
         else:
             work.lo = work.ownership.lo[: s.count]
             work.hi = work.ownership.hi[: s.count]
             work.lo[:] = -search_range
             work.hi[:] = search_range
+            work.ownership.outside[: s.count] = -1
+            work.ownership.depth[: s.count] = search_range + 1
+        work.outside = work.ownership.outside[: s.count]
+        work.depth = work.ownership.depth[: s.count]
         work.times.add("ownership", started)
+
+    @property
+    def regions(self) -> bool:
+        """Whether the region cue takes part in this frame: it is on, the frame came in colour, and colours have
+        been learnt."""
+        return self.settings.region and self.work.coloured and self.histograms.ready
+
+    def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
+        """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region.region_kernel`); returns the
+        number of lines used."""
+        s, st, h = work.samples, self.settings, self.histograms
+        assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
+        assert work.outside is not None and work.depth is not None
+        return region_kernel(
+            work.chroma,
+            self.chroma_size,
+            s.count,
+            s.camera,
+            s.component,
+            s.pixel,
+            s.normal,
+            s.jacobian,
+            work.outside,
+            work.depth,
+            twist,
+            work.lo,
+            work.hi,
+            max(st.region_every, 1),
+            h.foreground,
+            h.background,
+            h.seen,
+            h.seen_background,
+            st.region_amplitude,
+            st.region_slope / FACTOR,
+            st.region_weight,
+            st.region_sigma**2,
+            work.region_mean,
+            work.region_variance,
+            work.region_inside,
+            work.information,
+            work.eta,
+        )
+
+    def learn_colours(self, learn: np.ndarray) -> None:
+        """Count the colours along the lines at the current poses into the histograms (those of the components
+        ``learn`` (C, N) names; :func:`tracker.tracking.region.learn_kernel`) and blend them in."""
+        st, work = self.settings, self.work
+        s = work.samples
+        assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
+        assert work.outside is not None and work.depth is not None
+        started = time.perf_counter()
+        foreground = np.zeros_like(self.histograms.foreground)
+        background = np.zeros_like(self.histograms.background)
+        learn_kernel(
+            work.chroma,
+            self.chroma_size,
+            s.count,
+            s.camera,
+            s.component,
+            s.pixel,
+            s.normal,
+            s.jacobian,
+            work.outside,
+            work.depth,
+            motion_since(self.sampled_poses, self.poses),
+            work.lo,
+            work.hi,
+            learn,
+            max(1, round(st.region_inside / FACTOR)),
+            max(2, round(st.region_outside / FACTOR)),
+            foreground,
+            background,
+        )
+        self.histograms = blend(self.histograms, foreground, background, rate=st.region_learning_rate)
+        work.times.add("region", started)
 
     def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
         """Search the edge of every sample in ``work`` (moved by ``twist`` since sampling) in its images and fill
@@ -608,6 +731,8 @@ class Tracker:
         self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
+        if st.region and work.coloured and status != LOST:
+            self.learn_colours(np.ones(self.histograms.seen.shape, np.bool_))
         if self.keypoints is not None and status == TRACKED:
             self.noise = self.noise.learnt(
                 work.misfit,

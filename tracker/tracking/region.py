@@ -1,0 +1,304 @@
+"""The region cue: where along each sample's line the colours change from the part's own to the room's
+(docs/method-tracking.md, section 7).
+
+The edge search takes the nearest grey-level edge, which in a furnished room or on patterned clothes is often
+not the body's outline.  The region cue reads the same lines in colour instead, in the half-size colour image the
+readers decode beside the grey one (:class:`tracker.io.readers.WithChroma`), and asks which offset ``d`` of the
+outline along the line best splits it into the part's colours inside and the background's outside.
+
+Colour statistics: each colour (16 bins per channel, 4096 bins) has a frequency ``h_f`` among the pixels of
+component ``i`` in camera ``k`` and ``h_b`` among the background pixels near the body in camera ``k``, learnt
+online from the tracked poses (:func:`learn_kernel`, ``h <- (1 - a) h + a h_new``).  A pixel of colour ``y``
+is the part's with probability ``p_f = h_f / (h_f + h_b)`` (0.5 for a colour seen in neither).
+
+Along the line ``x_t = p + t n`` (``t`` in half-size pixels, ``n`` the outward normal), with a smoothed step
+``H(x) = 1/2 - a tanh(x / (2 s))`` for the chance that a pixel ``x`` inside the outline is the part's, the
+likelihood of the outline at ``d`` is
+
+    L(d) = prod_t [ H(t - d) p_f(x_t) + (1 - H(t - d)) (1 - p_f(x_t)) ],
+
+the posterior over the candidate offsets ``d`` (integers within the search interval) is ``L`` normalised, and its
+mean ``mu`` and variance ``sigma^2`` (in full-size pixels) enter the component's information like an edge
+measurement with offset ``mu`` and weight ``lambda / max(sigma^2, sigma_min^2)``:
+
+    C_i += w L^T L,   eta_i += w L^T mu.
+
+``a`` < 1/2 keeps a share of every pixel for misclassification (the step never reaches 0 or 1), so one odd pixel
+cannot veto an offset.  The pixels further than one from ``d`` lie on the step's flat parts; their terms are the
+same for every ``d`` on their side and are summed once per line (prefix sums), so a line of ``m`` pixels costs
+``4 m`` logarithms.
+
+A line whose outside is another part (an arm across the trunk, perhaps in the same shirt) is left out: the colours
+there do not tell the part from the background.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+BINS = 16  # per colour channel
+COLOURS = BINS**3
+FACTOR = 2  # the colour image is half the full size (4:2:0 chroma)
+MAX_LINE = 64  # half-size pixels a line may reach either side, at most
+
+
+@dataclass
+class Histograms:
+    """Colour frequencies: ``foreground`` (C, N, COLOURS) per camera and component, ``background`` (C, COLOURS)
+    per camera, each summing to 1 where ``seen`` (C, N) / ``seen_background`` (C,) say it was learnt."""
+
+    foreground: np.ndarray
+    background: np.ndarray
+    seen: np.ndarray
+    seen_background: np.ndarray
+
+    @classmethod
+    def empty(cls, cameras: int, components: int) -> Histograms:
+        return cls(
+            np.zeros((cameras, components, COLOURS), np.float32),
+            np.zeros((cameras, COLOURS), np.float32),
+            np.zeros((cameras, components), np.bool_),
+            np.zeros(cameras, np.bool_),
+        )
+
+    @property
+    def ready(self) -> bool:
+        """Whether any camera has both a background and a part learnt."""
+        return bool((self.seen & self.seen_background[:, None]).any())
+
+
+@njit(cache=True, inline="always")
+def _colour(chroma, width, height, x, y):
+    """The colour bin of the half-size pixel nearest to (x, y) (half-size coordinates); -1 outside the image."""
+    u = int(math.floor(x + 0.5))
+    v = int(math.floor(y + 0.5))
+    if u < 0 or v < 0 or u >= width or v >= height:
+        return -1
+    return (
+        (np.int64(chroma[v, u, 0]) // (256 // BINS)) * (BINS * BINS)
+        + (np.int64(chroma[v, u, 1]) // (256 // BINS)) * BINS
+        + np.int64(chroma[v, u, 2]) // (256 // BINS)
+    )
+
+
+@njit(cache=True, inline="always")
+def _half(px, py, nx, ny, moved):
+    """A full-size sample moved by ``moved`` pixels along its normal, in half-size coordinates."""
+    return ((px + moved * nx) + 0.5) / FACTOR - 0.5, ((py + moved * ny) + 0.5) / FACTOR - 0.5
+
+
+@njit(cache=True, nogil=True)
+def region_kernel(
+    chroma,
+    chroma_size,
+    count,
+    s_cam,
+    s_comp,
+    s_pixel,
+    s_normal,
+    s_jac,
+    s_outside,
+    s_depth,
+    twist,
+    s_lo,
+    s_hi,
+    every,
+    foreground,
+    background,
+    seen,
+    seen_background,
+    amplitude,
+    slope,
+    weight,
+    min_variance,
+    o_mean,
+    o_variance,
+    o_inside,
+    information,
+    eta,
+):
+    """The outline's offset posterior along the lines of every ``every``-th sample, added to C_i and eta_i (module
+    docstring); returns the number of lines used.
+
+    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one half-size
+    pixel from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the
+    line, ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the
+    part's far side.  Writes each sample's posterior mean and
+    variance (full-size pixels; NaN for a line not used) and ``o_inside``, the mean ``p_f`` of the two half-size
+    pixels just inside the predicted outline (NaN where not read).  ``min_variance`` floors the variance in the
+    weight, ``weight`` is lambda."""
+    used = 0
+    h_in = 0.5 + amplitude  # H far inside
+    h_out = 0.5 - amplitude
+    step = amplitude * math.tanh(1.0 / (2.0 * slope))
+    h_m1 = 0.5 + step  # H(-1): one pixel inside d
+    h_p1 = 0.5 - step
+    log_half = math.log(0.5)
+    n_max = 2 * MAX_LINE + 3
+    pf = np.empty(n_max)
+    l_in = np.empty(n_max)
+    l_out = np.empty(n_max)
+    l_m1 = np.empty(n_max)
+    l_p1 = np.empty(n_max)
+    prefix_in = np.empty(n_max + 1)
+    suffix_out = np.empty(n_max + 1)
+    score = np.empty(n_max)
+    for s in range(count):
+        o_mean[s] = np.nan
+        o_variance[s] = np.nan
+        o_inside[s] = np.nan
+        k = s_cam[s]
+        i = s_comp[s]
+        if s % every != 0 or not (seen[k, i] and seen_background[k]):
+            continue
+        moved = 0.0
+        for a in range(6):
+            moved += s_jac[s, a] * twist[i, a]
+        nx = s_normal[s, 0]
+        ny = s_normal[s, 1]
+        x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved)
+        width = chroma_size[k, 0]
+        height = chroma_size[k, 1]
+        d_lo = -min(-s_lo[s] // FACTOR, s_depth[s] // (2 * FACTOR), MAX_LINE)
+        d_hi = min(s_hi[s] // FACTOR, MAX_LINE)
+        # pixels t in [d_lo - 1, d_hi + 1]; index j = t - d_lo + 1
+        n_pix = d_hi - d_lo + 3
+        inside_sum = 0.0
+        inside_n = 0
+        ok = True
+        for j in range(n_pix):
+            t = d_lo - 1 + j
+            b = _colour(chroma[k], width, height, x0 + t * nx, y0 + t * ny)
+            if b < 0:
+                ok = False
+                break
+            hf = foreground[k, i, b]
+            hb = background[k, b]
+            p = 0.5 if hf + hb <= 0.0 else hf / (hf + hb)
+            pf[j] = p
+            if t == -1 or t == -2 or (t == 0 and d_lo > -2):
+                inside_sum += p
+                inside_n += 1
+        if inside_n > 0:
+            o_inside[s] = inside_sum / inside_n
+        if not ok or s_outside[s] != -1 or d_hi - d_lo < 2:
+            continue
+        for j in range(n_pix):
+            p = pf[j]
+            q = 1.0 - p
+            l_in[j] = math.log(h_in * p + h_out * q)
+            l_out[j] = math.log(h_out * p + h_in * q)
+            l_m1[j] = math.log(h_m1 * p + h_p1 * q)
+            l_p1[j] = math.log(h_p1 * p + h_m1 * q)
+        prefix_in[0] = 0.0
+        for j in range(n_pix):
+            prefix_in[j + 1] = prefix_in[j] + l_in[j]
+        suffix_out[n_pix] = 0.0
+        for j in range(n_pix - 1, -1, -1):
+            suffix_out[j] = suffix_out[j + 1] + l_out[j]
+        best = -np.inf
+        n_d = d_hi - d_lo + 1
+        for c in range(n_d):
+            j = c + 1  # the pixel at t = d
+            v = prefix_in[j - 1] + l_m1[j - 1] + log_half + l_p1[j + 1] + suffix_out[j + 2]
+            score[c] = v
+            best = max(best, v)
+        total = 0.0
+        mean = 0.0
+        for c in range(n_d):
+            e = math.exp(score[c] - best)
+            score[c] = e
+            total += e
+            mean += e * (d_lo + c)
+        mean /= total
+        variance = 0.0
+        for c in range(n_d):
+            variance += score[c] * (d_lo + c - mean) ** 2
+        variance /= total
+        mean *= FACTOR
+        variance *= FACTOR * FACTOR
+        o_mean[s] = mean
+        o_variance[s] = variance
+        w = weight / max(variance, min_variance)
+        used += 1
+        for a in range(6):
+            la = w * s_jac[s, a]
+            eta[i, a] += la * mean
+            for b in range(6):
+                information[i, a, b] += la * s_jac[s, b]
+    return used
+
+
+@njit(cache=True, nogil=True)
+def learn_kernel(
+    chroma,
+    chroma_size,
+    count,
+    s_cam,
+    s_comp,
+    s_pixel,
+    s_normal,
+    s_jac,
+    s_outside,
+    s_depth,
+    twist,
+    s_lo,
+    s_hi,
+    learn,
+    inside,
+    outside,
+    o_foreground,
+    o_background,
+):
+    """Count the colours along every sample's line at the poses ``twist`` moved them to: the half-size pixels
+    ``1..inside`` in from the outline are its component's (in ``o_foreground`` (C, N, COLOURS)), those
+    ``2..outside`` out are the background's (``o_background`` (C, COLOURS)) where the line's outside is the
+    background and within the search interval (and inside, short of the part's far side, ``s_depth``).  Only the
+    components with ``learn[k, i]`` count."""
+    for s in range(count):
+        k = s_cam[s]
+        i = s_comp[s]
+        if not learn[k, i]:
+            continue
+        moved = 0.0
+        for a in range(6):
+            moved += s_jac[s, a] * twist[i, a]
+        nx = s_normal[s, 0]
+        ny = s_normal[s, 1]
+        x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved)
+        width = chroma_size[k, 0]
+        height = chroma_size[k, 1]
+        deepest = min(inside, -s_lo[s] // FACTOR, (s_depth[s] - 1) // FACTOR)
+        for t in range(1, deepest + 1):
+            b = _colour(chroma[k], width, height, x0 - t * nx, y0 - t * ny)
+            if b >= 0:
+                o_foreground[k, i, b] += 1.0
+        if s_outside[s] != -1:
+            continue
+        farthest = min(outside, s_hi[s] // FACTOR)
+        for t in range(2, farthest + 1):
+            b = _colour(chroma[k], width, height, x0 + t * nx, y0 + t * ny)
+            if b >= 0:
+                o_background[k, b] += 1.0
+
+
+def blend(histograms: Histograms, foreground: np.ndarray, background: np.ndarray, *, rate: float) -> Histograms:
+    """The histograms after a frame's counts (:func:`learn_kernel`): each one with counts normalised and mixed in,
+    ``h <- (1 - rate) h + rate h_new``, or taken whole where it was never learnt."""
+    fg, bg = histograms.foreground.copy(), histograms.background.copy()
+    seen, seen_bg = histograms.seen.copy(), histograms.seen_background.copy()
+    totals = foreground.sum(axis=2)
+    for k, i in zip(*np.nonzero(totals > 0)):
+        new = foreground[k, i] / totals[k, i]
+        fg[k, i] = (1.0 - rate) * fg[k, i] + rate * new if seen[k, i] else new
+        seen[k, i] = True
+    totals_bg = background.sum(axis=1)
+    for k in np.nonzero(totals_bg > 0)[0]:
+        new = background[k] / totals_bg[k]
+        bg[k] = (1.0 - rate) * bg[k] + rate * new if seen_bg[k] else new
+        seen_bg[k] = True
+    return Histograms(fg, bg, seen, seen_bg)
