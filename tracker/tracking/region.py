@@ -9,10 +9,11 @@ outline along the line best splits it into the part's colours inside and the bac
 Colour statistics: each colour (16 bins per channel, 4096 bins) has a frequency ``h_f`` among the pixels of
 component ``i`` in camera ``k`` and ``h_b`` among the background pixels near the body in camera ``k``, learnt
 online from the tracked poses (:func:`learn_kernel`, ``h <- (1 - a) h + a h_new``).  A pixel of colour ``y``
-is the part's with probability ``p_f = h_f / (h_f + h_b)`` (0.5 for a colour seen in neither).
+is the part's with probability ``p_f = h_f / (h_f + h_b)`` (0.5 for a colour seen in neither); between pixel
+centres, ``p_f`` is interpolated bilinearly, so that the line's points lie where the line is.
 
 Along the line ``x_t = p + t n`` (``t`` in half-size pixels, ``n`` the outward normal), with a smoothed step
-``H(x) = 1/2 - a tanh(x / (2 s))`` for the chance that a pixel ``x`` inside the outline is the part's, the
+``H(x) = 1/2 - a tanh(x / (2 s))`` (taken flat, ``1/2 -+ a``, beyond one pixel) for the chance that a pixel ``x`` inside the outline is the part's, the
 likelihood of the outline at ``d`` is
 
     L(d) = prod_t [ H(t - d) p_f(x_t) + (1 - H(t - d)) (1 - p_f(x_t)) ],
@@ -59,8 +60,8 @@ class Histograms:
     @classmethod
     def empty(cls, cameras: int, components: int) -> Histograms:
         return cls(
-            np.zeros((cameras, components, COLOURS), np.float32),
-            np.zeros((cameras, COLOURS), np.float32),
+            np.zeros((cameras, components, COLOURS)),
+            np.zeros((cameras, COLOURS)),
             np.zeros((cameras, components), np.bool_),
             np.zeros(cameras, np.bool_),
         )
@@ -72,17 +73,50 @@ class Histograms:
 
 
 @njit(cache=True, inline="always")
+def _bin(pixel):
+    """The colour bin of one pixel (3 channels)."""
+    return (
+        (np.int64(pixel[0]) // (256 // BINS)) * (BINS * BINS)
+        + (np.int64(pixel[1]) // (256 // BINS)) * BINS
+        + np.int64(pixel[2]) // (256 // BINS)
+    )
+
+
+@njit(cache=True, inline="always")
+def _part(foreground, background, b):
+    """p_f of colour bin ``b``: the share of its frequency among the part's (0.5 for a colour seen in neither)."""
+    f = foreground[b]
+    g = background[b]
+    return 0.5 if f + g <= 0.0 else f / (f + g)
+
+
+@njit(cache=True)
+def part_probability(chroma, foreground, background, width, height, x, y):
+    """p_f at (x, y) in a half-size colour image, bilinear between the four pixels around it (pixel centres at
+    integers); -1 where one of them is outside the image."""
+    if x < 0.0 or y < 0.0 or x > width - 1.0 or y > height - 1.0:
+        return -1.0
+    u = min(int(x), width - 2)
+    v = min(int(y), height - 2)
+    fx = x - u
+    fy = y - v
+    top = _part(foreground, background, _bin(chroma[v, u])) * (1.0 - fx) + _part(
+        foreground, background, _bin(chroma[v, u + 1])
+    ) * fx
+    bottom = _part(foreground, background, _bin(chroma[v + 1, u])) * (1.0 - fx) + _part(
+        foreground, background, _bin(chroma[v + 1, u + 1])
+    ) * fx
+    return top * (1.0 - fy) + bottom * fy
+
+
+@njit(cache=True, inline="always")
 def _colour(chroma, width, height, x, y):
     """The colour bin of the half-size pixel nearest to (x, y) (half-size coordinates); -1 outside the image."""
     u = int(math.floor(x + 0.5))
     v = int(math.floor(y + 0.5))
     if u < 0 or v < 0 or u >= width or v >= height:
         return -1
-    return (
-        (np.int64(chroma[v, u, 0]) // (256 // BINS)) * (BINS * BINS)
-        + (np.int64(chroma[v, u, 1]) // (256 // BINS)) * BINS
-        + np.int64(chroma[v, u, 2]) // (256 // BINS)
-    )
+    return _bin(chroma[v, u])
 
 
 @njit(cache=True, inline="always")
@@ -172,13 +206,10 @@ def region_kernel(
         ok = True
         for j in range(n_pix):
             t = d_lo - 1 + j
-            b = _colour(chroma[k], width, height, x0 + t * nx, y0 + t * ny)
-            if b < 0:
+            p = part_probability(chroma[k], foreground[k, i], background[k], width, height, x0 + t * nx, y0 + t * ny)
+            if p < 0.0:
                 ok = False
                 break
-            hf = foreground[k, i, b]
-            hb = background[k, b]
-            p = 0.5 if hf + hb <= 0.0 else hf / (hf + hb)
             pf[j] = p
             if t == -1 or t == -2 or (t == 0 and d_lo > -2):
                 inside_sum += p

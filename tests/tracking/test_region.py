@@ -1,0 +1,218 @@
+"""The region cue's kernels against a brute-force posterior, and its colour learning."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tracker.tracking.region import BINS, COLOURS, FACTOR, Histograms, blend, learn_kernel, region_kernel
+
+PART = (200, 40, 40)  # a colour of the part, as the chroma image holds it
+ROOM = (40, 200, 40)
+
+
+def bin_of(colour) -> int:
+    step = 256 // BINS
+    c = [int(value) for value in colour]
+    return (c[0] // step) * BINS * BINS + (c[1] // step) * BINS + c[2] // step
+
+
+def split_image(edge: float, width: int = 80, height: int = 40, noise: float = 0.0, seed: int = 0) -> np.ndarray:
+    """A half-size colour image: the part's colour left of column ``edge``, the room's right of it; with ``noise``,
+    that share of pixels swapped at random."""
+    chroma = np.empty((1, height, width, 3), np.uint8)
+    columns = np.arange(width)
+    part = columns < edge
+    rng = np.random.default_rng(seed)
+    for v in range(height):
+        swapped = part ^ (rng.random(width) < noise)
+        chroma[0, v] = np.where(swapped[:, None], PART, ROOM)
+    return chroma
+
+
+def histograms(components: int = 2) -> Histograms:
+    h = Histograms.empty(1, components)
+    h.foreground[0, :, bin_of(PART)] = 0.9
+    h.foreground[0, :, bin_of(ROOM)] = 0.1
+    h.background[0, bin_of(ROOM)] = 0.8
+    h.background[0, bin_of(PART)] = 0.2
+    h.seen[:] = True
+    h.seen_background[:] = True
+    return h
+
+
+def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, twist=None, h=None, **options):
+    """The kernel on one sample in camera 0 of component 0 with normal +x; returns (mean, variance, C, eta, used)."""
+    h = histograms() if h is None else h
+    jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
+    information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
+    mean, variance, inside = np.zeros(1), np.zeros(1), np.zeros(1)
+    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0) | options
+    used = region_kernel(
+        chroma,
+        np.array([[chroma.shape[2], chroma.shape[1]]]),
+        1,
+        np.zeros(1, np.int64),
+        np.zeros(1, np.int64),
+        np.array([pixel], float),
+        np.array([[1.0, 0.0]]),
+        jac,
+        np.array([outside]),
+        np.array([depth]),
+        np.zeros((2, 6)) if twist is None else twist,
+        np.array([lo]),
+        np.array([hi]),
+        1,
+        h.foreground,
+        h.background,
+        h.seen,
+        h.seen_background,
+        settings["amplitude"],
+        settings["slope"],
+        settings["weight"],
+        settings["min_variance"],
+        mean,
+        variance,
+        inside,
+        information,
+        eta,
+    )
+    return mean[0], variance[0], information, eta, used
+
+
+def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
+    """The posterior's mean and variance (full-size pixels) by the product over every pixel of the line, the step
+    flat beyond one pixel as the kernel takes it."""
+    x0 = (pixel[0] + 0.5) / FACTOR - 0.5
+    y0 = round((pixel[1] + 0.5) / FACTOR - 0.5)  # the tests' rows lie on pixel centres
+    candidates = np.arange(-(-lo // FACTOR), hi // FACTOR + 1)
+    pixels = np.arange(candidates[0] - 1, candidates[-1] + 2)
+
+    def step(x):
+        if x <= -2:
+            return 0.5 + amplitude
+        if x >= 2:
+            return 0.5 - amplitude
+        return 0.5 - amplitude * np.tanh(x / (2 * slope))
+
+    log_likelihood = []
+    for d in candidates:
+        total = 0.0
+        for t in pixels:
+            x = x0 + t
+            u = int(np.floor(x))
+            p = sum(
+                weight * (lambda b: h.foreground[0, 0, b] / (h.foreground[0, 0, b] + h.background[0, b]))(
+                    bin_of(chroma[0, y0, column])
+                )
+                for column, weight in ((u, 1 - (x - u)), (u + 1, x - u))
+            )
+            total += np.log(step(t - d) * p + (1 - step(t - d)) * (1 - p))
+        log_likelihood.append(total)
+    posterior = np.exp(np.array(log_likelihood) - max(log_likelihood))
+    posterior /= posterior.sum()
+    mean = (posterior * candidates).sum()
+    return FACTOR * mean, FACTOR**2 * (posterior * (candidates - mean) ** 2).sum()
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.2])
+@pytest.mark.parametrize("edge", [30.0, 33.0, 36.0, 40.0])
+def test_the_posterior_equals_the_brute_force_product(edge, noise):
+    chroma = split_image(edge, noise=noise, seed=int(edge))
+    pixel = (65.3, 40.5)  # half-size (32.4, 20.0)
+    mean, variance, *_ = run(chroma, pixel, lo=-14, hi=17)
+    expected_mean, expected_variance = brute_force(chroma, pixel, -14, 17, histograms())
+    assert mean == pytest.approx(expected_mean, abs=1e-9)
+    assert variance == pytest.approx(expected_variance, abs=1e-9)
+
+
+@pytest.mark.parametrize("shift", [-6, -2, 0, 4, 8])
+def test_the_mean_finds_the_boundary_along_the_outward_normal(shift):
+    """The part lies at x < edge: a sample at the boundary's full-size place gives an offset near 0; moved by
+    ``shift`` pixels along its normal (+x), the offset brings it back, to within the half-size pixel."""
+    edge = 32.0  # half-size column where the room begins: the boundary at half-size x 31.5, full-size x 63.5
+    chroma = split_image(edge, noise=0.05)
+    mean, variance, *_ = run(chroma, (63.5 + shift, 40.5))
+    assert mean == pytest.approx(-shift, abs=0.5)
+    assert variance < 9.0  # a standard deviation under 3 pixels, with these histograms' weak contrast
+
+
+def test_a_line_adds_its_weighted_row_to_the_information():
+    chroma = split_image(32.0, noise=0.1, seed=3)
+    jacobian = np.array([1.0, 0.2, 0.0, 0.0, 0.3, -0.1])
+    mean, variance, information, eta, used = run(chroma, (60.0, 40.5), jacobian=jacobian, weight=2.0, min_variance=0.5)
+    w = 2.0 / max(variance, 0.5)
+    assert used == 1
+    np.testing.assert_allclose(information[0], w * np.outer(jacobian, jacobian), rtol=1e-12)
+    np.testing.assert_allclose(eta[0], w * jacobian * mean, rtol=1e-12)
+    assert not information[1].any() and not eta[1].any()
+
+
+def test_the_predicted_motion_moves_the_line():
+    """With the component moved by a twist since sampling, the line starts at p + (L . twist) n."""
+    chroma = split_image(32.0)
+    jacobian = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    twist = np.zeros((2, 6))
+    twist[0, 0] = 4.0  # four pixels outwards
+    moved, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist)
+    direct, *_ = run(chroma, (64.0, 40.5), jacobian=jacobian)
+    assert moved == pytest.approx(direct, abs=1e-12)
+
+
+def test_lines_that_cannot_tell_are_left_out():
+    chroma = split_image(32.0)
+    assert np.isnan(run(chroma, (63.5, 40.5), outside=1)[0])  # another part outside: no background there
+    assert np.isnan(run(chroma, (63.5, 40.5), lo=-2, hi=1)[0])  # too short a line
+    assert np.isnan(run(chroma, (158.0, 40.5))[0])  # reaches beyond the image
+    unseen = histograms()
+    unseen.seen[0, 0] = False
+    assert np.isnan(run(chroma, (63.5, 40.5), h=unseen)[0])
+
+
+def test_a_thin_part_keeps_its_offsets_within_half_its_width():
+    """A part 6 half-size pixels wide between two stretches of room: the candidates stop half way across it, so
+    the room on its far side cannot pull the outline in."""
+    chroma = split_image(32.0)
+    chroma[0, :, :26] = ROOM
+    near, *_ = run(chroma, (63.5, 40.5), depth=12, lo=-20)
+    assert abs(near) <= 0.5
+    far, *_ = run(chroma, (63.5, 40.5), depth=41, lo=-20)
+    assert far < -5.0  # without the width, the far side pulls the outline in: the reason the width is there
+
+
+def test_learning_counts_inside_and_outside_then_blends():
+    chroma = split_image(32.0)
+    seen = Histograms.empty(1, 2)
+    counts = (np.zeros_like(seen.foreground), np.zeros_like(seen.background))
+    learn_kernel(
+        chroma,
+        np.array([[80, 40]]),
+        2,
+        np.zeros(2, np.int64),
+        np.array([0, 1]),
+        np.array([[63.5, 40.5], [63.5, 20.5]]),
+        np.array([[1.0, 0.0], [1.0, 0.0]]),
+        np.zeros((2, 6)),
+        np.array([-1, 0]),
+        np.array([41, 41]),
+        np.zeros((2, 6)),
+        np.array([-20, -20]),
+        np.array([20, 20]),
+        np.array([[True, True]]),
+        2,
+        5,
+        *counts,
+    )
+    fg, bg = counts
+    assert fg[0, 0, bin_of(PART)] == 2 and fg[0, 1, bin_of(PART)] == 2 and fg.sum() == 4
+    assert bg[0, bin_of(ROOM)] == 4 and bg.sum() == 4  # 2..5 out, the first line's only: the second has a part outside
+    first = blend(seen, fg, bg, rate=0.2)
+    assert first.seen.all() and first.seen_background.all() and first.ready
+    assert first.foreground[0, 0].sum() == pytest.approx(1.0) and first.background[0].sum() == pytest.approx(1.0)
+    again = np.zeros_like(fg)
+    again[0, 0, 0] = 1.0
+    second = blend(first, again, np.zeros_like(bg), rate=0.2)
+    assert second.foreground[0, 0, 0] == pytest.approx(0.2)
+    assert second.foreground[0, 0, bin_of(PART)] == pytest.approx(0.8)
+    np.testing.assert_array_equal(second.background, first.background)
+    assert COLOURS == BINS**3
