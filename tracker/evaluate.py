@@ -35,6 +35,11 @@ class Report:
     lost_frames: int
     frames: int
     per_joint: dict[str, tuple[float, float]]  # joint name -> (MPJPE mm, PCK)
+    far_share: float = float("nan")  # share of the frames scored with a joint further than FAR from its truth
+
+
+FAR = 0.15
+"""Metres: a frame with a joint further than this from its truth counts in :attr:`Report.far_share`."""
 
 
 def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_threshold: float = 0.05) -> Report:
@@ -67,6 +72,7 @@ def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_thr
     aligned_error = np.where(scored, np.linalg.norm(_umeyama_align(tracked, true, scored) - true, axis=2), np.nan)
 
     per_joint = {name: (1000.0 * _mean(error[:, j]), _share(hit[:, j], known[:, j])) for j, name in enumerate(names)}
+    far = (np.nan_to_num(error, nan=0.0) > FAR).any(axis=1)
     return Report(
         mpjpe_mm=1000.0 * _mean(error),
         pa_mpjpe_mm=1000.0 * _mean(aligned_error),
@@ -75,6 +81,7 @@ def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_thr
         lost_frames=int(lost.sum()),
         frames=frame_count,
         per_joint=per_joint,
+        far_share=_share(far, scored.any(axis=1)),
     )
 
 
@@ -130,7 +137,8 @@ def format_report(report: Report) -> str:
     lost_share = report.lost_frames / report.frames if report.frames else 0.0
     width = max([len("joint"), *map(len, report.per_joint)])
     lines = [
-        f"frames {report.frames}, lost {report.lost_frames} ({100 * lost_share:.1f}%)",
+        f"frames {report.frames}, lost {report.lost_frames} ({100 * lost_share:.1f}%), "
+        f"{100 * report.far_share:.1f}% of those scored with a joint beyond {1000 * FAR:g} mm",
         f"MPJPE {report.mpjpe_mm:.1f} mm   PA-MPJPE {report.pa_mpjpe_mm:.1f} mm   {threshold} {100 * report.pck:.1f}%",
         "",
         f"{'joint':<{width}}  {'MPJPE mm':>9}  {threshold:>11}",

@@ -102,7 +102,8 @@ def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
             x = x0 + t
             u = int(np.floor(x))
             p = sum(
-                weight * (lambda b: h.foreground[0, 0, b] / (h.foreground[0, 0, b] + h.background[0, b]))(
+                weight
+                * (lambda b: h.foreground[0, 0, b] / (h.foreground[0, 0, b] + h.background[0, b]))(
                     bin_of(chroma[0, y0, column])
                 )
                 for column, weight in ((u, 1 - (x - u)), (u + 1, x - u))

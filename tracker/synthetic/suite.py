@@ -17,9 +17,13 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from tracker.camera import load_calibration
 from tracker.errors import TrackerInputError
 from tracker.evaluate import Report, evaluate
 from tracker.io.poses import load_poses
+from tracker.keypoints.store import load_keypoints
+from tracker.model import load_model
+from tracker.synthetic.detector_baseline import Baseline, baseline
 from tracker.synthetic.synth import Staging, synthesize
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -238,8 +242,13 @@ def made(out: str | os.PathLike, names: list[str] | None) -> list[Render]:
     return there
 
 
-def score(out: str | os.PathLike, results: str | os.PathLike, renders: list[Render]) -> list[tuple[Render, Report]]:
-    """Each render's report: ``results``/<name>/poses.npz against ``out``/<name>/truth.npz."""
+Scored = tuple[Render, Report, Baseline | None]
+"""A render's report, and the detector's baseline where its results hold the landmarks (keypoints.npz)."""
+
+
+def score(out: str | os.PathLike, results: str | os.PathLike, renders: list[Render]) -> list[Scored]:
+    """Each render's report: ``results``/<name>/poses.npz against ``out``/<name>/truth.npz, and the detector's
+    baseline (:mod:`tracker.synthetic.detector_baseline`) from ``results``/<name>/keypoints.npz if there is one."""
     results = Path(results)
     if not results.is_dir():
         raise TrackerInputError(f"{results}: results folder not found; track the suite with tracker suite run")
@@ -250,12 +259,20 @@ def score(out: str | os.PathLike, results: str | os.PathLike, renders: list[Rend
             raise TrackerInputError(
                 f"{poses}: not found; track it with tracker track {Path(out) / render.name} --out {poses.parent}"
             )
-        scores.append((render, evaluate(load_poses(poses), load_poses(Path(out) / render.name / "truth.npz"))))
+        recording = Path(out) / render.name
+        tracked, truth = load_poses(poses), load_poses(recording / "truth.npz")
+        landmarks = results / render.name / "keypoints.npz"
+        alone = None
+        if landmarks.is_file():
+            cameras = load_calibration(recording / "calibration.toml")
+            alone = baseline(load_keypoints(landmarks), cameras, load_model(recording / "model.toml"), truth, tracked)
+        scores.append((render, evaluate(tracked, truth), alone))
     return scores
 
 
-def summary(scores: list[tuple[Render, Report]]) -> dict:
-    """The scores as plain data: one row per render, the mean MPJPE over renders (mm, renders with a number)
+def summary(scores: list[Scored]) -> dict:
+    """The scores as plain data: one row per render (with the detector's baseline, the landmarks' and the
+    tracker's error over the same joints and frames), the mean MPJPE over renders (mm, renders with a number)
     and the worst PCK@50mm with its render; NaN becomes None."""
 
     def plain(value: float) -> float | None:
@@ -271,10 +288,13 @@ def summary(scores: list[tuple[Render, Report]]) -> dict:
             "pa_mpjpe_mm": plain(report.pa_mpjpe_mm),
             "pck": plain(report.pck),
             "lost_frames": report.lost_frames,
+            "far_share": plain(report.far_share),
+            "landmarks_mm": None if alone is None else plain(alone.landmarks_mm),
+            "tracker_same_mm": None if alone is None else plain(alone.tracker_mm),
         }
-        for render, report in scores
+        for render, report, alone in scores
     ]
-    numbers = [report.mpjpe_mm for _, report in scores if not math.isnan(report.mpjpe_mm)]
+    numbers = [report.mpjpe_mm for _, report, _ in scores if not math.isnan(report.mpjpe_mm)]
     worst = min(scores, key=lambda item: -1.0 if math.isnan(item[1].pck) else item[1].pck)
     return {
         "renders": rows,
@@ -292,16 +312,21 @@ def format_summary(data: dict) -> str:
 
     width = max(len("render"), *(len(row["name"]) for row in data["renders"]))
     lines = [
-        f"{'render':<{width}}  {'rig':<7}  {'fps':>4}  {'MPJPE mm':>8}  {'PA-MPJPE':>8}  {'PCK@50mm':>8}  lost/frames"
+        f"{'render':<{width}}  {'rig':<7}  {'fps':>4}  {'MPJPE mm':>8}  {'PA-MPJPE':>8}  {'PCK@50mm':>8}  "
+        f"{'>150mm':>6}  {'lost/frames':>11}  {'landmarks':>9}  {'tracker':>7}"
     ]
     for row in data["renders"]:
         lines.append(
             f"{row['name']:<{width}}  {row['rig']:<7}  {row['fps']:>4g}  {number(row['mpjpe_mm']):>8}  "
-            f"{number(row['pa_mpjpe_mm']):>8}  {number(row['pck'], 100.0):>7}%  {row['lost_frames']}/{row['frames']}"
+            f"{number(row['pa_mpjpe_mm']):>8}  {number(row['pck'], 100.0):>7}%  {number(row['far_share'], 100.0):>5}%  "
+            f"{str(row['lost_frames']) + '/' + str(row['frames']):>11}  {number(row['landmarks_mm']):>9}  "
+            f"{number(row['tracker_same_mm']):>7}"
         )
     lines += [
         "",
         f"mean MPJPE {number(data['mean_mpjpe_mm'])} mm over the renders scored; "
         f"worst PCK@50mm {number(data['worst_pck'], 100.0)} % ({data['worst_pck_render']})",
+        ">150mm: the share of frames with a joint further from its truth; landmarks: the detector's landmarks "
+        "triangulated frame by frame, mean error (mm) over the joints they give; tracker: the tracker's over the same",
     ]
     return "\n".join(lines)

@@ -100,12 +100,14 @@ def part_probability(chroma, foreground, background, width, height, x, y):
     v = min(int(y), height - 2)
     fx = x - u
     fy = y - v
-    top = _part(foreground, background, _bin(chroma[v, u])) * (1.0 - fx) + _part(
-        foreground, background, _bin(chroma[v, u + 1])
-    ) * fx
-    bottom = _part(foreground, background, _bin(chroma[v + 1, u])) * (1.0 - fx) + _part(
-        foreground, background, _bin(chroma[v + 1, u + 1])
-    ) * fx
+    top = (
+        _part(foreground, background, _bin(chroma[v, u])) * (1.0 - fx)
+        + _part(foreground, background, _bin(chroma[v, u + 1])) * fx
+    )
+    bottom = (
+        _part(foreground, background, _bin(chroma[v + 1, u])) * (1.0 - fx)
+        + _part(foreground, background, _bin(chroma[v + 1, u + 1])) * fx
+    )
     return top * (1.0 - fy) + bottom * fy
 
 
