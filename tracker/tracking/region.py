@@ -13,8 +13,8 @@ is the part's with probability ``p_f = h_f / (h_f + h_b)`` (0.5 for a colour see
 centres, ``p_f`` is interpolated bilinearly, so that the line's points lie where the line is.
 
 Along the line ``x_t = p + t n`` (``t`` in half-size pixels, ``n`` the outward normal), with a smoothed step
-``H(x) = 1/2 - a tanh(x / (2 s))`` (taken flat, ``1/2 -+ a``, beyond one pixel) for the chance that a pixel ``x`` inside the outline is the part's, the
-likelihood of the outline at ``d`` is
+``H(x) = 1/2 - a tanh(x / (2 s))`` (taken flat, ``1/2 -+ a``, beyond one pixel) for the chance that a pixel
+``x`` from the outline is the part's, the likelihood of the outline at ``d`` is
 
     L(d) = prod_t [ H(t - d) p_f(x_t) + (1 - H(t - d)) (1 - p_f(x_t)) ],
 
