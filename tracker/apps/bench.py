@@ -121,7 +121,14 @@ def track_run(
     try:
         run = track_frames(
             tracker,
-            tracked_frames(stream, recording, start=0, stop=recording.frame_count, prepare=tracker.smooth),
+            tracked_frames(
+                stream,
+                recording,
+                start=0,
+                stop=recording.frame_count,
+                prepare=tracker.smooth,
+                chroma=settings.region,
+            ),
             out / "poses.npz",
             fps=recording.fps,
             keypoints=None if stream is None else stream.get,
@@ -294,7 +301,9 @@ class _Passes:
             stop = min(self.recording.frame_count, self.total - done)
             self.stream, self.first = _stream(self.recording, stop, self.keypoint_step, self.settings), done
             try:
-                for _, images in tracked_frames(self.stream, self.recording, start=0, stop=stop, prepare=self.prepare):
+                for _, images in tracked_frames(
+                    self.stream, self.recording, start=0, stop=stop, prepare=self.prepare, chroma=self.settings.region
+                ):
                     yield done, images
                     done += 1
             finally:
@@ -333,6 +342,7 @@ def format_table(result: dict) -> str:
         "outline": "outline sampling and visibility",
         "ownership": "search limits (edge ownership)",
         "measure": "edge search and Jacobians",
+        "region": "region cue (colour along the lines, colours learnt)",
         "solve": "chain solve and coercion",
         "output": "output (joints, poses.npz)",
     }

@@ -197,7 +197,7 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 type=on_off,
                 metavar="on|off",
                 help="read the colours along the outline too, learnt as the run goes, to tell the body from the room "
-                "(default on; docs/method-tracking.md, section 7)",
+                "(default on; docs/region.md)",
             ),
         ),
         "region_weight": (

@@ -1,5 +1,5 @@
 """The region cue: where along each sample's line the colours change from the part's own to the room's
-(docs/method-tracking.md, section 7).
+(docs/region.md).
 
 The edge search takes the nearest grey-level edge, which in a furnished room or on patterned clothes is often
 not the body's outline.  The region cue reads the same lines in colour instead, in the half-size colour image the
