@@ -294,3 +294,52 @@ def test_ten_bit_video_gives_its_grey_levels(tmp_path: Path) -> None:
     levels = [float(image.mean()) for image in itertools.islice(grey_frames(video), 3)]
     assert all(image_shape == (64, 96) for image_shape in [next(grey_frames(video)).shape])
     np.testing.assert_allclose(levels, [20, 100, 180], atol=2.0)
+
+
+def coloured(index: int, size: tuple[int, int]) -> np.ndarray:
+    """A BGR test image: a red left half and a blue right half (the boundary moving with ``index``)."""
+    image = np.zeros((size[1], size[0], 3), np.uint8)
+    edge = 20 + 2 * index
+    image[:, :edge] = (40, 40, 220)
+    image[:, edge:] = (220, 60, 40)
+    return image
+
+
+def test_readers_give_every_frame_with_its_half_size_colour(tmp_path: Path) -> None:
+    """WithChroma: from MJPG (libjpeg at half scale), 4:2:0 video (PyAV's planes) and image folders alike, each frame
+    comes with its colour at half size, (H // 2, W // 2, 3), the grey frame unchanged and ``prepare`` applied to it;
+    each source's colours tell its two halves apart, at their places; with ColourCopies too the named frames also
+    bring their reduced BGR."""
+    import av
+
+    from tracker.io.readers import ColourCopies, WithChroma, WithColour, grey_frames, read_frames
+
+    size = (96, 64)
+    mjpg, mp4, folder = tmp_path / "cam0.avi", tmp_path / "cam1.mp4", tmp_path / "cam2"
+    writer = cv2.VideoWriter(str(mjpg), cv2.VideoWriter_fourcc(*"MJPG"), FPS, size)
+    folder.mkdir()
+    with av.open(str(mp4), "w") as container:
+        stream = container.add_stream("mpeg4", rate=int(FPS))
+        stream.width, stream.height, stream.pix_fmt, stream.bit_rate = *size, "yuv420p", 4_000_000
+        for index in range(4):
+            writer.write(coloured(index, size))
+            cv2.imwrite(str(folder / f"{index:06d}.png"), coloured(index, size))
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(coloured(index, size), format="bgr24")))
+        container.mux(stream.encode())
+    writer.release()
+    sources = [mjpg, mp4, folder]
+    plain = [list(itertools.islice(grey_frames(source), 4)) for source in sources]
+    copies = [ColourCopies(frozenset({2}), 2)] * 3
+    for index, frame in read_frames(sources, 0, 4, prepare=lambda image: image // 2, chroma=True, copies=copies):
+        for camera, item in enumerate(frame):
+            if index == 2:
+                assert isinstance(item, WithColour) and item.colour.shape == (32, 48, 3)
+                item = item.image
+            assert isinstance(item, WithChroma)
+            np.testing.assert_array_equal(item.image, plain[camera][index] // 2)
+            half = item.chroma.astype(float)
+            assert half.shape == (32, 48, 3) and item.chroma.dtype == np.uint8
+            edge = (20 + 2 * index) // 2
+            left, right = half[:, : edge - 2].mean(axis=(0, 1)), half[:, edge + 2 :].mean(axis=(0, 1))
+            assert np.abs(left - right).max() > 60  # the two colours are told apart
+            assert np.abs(half[:, : edge - 2] - left).mean() < 8 and np.abs(half[:, edge + 2 :] - right).mean() < 8
