@@ -205,7 +205,7 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
             dict(
                 type=positive_float,
                 metavar="W",
-                help="the colour cue's weight beside the edges' (default 1)",
+                help="the colour cue's weight beside the edges' (default 0.3)",
             ),
         ),
         "damping": (
