@@ -12,4 +12,5 @@ actor.py              rendered bodies unlike the model (capsules, or the model's
 synth.py              rendered recordings with ground truth (``tracker synth``) and the rigs of ``calib/``
 suite.py              the hard suite of renders and its scores (``tracker suite``)
 keypoint_accuracy.py  the keypoint detector scored against a render's truth
+detector_baseline.py  the detector's landmarks triangulated frame by frame: the baseline the tracker must beat
 """
