@@ -100,6 +100,15 @@ def test_make_then_score_known_errors(tmp_path, capsys):
     row = json.loads(capsys.readouterr().out)[0]
     assert row["name"] == SMALL and row["median"] == 0.0 and row["wrong"] == 0.0 and row["swapped"] == 0.0
     assert row["views"] == row["found"] == row["on_body"] == 12 and 12 * 9 <= row["scored"] < 12 * 12  # cam0's table
+    # the same landmarks beside the results: triangulated frame by frame they are the true joints, so the
+    # baseline is 0 mm while the tracker, 70 mm off (then 200 mm: every frame beyond 150 mm), keeps its number
+    save_keypoints(results / SMALL / "keypoints.npz", found)
+    for shift, far in ((0.07, 0.0), (0.2, 1.0)):
+        _write_poses(results / SMALL / "poses.npz", truth, shift)
+        assert main(["suite", "score", str(out), str(results), "--json"]) == 0
+        row = json.loads(capsys.readouterr().out)["renders"][0]
+        assert row["landmarks_mm"] == pytest.approx(0.0, abs=1e-6)
+        assert row["tracker_same_mm"] == pytest.approx(1000 * shift, abs=1e-3) and row["far_share"] == far
 
 
 def test_run_tracks_with_the_options_given(tmp_path, capsys):
