@@ -26,8 +26,8 @@ measurement with offset ``mu`` and weight ``lambda / max(sigma^2, sigma_min^2)``
 
 ``a`` < 1/2 keeps a share of every pixel for misclassification (the step never reaches 0 or 1), so one odd pixel
 cannot veto an offset.  The pixels further than one from ``d`` lie on the step's flat parts; their terms are the
-same for every ``d`` on their side and are summed once per line (prefix sums), so a line of ``m`` pixels costs
-``4 m`` logarithms.
+same for every ``d`` on their side and are summed once per line (prefix sums), and the four terms a pixel can
+take are read from a table over ``p_f`` (:func:`log_table`), so a line costs a few table reads per pixel.
 
 A line whose outside is another part (an arm across the trunk, perhaps in the same shirt) is left out: the colours
 there do not tell the part from the background.
@@ -45,6 +45,7 @@ BINS = 16  # per colour channel
 COLOURS = BINS**3
 FACTOR = 2  # the colour image is half the full size (4:2:0 chroma)
 MAX_LINE = 64  # half-size pixels a line may reach either side, at most
+LOG_STEPS = 4096  # intervals of the likelihood terms' table over p_f in [0, 1] (log_table)
 
 
 @dataclass
@@ -71,54 +72,76 @@ class Histograms:
         """Whether any camera has both a background and a part learnt."""
         return bool((self.seen & self.seen_background[:, None]).any())
 
+    def learn(self, counts: np.ndarray, counts_background: np.ndarray, *, rate: float) -> None:
+        """Mix a frame's counts (C, N, COLOURS) and (C, COLOURS) in (:func:`blend_kernel`), which leaves them zero."""
+        blend_kernel(self.foreground, self.background, self.seen, self.seen_background, counts, counts_background, rate)
+
+
+@njit(cache=True, nogil=True)
+def colour_bins(chroma, out):
+    """Each pixel's colour bin (of 16 x 16 x 16) of a half-size colour image (H', W', 3) into ``out`` (H', W')."""
+    step = 256 // BINS
+    for v in range(chroma.shape[0]):
+        for u in range(chroma.shape[1]):
+            out[v, u] = (
+                (chroma[v, u, 0] // step) * (BINS * BINS) + (chroma[v, u, 1] // step) * BINS + chroma[v, u, 2] // step
+            )
+
+
+@njit(cache=True, nogil=True)
+def part_table(foreground, background, seen, seen_background, out):
+    """p_f = h_f / (h_f + h_b) of every colour bin for every camera and component (C, N, COLOURS) into ``out`` (0.5
+    for a colour seen in neither; NaN where the camera has not learnt both the part and its background)."""
+    for k in range(foreground.shape[0]):
+        for i in range(foreground.shape[1]):
+            if not (seen[k, i] and seen_background[k]):
+                out[k, i, :] = np.nan
+                continue
+            for b in range(foreground.shape[2]):
+                f = foreground[k, i, b]
+                g = background[k, b]
+                out[k, i, b] = 0.5 if f + g <= 0.0 else f / (f + g)
+
 
 @njit(cache=True, inline="always")
-def _bin(pixel):
-    """The colour bin of one pixel (3 channels)."""
-    return (
-        (np.int64(pixel[0]) // (256 // BINS)) * (BINS * BINS)
-        + (np.int64(pixel[1]) // (256 // BINS)) * BINS
-        + np.int64(pixel[2]) // (256 // BINS)
-    )
-
-
-@njit(cache=True, inline="always")
-def _part(foreground, background, b):
-    """p_f of colour bin ``b``: the share of its frequency among the part's (0.5 for a colour seen in neither)."""
-    f = foreground[b]
-    g = background[b]
-    return 0.5 if f + g <= 0.0 else f / (f + g)
-
-
-@njit(cache=True)
-def part_probability(chroma, foreground, background, width, height, x, y):
-    """p_f at (x, y) in a half-size colour image, bilinear between the four pixels around it (pixel centres at
-    integers); -1 where one of them is outside the image."""
+def part_probability(bins, table, width, height, x, y):
+    """p_f at (x, y) of one camera's bin image (half-size coordinates), from one part's ``table`` (COLOURS,),
+    bilinear between the four pixels around it (pixel centres at integers); -1 where one of them is outside."""
     if x < 0.0 or y < 0.0 or x > width - 1.0 or y > height - 1.0:
         return -1.0
     u = min(int(x), width - 2)
     v = min(int(y), height - 2)
     fx = x - u
     fy = y - v
-    top = (
-        _part(foreground, background, _bin(chroma[v, u])) * (1.0 - fx)
-        + _part(foreground, background, _bin(chroma[v, u + 1])) * fx
-    )
-    bottom = (
-        _part(foreground, background, _bin(chroma[v + 1, u])) * (1.0 - fx)
-        + _part(foreground, background, _bin(chroma[v + 1, u + 1])) * fx
-    )
+    top = table[bins[v, u]] * (1.0 - fx) + table[bins[v, u + 1]] * fx
+    bottom = table[bins[v + 1, u]] * (1.0 - fx) + table[bins[v + 1, u + 1]] * fx
     return top * (1.0 - fy) + bottom * fy
 
 
 @njit(cache=True, inline="always")
-def _colour(chroma, width, height, x, y):
+def _colour(bins, width, height, x, y):
     """The colour bin of the half-size pixel nearest to (x, y) (half-size coordinates); -1 outside the image."""
     u = int(math.floor(x + 0.5))
     v = int(math.floor(y + 0.5))
     if u < 0 or v < 0 or u >= width or v >= height:
         return -1
-    return _bin(chroma[v, u])
+    return bins[v, u]
+
+
+@njit(cache=True)
+def log_table(amplitude, slope):
+    """The four terms of a line's likelihood as functions of p_f, tabulated at p_f = 0, 1/LOG_STEPS, ..., 1 (linear
+    between: within 1e-6 of the logarithm): ``log(H p + (1 - H) (1 - p))`` for H far inside the outline, far
+    outside, one pixel inside and one pixel outside (module docstring)."""
+    step = amplitude * math.tanh(1.0 / (2.0 * slope))
+    steps = (0.5 + amplitude, 0.5 - amplitude, 0.5 + step, 0.5 - step)
+    out = np.empty((4, LOG_STEPS + 1))
+    for row in range(4):
+        h = steps[row]
+        for c in range(LOG_STEPS + 1):
+            p = c / LOG_STEPS
+            out[row, c] = math.log(h * p + (1.0 - h) * (1.0 - p))
+    return out
 
 
 @njit(cache=True, inline="always")
@@ -129,7 +152,7 @@ def _half(px, py, nx, ny, moved):
 
 @njit(cache=True, nogil=True)
 def region_kernel(
-    chroma,
+    bins,
     chroma_size,
     count,
     s_cam,
@@ -143,12 +166,8 @@ def region_kernel(
     s_lo,
     s_hi,
     every,
-    foreground,
-    background,
-    seen,
-    seen_background,
-    amplitude,
-    slope,
+    table,
+    logs,
     weight,
     min_variance,
     o_mean,
@@ -168,11 +187,6 @@ def region_kernel(
     pixels just inside the predicted outline (NaN where not read).  ``min_variance`` floors the variance in the
     weight, ``weight`` is lambda."""
     used = 0
-    h_in = 0.5 + amplitude  # H far inside
-    h_out = 0.5 - amplitude
-    step = amplitude * math.tanh(1.0 / (2.0 * slope))
-    h_m1 = 0.5 + step  # H(-1): one pixel inside d
-    h_p1 = 0.5 - step
     log_half = math.log(0.5)
     n_max = 2 * MAX_LINE + 3
     pf = np.empty(n_max)
@@ -189,7 +203,7 @@ def region_kernel(
         o_inside[s] = np.nan
         k = s_cam[s]
         i = s_comp[s]
-        if s % every != 0 or not (seen[k, i] and seen_background[k]):
+        if s % every != 0 or np.isnan(table[k, i, 0]):
             continue
         moved = 0.0
         for a in range(6):
@@ -208,7 +222,7 @@ def region_kernel(
         ok = True
         for j in range(n_pix):
             t = d_lo - 1 + j
-            p = part_probability(chroma[k], foreground[k, i], background[k], width, height, x0 + t * nx, y0 + t * ny)
+            p = part_probability(bins[k], table[k, i], width, height, x0 + t * nx, y0 + t * ny)
             if p < 0.0:
                 ok = False
                 break
@@ -221,12 +235,13 @@ def region_kernel(
         if not ok or s_outside[s] != -1 or d_hi - d_lo < 2:
             continue
         for j in range(n_pix):
-            p = pf[j]
-            q = 1.0 - p
-            l_in[j] = math.log(h_in * p + h_out * q)
-            l_out[j] = math.log(h_out * p + h_in * q)
-            l_m1[j] = math.log(h_m1 * p + h_p1 * q)
-            l_p1[j] = math.log(h_p1 * p + h_m1 * q)
+            x = pf[j] * LOG_STEPS
+            c = min(int(x), LOG_STEPS - 1)
+            f = x - c
+            l_in[j] = logs[0, c] + f * (logs[0, c + 1] - logs[0, c])
+            l_out[j] = logs[1, c] + f * (logs[1, c + 1] - logs[1, c])
+            l_m1[j] = logs[2, c] + f * (logs[2, c + 1] - logs[2, c])
+            l_p1[j] = logs[3, c] + f * (logs[3, c + 1] - logs[3, c])
         prefix_in[0] = 0.0
         for j in range(n_pix):
             prefix_in[j + 1] = prefix_in[j] + l_in[j]
@@ -268,7 +283,7 @@ def region_kernel(
 
 @njit(cache=True, nogil=True)
 def learn_kernel(
-    chroma,
+    bins,
     chroma_size,
     count,
     s_cam,
@@ -307,31 +322,38 @@ def learn_kernel(
         height = chroma_size[k, 1]
         deepest = min(inside, -s_lo[s] // FACTOR, (s_depth[s] - 1) // FACTOR)
         for t in range(1, deepest + 1):
-            b = _colour(chroma[k], width, height, x0 - t * nx, y0 - t * ny)
+            b = _colour(bins[k], width, height, x0 - t * nx, y0 - t * ny)
             if b >= 0:
                 o_foreground[k, i, b] += 1.0
         if s_outside[s] != -1:
             continue
         farthest = min(outside, s_hi[s] // FACTOR)
         for t in range(2, farthest + 1):
-            b = _colour(chroma[k], width, height, x0 + t * nx, y0 + t * ny)
+            b = _colour(bins[k], width, height, x0 + t * nx, y0 + t * ny)
             if b >= 0:
                 o_background[k, b] += 1.0
 
 
-def blend(histograms: Histograms, foreground: np.ndarray, background: np.ndarray, *, rate: float) -> Histograms:
-    """The histograms after a frame's counts (:func:`learn_kernel`): each one with counts normalised and mixed in,
-    ``h <- (1 - rate) h + rate h_new``, or taken whole where it was never learnt."""
-    fg, bg = histograms.foreground.copy(), histograms.background.copy()
-    seen, seen_bg = histograms.seen.copy(), histograms.seen_background.copy()
-    totals = foreground.sum(axis=2)
-    for k, i in zip(*np.nonzero(totals > 0)):
-        new = foreground[k, i] / totals[k, i]
-        fg[k, i] = (1.0 - rate) * fg[k, i] + rate * new if seen[k, i] else new
-        seen[k, i] = True
-    totals_bg = background.sum(axis=1)
-    for k in np.nonzero(totals_bg > 0)[0]:
-        new = background[k] / totals_bg[k]
-        bg[k] = (1.0 - rate) * bg[k] + rate * new if seen_bg[k] else new
-        seen_bg[k] = True
-    return Histograms(fg, bg, seen, seen_bg)
+@njit(cache=True, nogil=True)
+def blend_kernel(foreground, background, seen, seen_background, counts, counts_background, rate):
+    """Mix a frame's colour counts (:func:`learn_kernel`) into the histograms in place, each normalised,
+    ``h <- (1 - rate) h + rate h_new``, or taken whole where the histogram was never learnt; the counts are left
+    zero."""
+    for k in range(foreground.shape[0]):
+        for i in range(foreground.shape[1]):
+            total = counts[k, i].sum()
+            if total <= 0.0:
+                continue
+            keep = 1.0 - rate if seen[k, i] else 0.0
+            for b in range(foreground.shape[2]):
+                foreground[k, i, b] = keep * foreground[k, i, b] + (1.0 - keep) * counts[k, i, b] / total
+                counts[k, i, b] = 0.0
+            seen[k, i] = True
+        total = counts_background[k].sum()
+        if total <= 0.0:
+            continue
+        keep = 1.0 - rate if seen_background[k] else 0.0
+        for b in range(background.shape[1]):
+            background[k, b] = keep * background[k, b] + (1.0 - keep) * counts_background[k, b] / total
+            counts_background[k, b] = 0.0
+        seen_background[k] = True

@@ -41,7 +41,16 @@ from tracker.tracking.measure import Statistics, component_misfits, measure_kern
 from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
-from tracker.tracking.region import FACTOR, Histograms, blend, learn_kernel, region_kernel
+from tracker.tracking.region import (
+    COLOURS,
+    FACTOR,
+    Histograms,
+    colour_bins,
+    learn_kernel,
+    log_table,
+    part_table,
+    region_kernel,
+)
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
 
@@ -283,8 +292,8 @@ class Workspace:
     limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each
     sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
     them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); each camera's
-    half-size colour image ``chroma`` (C, H', W', 3) when the frame came with one (``coloured``), and the region
-    cue's mean, variance and inside colour per sample (:func:`tracker.tracking.region.region_kernel`).
+    half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one (``coloured``), and
+    the region cue's mean, variance and inside colour per sample (:func:`tracker.tracking.region.region_kernel`).
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
     (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
@@ -299,7 +308,7 @@ class Workspace:
     eta: np.ndarray
     misfit: np.ndarray
     times: StageTimes
-    chroma: np.ndarray
+    bins: np.ndarray
     region_mean: np.ndarray
     region_variance: np.ndarray
     region_inside: np.ndarray
@@ -326,7 +335,7 @@ class Workspace:
             np.zeros((n, 6)),
             np.full((len(ownership.rig.names), len(LANDMARKS)), np.nan),
             StageTimes(),
-            np.zeros((len(half), int(half[:, 1].max()), int(half[:, 0].max()), 3), np.uint8),
+            np.zeros((len(half), int(half[:, 1].max()), int(half[:, 0].max())), np.int16),
             np.zeros(capacity),
             np.zeros(capacity),
             np.zeros(capacity),
@@ -382,6 +391,10 @@ class Tracker:
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
         self.histograms = Histograms.empty(len(cameras), n)
+        self.part_table = np.full((len(cameras), n, COLOURS), np.nan)  # p_f of every colour (region.part_table)
+        self.counts = np.zeros((len(cameras), n, COLOURS))  # a frame's colour counts, before they are learnt
+        self.counts_background = np.zeros((len(cameras), COLOURS))
+        self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
@@ -412,6 +425,10 @@ class Tracker:
         constant_velocity(poses, poses, self.settings.damping)
         self.iterate(0)
         self.iterate(1)
+        if self.settings.region:  # no colours learnt: every line is left out and nothing is counted
+            colour_bins(np.zeros((2, 2, 3), np.uint8), np.zeros((2, 2), np.int16))
+            self.add_regions(self.work, self.still)
+            self.learn_colours(np.zeros(self.histograms.seen.shape, np.bool_))
         component_misfits(self.work.offset, self.work.samples.component, self.work.samples.count, self.model.size)
         self.poses, self.anchor = poses, anchor
 
@@ -435,7 +452,7 @@ class Tracker:
         for k, image in enumerate(images):
             if isinstance(image, WithChroma):
                 h, w = image.chroma.shape[:2]
-                work.chroma[k, :h, :w] = image.chroma
+                colour_bins(image.chroma, work.bins[k, :h, :w])
                 image = image.image
             else:
                 coloured = False
@@ -531,11 +548,11 @@ class Tracker:
     def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
         """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region.region_kernel`); returns the
         number of lines used."""
-        s, st, h = work.samples, self.settings, self.histograms
+        s, st = work.samples, self.settings
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
         assert work.outside is not None and work.depth is not None
         return region_kernel(
-            work.chroma,
+            work.bins,
             self.chroma_size,
             s.count,
             s.camera,
@@ -549,12 +566,8 @@ class Tracker:
             work.lo,
             work.hi,
             max(st.region_every, 1),
-            h.foreground,
-            h.background,
-            h.seen,
-            h.seen_background,
-            st.region_amplitude,
-            st.region_slope / FACTOR,
+            self.part_table,
+            self.logs,
             st.region_weight,
             st.region_sigma**2,
             work.region_mean,
@@ -572,10 +585,8 @@ class Tracker:
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
         assert work.outside is not None and work.depth is not None
         started = time.perf_counter()
-        foreground = np.zeros_like(self.histograms.foreground)
-        background = np.zeros_like(self.histograms.background)
         learn_kernel(
-            work.chroma,
+            work.bins,
             self.chroma_size,
             s.count,
             s.camera,
@@ -591,10 +602,12 @@ class Tracker:
             learn,
             max(1, round(st.region_inside / FACTOR)),
             max(2, round(st.region_outside / FACTOR)),
-            foreground,
-            background,
+            self.counts,
+            self.counts_background,
         )
-        self.histograms = blend(self.histograms, foreground, background, rate=st.region_learning_rate)
+        h = self.histograms
+        h.learn(self.counts, self.counts_background, rate=st.region_learning_rate)
+        part_table(h.foreground, h.background, h.seen, h.seen_background, self.part_table)
         work.times.add("region", started)
 
     def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
