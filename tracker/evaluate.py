@@ -72,7 +72,7 @@ def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_thr
     aligned_error = np.where(scored, np.linalg.norm(_umeyama_align(tracked, true, scored) - true, axis=2), np.nan)
 
     per_joint = {name: (1000.0 * _mean(error[:, j]), _share(hit[:, j], known[:, j])) for j, name in enumerate(names)}
-    far = (np.nan_to_num(error, nan=0.0) > FAR).any(axis=1)
+    far = np.asarray((np.nan_to_num(error, nan=0.0) > FAR).any(axis=1))
     return Report(
         mpjpe_mm=1000.0 * _mean(error),
         pa_mpjpe_mm=1000.0 * _mean(aligned_error),

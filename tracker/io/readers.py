@@ -172,7 +172,7 @@ def grey_frames(
             video.skip(index)
         for index in itertools.count(start, step):
             if index in copies.frames:
-                image, bgr, half = video.read_with_colour(index, chroma=chroma)
+                image, bgr, half = video.read_with_colour(index)
                 yield WithColour(WithChroma(image, half) if chroma else image, reduced(bgr, copies.factor))
             elif chroma:
                 yield WithChroma(*video.read_with_chroma(index))
@@ -203,12 +203,12 @@ class _MotionJpeg:
     def read(self, index: int) -> np.ndarray:
         return self._decoded(self._data(index), self.flags, index)
 
-    def read_with_colour(self, index: int, *, chroma: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """The frame as :meth:`read` gives it, in BGR colour, and (with ``chroma``) at half size in colour, all
-        decoded from its JPEG."""
+    def read_with_colour(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The frame as :meth:`read` gives it, in BGR colour, and in colour at half size, all decoded from its
+        JPEG."""
         data = self._data(index)
         image, bgr = self._decoded(data, self.flags, index), self._decoded(data, cv2.IMREAD_COLOR, index)
-        return image, bgr, half_size(bgr, bgr.shape) if chroma else None
+        return image, bgr, half_size(bgr, bgr.shape)
 
     def read_with_chroma(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """The frame as :meth:`read` gives it and its colour at half size, which libjpeg decodes at half scale."""
@@ -266,11 +266,11 @@ class _Decoded:
         frame = self._next(index)
         return frame.to_ndarray(format="bgr24") if self.colour else luma(frame)
 
-    def read_with_colour(self, index: int, *, chroma: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """The frame as :meth:`read` gives it, in BGR colour, and (with ``chroma``) at half size in colour."""
+    def read_with_colour(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The frame as :meth:`read` gives it, in BGR colour, and in colour at half size (:func:`half_colour`)."""
         frame = self._next(index)
         bgr = frame.to_ndarray(format="bgr24")
-        return (bgr if self.colour else luma(frame)), bgr, half_colour(frame) if chroma else None
+        return (bgr if self.colour else luma(frame)), bgr, half_colour(frame)
 
     def read_with_chroma(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """The frame as :meth:`read` gives it and its colour at half size (:func:`half_colour`)."""
