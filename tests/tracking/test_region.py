@@ -59,9 +59,10 @@ def bins_of(chroma):
 
 
 def table_of(h):
-    out = np.zeros(h.foreground.shape)
-    part_table(h.foreground, h.background, h.seen, h.seen_background, out)
-    return out
+    """(p_f table, distinctness) of histograms ``h``."""
+    out, distinct = np.zeros(h.foreground.shape), np.zeros(h.seen.shape)
+    part_table(h.foreground, h.background, h.seen, h.seen_background, out, distinct)
+    return out, distinct
 
 
 def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, twist=None, h=None, **options):
@@ -86,7 +87,7 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
         np.array([lo]),
         np.array([hi]),
         1,
-        table_of(h),
+        *table_of(h),
         log_table(settings["amplitude"], settings["slope"]),
         settings["weight"],
         settings["min_variance"],
@@ -161,7 +162,8 @@ def test_a_line_adds_its_weighted_row_to_the_information():
     chroma = split_image(32.0, noise=0.1, seed=3)
     jacobian = np.array([1.0, 0.2, 0.0, 0.0, 0.3, -0.1])
     mean, variance, information, eta, used = run(chroma, (60.0, 40.5), jacobian=jacobian, weight=2.0, min_variance=0.5)
-    w = 2.0 / max(variance, 0.5)
+    distinct = 1.0 - 2 * np.sqrt(0.9 * 0.2) / 2 - 2 * np.sqrt(0.1 * 0.8) / 2  # 1 - Bhattacharyya coefficient
+    w = 2.0 * distinct / max(variance, 0.5)
     assert used == 1
     np.testing.assert_allclose(information[0], w * np.outer(jacobian, jacobian), rtol=1e-12)
     np.testing.assert_allclose(eta[0], w * jacobian * mean, rtol=1e-12)
@@ -236,7 +238,8 @@ def test_learning_counts_inside_and_outside_then_blends():
     assert seen.foreground[0, 0, 0] == pytest.approx(0.2)
     assert seen.foreground[0, 0, bin_of(PART)] == pytest.approx(0.8)
     np.testing.assert_array_equal(seen.background, background)
-    table = table_of(seen)
+    table, distinct = table_of(seen)
+    assert distinct[0, 0] == pytest.approx(1.0) and distinct[0, 1] == pytest.approx(1.0)  # no colour shared
     assert table[0, 0, bin_of(PART)] == pytest.approx(0.8 / (0.8 + 0.0)) and table[0, 0, 1] == 0.5
     assert table[0, 0, bin_of(ROOM)] == 0.0
     assert COLOURS == BINS**3
@@ -250,3 +253,11 @@ def test_the_table_of_likelihood_terms_is_the_logarithm():
     for row, h in enumerate((0.93, 0.07, 0.5 + h_one, 0.5 - h_one)):
         exact = np.log(h * p + (1 - h) * (1 - p))
         np.testing.assert_allclose(np.interp(p, steps, table[row]), exact, atol=2e-6)
+
+
+def test_a_part_coloured_like_its_background_does_not_vote():
+    """Skin before a beige wall: when the part's histogram is the background's, the lines weigh nothing."""
+    same = histograms()
+    same.foreground[0, :] = same.background[0]
+    mean, variance, information, eta, used = run(split_image(32.0), (63.5, 40.5), h=same)
+    assert used == 1 and not information.any() and not eta.any()

@@ -89,18 +89,24 @@ def colour_bins(chroma, out):
 
 
 @njit(cache=True, nogil=True)
-def part_table(foreground, background, seen, seen_background, out):
+def part_table(foreground, background, seen, seen_background, out, o_distinct):
     """p_f = h_f / (h_f + h_b) of every colour bin for every camera and component (C, N, COLOURS) into ``out`` (0.5
-    for a colour seen in neither; NaN where the camera has not learnt both the part and its background)."""
+    for a colour seen in neither; NaN where the camera has not learnt both the part and its background), and how
+    distinct the part's colours are from the background's, ``o_distinct`` (C, N): 1 minus the Bhattacharyya
+    coefficient sum_y sqrt(h_f(y) h_b(y)) of the two histograms (0 for the same colours, 1 for none shared)."""
     for k in range(foreground.shape[0]):
         for i in range(foreground.shape[1]):
+            o_distinct[k, i] = 0.0
             if not (seen[k, i] and seen_background[k]):
                 out[k, i, :] = np.nan
                 continue
+            shared = 0.0
             for b in range(foreground.shape[2]):
                 f = foreground[k, i, b]
                 g = background[k, b]
                 out[k, i, b] = 0.5 if f + g <= 0.0 else f / (f + g)
+                shared += math.sqrt(f * g)
+            o_distinct[k, i] = max(0.0, 1.0 - shared)
 
 
 @njit(cache=True, inline="always")
@@ -167,6 +173,7 @@ def region_kernel(
     s_hi,
     every,
     table,
+    distinct,
     logs,
     weight,
     min_variance,
@@ -271,7 +278,7 @@ def region_kernel(
         variance *= FACTOR * FACTOR
         o_mean[s] = mean
         o_variance[s] = variance
-        w = weight / max(variance, min_variance)
+        w = weight * distinct[k, i] / max(variance, min_variance)
         used += 1
         for a in range(6):
             la = w * s_jac[s, a]

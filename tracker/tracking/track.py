@@ -392,6 +392,7 @@ class Tracker:
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
         self.histograms = Histograms.empty(len(cameras), n)
         self.part_table = np.full((len(cameras), n, COLOURS), np.nan)  # p_f of every colour (region.part_table)
+        self.distinct = np.zeros((len(cameras), n))  # how distinct each part's colours are from its background's
         self.counts = np.zeros((len(cameras), n, COLOURS))  # a frame's colour counts, before they are learnt
         self.counts_background = np.zeros((len(cameras), COLOURS))
         self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
@@ -567,6 +568,7 @@ class Tracker:
             work.hi,
             max(st.region_every, 1),
             self.part_table,
+            self.distinct,
             self.logs,
             st.region_weight,
             st.region_sigma**2,
@@ -607,7 +609,7 @@ class Tracker:
         )
         h = self.histograms
         h.learn(self.counts, self.counts_background, rate=st.region_learning_rate)
-        part_table(h.foreground, h.background, h.seen, h.seen_background, self.part_table)
+        part_table(h.foreground, h.background, h.seen, h.seen_background, self.part_table, self.distinct)
         work.times.add("region", started)
 
     def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
