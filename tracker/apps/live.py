@@ -22,7 +22,7 @@ Outputs: ``DIR/poses.npz`` (default ``out/live``) as ``tracker track`` writes it
 ``calibration.toml``, ``model.toml`` and ``init.toml`` (copies), and ``timestamps.csv`` (frame and
 each camera's capture time in seconds since capture started; the videos state the cameras' nominal
 frame rate).  So ``tracker track DIR --keypoints off`` with the same settings decodes the same images and
-computes the same poses as the live run (which tracks edges only).  A recording
+computes the same poses as the live run (which tracks the edges and the colours, without the keypoints).  A recording
 needs every camera in every frame: when a camera drops, the recording ends there (tracking
 goes on), and it still replays identically.
 
@@ -49,6 +49,7 @@ from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
+from tracker.io.readers import WithChroma
 from tracker.io.recording import VIDEO_SUFFIXES
 from tracker.keypoints.live import LiveDetector, transferred
 from tracker.tracking.track import Tracker
@@ -333,7 +334,7 @@ class _Session:
             assert self.taken is not None  # the set just tracked
             shown = list(self.blanks)
             for camera, image in zip(self.taken.cameras, frame.images):
-                shown[camera] = image
+                shown[camera] = image.image if isinstance(image, WithChroma) else image
             self.view.offer(frame.index, shown, frame.result, elapsed=frame.spent)
         self.frames += 1
 
@@ -361,7 +362,7 @@ def track_live(
         print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
         tracker.warm_up()
         with _StopRequest() as stop:
-            capture.start(tracker.smooth)
+            capture.start(tracker.smooth, chroma=tracker.settings.region)
             session = _Session(capture, cameras, stop, recorder, view, detector)
             run = track_frames(
                 tracker,

@@ -56,13 +56,13 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.io.readers import MJPG, open_video
+from tracker.io.readers import MJPG, WithChroma, half_size, open_video
 from tracker.io.recording import DEFAULT_FPS
 
 STALL_TIMEOUT = 2.0  # seconds without a frame after which a camera is dropped
@@ -211,11 +211,12 @@ class ReplaySource:
 
 @dataclass(frozen=True)
 class Frame:
-    """One captured frame: monotonic capture time, the JPEG as delivered, the grey image after ``prepare``."""
+    """One captured frame: monotonic capture time, the JPEG as delivered, the grey image after ``prepare`` (with its
+    half-size colour, :class:`~tracker.io.readers.WithChroma`, when the capture was started with ``chroma``)."""
 
     time: float
     jpeg: np.ndarray
-    image: np.ndarray
+    image: Any
 
 
 @dataclass(frozen=True)
@@ -335,20 +336,22 @@ class Capture:
         self.stopping = threading.Event()
         self.threads: list[threading.Thread] = []
 
-    def start(self, prepare: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
-        """Start one thread per camera; ``prepare`` (grey image -> image) runs in them on every frame."""
+    def start(self, prepare: Callable[[np.ndarray], np.ndarray] | None = None, *, chroma: bool = False) -> None:
+        """Start one thread per camera; ``prepare`` (grey image -> image) runs in them on every frame.  With
+        ``chroma`` each frame's image comes as :class:`~tracker.io.readers.WithChroma`, its colour at half size
+        decoded from the same JPEG as the recording's readers decode it."""
         self.started = time.monotonic()
         self.last = [self.started] * len(self.sources)
         self.threads = [
             threading.Thread(
-                target=self._run, args=(camera, prepare), daemon=True, name=f"capture {self.names[camera]}"
+                target=self._run, args=(camera, prepare, chroma), daemon=True, name=f"capture {self.names[camera]}"
             )
             for camera in range(len(self.sources))
         ]
         for thread in self.threads:
             thread.start()
 
-    def _run(self, camera: int, prepare) -> None:
+    def _run(self, camera: int, prepare, chroma: bool) -> None:
         source = self.sources[camera]
         try:
             while not self.stopping.is_set():
@@ -364,7 +367,13 @@ class Capture:
                     raise CaptureError(
                         f"delivered a {image.shape[1]}x{image.shape[0]} frame, not {source.size[0]}x{source.size[1]}"
                     )
-                self._arrive(camera, Frame(stamp, jpeg, image if prepare is None else prepare(image)))
+                prepared = image if prepare is None else prepare(image)
+                if chroma:
+                    colour = cv2.imdecode(jpeg, cv2.IMREAD_REDUCED_COLOR_2)
+                    if colour is None:
+                        raise CaptureError("delivered a frame that is not a decodable JPEG")
+                    prepared = WithChroma(prepared, half_size(colour, image.shape))
+                self._arrive(camera, Frame(stamp, jpeg, prepared))
         except Exception as error:  # a failing camera is dropped; the others go on
             self.drop(camera, str(error) if isinstance(error, CaptureError) else f"failed: {error!r}")
         finally:
