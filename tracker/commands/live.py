@@ -120,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
 
             detector = LiveDetector(cameras, step)
             stack.callback(detector.close)
+            print("starting the keypoint detector...", file=sys.stderr, flush=True)
+            detector.wait_until_ready()
         summary = track_live(
             capture, tracker, cameras=cameras, out=out, recorder=recorder, view=view, detector=detector
         )

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from tracker.camera import Camera
+from tracker.errors import TrackerInputError
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints
@@ -26,6 +27,12 @@ from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
 
 _CLOSE_WAIT = 2.0
 """Seconds the worker gets to finish its frame set when the run ends, before it is stopped."""
+
+READY = "ready"
+"""What the worker puts on its results once its landmarkers are loaded."""
+
+_START_WAIT = 120.0
+"""Seconds the worker may take to load its landmarkers."""
 
 
 def _work(cameras: list[Camera], jobs, results) -> None:
@@ -36,6 +43,7 @@ def _work(cameras: list[Camera], jobs, results) -> None:
         with native_logs_muted():
             detectors = [Detector() for _ in cameras]
             names = tuple(camera.name for camera in cameras)
+            results.put(READY)
             while (job := jobs.get()) is not None:
                 number, jpegs = job
                 pixels = np.full((len(cameras), len(LANDMARKS), 2), np.nan)
@@ -67,6 +75,18 @@ class LiveDetector:
         self.busy = False
         self.arrived: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.offered = self.taken = self.used = 0
+
+    def wait_until_ready(self) -> None:
+        """Block until the worker has loaded its landmarkers (a second or two), so that the first frame sets
+        offered are not skipped while it starts; raises its error, or TrackerInputError when it does not start."""
+        try:
+            item = self.results.get(timeout=_START_WAIT)
+        except queue.Empty:
+            raise TrackerInputError(
+                f"the keypoint detector did not start within {_START_WAIT:g} s; run with --keypoints off"
+            ) from None
+        if isinstance(item, BaseException):
+            raise item
 
     def offer(self, number: int, jpegs: list[np.ndarray | None]) -> bool:
         """Hand frame ``number``'s JPEGs (one per camera of the rig, None for a camera without a frame) to
