@@ -4,7 +4,7 @@ along it, and the frame loop that fits the poses to them.
 outline.py         visible outline samples and their Jacobian rows; sections 2-3
 ownership.py       search limits: which predicted outline may claim an image edge
 measure.py         edge search, IRLS weights, per-component information; section 3
-region.py          the region cue: colours learnt along the outline, the outline's offset posterior per line
+region_cue.py      the region cue: colours learnt along the outline, the outline's offset posterior per line
 keypoint_cue.py    the 2-D keypoints' landmarks fused with the edges in the solve
 landmark_noise.py  the keypoints' learnt noise: each landmark's zone, and how firmly the edges hold its limb
 motion_prior.py    the Kalman motion prior (``--dynamics kalman``) and the motion a tracker carries between frames

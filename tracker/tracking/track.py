@@ -41,7 +41,7 @@ from tracker.tracking.measure import Statistics, component_misfits, measure_kern
 from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
-from tracker.tracking.region import (
+from tracker.tracking.region_cue import (
     COLOURS,
     FACTOR,
     Histograms,
@@ -100,7 +100,7 @@ class Settings:
     keypoint_edge_misfit: float = 0.8  # px: where a component's edges fit worse (median |m|), the joint landmarks it
     # places (keypoint_cue.placers) pull from the floor zone (keypoint_tolerance) with no fade
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
-    # the region cue (tracker.tracking.region), used where the frames come with their colour (WithChroma)
+    # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = True  # read the colours along the samples' lines too
     region_weight: float = 0.3  # lambda: a line's weight is lambda / max(sigma^2, region_sigma^2)
     region_sigma: float = 1.0  # full-size pixels: the smallest standard deviation a line's offset is given
@@ -293,7 +293,7 @@ class Workspace:
     sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
     them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); each camera's
     half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one (``coloured``), and
-    the region cue's mean, variance and inside colour per sample (:func:`tracker.tracking.region.region_kernel`).
+    the region cue's mean, variance and inside colour per sample (:func:`tracker.tracking.region_cue.region_kernel`).
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
     (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
@@ -547,7 +547,7 @@ class Tracker:
         return self.settings.region and self.work.coloured and self.histograms.ready
 
     def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
-        """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region.region_kernel`); returns the
+        """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region_cue.region_kernel`); returns the
         number of lines used."""
         s, st = work.samples, self.settings
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
@@ -581,7 +581,7 @@ class Tracker:
 
     def learn_colours(self, learn: np.ndarray) -> None:
         """Count the colours along the lines at the current poses into the histograms (those of the components
-        ``learn`` (C, N) names; :func:`tracker.tracking.region.learn_kernel`) and blend them in."""
+        ``learn`` (C, N) names; :func:`tracker.tracking.region_cue.learn_kernel`) and blend them in."""
         st, work = self.settings, self.work
         s = work.samples
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.tracking.region import (
+from tracker.tracking.region_cue import (
     BINS,
     COLOURS,
     FACTOR,
