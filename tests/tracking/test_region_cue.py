@@ -202,6 +202,43 @@ def test_a_thin_part_keeps_its_offsets_within_half_its_width():
     assert far < -5.0  # without the width, the far side pulls the outline in: the reason the width is there
 
 
+def learn(chroma, seen, mean, counts):
+    """learn_kernel on two lines of camera 0 at half-size row 20 and 10: component 0 with the room outside,
+    component 1 with another part outside; their last offsets ``mean``."""
+    learn_kernel(
+        bins_of(chroma),
+        np.array([[80, 40]]),
+        2,
+        np.zeros(2, np.int64),
+        np.array([0, 1]),
+        np.array([[63.5, 40.5], [63.5, 20.5]]),
+        np.array([[1.0, 0.0], [1.0, 0.0]]),
+        np.zeros((2, 6)),
+        np.array([-1, 0]),
+        np.array([41, 41]),
+        np.zeros((2, 6)),
+        np.array([-20, -20]),
+        np.array([20, 20]),
+        np.asarray(mean, float),
+        seen.seen,
+        2.0,
+        2,
+        5,
+        *counts,
+    )
+
+
+def test_known_colours_are_learnt_only_where_the_line_agrees_with_the_outline():
+    chroma = split_image(32.0)
+    seen = Histograms.empty(1, 2)
+    seen.seen[:] = True
+    counts = (np.zeros_like(seen.foreground), np.zeros_like(seen.background))
+    learn(chroma, seen, [1.5, 3.0], counts)  # the first line agrees within 2 pixels, the second does not
+    assert counts[0][0, 0].sum() == 2 and counts[0][0, 1].sum() == 0
+    learn(chroma, seen, [np.nan, -2.0], counts)  # a line the cue did not measure teaches nothing
+    assert counts[0][0, 0].sum() == 2 and counts[0][0, 1].sum() == 2
+
+
 def test_learning_counts_inside_and_outside_then_blends():
     chroma = split_image(32.0)
     seen = Histograms.empty(1, 2)
@@ -220,7 +257,9 @@ def test_learning_counts_inside_and_outside_then_blends():
         np.zeros((2, 6)),
         np.array([-20, -20]),
         np.array([20, 20]),
-        np.array([[True, True]]),
+        np.array([np.nan, np.nan]),
+        seen.seen,
+        2.0,
         2,
         5,
         *counts,

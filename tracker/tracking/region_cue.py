@@ -303,7 +303,9 @@ def learn_kernel(
     twist,
     s_lo,
     s_hi,
-    learn,
+    s_mean,
+    seen,
+    agree,
     inside,
     outside,
     o_foreground,
@@ -312,12 +314,15 @@ def learn_kernel(
     """Count the colours along every sample's line at the poses ``twist`` moved them to: the half-size pixels
     ``1..inside`` in from the outline are its component's (in ``o_foreground`` (C, N, COLOURS)), those
     ``2..outside`` out are the background's (``o_background`` (C, COLOURS)) where the line's outside is the
-    background and within the search interval (and inside, short of the part's far side, ``s_depth``).  Only the
-    components with ``learn[k, i]`` count."""
+    background and within the search interval (and inside, short of the part's far side, ``s_depth``).
+
+    Once camera k knows part i's colours (``seen[k, i]``), only the lines whose last offset posterior agrees with
+    the outline (``|s_mean| <= agree``, full-size pixels) count: a part that strays would otherwise learn the room's
+    colours where it lies and hold itself there."""
     for s in range(count):
         k = s_cam[s]
         i = s_comp[s]
-        if not learn[k, i]:
+        if seen[k, i] and not abs(s_mean[s]) <= agree:
             continue
         moved = 0.0
         for a in range(6):

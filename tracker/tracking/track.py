@@ -110,6 +110,7 @@ class Settings:
     region_every: int = 1  # use every k-th sample's line
     region_inside: int = 4  # pixels in from the outline whose colours are learnt as the part's
     region_outside: int = 10  # ... and out to which they are learnt as the background's (from 4)
+    region_agree: float = 2.0  # pixels: once a part's colours are known, only lines whose offset is this close teach
 
 
 def scaled_to(settings: Settings, short_side: int) -> Settings:
@@ -128,6 +129,7 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         threshold=settings.threshold / k,
         keypoint_edge_misfit=settings.keypoint_edge_misfit * k,
         region_sigma=settings.region_sigma * k,
+        region_agree=settings.region_agree * k,
         region_slope=settings.region_slope * k,
         region_inside=max(1, round(settings.region_inside * k)),
         region_outside=max(2, round(settings.region_outside * k)),
@@ -390,9 +392,6 @@ class Tracker:
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
-        self.histograms = Histograms.empty(len(cameras), n)
-        self.part_table = np.full((len(cameras), n, COLOURS), np.nan)  # p_f of every colour (region.part_table)
-        self.distinct = np.zeros((len(cameras), n))  # how distinct each part's colours are from its background's
         self.counts = np.zeros((len(cameras), n, COLOURS))  # a frame's colour counts, before they are learnt
         self.counts_background = np.zeros((len(cameras), COLOURS))
         self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
@@ -408,7 +407,12 @@ class Tracker:
 
     def restart(self, poses: np.ndarray) -> None:
         """Go on from ``poses`` (coerced) as from a first pose: no motion carried over, the motion filter
-        (kalman) started afresh about them."""
+        (kalman) started afresh about them, and no colours known (those learnt on the way that led astray are the
+        room's as often as the body's; the region cue learns them again from the next frame)."""
+        cameras, n = len(self.rig.names), self.model.size
+        self.histograms = Histograms.empty(cameras, n)
+        self.part_table = np.full((cameras, n, COLOURS), np.nan)  # p_f of every colour (region_cue.part_table)
+        self.distinct = np.zeros((cameras, n))  # how distinct each part's colours are from its background's
         self.poses = self.model.coerce(poses)
         self.anchor = self.poses
         st = self.settings
@@ -426,10 +430,13 @@ class Tracker:
         constant_velocity(poses, poses, self.settings.damping)
         self.iterate(0)
         self.iterate(1)
-        if self.settings.region:  # no colours learnt: every line is left out and nothing is counted
+        if self.settings.region:  # the colours are learnt into spare histograms, then the tracker's are put back
+            learnt = self.histograms, self.part_table.copy(), self.distinct.copy()
+            self.histograms = Histograms.empty(*self.histograms.seen.shape)
             colour_bins(np.zeros((2, 2, 3), np.uint8), np.zeros((2, 2), np.int16))
             self.add_regions(self.work, self.still)
-            self.learn_colours(np.zeros(self.histograms.seen.shape, np.bool_))
+            self.learn_colours()
+            self.histograms, self.part_table, self.distinct = learnt
         component_misfits(self.work.offset, self.work.samples.component, self.work.samples.count, self.model.size)
         self.poses, self.anchor = poses, anchor
 
@@ -579,9 +586,9 @@ class Tracker:
             work.eta,
         )
 
-    def learn_colours(self, learn: np.ndarray) -> None:
-        """Count the colours along the lines at the current poses into the histograms (those of the components
-        ``learn`` (C, N) names; :func:`tracker.tracking.region_cue.learn_kernel`) and blend them in."""
+    def learn_colours(self) -> None:
+        """Count the colours along the lines at the current poses into the histograms
+        (:func:`tracker.tracking.region_cue.learn_kernel`) and blend them in."""
         st, work = self.settings, self.work
         s = work.samples
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
@@ -601,7 +608,9 @@ class Tracker:
             motion_since(self.sampled_poses, self.poses),
             work.lo,
             work.hi,
-            learn,
+            work.region_mean,
+            self.histograms.seen,
+            st.region_agree,
             max(1, round(st.region_inside / FACTOR)),
             max(2, round(st.region_outside / FACTOR)),
             self.counts,
@@ -747,7 +756,7 @@ class Tracker:
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
         if st.region and work.coloured and status != LOST:
-            self.learn_colours(np.ones(self.histograms.seen.shape, np.bool_))
+            self.learn_colours()
         if self.keypoints is not None and status == TRACKED:
             self.noise = self.noise.learnt(
                 work.misfit,
