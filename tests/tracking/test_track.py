@@ -17,7 +17,7 @@ from tracker.io.recording import frames, open_recording
 from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
-from tracker.synthetic.synth import synthesize
+from tracker.synthetic.synth import Staging, synthesize
 from tracker.tracking.track import Settings, Tracker, motion_since, smoother
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -119,6 +119,48 @@ def test_every_lens_tracks_as_well_as_a_pinhole(lens_recordings, lens, twin):
     reference, _ = _track(lens_recordings[twin], LENS_FRAMES)
     assert report.lost_frames == 0
     assert report.mpjpe_mm <= 1.3 * reference.mpjpe_mm, (report.mpjpe_mm, reference.mpjpe_mm)
+
+
+@pytest.fixture(scope="module")
+def striped_room(tmp_path_factory) -> Path:
+    """40 frames of the procedural turn in striped clothes with a face, in a furnished room, seen by calib/demo3.toml:
+    the stripes and the room give the edge search wrong edges."""
+    out = tmp_path_factory.mktemp("striped") / "rec"
+    staging = Staging(texture="stripes", backdrop="room", face=True)
+    synthesize(
+        ROOT / "models" / "human.toml",
+        ROOT / "calib" / "demo3.toml",
+        out,
+        motion="procedural",
+        frames=40,
+        seed=5,
+        progress=False,
+        staging=staging,
+    )
+    return out
+
+
+def _track_in_colour(recording: Path, settings: Settings):
+    """``recording`` tracked from its init.toml with ``settings``, its frames read with their colour."""
+    rec = open_recording(recording)
+    model = load_model(rec.model_path)
+    tracker = Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), settings)
+    results = [tracker.step(images) for _, images in frames(rec, chroma=True)]
+    tracked = {
+        "frame": np.arange(len(results)),
+        "joint_names": np.array(model.joint_names),
+        "joints": joint_centres(np.stack([r.poses for r in results])),
+    }
+    return evaluate(tracked, load_poses(rec.truth_path)), tracker
+
+
+def test_the_region_cue_holds_striped_clothes_in_a_room_better_than_the_edges_alone(striped_room):
+    """The colours along the outline hold what the stripes' and the room's edges pull off (measured: 7.9 mm with the
+    edges alone, 5.1-5.3 mm with the region cue), and the tracker learnt every part's colours in every camera."""
+    edges, _ = _track_in_colour(striped_room, Settings(region=False))
+    region, tracker = _track_in_colour(striped_room, Settings(region=True))
+    assert region.lost_frames == 0 and region.mpjpe_mm < 0.8 * edges.mpjpe_mm, (region.mpjpe_mm, edges.mpjpe_mm)
+    assert tracker.histograms.seen.all() and (tracker.distinct > 0.5).mean() > 0.8
 
 
 def test_converges_from_a_displaced_start():

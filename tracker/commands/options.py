@@ -197,7 +197,8 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 type=on_off,
                 metavar="on|off",
                 help="read the colours along the outline too, learnt as the run goes, to tell the body from the room "
-                "(default on; docs/region.md)",
+                "(default off: it helps in furnished rooms but can still lose a real body in fast moves; "
+                "docs/region.md)",
             ),
         ),
         "region_weight": (
