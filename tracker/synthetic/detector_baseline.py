@@ -34,7 +34,7 @@ class Baseline:
 
 
 def baseline(
-    keypoints: Keypoints, cameras: list[Camera], model: Model, truth: dict, poses: dict | None = None
+    keypoints: Keypoints, truth: dict, *, cameras: list[Camera], model: Model, poses: dict | None = None
 ) -> Baseline:
     """The baseline of ``keypoints`` (seen by ``cameras``, distances of ``model``) against ``truth`` (a truth.npz's
     arrays), and the tracker's ``poses`` (a poses.npz's) over the same joints and frames."""

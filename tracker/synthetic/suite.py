@@ -265,7 +265,8 @@ def score(out: str | os.PathLike, results: str | os.PathLike, renders: list[Rend
         alone = None
         if landmarks.is_file():
             cameras = load_calibration(recording / "calibration.toml")
-            alone = baseline(load_keypoints(landmarks), cameras, load_model(recording / "model.toml"), truth, tracked)
+            model = load_model(recording / "model.toml")
+            alone = baseline(load_keypoints(landmarks), truth, cameras=cameras, model=model, poses=tracked)
         scores.append((render, evaluate(tracked, truth), alone))
     return scores
 
