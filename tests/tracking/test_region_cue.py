@@ -70,7 +70,7 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
     h = histograms() if h is None else h
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
-    mean, variance, inside = np.zeros(1), np.zeros(1), np.zeros(1)
+    mean, variance = np.zeros(1), np.zeros(1)
     settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0) | options
     used = region_kernel(
         bins_of(chroma),
@@ -93,7 +93,6 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
         settings["min_variance"],
         mean,
         variance,
-        inside,
         information,
         eta,
     )
@@ -243,27 +242,7 @@ def test_learning_counts_inside_and_outside_then_blends():
     chroma = split_image(32.0)
     seen = Histograms.empty(1, 2)
     counts = (np.zeros_like(seen.foreground), np.zeros_like(seen.background))
-    learn_kernel(
-        bins_of(chroma),
-        np.array([[80, 40]]),
-        2,
-        np.zeros(2, np.int64),
-        np.array([0, 1]),
-        np.array([[63.5, 40.5], [63.5, 20.5]]),
-        np.array([[1.0, 0.0], [1.0, 0.0]]),
-        np.zeros((2, 6)),
-        np.array([-1, 0]),
-        np.array([41, 41]),
-        np.zeros((2, 6)),
-        np.array([-20, -20]),
-        np.array([20, 20]),
-        np.array([np.nan, np.nan]),
-        seen.seen,
-        2.0,
-        2,
-        5,
-        *counts,
-    )
+    learn(chroma, seen, [np.nan, np.nan], counts)
     fg, bg = counts
     assert fg[0, 0, bin_of(PART)] == 2 and fg[0, 1, bin_of(PART)] == 2 and fg.sum() == 4
     assert bg[0, bin_of(ROOM)] == 4 and bg.sum() == 4  # 2..5 out, the first line's only: the second has a part outside

@@ -179,7 +179,6 @@ def region_kernel(
     min_variance,
     o_mean,
     o_variance,
-    o_inside,
     information,
     eta,
 ):
@@ -190,9 +189,8 @@ def region_kernel(
     pixel from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the
     line, ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the
     part's far side.  Writes each sample's posterior mean and
-    variance (full-size pixels; NaN for a line not used) and ``o_inside``, the mean ``p_f`` of the two half-size
-    pixels just inside the predicted outline (NaN where not read).  ``min_variance`` floors the variance in the
-    weight, ``weight`` is lambda."""
+    variance (full-size pixels; NaN for a line not used).  ``min_variance`` floors the variance in the weight,
+    ``weight`` is lambda."""
     used = 0
     log_half = math.log(0.5)
     n_max = 2 * MAX_LINE + 3
@@ -207,7 +205,6 @@ def region_kernel(
     for s in range(count):
         o_mean[s] = np.nan
         o_variance[s] = np.nan
-        o_inside[s] = np.nan
         k = s_cam[s]
         i = s_comp[s]
         if s % every != 0 or np.isnan(table[k, i, 0]):
@@ -224,8 +221,8 @@ def region_kernel(
         d_hi = min(s_hi[s] // FACTOR, MAX_LINE)
         # pixels t in [d_lo - 1, d_hi + 1]; index j = t - d_lo + 1
         n_pix = d_hi - d_lo + 3
-        inside_sum = 0.0
-        inside_n = 0
+        if s_outside[s] != -1 or d_hi - d_lo < 2:
+            continue
         ok = True
         for j in range(n_pix):
             t = d_lo - 1 + j
@@ -234,12 +231,7 @@ def region_kernel(
                 ok = False
                 break
             pf[j] = p
-            if t == -1 or t == -2 or (t == 0 and d_lo > -2):
-                inside_sum += p
-                inside_n += 1
-        if inside_n > 0:
-            o_inside[s] = inside_sum / inside_n
-        if not ok or s_outside[s] != -1 or d_hi - d_lo < 2:
+        if not ok:
             continue
         for j in range(n_pix):
             x = pf[j] * LOG_STEPS

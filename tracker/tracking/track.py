@@ -295,7 +295,7 @@ class Workspace:
     sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
     them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); each camera's
     half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one (``coloured``), and
-    the region cue's mean, variance and inside colour per sample (:func:`tracker.tracking.region_cue.region_kernel`).
+    the region cue's mean and variance per sample (:func:`tracker.tracking.region_cue.region_kernel`).
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
     (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
@@ -313,7 +313,6 @@ class Workspace:
     bins: np.ndarray
     region_mean: np.ndarray
     region_variance: np.ndarray
-    region_inside: np.ndarray
     coloured: bool = False
     lo: np.ndarray | None = None
     hi: np.ndarray | None = None
@@ -338,7 +337,6 @@ class Workspace:
             np.full((len(ownership.rig.names), len(LANDMARKS)), np.nan),
             StageTimes(),
             np.zeros((len(half), int(half[:, 1].max()), int(half[:, 0].max())), np.int16),
-            np.zeros(capacity),
             np.zeros(capacity),
             np.zeros(capacity),
         )
@@ -581,7 +579,6 @@ class Tracker:
             st.region_sigma**2,
             work.region_mean,
             work.region_variance,
-            work.region_inside,
             work.information,
             work.eta,
         )
