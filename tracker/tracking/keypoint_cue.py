@@ -154,6 +154,27 @@ def placers(model: Model, component: np.ndarray, point: np.ndarray) -> np.ndarra
     return np.where(centre, parent, -1)
 
 
+def limbs(model: Model, component: np.ndarray) -> np.ndarray:
+    """The limb each landmark can lead (K, N) bool (:meth:`tracker.tracking.track.Tracker.lead`): for a landmark
+    on a component whose parent has no other child (an elbow, wrist, knee or ankle, or a point on a hand or foot),
+    the whole chain of such components above it, up to the one that hangs from a branching component (the upper arm
+    below the torso, the thigh below the pelvis), with everything below; none for the others (a shoulder, a hip, a
+    face point: moving them moves the trunk) and for a landmark without a component."""
+    parent = model.parent
+    children = np.bincount(parent[parent >= 0], minlength=model.size)
+    out = np.zeros((len(component), model.size), bool)
+    for j, i in enumerate(component):
+        if i < 0 or parent[i] < 0 or children[parent[i]] != 1:
+            continue
+        top = parent[i]
+        while parent[top] >= 0 and children[parent[top]] == 1:
+            top = parent[top]
+        out[j, top] = True
+        for below in range(top + 1, model.size):  # breadth-first order: a parent comes before its children
+            out[j, below] = out[j, parent[below]]
+    return out
+
+
 def landmark_world(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
     """World points (K, 3) of the landmarks' model points ``point`` (K, 3), fixed in components ``component``
     (K,), at ``poses`` (N, 4, 4); NaN for landmarks without a component (-1)."""

@@ -205,3 +205,15 @@ def component_misfits(offset, component, count, n_components):
         if found[i] > 0:
             out[i] = np.median(values[start[i] : start[i + 1]])
     return out
+
+
+def support(offset: np.ndarray, component: np.ndarray, count: int, chosen: np.ndarray, robust_c: float) -> float:
+    """How closely the outlines of the components ``chosen`` (N,) bool found their edges in the last measurement:
+    the mean over their first ``count`` samples of c / (c + |m|), the IRLS weight scaled to 1 at m = 0, where the
+    sample found an edge (``offset`` not NaN) and 0 where it found none; 0 for no sample.  An outline lying on its
+    edges scores near 1, one among clutter's edges at random offsets well below."""
+    mine = chosen[component[:count]]
+    if not mine.any():
+        return 0.0
+    m = np.abs(offset[:count][mine])
+    return float(np.where(np.isnan(m), 0.0, robust_c / (robust_c + np.nan_to_num(m))).mean())

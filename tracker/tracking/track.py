@@ -35,9 +35,9 @@ from tracker.io.readers import WithChroma
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
-from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, placers
+from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, limbs, placers
 from tracker.tracking.landmark_noise import LandmarkNoise
-from tracker.tracking.measure import Statistics, component_misfits, measure_kernel
+from tracker.tracking.measure import Statistics, component_misfits, measure_kernel, support
 from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
@@ -53,6 +53,8 @@ from tracker.tracking.region_cue import (
 )
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
+LEAD_ITERATIONS = 3  # solves of the landmarks alone that move a limb they lead (Tracker.lead)
+PIN = 1e6  # the prior's multiple that holds the components a lead does not move at their predicted poses
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,9 @@ class Settings:
     keypoint_reach: float = 0.1  # a landmark's pull fades beyond this share of the body's size past its zone
     keypoint_edge_misfit: float = 0.8  # px: where a component's edges fit worse (median |m|), the joint landmarks it
     # places (keypoint_cue.placers) pull from the floor zone (keypoint_tolerance) with no fade
+    keypoint_lead: float = 0.06  # share of the body's image size: where the landmarks at a limb's end lie this far
+    # beyond their learnt zone off its predicted pose, in two views or more (one in a one-camera rig), the landmarks
+    # alone move that limb to them before the edge search (Tracker.lead); 0: never
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = False  # read the colours along the samples' lines too (--region on)
@@ -382,11 +387,17 @@ class Tracker:
             np.zeros((len(cameras), height, width), np.uint8),
             Ownership(model, self.rig, settings.capacity, max(settings.search_range, settings.final_search_range)),
         )
+        self.retry = self.work.spare(self.work.images)  # a lead's try (:meth:`lead`): the same images, colours, clock
+        self.retry.bins, self.retry.times = self.work.bins, self.work.times
         self.restart(initial_poses)
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
+        self.limbs = limbs(model, self.landmarks[0])
+        top = np.where(self.limbs.any(axis=1), self.limbs.argmax(axis=1), -1)  # breadth-first: the limb's first part
+        self.roots = [(self.landmarks[0] == part) & (part >= 0) for part in top]  # landmarks at each limb's root
+        self.floor = (np.full(len(LANDMARKS), settings.keypoint_tolerance), np.full(len(LANDMARKS), np.inf))
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
@@ -507,11 +518,15 @@ class Tracker:
 
     def update(self, poses: np.ndarray) -> np.ndarray:
         """Prior, tree solve, step and coercion (:func:`update_kernel`) with the information gathered."""
+        return self._update(self.work.information, self.work.eta, self.prior, poses)
+
+    def _update(self, information: np.ndarray, eta: np.ndarray, prior: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """:func:`update_kernel` with ``information``, ``eta`` and ``prior`` about the anchor."""
         m, st = self.model, self.settings
         return update_kernel(
-            self.work.information,
-            self.work.eta,
-            self.prior,
+            information,
+            eta,
+            prior,
             poses,
             self.anchor,
             m.parent,
@@ -691,10 +706,18 @@ class Tracker:
         <tracker.tracking.landmark_noise.LandmarkNoise.held>`) pulls from the floor zone with no fade.  Returns
         (landmarks used, left/right pairs rejected)."""
         st = self.settings
-        component, point, pairs = self.landmarks
         held = self.noise.held(self.placer, st.keypoint_edge_misfit)
         with np.errstate(divide="ignore"):
             reach = st.keypoint_reach / held
+        zone = held * self.noise.tolerance + (1.0 - held) * st.keypoint_tolerance
+        return self.pull(pixels, confidence, (zone, reach), self.work.information, self.work.eta, self.work.misfit)
+
+    def pull(self, pixels, confidence, zone, information, eta, misfit) -> tuple[int, int]:
+        """Add the pull of the landmarks ``pixels`` (C, K, 2) at ``confidence`` (C, K) at the current poses
+        (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`) to ``information`` and ``eta``, and their misfits to
+        ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,))."""
+        st = self.settings
+        component, point, pairs = self.landmarks
         return keypoint_kernel(
             self.poses,
             self.rig.camera_from_world,
@@ -709,12 +732,95 @@ class Tracker:
             st.keypoint_confidence,
             st.robust_c,
             st.keypoint_weight,
-            held * self.noise.tolerance + (1.0 - held) * st.keypoint_tolerance,
-            reach,
-            self.work.information,
-            self.work.eta,
-            self.work.misfit,
+            zone[0],
+            zone[1],
+            information,
+            eta,
+            misfit,
         )
+
+    def led_limbs(self, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray:
+        """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead (:meth:`lead`) at the
+        current poses: the limbs (:func:`tracker.tracking.keypoint_cue.limbs`) of the landmarks that lie more than
+        ``keypoint_lead`` of the body's image size beyond their learnt noise zone
+        (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`) off their image, in the median over the views that
+        see them (two or more, their detections already checked to agree, :mod:`tracker.keypoints.consistency`; one
+        in a one-camera rig), where the landmarks at the limb's root (the shoulder of an arm, the hip of a leg) lie
+        within that of theirs: a limb is led from a trunk in place; a trunk off its landmarks is the recovery's
+        (:mod:`tracker.keypoints.recovery`), and leading its limbs would hide it from it."""
+        st = self.settings
+        misfit = np.empty_like(self.work.misfit)
+        self.pull(
+            pixels, confidence, self.floor, np.zeros_like(self.work.information), np.zeros_like(self.work.eta), misfit
+        )
+        seen = np.isfinite(misfit)
+        views = seen.sum(axis=0)
+        far = np.array([np.median(misfit[seen[:, j], j]) if views[j] else 0.0 for j in range(misfit.shape[1])])
+        judged = views >= min(2, len(misfit))
+        off = judged & (far > st.keypoint_lead + self.noise.tolerance)
+        placed = judged & ~off
+        rooted = np.array([root.any() and placed[root].all() for root in self.roots])
+        return self.limbs[off & rooted].any(axis=0)
+
+    def move_limbs(self, led: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> None:
+        """Move the components ``led`` (N,) bool to the landmarks ``pixels`` at ``confidence``, landmarks alone:
+        :data:`LEAD_ITERATIONS` solves of the landmarks on them, from the floor zone with no fade, while the other
+        components are held where they are (their prior times :data:`PIN`) and the prior about each step's start
+        damps the led ones.  The moved pose becomes the frame's prediction (the anchor)."""
+        work, component = self.work, self.landmarks[0]
+        chosen = np.where((component >= 0) & led[np.maximum(component, 0)], confidence, 0.0)
+        prior = np.where(led[:, None, None], self.prior, PIN * self.prior)
+        information, eta, misfit = np.empty_like(work.information), np.empty_like(work.eta), np.empty_like(work.misfit)
+        for _ in range(LEAD_ITERATIONS):
+            self.anchor = self.poses
+            information[:] = 0.0
+            eta[:] = 0.0
+            self.pull(pixels, chosen, self.floor, information, eta, misfit)
+            self.poses = self._update(information, eta, prior, self.poses)
+        self.anchor = self.poses
+
+    def lead(self, stats: Statistics, pixels: np.ndarray, confidence: np.ndarray) -> tuple[Statistics, int]:
+        """Try again the limbs the edges could not reach, led by the landmarks ``pixels`` at ``confidence``; the
+        frame's statistics (``stats`` as tracked) and the number of components led (0: the frame as tracked).
+
+        A limb's edges are searched a few pixels either side of its predicted outline: a limb that moved farther
+        since the last frame (a fast swing, a low frame rate, a re-seed that left no velocity) lies beyond them, and
+        its edges then hold it on whatever lies within reach, against the landmarks that say where it is (their pull
+        is bounded, like an edge sample's).  So where the frame's landmarks still lie far off a limb once tracked
+        (:meth:`led_limbs`), that limb is moved to them (:meth:`move_limbs`) and the frame tracked again from there.
+        The edges arbitrate, as they do a re-seed (:mod:`tracker.keypoints.recovery`): the led pose is kept only
+        when the led components' outlines find their edges closer (:func:`tracker.tracking.measure.support`) than
+        the tracked ones did; a detector that is wrong where the edges are right (a faceless mannequin's wrists) is
+        then outvoted."""
+        st, work = self.settings, self.work
+        led = self.led_limbs(pixels, confidence)
+        if not led.any():
+            return stats, 0
+        tracked, anchor = self.poses, self.anchor
+        before = support(work.offset, work.samples.component, work.samples.count, led, st.robust_c)
+        self.work, self.retry = self.retry, work  # the try searches in the spare buffers, the frame's kept
+        self.work.coloured = work.coloured
+        self.move_limbs(led, pixels, confidence)
+        for iteration in range(st.iterations):
+            again = self.iterate(iteration)
+        tried = self.work
+        if support(tried.offset, tried.samples.component, tried.samples.count, led, st.robust_c) > before:
+            return again, int(led.sum())
+        self.work, self.retry = work, tried  # the edges side with the tracked pose
+        self.poses, self.anchor = tracked, anchor
+        return stats, 0
+        tracked, anchor = self.poses, self.anchor
+        before = support(work.offset, work.samples.component, work.samples.count, led, st.robust_c)
+        self.move_limbs(led, pixels, confidence)
+        for iteration in range(st.iterations):
+            again = self.iterate(iteration)
+        if support(work.offset, work.samples.component, work.samples.count, led, st.robust_c) > before:
+            return again, int(led.sum())
+        self.poses, self.anchor = tracked, anchor  # the edges side with the tracked pose: measured there again
+        search_range = self.search_range(st.iterations - 1)
+        self.sample(work, tracked, search_range)
+        self.measure(work, search_range, self.still)
+        return stats, 0
 
     def step(
         self,
@@ -744,6 +850,8 @@ class Tracker:
         self.anchor = self.poses
         for iteration in range(st.iterations):
             stats = self.iterate(iteration)
+        if self.keypoints is not None and st.keypoint_lead > 0:
+            stats, _ = self.lead(stats, *self.keypoints)
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
         self.motion = dataclasses.replace(self.motion, previous=current)
