@@ -333,9 +333,10 @@ def test_a_limb_far_off_its_landmarks_is_led_to_them_and_the_rest_stays(demo_fra
 
 def test_the_edges_keep_a_led_limb_where_the_landmarks_are_right_and_refuse_it_where_they_are_wrong(demo_frame):
     """One frame of the demo. Predicted with the left arm 90 degrees off and given perfect landmarks, the edges
-    alone and the landmarks' bounded pull leave the wrist far off; the lead brings it back. Tracked from the true
-    pose with the left wrist detected a fifth of the body's size off in every view (a detector that misreads a
-    faceless wrist, consistently), the led arm's outline finds its edges worse, and the tracked arm is kept."""
+    and the landmarks' bounded pull leave the wrist far off (measured: 507 mm); the lead brings it back (16 mm).
+    Tracked from the true pose with the left wrist detected a fifth of the body's size off in every view (a
+    detector that misreads a faceless wrist, consistently), the led arm's outline finds its edges worse, and the
+    tracked arm is kept (9 mm either way)."""
     import itertools
 
     from tracker.io.recording import frames
@@ -354,7 +355,7 @@ def test_the_edges_keep_a_led_limb_where_the_landmarks_are_right_and_refuse_it_w
         return 1000 * np.linalg.norm(joint_centres(result.poses)[wrist] - joint_centres(poses)[wrist])
 
     turned = _arm_turned(model, poses, 90.0)
-    assert tracked(turned, pixels, 0.0) > 100.0 and tracked(turned, pixels, 0.06) < 20.0
+    assert tracked(turned, pixels, 0.0) > 300.0 and tracked(turned, pixels, 0.06) < 20.0
     wrong = pixels.copy()
     left_wrist = LANDMARKS.index("left_wrist")
     extent = np.linalg.norm(np.ptp(pixels[0][component >= 0], axis=0))

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracker.tracking.measure import component_misfits, edge_offset, measure_kernel
+from tracker.tracking.measure import component_misfits, edge_offset, measure_kernel, support
 
 W, H = 80, 60
 LO, HI = 40.0, 200.0
@@ -332,6 +332,17 @@ def test_component_misfits_are_the_median_offset_of_each_components_found_sample
         found = offset[:count][(component[:count] == i) & ~np.isnan(offset[:count])]
         assert got[i] == np.median(np.abs(found))  # rows past count are not read
     assert got[components - 1] == np.inf
+
+
+def test_support_is_the_mean_scaled_weight_of_the_chosen_components_samples():
+    offset = np.array([0.0, 2.0, np.nan, -6.0, 1.0, 9.0])
+    component = np.array([0, 0, 0, 1, 2, 2])
+    chosen = np.array([True, False, True])
+    c = 2.0
+    by_hand = (1.0 + 0.5 + 0.0 + 2 / 3 + 2 / 11) / 5  # samples of components 0 and 2; the NaN found no edge
+    assert support(offset, component, 6, chosen, c) == pytest.approx(by_hand)
+    assert support(offset, component, 3, chosen, c) == pytest.approx(0.5)  # only the first count samples
+    assert support(offset, component, 6, np.array([False, False, False]), c) == 0.0
 
 
 @pytest.mark.parametrize("factor", [2, 3])
