@@ -1,5 +1,6 @@
 """Checking detections across the views on perfect landmarks of the demo: a view swapped left/right is put
-right, a view showing someone else is dropped whole, and the batched triangulation is the single one."""
+right, a view showing someone else is dropped whole, two views that disagree are settled by the tracked body, and
+the batched triangulation is the single one."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoints.consistency import consistent, triangulate, triangulate_many, unswapped
+from tracker.keypoints.consistency import consistent, sided_with, triangulate, triangulate_many, unswapped
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
 from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
@@ -86,3 +87,37 @@ def test_batched_triangulation_is_the_single_one():
         else:
             single = triangulate([cameras[k] for k in views], normalised[m, views])
             np.testing.assert_allclose(batched[m], single, atol=1e-9)
+
+
+def test_two_views_that_disagree_are_settled_by_the_tracked_body(perfect):
+    """Frame 0 seen by two cameras only, cam0 showing someone else 150 px lower: the check cannot tell which
+    view is right and keeps neither; the tracked body (the truth, or 2 cm higher) sides with cam1, whose landmarks
+    come back, and cam0's stay out.  A body tracked elsewhere (half a metre higher) gets nothing back, and neither
+    does a landmark the check kept in two views."""
+    cameras, keypoints = perfect
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")
+    component, point, _ = landmark_points(model, LANDMARKS)
+    two = [cameras[0], cameras[1]]
+    pixels = keypoints.pixels[:1, :2].copy()
+    pixels[0, 0] += [0.0, 150.0]
+    detected = Keypoints(np.arange(1), ("cam0", "cam1"), pixels, keypoints.confidence[:1, :2], keypoints.world[:1, :2])
+    checked = consistent(detected, two)[0]
+    seen = component >= 0
+    assert not (checked.confidence[0][:, seen] >= 0.5).any()  # the views alone keep neither
+    expected = np.full((len(LANDMARKS), 3), np.nan)
+    expected[seen] = truth["poses"][0, component[seen], :3, 3]
+    before = (checked.pixels[0], checked.confidence[0])
+    for moved, back in ((0.0, True), (0.02, True), (0.5, False)):
+        got_pixels, got_confidence = sided_with(
+            (pixels[0], detected.confidence[0]), before, expected + [0.0, 0.0, moved], two
+        )
+        assert not (got_confidence[0] >= 0.5).any()
+        assert (got_confidence[1, seen] >= 0.5).all() == back and (got_confidence[1, ~seen] < 0.5).all()
+        if back:
+            np.testing.assert_array_equal(got_pixels[1, seen], pixels[0, 1, seen])
+    three = consistent(keypoints.at_frames(np.array([0])), cameras)[0]
+    settled = (three.pixels[0], three.confidence[0])
+    kept = sided_with((keypoints.pixels[0], keypoints.confidence[0]), settled, expected, cameras)
+    np.testing.assert_array_equal(kept[1], settled[1])

@@ -44,7 +44,7 @@ from tracker.io.poses import load_poses
 from tracker.io.readers import grey_frames
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.keypoints.detector import Detector
-from tracker.keypoints.stream import KeypointStream, default_step, schedule_words, tracked_frames
+from tracker.keypoints.stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.track import STAGES, Settings, StageTimes, Tracker, reductions
@@ -131,7 +131,7 @@ def track_run(
             ),
             out / "poses.npz",
             fps=recording.fps,
-            keypoints=None if stream is None else stream.get,
+            keypoints=None if stream is None else beside(stream, tracker),
         )
     finally:
         if stream is not None:

@@ -104,7 +104,7 @@ def track(
     from tracker.io.poses import load_poses
     from tracker.io.readers import keeping_grey, split_kept
     from tracker.io.recording import capture_times
-    from tracker.keypoints.stream import tracked_frames
+    from tracker.keypoints.stream import beside, tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.tracking.track import Tracker, reductions
 
@@ -193,7 +193,7 @@ def track(
             progress(searched(read), total=stop - begin),
             out / "poses.npz",
             fps=rec.fps,
-            keypoints=None if stream is None else stream.get,
+            keypoints=None if stream is None else beside(stream, tracker),
             check=recovery,
             times=None if times is None else lambda index: float(times[index]),
             each=counted_and_shown,

@@ -14,6 +14,9 @@ unchecked ones too.  Then a view whose left and right are swapped (the detector 
 person's back for their front) is put right when the other views, triangulated, place both
 landmarks of a left/right pair the other way round (three views or more).
 
+Two views that disagree, with no third to settle it, leave the landmark in neither.  The tracker can settle it:
+the body it tracks says which view shows it (:func:`sided_with`).
+
 The same search (:func:`readings`) also takes a left/right pair of landmarks at once and lets each
 view read the pair either way round, for a detector that swaps left and right in some views: then a
 hypothesis is a pair of views and the order in which the second reads the pair, and every view
@@ -34,6 +37,15 @@ from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
 
 GATE = 0.05
 """Reprojection distance, as a share of the image's short side, within which a view agrees."""
+
+NEAR = 0.05
+"""Image distance, as a share of the tracked body's size in that view, within which a disputed detection sides with
+the tracked body (:func:`sided_with`): about twice a detector's scatter on a person, and well inside the fifth of
+the body's size by which it misreads a faceless mannequin's wrists."""
+
+SHOWS = 0.1
+"""The same share within which, in the median, a view's confident detections must lie for the view to show the
+tracked body (:func:`sided_with`): the recovery's :data:`tracker.keypoints.recovery.STRAYED`."""
 
 
 def triangulate(cameras: list[Camera], normalised: np.ndarray) -> np.ndarray:
@@ -254,3 +266,43 @@ def undistorted(pixels: np.ndarray, cameras: list[Camera]) -> np.ndarray:
         seen = np.isfinite(pixels[:, k]).all(axis=2)
         normalised[:, k][seen] = camera.undistort_pixels(pixels[:, k][seen])
     return normalised
+
+
+def sided_with(
+    detected: tuple[np.ndarray, np.ndarray],
+    checked: tuple[np.ndarray, np.ndarray],
+    expected: np.ndarray,
+    cameras: list[Camera],
+    *,
+    min_confidence: float = 0.5,
+    near: float = NEAR,
+    shows: float = SHOWS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's ``checked`` landmarks (pixels (C, K, 2), confidence (C, K); :func:`consistent` of ``detected``) with
+    the disputes the views could not settle given to the views that show the tracked body.
+
+    Two views that disagree on a landmark, and no third, leave it in neither (:func:`consistent`): one of them may
+    show someone else (a bystander, a photograph) where the other lost the body, and the views alone cannot tell
+    which.  The tracked body can: ``expected`` (K, 3) are its landmark points in the world (NaN where the model has
+    none), at the pose of the last frame.  A detection that ``checked`` dropped is given back when fewer than two
+    views keep its landmark, it lies within ``near`` of the body's size of its expected image, and its view's
+    confident detections lie within ``shows`` of theirs in the median (the view shows the tracked body).  A body
+    lost to clutter gets back nothing it did not already lie near."""
+    pixels, confidence = checked[0].copy(), checked[1].copy()
+    kept = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
+    unsettled = kept.sum(axis=0) < 2
+    for k, camera in enumerate(cameras):
+        usable = (detected[1][k] >= min_confidence) & np.isfinite(detected[0][k]).all(axis=1)
+        usable &= np.isfinite(expected).all(axis=1)
+        if usable.sum() < 2:
+            continue
+        projected = camera.project(expected[usable])
+        size = max(float(np.linalg.norm(np.ptp(projected, axis=0))), 1.0)
+        distance = np.full(len(expected), np.inf)
+        distance[usable] = np.linalg.norm(detected[0][k, usable] - projected, axis=1) / size
+        if not np.median(distance[usable]) < shows:
+            continue
+        back = usable & unsettled & ~kept[k] & (distance < near)
+        pixels[k, back] = detected[0][k, back]
+        confidence[k, back] = detected[1][k, back]
+    return pixels, confidence

@@ -29,18 +29,23 @@ import multiprocessing
 import queue
 import signal
 from collections import deque
-from collections.abc import Generator, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tracker.errors import TrackerInputError
 from tracker.io.readers import ColourCopies, WithColour
 from tracker.io.recording import Recording, frames
-from tracker.keypoints.consistency import consistent
+from tracker.keypoints.consistency import consistent, sided_with
 from tracker.keypoints.detect import cached, detections, fingerprint, frame_keypoints, holding, merged, stacked
 from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints, save_keypoints
+from tracker.tracking.keypoint_cue import landmark_world
+
+if TYPE_CHECKING:
+    from tracker.tracking.track import Tracker
 
 RATE = 15.0
 """Frames a second the detector sees by default (``--keypoints``; docs/keypoints.md: its cost and what it buys):
@@ -172,14 +177,17 @@ class KeypointStream:
         self.sent: set[int] = set()
         self.old = cached(cache, recording) if cache is not None else None
         self.raw: list[Keypoints] = []
+        self.detected: dict[int, Keypoints] = {}  # each scheduled frame's landmarks as detected, before the check
         self.checked: dict[int, Keypoints] = {}
         self.worker: multiprocessing.process.BaseProcess | None = None
         self.reused = holding(self.old, self.wanted)
         held = self.wanted[np.isin(self.wanted, self.old.frame)] if self.old is not None else self.wanted[:0]
         if len(held):  # the cache's rows win over a new detection of the same frame: a re-run gives the same
             assert self.old is not None
-            checked = consistent(self.old.at_frames(held), recording.cameras)[0]
+            detected = self.old.at_frames(held)
+            checked = consistent(detected, recording.cameras)[0]
             self.checked = {int(frame): checked.at_frames(np.array([frame])) for frame in held}
+            self.detected = {int(frame): detected.at_frames(np.array([frame])) for frame in held}
         if self.reused is not None:
             return
         require_detector()
@@ -211,23 +219,42 @@ class KeypointStream:
         self.fed.put((index, images))
         self.sent.add(index)
 
-    def get(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+    def get(self, frame: int, near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of ``frame`` (pixels (C, 33, 2), confidence (C, 33)), waiting for the
         worker if need be.  Between two detected frames the landmarks are interpolated linearly (each
-        where both frames hold it, at the lower confidence); None after the last detected frame."""
+        where both frames hold it, at the lower confidence); None after the last detected frame.  With ``near``,
+        the tracked body's landmark points (33, 3) in the world, the disputes the views could not settle are given
+        to the views that show that body (:func:`tracker.keypoints.consistency.sided_with`)."""
+        checked = self._between(frame, self._checked)
+        if checked is None or near is None:
+            return checked
+        detected = self._between(frame, self._detected)
+        assert detected is not None  # every checked frame was detected
+        return sided_with(detected, checked, near, self.recording.cameras)
+
+    def _between(self, frame: int, landmarks) -> tuple[np.ndarray, np.ndarray] | None:
+        """``landmarks`` (of a scheduled frame: pixels, confidence) of ``frame``, interpolated between scheduled
+        frames (:meth:`get`)."""
         after = int(np.searchsorted(self.wanted, frame))
         if after < len(self.wanted) and self.wanted[after] == frame:
-            return self._checked(frame)
+            return landmarks(frame)
         if after == 0 or after == len(self.wanted):
             return None
         before, next_frame = int(self.wanted[after - 1]), int(self.wanted[after])
-        earlier, later = self._checked(before), self._checked(next_frame)
+        earlier, later = landmarks(before), landmarks(next_frame)
         if earlier is None or later is None:
             return None
         share = (frame - before) / (next_frame - before)
         pixels = (1.0 - share) * earlier[0] + share * later[0]
         confidence = np.minimum(earlier[1], later[1])
         return pixels, np.where(np.isfinite(pixels).all(axis=2), confidence, 0.0)
+
+    def _detected(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The landmarks of a scheduled frame as detected, before the check (:meth:`_checked` waits for them)."""
+        if self._checked(frame) is None:
+            return None
+        found = self.detected[frame]
+        return found.pixels[0], found.confidence[0]
 
     def _checked(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of a scheduled frame, waiting for the worker if need be."""
@@ -259,6 +286,7 @@ class KeypointStream:
             raw, checked = item
             self.raw.append(raw)
             self.checked[int(raw.frame[0])] = checked
+            self.detected[int(raw.frame[0])] = raw
 
     def close(self) -> None:
         """Stop the worker and add what it detected to the cache."""
@@ -279,3 +307,10 @@ class KeypointStream:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def beside(stream: KeypointStream, tracker: Tracker) -> Callable[[int], tuple[np.ndarray, np.ndarray] | None]:
+    """``stream``'s landmarks for the frames ``tracker`` tracks, the views' unsettled disputes settled by the body it
+    tracks (:meth:`KeypointStream.get` with its landmark points at the last frame's pose)."""
+    component, point = tracker.landmarks[:2]
+    return lambda frame: stream.get(frame, near=landmark_world(tracker.poses, component, point))

@@ -102,8 +102,8 @@ class Settings:
     keypoint_edge_misfit: float = 0.8  # px: where a component's edges fit worse (median |m|), the joint landmarks it
     # places (keypoint_cue.placers) pull from the floor zone (keypoint_tolerance) with no fade
     keypoint_lead: float = 0.06  # share of the body's image size: where the landmarks at a limb's end lie this far
-    # beyond their learnt zone off its predicted pose, in two views or more (one in a one-camera rig), the landmarks
-    # alone move that limb to them before the edge search (Tracker.lead); 0: never
+    # beyond their learnt zone off the tracked limb, the landmarks alone move it to them and the frame is tracked
+    # again from there, kept if the limb's edges fit better (Tracker.lead); 0: never
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = False  # read the colours along the samples' lines too (--region on)
@@ -740,14 +740,14 @@ class Tracker:
         )
 
     def led_limbs(self, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray:
-        """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead (:meth:`lead`) at the
-        current poses: the limbs (:func:`tracker.tracking.keypoint_cue.limbs`) of the landmarks that lie more than
+        """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead (:meth:`lead`) at the current
+        poses: the limbs (:func:`tracker.tracking.keypoint_cue.limbs`) of the landmarks that lie more than
         ``keypoint_lead`` of the body's image size beyond their learnt noise zone
-        (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`) off their image, in the median over the views that
-        see them (two or more, their detections already checked to agree, :mod:`tracker.keypoints.consistency`; one
-        in a one-camera rig), where the landmarks at the limb's root (the shoulder of an arm, the hip of a leg) lie
-        within that of theirs: a limb is led from a trunk in place; a trunk off its landmarks is the recovery's
-        (:mod:`tracker.keypoints.recovery`), and leading its limbs would hide it from it."""
+        (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`) off their image, in the median over the views that see
+        them (their detections already checked to agree, :mod:`tracker.keypoints.consistency`; one view may be all there
+        is: the edges arbitrate, :meth:`lead`), where the landmarks at the limb's root (the shoulder of an arm, the hip
+        of a leg) lie within that of theirs: a limb is led from a trunk in place; a trunk off its landmarks is the
+        recovery's (:mod:`tracker.keypoints.recovery`), and leading its limbs would hide it from it."""
         st = self.settings
         misfit = np.empty_like(self.work.misfit)
         self.pull(
@@ -756,7 +756,7 @@ class Tracker:
         seen = np.isfinite(misfit)
         views = seen.sum(axis=0)
         far = np.array([np.median(misfit[seen[:, j], j]) if views[j] else 0.0 for j in range(misfit.shape[1])])
-        judged = views >= min(2, len(misfit))
+        judged = views >= 1
         off = judged & (far > st.keypoint_lead + self.noise.tolerance)
         placed = judged & ~off
         rooted = np.array([root.any() and placed[root].all() for root in self.roots])
