@@ -284,13 +284,15 @@ def sided_with(
     Two views that disagree on a landmark, and no third, leave it in neither (:func:`consistent`): one of them may
     show someone else (a bystander, a photograph) where the other lost the body, and the views alone cannot tell
     which.  The tracked body can: ``expected`` (K, 3) are its landmark points in the world (NaN where the model has
-    none), at the pose of the last frame.  A detection that ``checked`` dropped is given back when fewer than two
-    views keep its landmark, it lies within ``near`` of the body's size of its expected image, and its view's
-    confident detections lie within ``shows`` of theirs in the median (the view shows the tracked body).  A body
-    lost to clutter gets back nothing it did not already lie near."""
+    none), at the pose of the last frame.  A detection that ``checked`` dropped is given back when two views saw its
+    landmark and neither kept it (where three or more saw it, the check had a majority to go by), it lies within
+    ``near`` of the body's size of its expected image, and its view's confident detections lie within ``shows`` of
+    theirs in the median (the view shows the tracked body).  A body lost to clutter gets back nothing it did not
+    already lie near."""
     pixels, confidence = checked[0].copy(), checked[1].copy()
     kept = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
-    unsettled = kept.sum(axis=0) < 2
+    seen = (detected[1] >= min_confidence) & np.isfinite(detected[0]).all(axis=2)
+    unsettled = (kept.sum(axis=0) < 2) & (seen.sum(axis=0) == 2)
     for k, camera in enumerate(cameras):
         usable = (detected[1][k] >= min_confidence) & np.isfinite(detected[0][k]).all(axis=1)
         usable &= np.isfinite(expected).all(axis=1)
