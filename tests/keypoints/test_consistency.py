@@ -111,7 +111,7 @@ def test_two_views_that_disagree_are_settled_by_the_tracked_body(perfect):
     before = (checked.pixels[0], checked.confidence[0])
     for moved, back in ((0.0, True), (0.02, True), (0.5, False)):
         got_pixels, got_confidence = sided_with(
-            (pixels[0], detected.confidence[0]), before, expected + [0.0, 0.0, moved], two
+            (pixels[0], detected.confidence[0]), before, expected=expected + [0.0, 0.0, moved], cameras=two
         )
         assert not (got_confidence[0] >= 0.5).any()
         assert (got_confidence[1, seen] >= 0.5).all() == back and (got_confidence[1, ~seen] < 0.5).all()
@@ -119,5 +119,5 @@ def test_two_views_that_disagree_are_settled_by_the_tracked_body(perfect):
             np.testing.assert_array_equal(got_pixels[1, seen], pixels[0, 1, seen])
     three = consistent(keypoints.at_frames(np.array([0])), cameras)[0]
     settled = (three.pixels[0], three.confidence[0])
-    kept = sided_with((keypoints.pixels[0], keypoints.confidence[0]), settled, expected, cameras)
+    kept = sided_with((keypoints.pixels[0], keypoints.confidence[0]), settled, expected=expected, cameras=cameras)
     np.testing.assert_array_equal(kept[1], settled[1])

@@ -340,9 +340,11 @@ def test_support_is_the_mean_scaled_weight_of_the_chosen_components_samples():
     chosen = np.array([True, False, True])
     c = 2.0
     by_hand = (1.0 + 0.5 + 0.0 + 2 / 3 + 2 / 11) / 5  # samples of components 0 and 2; the NaN found no edge
-    assert support(offset, component, 6, chosen, c) == pytest.approx(by_hand)
-    assert support(offset, component, 3, chosen, c) == pytest.approx(0.5)  # only the first count samples
-    assert support(offset, component, 6, np.array([False, False, False]), c) == 0.0
+    assert support(offset, component, count=6, chosen=chosen, robust_c=c) == pytest.approx(by_hand)
+    assert support(offset, component, count=3, chosen=chosen, robust_c=c) == pytest.approx(
+        0.5
+    )  # only the first count samples
+    assert support(offset, component, count=6, chosen=np.array([False, False, False]), robust_c=c) == 0.0
 
 
 @pytest.mark.parametrize("factor", [2, 3])

@@ -271,9 +271,9 @@ def undistorted(pixels: np.ndarray, cameras: list[Camera]) -> np.ndarray:
 def sided_with(
     detected: tuple[np.ndarray, np.ndarray],
     checked: tuple[np.ndarray, np.ndarray],
+    *,
     expected: np.ndarray,
     cameras: list[Camera],
-    *,
     min_confidence: float = 0.5,
     near: float = NEAR,
     shows: float = SHOWS,

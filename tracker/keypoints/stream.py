@@ -230,7 +230,7 @@ class KeypointStream:
             return checked
         detected = self._between(frame, self._detected)
         assert detected is not None  # every checked frame was detected
-        return sided_with(detected, checked, near, self.recording.cameras)
+        return sided_with(detected, checked, expected=near, cameras=self.recording.cameras)
 
     def _between(self, frame: int, landmarks) -> tuple[np.ndarray, np.ndarray] | None:
         """``landmarks`` (of a scheduled frame: pixels, confidence) of ``frame``, interpolated between scheduled

@@ -207,7 +207,7 @@ def component_misfits(offset, component, count, n_components):
     return out
 
 
-def support(offset: np.ndarray, component: np.ndarray, count: int, chosen: np.ndarray, robust_c: float) -> float:
+def support(offset: np.ndarray, component: np.ndarray, *, count: int, chosen: np.ndarray, robust_c: float) -> float:
     """How closely the outlines of the components ``chosen`` (N,) bool found their edges in the last measurement:
     the mean over their first ``count`` samples of c / (c + |m|), the IRLS weight scaled to 1 at m = 0, where the
     sample found an edge (``offset`` not NaN) and 0 where it found none; 0 for no sample.  An outline lying on its

@@ -710,9 +710,16 @@ class Tracker:
         with np.errstate(divide="ignore"):
             reach = st.keypoint_reach / held
         zone = held * self.noise.tolerance + (1.0 - held) * st.keypoint_tolerance
-        return self.pull(pixels, confidence, (zone, reach), self.work.information, self.work.eta, self.work.misfit)
+        return self.pull(
+            pixels,
+            confidence,
+            zone=(zone, reach),
+            information=self.work.information,
+            eta=self.work.eta,
+            misfit=self.work.misfit,
+        )
 
-    def pull(self, pixels, confidence, zone, information, eta, misfit) -> tuple[int, int]:
+    def pull(self, pixels, confidence, *, zone, information, eta, misfit) -> tuple[int, int]:
         """Add the pull of the landmarks ``pixels`` (C, K, 2) at ``confidence`` (C, K) at the current poses
         (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`) to ``information`` and ``eta``, and their misfits to
         ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,))."""
@@ -751,7 +758,12 @@ class Tracker:
         st = self.settings
         misfit = np.empty_like(self.work.misfit)
         self.pull(
-            pixels, confidence, self.floor, np.zeros_like(self.work.information), np.zeros_like(self.work.eta), misfit
+            pixels,
+            confidence,
+            zone=self.floor,
+            information=np.zeros_like(self.work.information),
+            eta=np.zeros_like(self.work.eta),
+            misfit=misfit,
         )
         seen = np.isfinite(misfit)
         views = seen.sum(axis=0)
@@ -775,7 +787,7 @@ class Tracker:
             self.anchor = self.poses
             information[:] = 0.0
             eta[:] = 0.0
-            self.pull(pixels, chosen, self.floor, information, eta, misfit)
+            self.pull(pixels, chosen, zone=self.floor, information=information, eta=eta, misfit=misfit)
             self.poses = self._update(information, eta, prior, self.poses)
         self.anchor = self.poses
 
@@ -797,29 +809,22 @@ class Tracker:
         if not led.any():
             return stats, 0
         tracked, anchor = self.poses, self.anchor
-        before = support(work.offset, work.samples.component, work.samples.count, led, st.robust_c)
+        before = support(
+            work.offset, work.samples.component, count=work.samples.count, chosen=led, robust_c=st.robust_c
+        )
         self.work, self.retry = self.retry, work  # the try searches in the spare buffers, the frame's kept
         self.work.coloured = work.coloured
         self.move_limbs(led, pixels, confidence)
         for iteration in range(st.iterations):
             again = self.iterate(iteration)
         tried = self.work
-        if support(tried.offset, tried.samples.component, tried.samples.count, led, st.robust_c) > before:
+        if (
+            support(tried.offset, tried.samples.component, count=tried.samples.count, chosen=led, robust_c=st.robust_c)
+            > before
+        ):
             return again, int(led.sum())
         self.work, self.retry = work, tried  # the edges side with the tracked pose
         self.poses, self.anchor = tracked, anchor
-        return stats, 0
-        tracked, anchor = self.poses, self.anchor
-        before = support(work.offset, work.samples.component, work.samples.count, led, st.robust_c)
-        self.move_limbs(led, pixels, confidence)
-        for iteration in range(st.iterations):
-            again = self.iterate(iteration)
-        if support(work.offset, work.samples.component, work.samples.count, led, st.robust_c) > before:
-            return again, int(led.sum())
-        self.poses, self.anchor = tracked, anchor  # the edges side with the tracked pose: measured there again
-        search_range = self.search_range(st.iterations - 1)
-        self.sample(work, tracked, search_range)
-        self.measure(work, search_range, self.still)
         return stats, 0
 
     def step(
