@@ -9,6 +9,7 @@ How cameras are matched, captured, dropped and recorded: :mod:`tracker.apps.live
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from contextlib import ExitStack
 from pathlib import Path
@@ -87,7 +88,10 @@ def run(args: argparse.Namespace) -> int:
             [device for _, device in rig], cameras, size=args.size, fps=args.fps, calibration=calibration_path
         )
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
-        tracker = Tracker(model, cameras, init, options.settings_from(args, capture.fps))
+        # live landmarks are an earlier frame set's, moved by the motion tracked since: they cannot lead a limb
+        # the edges lost (Tracker.lead), which would take it to where it was then
+        settings = dataclasses.replace(options.settings_from(args, capture.fps), keypoint_lead=0.0)
+        tracker = Tracker(model, cameras, init, settings)
         print(
             "live: "
             + ", ".join(
