@@ -12,7 +12,9 @@ joints exact (section 5).  Before measuring, each sample's search is cut half wa
 to the next predicted edge along its line that is not its own boundary
 (:mod:`tracker.tracking.ownership`), so an image edge is only explained by the nearest
 predicted outline that can account for it, and the search range shrinks from
-iteration to iteration (coarse to fine).  The frame's status comes from the share of samples
+iteration to iteration (coarse to fine).  With landmarks, a limb they place far from where the
+edges left it is moved to them and the frame tracked again, kept if that limb's edges fit better
+(:meth:`Tracker.lead`, docs/keypoints.md).  The frame's status comes from the share of samples
 that found an edge and the robust mean residual.
 """
 
