@@ -398,7 +398,7 @@ class Tracker:
         self.placer = placers(model, *self.landmarks[:2])
         self.limbs = limbs(model, self.landmarks[0])
         top = np.where(self.limbs.any(axis=1), self.limbs.argmax(axis=1), -1)  # breadth-first: the limb's first part
-        self.roots = [(self.landmarks[0] == part) & (part >= 0) for part in top]  # landmarks at each limb's root
+        self.roots = (self.landmarks[0][None, :] == top[:, None]) & (top[:, None] >= 0)  # (K, K): each limb's root
         self.floor = (np.full(len(LANDMARKS), settings.keypoint_tolerance), np.full(len(LANDMARKS), np.inf))
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
@@ -773,7 +773,7 @@ class Tracker:
         judged = views >= 1
         off = judged & (far > st.keypoint_lead + self.noise.tolerance)
         placed = judged & ~off
-        rooted = np.array([root.any() and placed[root].all() for root in self.roots])
+        rooted = self.roots.any(axis=1) & ~(self.roots & ~placed).any(axis=1)
         return self.limbs[off & rooted].any(axis=0)
 
     def move_limbs(self, led: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> None:
@@ -793,9 +793,9 @@ class Tracker:
             self.poses = self._update(information, eta, prior, self.poses)
         self.anchor = self.poses
 
-    def lead(self, stats: Statistics, pixels: np.ndarray, confidence: np.ndarray) -> tuple[Statistics, int]:
+    def lead(self, stats: Statistics, pixels: np.ndarray, confidence: np.ndarray) -> Statistics:
         """Try again the limbs the edges could not reach, led by the landmarks ``pixels`` at ``confidence``; the
-        frame's statistics (``stats`` as tracked) and the number of components led (0: the frame as tracked).
+        frame's statistics (``stats`` as tracked, unless the try is kept).
 
         A limb's edges are searched a few pixels either side of its predicted outline: a limb that moved farther
         since the last frame (a fast swing, a low frame rate, a re-seed that left no velocity) lies beyond them, and
@@ -809,7 +809,7 @@ class Tracker:
         st, work = self.settings, self.work
         led = self.led_limbs(pixels, confidence)
         if not led.any():
-            return stats, 0
+            return stats
         tracked, anchor = self.poses, self.anchor
         before = support(
             work.offset, work.samples.component, count=work.samples.count, chosen=led, robust_c=st.robust_c
@@ -824,10 +824,10 @@ class Tracker:
             support(tried.offset, tried.samples.component, count=tried.samples.count, chosen=led, robust_c=st.robust_c)
             > before
         ):
-            return again, int(led.sum())
+            return again
         self.work, self.retry = work, tried  # the edges side with the tracked pose
         self.poses, self.anchor = tracked, anchor
-        return stats, 0
+        return stats
 
     def step(
         self,
@@ -858,7 +858,7 @@ class Tracker:
         for iteration in range(st.iterations):
             stats = self.iterate(iteration)
         if self.keypoints is not None and st.keypoint_lead > 0:
-            stats, _ = self.lead(stats, *self.keypoints)
+            stats = self.lead(stats, *self.keypoints)
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
         self.motion = dataclasses.replace(self.motion, previous=current)
