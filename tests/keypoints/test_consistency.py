@@ -121,3 +121,35 @@ def test_two_views_that_disagree_are_settled_by_the_tracked_body(perfect):
     settled = (three.pixels[0], three.confidence[0])
     kept = sided_with((keypoints.pixels[0], keypoints.confidence[0]), settled, expected=expected, cameras=cameras)
     np.testing.assert_array_equal(kept[1], settled[1])
+
+
+def test_a_view_that_moved_on_steadily_settles_a_dispute(perfect):
+    """Two views disagree and the tracked body is off (half a metre up), so it settles nothing; each view's own
+    last landmarks do: cam0 jumped 150 px since (to someone else), cam1 moved a pixel, so cam1's disputed
+    landmarks come back and cam0's stay out.  Where both moved on steadily, or neither, the dispute stands."""
+    cameras, keypoints = perfect
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")
+    component, point, _ = landmark_points(model, LANDMARKS)
+    two = [cameras[0], cameras[1]]
+    pixels = keypoints.pixels[:1, :2].copy()
+    pixels[0, 0] += [0.0, 150.0]
+    detected = Keypoints(np.arange(1), ("cam0", "cam1"), pixels, keypoints.confidence[:1, :2], keypoints.world[:1, :2])
+    checked = consistent(detected, two)[0]
+    seen = component >= 0
+    off = np.full((len(LANDMARKS), 3), np.nan)
+    off[seen] = truth["poses"][0, component[seen], :3, 3] + [0.0, 0.0, 0.5]
+    before = (checked.pixels[0], checked.confidence[0])
+    last = keypoints.pixels[0, :2] + [1.0, 0.0]  # where each view's landmarks were at the last detected frame
+    got_pixels, got_confidence = sided_with(
+        (pixels[0], detected.confidence[0]), before, expected=off, cameras=two, previous=last
+    )
+    assert not (got_confidence[0] >= 0.5).any()
+    assert (got_confidence[1, seen] >= 0.5).all()
+    np.testing.assert_array_equal(got_pixels[1, seen], pixels[0, 1, seen])
+    for previous in (pixels[0] + [1.0, 0.0], last + [300.0, 0.0], None):  # both steady, neither, none known
+        _, unsettled = sided_with(
+            (pixels[0], detected.confidence[0]), before, expected=off, cameras=two, previous=previous
+        )
+        assert not (unsettled[:, seen] >= 0.5).any()

@@ -173,3 +173,40 @@ def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
         assert index == 0 and len(images) == 3
         read.close()
     assert not [thread for thread in threading.enumerate() if thread.name.startswith("reader ")]
+
+
+def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeypatch):
+    """A cache of frames 0, 2 and 4 in which cam2 sees nobody and cam0 jumps 150 px (to someone else) from frame 2
+    on: asked in frame order with a tracked body half a metre off, the stream gives cam1's disputed landmarks of
+    frames 2-4 back, never cam0's; asked for frame 4 first, it has no last frame to go by and gives nothing back."""
+    from tracker.keypoints.detector import DETECTOR
+    from tracker.keypoints.store import Keypoints
+    from tracker.model import load_model
+    from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = np.load(DEMO / "truth.npz")
+    component = landmark_points(model, LANDMARKS)[0]
+    seen = component >= 0
+    frames_held = np.array([0, 2, 4])
+    pixels = np.full((3, 3, len(LANDMARKS), 2), np.nan)
+    for k, camera in enumerate(recording.cameras[:2]):
+        for j in np.flatnonzero(seen):
+            pixels[:, k, j] = camera.project(truth["poses"][frames_held, component[j], :3, 3])
+    pixels[1:, 0] += [0.0, 150.0]
+    confidence = np.where(np.isfinite(pixels[..., 0]), 1.0, 0.0)
+    names = tuple(camera.name for camera in recording.cameras)
+    held = Keypoints(frames_held, names, pixels, confidence, np.zeros((3, 3, len(LANDMARKS), 3)), DETECTOR)
+    cache = tmp_path / "keypoints.npz"
+    save_keypoints(cache, dataclasses.replace(held, recording=fingerprint(recording)))
+    monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
+    off = np.full((len(LANDMARKS), 3), np.nan)
+    off[seen] = truth["poses"][0, component[seen], :3, 3] + [0.0, 0.0, 0.5]
+    with KeypointStream(recording, 0, 5, 2, cache) as stream:
+        got = {frame: stream.get(frame, near=off) for frame in range(5)}
+    assert all((got[frame][1][1, seen] >= 0.5).all() for frame in range(5))
+    assert not any((got[frame][1][0, seen] >= 0.5).any() for frame in (2, 3, 4))
+    with KeypointStream(recording, 0, 5, 2, cache) as fresh:
+        first = fresh.get(4, near=off)
+    assert not (first[1][:2, seen] >= 0.5).any()

@@ -15,7 +15,8 @@ person's back for their front) is put right when the other views, triangulated, 
 landmarks of a left/right pair the other way round (three views or more).
 
 Two views that disagree, with no third to settle it, leave the landmark in neither.  The tracker can settle it:
-the body it tracks says which view shows it (:func:`sided_with`).
+the body it tracks says which view shows it, and so does each view's own last frame: a detector that jumped to
+someone else jumped, while the body moved on a little (:func:`sided_with`).
 
 The same search (:func:`readings`) also takes a left/right pair of landmarks at once and lets each
 view read the pair either way round, for a detector that swaps left and right in some views: then a
@@ -46,6 +47,13 @@ the body's size by which it misreads a faceless mannequin's wrists."""
 SHOWS = 0.1
 """The same share within which, in the median, a view's confident detections must lie for the view to show the
 tracked body (:func:`sided_with`): the recovery's :data:`tracker.keypoints.recovery.STRAYED`."""
+
+CONFIDENT = 0.5
+"""A detection's confidence from which :func:`sided_with` counts it as seen."""
+
+STEADY_COUNT = 4
+"""Landmarks a view must show in both frames for its own last frame to say whether it moved on steadily
+(:func:`sided_with`)."""
 
 
 def triangulate(cameras: list[Camera], normalised: np.ndarray) -> np.ndarray:
@@ -274,7 +282,8 @@ def sided_with(
     *,
     expected: np.ndarray,
     cameras: list[Camera],
-    min_confidence: float = 0.5,
+    previous: np.ndarray | None = None,
+    min_confidence: float = CONFIDENT,
     near: float = NEAR,
     shows: float = SHOWS,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -288,11 +297,22 @@ def sided_with(
     landmark and neither kept it (where three or more saw it, the check had a majority to go by), it lies within
     ``near`` of the body's size of its expected image, and its view's confident detections lie within ``shows`` of
     theirs in the median (the view shows the tracked body).  A body lost to clutter gets back nothing it did not
-    already lie near."""
+    already lie near.
+
+    ``previous`` (C, K, 2), the landmarks the tracker was given at the last detected frame (NaN where none), settle
+    the disputes the tracked body cannot, once it is off or moves fast: where one of the two views' confident
+    detections lie within ``shows`` of that view's own previous landmarks in the median (its size taken from their
+    extent) and the other's do not, the steady view gets its disputed landmarks back.  A detector that jumps to a
+    bystander or a photograph for some frames leaves the body's view steady and its own not."""
     pixels, confidence = checked[0].copy(), checked[1].copy()
     kept = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
     seen = (detected[1] >= min_confidence) & np.isfinite(detected[0]).all(axis=2)
     unsettled = (kept.sum(axis=0) < 2) & (seen.sum(axis=0) == 2)
+    if previous is not None:
+        steady = np.array([_steady(detected[0][k], seen[k], previous[k], shows) for k in range(len(cameras))])
+        wins = unsettled & seen & steady[:, None] & ((seen & ~steady[:, None]).sum(axis=0) == 1)
+        pixels[wins] = detected[0][wins]
+        confidence[wins] = detected[1][wins]
     for k, camera in enumerate(cameras):
         usable = (detected[1][k] >= min_confidence) & np.isfinite(detected[0][k]).all(axis=1)
         usable &= np.isfinite(expected).all(axis=1)
@@ -308,3 +328,13 @@ def sided_with(
         pixels[k, back] = detected[0][k, back]
         confidence[k, back] = detected[1][k, back]
     return pixels, confidence
+
+
+def _steady(pixels: np.ndarray, seen: np.ndarray, previous: np.ndarray, shows: float) -> bool:
+    """Whether a view's ``seen`` detections ``pixels`` (K, 2) lie within ``shows`` of its ``previous`` landmarks in
+    the median, as a share of their extent; not with fewer than :data:`STEADY_COUNT` landmarks in both."""
+    both = seen & np.isfinite(previous).all(axis=1)
+    if both.sum() < STEADY_COUNT:
+        return False
+    size = max(float(np.linalg.norm(np.ptp(previous[both], axis=0))), 1.0)
+    return bool(np.median(np.linalg.norm(pixels[both] - previous[both], axis=1)) / size < shows)

@@ -38,7 +38,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.readers import ColourCopies, WithColour
 from tracker.io.recording import Recording, frames
-from tracker.keypoints.consistency import consistent, sided_with
+from tracker.keypoints.consistency import CONFIDENT, consistent, sided_with
 from tracker.keypoints.detect import cached, detections, fingerprint, frame_keypoints, holding, merged, stacked
 from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints, save_keypoints
@@ -179,6 +179,7 @@ class KeypointStream:
         self.raw: list[Keypoints] = []
         self.detected: dict[int, Keypoints] = {}  # each scheduled frame's landmarks as detected, before the check
         self.checked: dict[int, Keypoints] = {}
+        self.settled: tuple[int, np.ndarray] | None = None  # the last detected frame :meth:`get` gave, its landmarks
         self.worker: multiprocessing.process.BaseProcess | None = None
         self.reused = holding(self.old, self.wanted)
         held = self.wanted[np.isin(self.wanted, self.old.frame)] if self.old is not None else self.wanted[:0]
@@ -224,13 +225,24 @@ class KeypointStream:
         worker if need be.  Between two detected frames the landmarks are interpolated linearly (each
         where both frames hold it, at the lower confidence); None after the last detected frame.  With ``near``,
         the tracked body's landmark points (33, 3) in the world, the disputes the views could not settle are given
-        to the views that show that body (:func:`tracker.keypoints.consistency.sided_with`)."""
+        to the views that show that body, or that moved on steadily from the landmarks given at the last detected
+        frame asked for (:func:`tracker.keypoints.consistency.sided_with`; ask in frame order)."""
         checked = self._between(frame, self._checked)
         if checked is None or near is None:
             return checked
         detected = self._between(frame, self._detected)
         assert detected is not None  # every checked frame was detected
-        return sided_with(detected, checked, expected=near, cameras=self.recording.cameras)
+        before = self.settled if self.settled is not None and self.settled[0] < frame else None
+        pixels, confidence = sided_with(
+            detected,
+            checked,
+            expected=near,
+            cameras=self.recording.cameras,
+            previous=None if before is None else before[1],
+        )
+        if frame in self.checked:  # a detected frame: the next ones' own last frame
+            self.settled = (frame, np.where((confidence >= CONFIDENT)[..., None], pixels, np.nan))
+        return pixels, confidence
 
     def _between(self, frame: int, landmarks) -> tuple[np.ndarray, np.ndarray] | None:
         """``landmarks`` (of a scheduled frame: pixels, confidence) of ``frame``, interpolated between scheduled
