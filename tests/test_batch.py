@@ -109,7 +109,21 @@ def _batch(recordings: list[Path], out: Path) -> subprocess.Popen:
     command += ["--workers", "2", "--quiet", *SLOW]
     env = {key: value for key, value in os.environ.items() if key != "PYTHONUNBUFFERED"}  # lines must come as made
     env["OPENBLAS_NUM_THREADS"] = "1"
-    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    return subprocess.Popen(
+        command,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=_interruptible,  # noqa: PLW1509 (one signal call, before exec)
+    )
+
+
+def _interruptible() -> None:
+    """In the batch's process before it starts: Ctrl-C at its default, so that Python raises KeyboardInterrupt on
+    it.  An ignored SIGINT is inherited across exec, and Python then leaves it ignored; in a full test run something
+    before these tests leaves the test process ignoring it, and the batch then ran to its end through the SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _first_finished(batch: subprocess.Popen) -> str:
