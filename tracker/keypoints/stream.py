@@ -232,14 +232,8 @@ class KeypointStream:
             return checked
         detected = self._between(frame, self._detected)
         assert detected is not None  # every checked frame was detected
-        before = self.settled if self.settled is not None and self.settled[0] < frame else None
-        pixels, confidence = sided_with(
-            detected,
-            checked,
-            expected=near,
-            cameras=self.recording.cameras,
-            previous=None if before is None else before[1],
-        )
+        last = self.settled[1] if self.settled is not None and self.settled[0] < frame else None
+        pixels, confidence = sided_with(detected, checked, expected=near, cameras=self.recording.cameras, previous=last)
         if frame in self.checked:  # a detected frame: the next ones' own last frame
             self.settled = (frame, np.where((confidence >= CONFIDENT)[..., None], pixels, np.nan))
         return pixels, confidence

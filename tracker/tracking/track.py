@@ -811,19 +811,20 @@ class Tracker:
         if not led.any():
             return stats
         tracked, anchor = self.poses, self.anchor
-        before = support(
-            work.offset, work.samples.component, count=work.samples.count, chosen=led, robust_c=st.robust_c
-        )
+
+        def fit(buffers: Workspace) -> float:
+            """How closely the led components' outlines found their edges in ``buffers``' last measurement."""
+            s = buffers.samples
+            return support(buffers.offset, s.component, count=s.count, chosen=led, robust_c=st.robust_c)
+
+        before = fit(work)
         self.work, self.retry = self.retry, work  # the try searches in the spare buffers, the frame's kept
         self.work.coloured = work.coloured
         self.move_limbs(led, pixels, confidence)
         for iteration in range(st.iterations):
             again = self.iterate(iteration)
         tried = self.work
-        if (
-            support(tried.offset, tried.samples.component, count=tried.samples.count, chosen=led, robust_c=st.robust_c)
-            > before
-        ):
+        if fit(tried) > before:
             return again
         self.work, self.retry = work, tried  # the edges side with the tracked pose
         self.poses, self.anchor = tracked, anchor
