@@ -44,8 +44,8 @@ def histograms(components: int = 2) -> Histograms:
     h = Histograms.empty(1, components)
     h.foreground[0, :, bin_of(PART)] = 0.9
     h.foreground[0, :, bin_of(ROOM)] = 0.1
-    h.background[0, bin_of(ROOM)] = 0.8
-    h.background[0, bin_of(PART)] = 0.2
+    h.background[0, :, bin_of(ROOM)] = 0.8
+    h.background[0, :, bin_of(PART)] = 0.2
     h.seen[:] = True
     h.seen_background[:] = True
     return h
@@ -122,7 +122,7 @@ def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
             u = int(np.floor(x))
             p = sum(
                 weight
-                * (lambda b: h.foreground[0, 0, b] / (h.foreground[0, 0, b] + h.background[0, b]))(
+                * (lambda b: h.foreground[0, 0, b] / (h.foreground[0, 0, b] + h.background[0, 0, b]))(
                     bin_of(chroma[0, y0, column])
                 )
                 for column, weight in ((u, 1 - (x - u)), (u + 1, x - u))
@@ -245,11 +245,11 @@ def test_learning_counts_inside_and_outside_then_blends():
     learn(chroma, seen, [np.nan, np.nan], counts)
     fg, bg = counts
     assert fg[0, 0, bin_of(PART)] == 2 and fg[0, 1, bin_of(PART)] == 2 and fg.sum() == 4
-    assert bg[0, bin_of(ROOM)] == 4 and bg.sum() == 4  # 2..5 out, the first line's only: the second has a part outside
+    assert bg[0, 0, bin_of(ROOM)] == 4 and bg.sum() == 4  # 2..5 out of the first line; the second has a part outside
     seen.learn(fg, bg, rate=0.2)
-    assert seen.seen.all() and seen.seen_background.all() and seen.ready
+    assert seen.seen.all() and seen.seen_background.tolist() == [[True, False]] and seen.ready
     assert not fg.any() and not bg.any()  # the counts are used up
-    assert seen.foreground[0, 0].sum() == pytest.approx(1.0) and seen.background[0].sum() == pytest.approx(1.0)
+    assert seen.foreground[0, 0].sum() == pytest.approx(1.0) and seen.background[0, 0].sum() == pytest.approx(1.0)
     background = seen.background.copy()
     fg[0, 0, 0] = 1.0
     seen.learn(fg, bg, rate=0.2)
@@ -258,6 +258,7 @@ def test_learning_counts_inside_and_outside_then_blends():
     np.testing.assert_array_equal(seen.background, background)
     table, distinct = table_of(seen)
     assert distinct[0, 0] == pytest.approx(1.0) and distinct[0, 1] == pytest.approx(1.0)  # no colour shared
+    assert table[0, 1, bin_of(ROOM)] == 0.0  # the second part, with no background of its own, takes the camera's
     assert table[0, 0, bin_of(PART)] == pytest.approx(0.8 / (0.8 + 0.0)) and table[0, 0, 1] == 0.5
     assert table[0, 0, bin_of(ROOM)] == 0.0
     assert COLOURS == BINS**3
@@ -276,6 +277,24 @@ def test_the_table_of_likelihood_terms_is_the_logarithm():
 def test_a_part_coloured_like_its_background_does_not_vote():
     """Skin before a beige wall: when the part's histogram is the background's, the lines weigh nothing."""
     same = histograms()
-    same.foreground[0, :] = same.background[0]
+    same.foreground[0, :] = same.background[0, 0]
     mean, variance, information, eta, used = run(split_image(32.0), (63.5, 40.5), h=same)
     assert used == 1 and not information.any() and not eta.any()
+
+
+def test_a_parts_background_is_the_mean_of_its_own_and_the_cameras():
+    """The legs before the floor, the arms before the wall: each part's p_f takes the mean of the background just
+    outside it and the camera's (the mean of its parts' backgrounds), brute force over three parts."""
+    rng = np.random.default_rng(3)
+    h = Histograms.empty(1, 3)
+    h.foreground[0] = rng.random((3, COLOURS)) ** 4
+    h.background[0] = rng.random((3, COLOURS)) ** 4
+    h.foreground[0] /= h.foreground[0].sum(axis=1, keepdims=True)
+    h.background[0] /= h.background[0].sum(axis=1, keepdims=True)
+    h.seen[:] = True
+    h.seen_background[0] = [True, True, False]
+    table, distinct = table_of(h)
+    camera = h.background[0, :2].mean(axis=0)
+    for i, g in enumerate((0.5 * (h.background[0, 0] + camera), 0.5 * (h.background[0, 1] + camera), camera)):
+        np.testing.assert_allclose(table[0, i], h.foreground[0, i] / (h.foreground[0, i] + g), rtol=1e-12)
+        assert distinct[0, i] == pytest.approx(1.0 - np.sqrt(h.foreground[0, i] * g).sum(), rel=1e-12)

@@ -7,10 +7,13 @@ readers decode beside the grey one (:class:`tracker.io.readers.WithChroma`), and
 outline along the line best splits it into the part's colours inside and the background's outside.
 
 Colour statistics: each colour (16 bins per channel, 4096 bins) has a frequency ``h_f`` among the pixels of
-component ``i`` in camera ``k`` and ``h_b`` among the background pixels near the body in camera ``k``, learnt
-online from the tracked poses (:func:`learn_kernel`, ``h <- (1 - a) h + a h_new``).  A pixel of colour ``y``
-is the part's with probability ``p_f = h_f / (h_f + h_b)`` (0.5 for a colour seen in neither); between pixel
-centres, ``p_f`` is interpolated bilinearly, so that the line's points lie where the line is.
+component ``i`` in camera ``k`` and ``h_b`` among the background pixels just outside that part's outline in camera
+``k``, learnt online from the tracked poses (:func:`learn_kernel`, ``h <- (1 - a) h + a h_new``).  A pixel of
+colour ``y`` is the part's with probability ``p_f = h_f / (h_f + g)`` (0.5 for a colour seen in neither), where
+``g`` is the mean of the part's own background ``h_b`` and the camera's, the mean of all its parts' ``h_b``: the
+legs are seen against the floor, the arms and the head against the walls, and a part's own background alone, learnt
+from its few lines, is too sparse to be fair to a printed costume (:func:`part_table`).  Between pixel centres,
+``p_f`` is interpolated bilinearly, so that the line's points lie where the line is.
 
 Along the line ``x_t = p + t n`` (``t`` in half-size pixels, ``n`` the outward normal), with a smoothed step
 ``H(x) = 1/2 - a tanh(x / (2 s))`` (taken flat, ``1/2 -+ a``, beyond one pixel) for the chance that a pixel
@@ -50,8 +53,9 @@ LOG_STEPS = 4096  # intervals of the likelihood terms' table over p_f in [0, 1] 
 
 @dataclass
 class Histograms:
-    """Colour frequencies: ``foreground`` (C, N, COLOURS) per camera and component, ``background`` (C, COLOURS)
-    per camera, each summing to 1 where ``seen`` (C, N) / ``seen_background`` (C,) say it was learnt."""
+    """Colour frequencies per camera and component, of the part (``foreground`` (C, N, COLOURS)) and of the
+    background just outside its outline (``background`` (C, N, COLOURS)), each summing to 1 where ``seen`` (C, N) /
+    ``seen_background`` (C, N) say it was learnt."""
 
     foreground: np.ndarray
     background: np.ndarray
@@ -62,18 +66,18 @@ class Histograms:
     def empty(cls, cameras: int, components: int) -> Histograms:
         return cls(
             np.zeros((cameras, components, COLOURS)),
-            np.zeros((cameras, COLOURS)),
+            np.zeros((cameras, components, COLOURS)),
             np.zeros((cameras, components), np.bool_),
-            np.zeros(cameras, np.bool_),
+            np.zeros((cameras, components), np.bool_),
         )
 
     @property
     def ready(self) -> bool:
         """Whether any camera has both a background and a part learnt."""
-        return bool((self.seen & self.seen_background[:, None]).any())
+        return bool((self.seen.any(axis=1) & self.seen_background.any(axis=1)).any())
 
     def learn(self, counts: np.ndarray, counts_background: np.ndarray, *, rate: float) -> None:
-        """Mix a frame's counts (C, N, COLOURS) and (C, COLOURS) in (:func:`blend_kernel`), which leaves them zero."""
+        """Mix a frame's counts (C, N, COLOURS) each in (:func:`blend_kernel`), which leaves them zero."""
         blend_kernel(self.foreground, self.background, self.seen, self.seen_background, counts, counts_background, rate)
 
 
@@ -90,20 +94,32 @@ def colour_bins(chroma, out):
 
 @njit(cache=True, nogil=True)
 def part_table(foreground, background, seen, seen_background, out, o_distinct):
-    """p_f = h_f / (h_f + h_b) of every colour bin for every camera and component (C, N, COLOURS) into ``out`` (0.5
-    for a colour seen in neither; NaN where the camera has not learnt both the part and its background), and how
-    distinct the part's colours are from the background's, ``o_distinct`` (C, N): 1 minus the Bhattacharyya
-    coefficient sum_y sqrt(h_f(y) h_b(y)) of the two histograms (0 for the same colours, 1 for none shared)."""
+    """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS) into ``out`` (0.5
+    for a colour seen in neither; NaN where the camera has not learnt the part, or no background), ``g`` the mean of
+    the part's background and the camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part
+    whose lines all had another part outside), and how distinct the
+    part's colours are from that background, ``o_distinct`` (C, N): 1 minus the Bhattacharyya coefficient
+    sum_y sqrt(h_f(y) g(y)) of the two histograms (0 for the same colours, 1 for none shared)."""
+    around = np.zeros(foreground.shape[2])
     for k in range(foreground.shape[0]):
+        around[:] = 0.0
+        parts = 0
+        for i in range(foreground.shape[1]):
+            if seen_background[k, i]:
+                around += background[k, i]
+                parts += 1
+        if parts:
+            around /= parts
         for i in range(foreground.shape[1]):
             o_distinct[k, i] = 0.0
-            if not (seen[k, i] and seen_background[k]):
+            if not (seen[k, i] and parts):
                 out[k, i, :] = np.nan
                 continue
+            own = 0.5 if seen_background[k, i] else 0.0
             shared = 0.0
             for b in range(foreground.shape[2]):
                 f = foreground[k, i, b]
-                g = background[k, b]
+                g = own * background[k, i, b] + (1.0 - own) * around[b]
                 out[k, i, b] = 0.5 if f + g <= 0.0 else f / (f + g)
                 shared += math.sqrt(f * g)
             o_distinct[k, i] = max(0.0, 1.0 - shared)
@@ -305,7 +321,7 @@ def learn_kernel(
 ):
     """Count the colours along every sample's line at the poses ``twist`` moved them to: the half-size pixels
     ``1..inside`` in from the outline are its component's (in ``o_foreground`` (C, N, COLOURS)), those
-    ``2..outside`` out are the background's (``o_background`` (C, COLOURS)) where the line's outside is the
+    ``2..outside`` out are its background's (``o_background`` (C, N, COLOURS)) where the line's outside is the
     background and within the search interval (and inside, short of the part's far side, ``s_depth``).
 
     Once camera k knows part i's colours (``seen[k, i]``), only the lines whose last offset posterior agrees with
@@ -335,7 +351,7 @@ def learn_kernel(
         for t in range(2, farthest + 1):
             b = _colour(bins[k], width, height, x0 + t * nx, y0 + t * ny)
             if b >= 0:
-                o_background[k, b] += 1.0
+                o_background[k, i, b] += 1.0
 
 
 @njit(cache=True, nogil=True)
@@ -345,19 +361,18 @@ def blend_kernel(foreground, background, seen, seen_background, counts, counts_b
     zero."""
     for k in range(foreground.shape[0]):
         for i in range(foreground.shape[1]):
-            total = counts[k, i].sum()
-            if total <= 0.0:
-                continue
-            keep = 1.0 - rate if seen[k, i] else 0.0
-            for b in range(foreground.shape[2]):
-                foreground[k, i, b] = keep * foreground[k, i, b] + (1.0 - keep) * counts[k, i, b] / total
-                counts[k, i, b] = 0.0
-            seen[k, i] = True
-        total = counts_background[k].sum()
-        if total <= 0.0:
-            continue
-        keep = 1.0 - rate if seen_background[k] else 0.0
-        for b in range(background.shape[1]):
-            background[k, b] = keep * background[k, b] + (1.0 - keep) * counts_background[k, b] / total
-            counts_background[k, b] = 0.0
-        seen_background[k] = True
+            _blend(foreground[k, i], seen, k, i, counts[k, i], rate)
+            _blend(background[k, i], seen_background, k, i, counts_background[k, i], rate)
+
+
+@njit(cache=True, inline="always")
+def _blend(histogram, seen, k, i, counts, rate):
+    """Mix ``counts`` normalised into ``histogram`` (:func:`blend_kernel`), mark ``seen[k, i]`` and zero them."""
+    total = counts.sum()
+    if total <= 0.0:
+        return
+    keep = 1.0 - rate if seen[k, i] else 0.0
+    for b in range(histogram.shape[0]):
+        histogram[b] = keep * histogram[b] + (1.0 - keep) * counts[b] / total
+        counts[b] = 0.0
+    seen[k, i] = True

@@ -404,7 +404,7 @@ class Tracker:
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
         self.counts = np.zeros((len(cameras), n, COLOURS))  # a frame's colour counts, before they are learnt
-        self.counts_background = np.zeros((len(cameras), COLOURS))
+        self.counts_background = np.zeros((len(cameras), n, COLOURS))
         self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
 
     def with_cameras(self, cameras) -> Tracker:
