@@ -197,8 +197,7 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 type=on_off,
                 metavar="on|off",
                 help="read the colours along the outline too, learnt as the run goes, to tell the body from the room "
-                "(default off: it helps in furnished rooms but can still lose a real body in fast moves; "
-                "docs/region.md)",
+                "(default on; it needs the frames' colour, so --background goes without it; docs/region.md)",
             ),
         ),
         "region_weight": (

@@ -120,7 +120,10 @@ def part_table(foreground, background, seen, seen_background, out, o_distinct):
             for b in range(foreground.shape[2]):
                 f = foreground[k, i, b]
                 g = own * background[k, i, b] + (1.0 - own) * around[b]
-                out[k, i, b] = 0.5 if f + g <= 0.0 else f / (f + g)
+                if f <= 0.0:  # most colours: no share, no root to take
+                    out[k, i, b] = 0.5 if g <= 0.0 else 0.0
+                    continue
+                out[k, i, b] = f / (f + g)
                 shared += math.sqrt(f * g)
             o_distinct[k, i] = max(0.0, 1.0 - shared)
 

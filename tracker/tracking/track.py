@@ -108,7 +108,7 @@ class Settings:
     # again from there, kept if the limb's edges fit better (Tracker.lead); 0: never
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
-    region: bool = False  # read the colours along the samples' lines too (--region on)
+    region: bool = True  # read the colours along the samples' lines too (--region off: edges alone)
     region_weight: float = 0.3  # lambda: a line's weight is lambda / max(sigma^2, region_sigma^2)
     region_sigma: float = 1.0  # full-size pixels: the smallest standard deviation a line's offset is given
     region_amplitude: float = 0.43  # a: the smoothed step H(x) = 1/2 - a tanh(x / 2s) between inside and outside
