@@ -23,7 +23,7 @@ from tracker.tracking.keypoint_cue import (
     project_point,
 )
 from tracker.tracking.outline import Rig
-from tracker.tracking.track import Settings
+from tracker.tracking.track import Settings, Tracker
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
@@ -144,6 +144,28 @@ def test_swapped_pairs_are_rejected_and_low_confidence_ignored(demo_frame):
     (used, rejected), _, eta = _add(model, rig, component, point, pairs, poses, swapped, confidence)
     assert rejected == 1 and used == 3 * 12 - 2 - 1
     np.testing.assert_allclose(eta, 0.0, atol=1e-6)
+
+
+def test_by_default_unsure_landmarks_pull_in_proportion_to_their_confidence(demo_frame):
+    """The tracker takes landmarks from confidence 0.3, below the 0.5 from which the check across the views counts
+    them (docs/keypoints.md, "Fusion with the edges"): a wrist detected 20 px off pulls at confidence 0.4 with 0.4
+    times the pull it has at 1, and not at all at 0.2."""
+    model, rig, component, point, pairs, poses, pixels = demo_frame
+    tracker = Tracker(model, open_recording(DEMO).cameras, poses, Settings())
+    wrist = LANDMARKS.index("left_wrist")
+    off = np.full_like(pixels, np.nan)
+    off[0, wrist] = pixels[0, wrist] + (20.0, 0.0)
+    pulls, used = {}, {}
+    for q in (1.0, 0.4, 0.2):
+        confidence = np.zeros(pixels.shape[:2])
+        confidence[0, wrist] = q
+        information, eta = np.zeros((model.size, 6, 6)), np.zeros((model.size, 6))
+        misfit = np.full(pixels.shape[:2], np.nan)
+        used[q], _ = tracker.pull(off, confidence, zone=tracker.floor, information=information, eta=eta, misfit=misfit)
+        pulls[q] = eta
+    assert used == {1.0: 1, 0.4: 1, 0.2: 0}
+    assert np.abs(pulls[1.0]).max() > 0.0 and not pulls[0.2].any()
+    np.testing.assert_allclose(pulls[0.4], 0.4 * pulls[1.0], rtol=1e-12, atol=1e-15)
 
 
 def test_landmarks_within_the_detector_noise_are_not_used_and_further_ones_pull_by_the_excess(demo_frame):
