@@ -97,9 +97,9 @@ def part_table(foreground, background, seen, seen_background, out, o_distinct):
     """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS) into ``out`` (0.5
     for a colour seen in neither; NaN where the camera has not learnt the part, or no background), ``g`` the mean of
     the part's background and the camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part
-    whose lines all had another part outside), and how distinct the
-    part's colours are from that background, ``o_distinct`` (C, N): 1 minus the Bhattacharyya coefficient
-    sum_y sqrt(h_f(y) g(y)) of the two histograms (0 for the same colours, 1 for none shared)."""
+    whose lines all had another part outside), and how distinct the part's colours are from that background,
+    ``o_distinct`` (C, N): 1 minus the Bhattacharyya coefficient sum_y sqrt(h_f(y) g(y)) of the two histograms (0
+    for the same colours, 1 for none shared)."""
     around = np.zeros(foreground.shape[2])
     for k in range(foreground.shape[0]):
         around[:] = 0.0
@@ -364,18 +364,19 @@ def blend_kernel(foreground, background, seen, seen_background, counts, counts_b
     zero."""
     for k in range(foreground.shape[0]):
         for i in range(foreground.shape[1]):
-            _blend(foreground[k, i], seen, k, i, counts[k, i], rate)
-            _blend(background[k, i], seen_background, k, i, counts_background[k, i], rate)
+            seen[k, i] = _blend(foreground[k, i], counts[k, i], rate, seen[k, i])
+            seen_background[k, i] = _blend(background[k, i], counts_background[k, i], rate, seen_background[k, i])
 
 
 @njit(cache=True, inline="always")
-def _blend(histogram, seen, k, i, counts, rate):
-    """Mix ``counts`` normalised into ``histogram`` (:func:`blend_kernel`), mark ``seen[k, i]`` and zero them."""
+def _blend(histogram, counts, rate, learnt):
+    """Mix ``counts`` normalised into ``histogram`` (taken whole if it was never ``learnt``) and zero them
+    (:func:`blend_kernel`); returns whether the histogram is learnt now."""
     total = counts.sum()
     if total <= 0.0:
-        return
-    keep = 1.0 - rate if seen[k, i] else 0.0
+        return learnt
+    keep = 1.0 - rate if learnt else 0.0
     for b in range(histogram.shape[0]):
         histogram[b] = keep * histogram[b] + (1.0 - keep) * counts[b] / total
         counts[b] = 0.0
-    seen[k, i] = True
+    return True

@@ -96,7 +96,7 @@ class Settings:
     # side at least this long (:func:`reduction`; their pixel settings still scale with the full size); 0: never
     resample_every: int = 3  # sample the outlines afresh every k-th iteration; between, move them to first order
     keypoint_weight: float = 3.0  # s: a landmark's weight against an edge sample's (tracker.tracking.keypoint_cue)
-    keypoint_confidence: float = 0.3  # landmarks less confident than this are not used
+    keypoint_confidence: float = 0.3  # landmarks less confident are not used (below 0.5 they are used unchecked)
     keypoint_tolerance: float = 0.015  # detector noise, a share of the body's image size: closer landmarks unused
     keypoint_noise_multiple: float = 1.5  # each landmark's zone grows to this many times its median misfit (0: fixed)
     keypoint_tolerance_max: float = 0.15  # ... but no further: a body that far off is pulled back
