@@ -12,6 +12,7 @@ from tracker.tracking.region_cue import (
     Histograms,
     colour_bins,
     learn_kernel,
+    line_profiles,
     log_table,
     part_table,
     region_kernel,
@@ -66,31 +67,43 @@ def table_of(h):
 
 
 def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, twist=None, h=None, **options):
-    """The kernel on one sample in camera 0 of component 0 with normal +x; returns (mean, variance, C, eta, used)."""
+    """The kernels on one sample in camera 0 of component 0 with normal +x, its line profiled where it was sampled
+    and read after the component moved by ``twist``; returns (mean, variance, C, eta, used)."""
     h = histograms() if h is None else h
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
     mean, variance = np.zeros(1), np.zeros(1)
     settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0) | options
-    used = region_kernel(
+    table, distinct = table_of(h)
+    camera, component = np.zeros(1, np.int64), np.zeros(1, np.int64)
+    search = (np.array([lo]), np.array([hi]))
+    profiles = line_profiles(
         bins_of(chroma),
         np.array([[chroma.shape[2], chroma.shape[1]]]),
         1,
-        np.zeros(1, np.int64),
-        np.zeros(1, np.int64),
+        camera,
+        component,
         np.array([pixel], float),
         np.array([[1.0, 0.0]]),
-        jac,
         np.array([outside]),
         np.array([depth]),
-        np.zeros((2, 6)) if twist is None else twist,
-        np.array([lo]),
-        np.array([hi]),
+        *search,
         1,
-        *table_of(h),
+        table,
         log_table(settings["amplitude"], settings["slope"]),
+    )
+    used = region_kernel(
+        1,
+        camera,
+        component,
+        jac,
+        *search,
+        np.array([depth]),
+        np.zeros((2, 6)) if twist is None else twist,
+        distinct,
         settings["weight"],
         settings["min_variance"],
+        *profiles,
         mean,
         variance,
         information,
@@ -99,12 +112,14 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
     return mean[0], variance[0], information, eta, used
 
 
-def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
+def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5, candidates=None):
     """The posterior's mean and variance (full-size pixels) by the product over every pixel of the line, the step
-    flat beyond one pixel as the kernel takes it."""
+    flat beyond one pixel as the kernel takes it: over the ``candidates`` given (half-size pixels from ``pixel``
+    along the line), else over those of the search interval ``lo``..``hi``."""
     x0 = (pixel[0] + 0.5) / FACTOR - 0.5
     y0 = round((pixel[1] + 0.5) / FACTOR - 0.5)  # the tests' rows lie on pixel centres
-    candidates = np.arange(-(-lo // FACTOR), hi // FACTOR + 1)
+    if candidates is None:
+        candidates = np.arange(-(-lo // FACTOR), hi // FACTOR + 1)
     pixels = np.arange(candidates[0] - 1, candidates[-1] + 2)
 
     def step(x):
@@ -169,15 +184,22 @@ def test_a_line_adds_its_weighted_row_to_the_information():
     assert not information[1].any() and not eta[1].any()
 
 
-def test_the_predicted_motion_moves_the_line():
-    """With the component moved by a twist since sampling, the line starts at p + (L . twist) n."""
-    chroma = split_image(32.0)
-    jacobian = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+@pytest.mark.parametrize("pixels", [-5.0, -0.7, 1.4, 4.0])
+def test_a_moved_part_reads_its_profile_within_its_moved_search_interval(pixels):
+    """Moved by ``pixels`` along the normal since sampling, the part's line keeps the candidates of its profile
+    that lie in its search interval moved with it, and gives their posterior from its new place."""
+    chroma = split_image(32.0, noise=0.1, seed=5)
     twist = np.zeros((2, 6))
-    twist[0, 0] = 4.0  # four pixels outwards
-    moved, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist)
-    direct, *_ = run(chroma, (64.0, 40.5), jacobian=jacobian)
-    assert moved == pytest.approx(direct, abs=1e-12)
+    twist[0, 0] = pixels
+    jacobian = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    mean, variance, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist, lo=-14, hi=17)
+    shift = pixels / FACTOR
+    candidates = np.arange(max(np.ceil(-7 + shift), -7), min(np.floor(8 + shift), 8) + 1)
+    expected_mean, expected_variance = brute_force(chroma, (60.0, 40.5), -14, 17, histograms(), candidates=candidates)
+    assert mean == pytest.approx(expected_mean - pixels, abs=1e-4)
+    assert variance == pytest.approx(expected_variance, abs=1e-4)
+    still, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, lo=-14, hi=17)
+    assert 60.0 + pixels + mean == pytest.approx(60.0 + still, abs=0.25)  # the same boundary found from anywhere
 
 
 def test_lines_that_cannot_tell_are_left_out():
@@ -185,6 +207,9 @@ def test_lines_that_cannot_tell_are_left_out():
     assert np.isnan(run(chroma, (63.5, 40.5), outside=1)[0])  # another part outside: no background there
     assert np.isnan(run(chroma, (63.5, 40.5), lo=-2, hi=1)[0])  # too short a line
     assert np.isnan(run(chroma, (158.0, 40.5))[0])  # reaches beyond the image
+    twist = np.zeros((2, 6))
+    twist[0, 0] = 36.0
+    assert np.isnan(run(chroma, (63.5, 40.5), lo=-14, hi=17, twist=twist)[0])  # moved beyond its sampled line
     unseen = histograms()
     unseen.seen[0, 0] = False
     assert np.isnan(run(chroma, (63.5, 40.5), h=unseen)[0])

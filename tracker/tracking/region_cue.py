@@ -175,117 +175,179 @@ def _half(px, py, nx, ny, moved):
     return ((px + moved * nx) + 0.5) / FACTOR - 0.5, ((py + moved * ny) + 0.5) / FACTOR - 0.5
 
 
+@njit(cache=True, inline="always")
+def _limits(s_lo, s_hi, s_depth):
+    """A line's candidate offsets (half-size pixels, :func:`region_kernel`): from the search interval ``s_lo``,
+    ``s_hi`` (full-size pixels) and short of the part's far side (half its width along the line, ``s_depth``)."""
+    return -min(-s_lo // FACTOR, s_depth // (2 * FACTOR), MAX_LINE), min(s_hi // FACTOR, MAX_LINE)
+
+
+@njit(cache=True, inline="always")
+def _used(s, every, table_ki, outside, d_lo, d_hi):
+    """Whether a line takes part: every ``every``-th, of a part whose colours the camera knows, with the
+    background outside, and at least three candidates long."""
+    return s % every == 0 and not np.isnan(table_ki[0]) and outside == -1 and d_hi - d_lo >= 2
+
+
+@njit(cache=True, nogil=True)
+def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, pf, terms, out, at):
+    """The log-likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
+    pixels) into ``out[at:]`` (module docstring); False where a pixel of the line lies outside the image.  ``pf``
+    (n + 2,) and ``terms`` (6, n + 3) are scratch."""
+    log_half = math.log(0.5)
+    n_pix = d_hi - d_lo + 3  # pixels t in [d_lo - 1, d_hi + 1]; index j = t - d_lo + 1
+    for j in range(n_pix):
+        t = d_lo - 1 + j
+        p = part_probability(bins, table, width, height, x0 + t * nx, y0 + t * ny)
+        if p < 0.0:
+            return False
+        pf[j] = p
+    prefix_in = terms[4]
+    suffix_out = terms[5]
+    for j in range(n_pix):
+        x = pf[j] * LOG_STEPS
+        c = min(int(x), LOG_STEPS - 1)
+        f = x - c
+        for row in range(4):
+            terms[row, j] = logs[row, c] + f * (logs[row, c + 1] - logs[row, c])
+    prefix_in[0] = 0.0
+    for j in range(n_pix):
+        prefix_in[j + 1] = prefix_in[j] + terms[0, j]
+    suffix_out[n_pix] = 0.0
+    for j in range(n_pix - 1, -1, -1):
+        suffix_out[j] = suffix_out[j + 1] + terms[1, j]
+    for c in range(d_hi - d_lo + 1):
+        j = c + 1  # the pixel at t = d
+        out[at + c] = prefix_in[j - 1] + terms[2, j - 1] + log_half + terms[3, j + 1] + suffix_out[j + 2]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _moments(likelihood, at, n):
+    """The mean and variance (in steps from ``at``) of the posterior ``likelihood[at:at + n]`` normalised."""
+    total = 0.0
+    mean = 0.0
+    for c in range(n):
+        total += likelihood[at + c]
+        mean += likelihood[at + c] * c
+    mean /= total
+    variance = 0.0
+    for c in range(n):
+        variance += likelihood[at + c] * (c - mean) ** 2
+    return mean, variance / total
+
+
+@njit(cache=True, nogil=True)
+def line_profiles(
+    bins, chroma_size, count, s_cam, s_comp, s_pixel, s_normal, s_outside, s_depth, s_lo, s_hi, every, table, logs
+):
+    """Each line's likelihood of the outline at every candidate offset from its sampled place (module docstring),
+    divided by its largest, which :func:`region_kernel` reads for this and the next iterations until the next
+    sampling.  Returns the line profiles ``(likelihood, start, first, length)``: sample ``s``'s lie at
+    ``likelihood[start[s]:start[s] + length[s]]``, for the offsets ``first[s], first[s] + 1, ...`` (half-size
+    pixels along the line; length 0 for a line not used, or one that leaves the image).
+
+    A line's log-likelihoods differ by at most 2 * (MAX_LINE + 1) pixels' terms, each within
+    log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of another's: the smallest ratio (e^-340 then) is far from
+    underflow, so any run of candidates keeps its posterior's shape to the last bits."""
+    start = np.zeros(count, np.int64)
+    first = np.zeros(count, np.int64)
+    length = np.zeros(count, np.int64)
+    total = 0
+    for s in range(count):
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
+        if _used(s, every, table[s_cam[s], s_comp[s]], s_outside[s], d_lo, d_hi):
+            start[s] = total
+            total += d_hi - d_lo + 1
+    likelihood = np.empty(total)
+    n_max = 2 * MAX_LINE + 3
+    pf = np.empty(n_max)
+    terms = np.empty((6, n_max + 1))
+    for s in range(count):
+        k = s_cam[s]
+        i = s_comp[s]
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
+        if not _used(s, every, table[k, i], s_outside[s], d_lo, d_hi):
+            continue
+        nx = s_normal[s, 0]
+        ny = s_normal[s, 1]
+        x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, 0.0)
+        if _scores(
+            bins[k],
+            table[k, i],
+            chroma_size[k, 0],
+            chroma_size[k, 1],
+            x0,
+            y0,
+            nx,
+            ny,
+            d_lo,
+            d_hi,
+            logs,
+            pf,
+            terms,
+            likelihood,
+            start[s],
+        ):
+            at, n = start[s], d_hi - d_lo + 1
+            best = likelihood[at : at + n].max()
+            for c in range(n):
+                likelihood[at + c] = math.exp(likelihood[at + c] - best)
+            first[s] = d_lo
+            length[s] = n
+    return likelihood, start, first, length
+
+
 @njit(cache=True, nogil=True)
 def region_kernel(
-    bins,
-    chroma_size,
     count,
     s_cam,
     s_comp,
-    s_pixel,
-    s_normal,
     s_jac,
-    s_outside,
-    s_depth,
-    twist,
     s_lo,
     s_hi,
-    every,
-    table,
+    s_depth,
+    twist,
     distinct,
-    logs,
     weight,
     min_variance,
+    p_likelihood,
+    p_start,
+    p_first,
+    p_length,
     o_mean,
     o_variance,
     information,
     eta,
 ):
-    """The outline's offset posterior along the lines of every ``every``-th sample, added to C_i and eta_i (module
-    docstring); returns the number of lines used.
+    """The outline's offset posterior along each line profiled at the sampling (``p_*``, :func:`line_profiles`),
+    added to C_i and eta_i (module docstring); returns the number of lines used.
 
-    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one half-size
-    pixel from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the
-    line, ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the
-    part's far side.  Writes each sample's posterior mean and
-    variance (full-size pixels; NaN for a line not used).  ``min_variance`` floors the variance in the weight,
-    ``weight`` is lambda."""
+    The candidate offsets step by one half-size pixel.  Since the sampling, the part moved by ``L . twist_i``
+    along the line, and with it the line's search interval (``s_lo``, ``s_hi``, full-size pixels, short of the
+    part's far side ``s_depth``): the candidates are those of the profile that lie within the interval moved
+    (at least three, else the line is left out this iteration).  Writes each sample's posterior mean and variance
+    (full-size pixels, from the moved place; NaN for a line not used).  ``min_variance`` floors the variance in
+    the weight, ``weight`` is lambda."""
     used = 0
-    log_half = math.log(0.5)
-    n_max = 2 * MAX_LINE + 3
-    pf = np.empty(n_max)
-    l_in = np.empty(n_max)
-    l_out = np.empty(n_max)
-    l_m1 = np.empty(n_max)
-    l_p1 = np.empty(n_max)
-    prefix_in = np.empty(n_max + 1)
-    suffix_out = np.empty(n_max + 1)
-    score = np.empty(n_max)
     for s in range(count):
         o_mean[s] = np.nan
         o_variance[s] = np.nan
+        if p_length[s] == 0:
+            continue
         k = s_cam[s]
         i = s_comp[s]
-        if s % every != 0 or np.isnan(table[k, i, 0]):
-            continue
         moved = 0.0
         for a in range(6):
             moved += s_jac[s, a] * twist[i, a]
-        nx = s_normal[s, 0]
-        ny = s_normal[s, 1]
-        x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved)
-        width = chroma_size[k, 0]
-        height = chroma_size[k, 1]
-        d_lo = -min(-s_lo[s] // FACTOR, s_depth[s] // (2 * FACTOR), MAX_LINE)
-        d_hi = min(s_hi[s] // FACTOR, MAX_LINE)
-        # pixels t in [d_lo - 1, d_hi + 1]; index j = t - d_lo + 1
-        n_pix = d_hi - d_lo + 3
-        if s_outside[s] != -1 or d_hi - d_lo < 2:
+        shift = moved / FACTOR  # half-size pixels
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
+        u_lo = max(int(math.ceil(d_lo + shift - 1e-9)), p_first[s])
+        u_hi = min(int(math.floor(d_hi + shift + 1e-9)), p_first[s] + p_length[s] - 1)
+        if u_hi - u_lo < 2:
             continue
-        ok = True
-        for j in range(n_pix):
-            t = d_lo - 1 + j
-            p = part_probability(bins[k], table[k, i], width, height, x0 + t * nx, y0 + t * ny)
-            if p < 0.0:
-                ok = False
-                break
-            pf[j] = p
-        if not ok:
-            continue
-        for j in range(n_pix):
-            x = pf[j] * LOG_STEPS
-            c = min(int(x), LOG_STEPS - 1)
-            f = x - c
-            l_in[j] = logs[0, c] + f * (logs[0, c + 1] - logs[0, c])
-            l_out[j] = logs[1, c] + f * (logs[1, c + 1] - logs[1, c])
-            l_m1[j] = logs[2, c] + f * (logs[2, c + 1] - logs[2, c])
-            l_p1[j] = logs[3, c] + f * (logs[3, c + 1] - logs[3, c])
-        prefix_in[0] = 0.0
-        for j in range(n_pix):
-            prefix_in[j + 1] = prefix_in[j] + l_in[j]
-        suffix_out[n_pix] = 0.0
-        for j in range(n_pix - 1, -1, -1):
-            suffix_out[j] = suffix_out[j + 1] + l_out[j]
-        best = -np.inf
-        n_d = d_hi - d_lo + 1
-        for c in range(n_d):
-            j = c + 1  # the pixel at t = d
-            v = prefix_in[j - 1] + l_m1[j - 1] + log_half + l_p1[j + 1] + suffix_out[j + 2]
-            score[c] = v
-            best = max(best, v)
-        total = 0.0
-        mean = 0.0
-        for c in range(n_d):
-            e = math.exp(score[c] - best)
-            score[c] = e
-            total += e
-            mean += e * (d_lo + c)
-        mean /= total
-        variance = 0.0
-        for c in range(n_d):
-            variance += score[c] * (d_lo + c - mean) ** 2
-        variance /= total
-        mean *= FACTOR
+        step, variance = _moments(p_likelihood, p_start[s] + u_lo - p_first[s], u_hi - u_lo + 1)
+        mean = (u_lo + step - shift) * FACTOR
         variance *= FACTOR * FACTOR
         o_mean[s] = mean
         o_variance[s] = variance

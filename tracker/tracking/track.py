@@ -49,6 +49,7 @@ from tracker.tracking.region_cue import (
     Histograms,
     colour_bins,
     learn_kernel,
+    line_profiles,
     log_table,
     part_table,
     region_kernel,
@@ -325,6 +326,7 @@ class Workspace:
     hi: np.ndarray | None = None
     outside: np.ndarray | None = None
     depth: np.ndarray | None = None
+    profiles: tuple[np.ndarray, ...] | None = None  # the region cue's lines scored at the sampling (line_profiles)
 
     @classmethod
     def around(cls, images: np.ndarray, ownership: Ownership) -> Workspace:
@@ -445,6 +447,7 @@ class Tracker:
             learnt = self.histograms, self.part_table.copy(), self.distinct.copy()
             self.histograms = Histograms.empty(*self.histograms.seen.shape)
             colour_bins(np.zeros((2, 2, 3), np.uint8), np.zeros((2, 2), np.int16))
+            self.profile_lines(self.work)
             self.add_regions(self.work, self.still)
             self.learn_colours()
             self.histograms, self.part_table, self.distinct = learnt
@@ -499,7 +502,8 @@ class Tracker:
         """
         st, work = self.settings, self.work
         search_range = self.search_range(iteration)
-        if iteration % max(st.resample_every, 1) == 0:
+        resampled = iteration % max(st.resample_every, 1) == 0
+        if resampled:
             self.sample(work, self.poses, search_range)
             self.sampled_poses = self.poses
             twist = self.still
@@ -511,6 +515,8 @@ class Tracker:
             self.add_keypoints(*self.keypoints)
         started = work.times.add("measure", started)
         if self.regions:
+            if resampled:
+                self.profile_lines(work)
             self.add_regions(work, twist)
             started = work.times.add("region", started)
         self.poses = self.update(self.poses)
@@ -568,13 +574,13 @@ class Tracker:
         been learnt."""
         return self.settings.region and self.work.coloured and self.histograms.ready
 
-    def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
-        """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region_cue.region_kernel`); returns the
-        number of lines used."""
+    def profile_lines(self, work: Workspace) -> None:
+        """Score the region cue's lines at the places just sampled, for this and the next iterations
+        (:func:`tracker.tracking.region_cue.line_profiles`)."""
         s, st = work.samples, self.settings
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
         assert work.outside is not None and work.depth is not None
-        return region_kernel(
+        work.profiles = line_profiles(
             work.bins,
             self.chroma_size,
             s.count,
@@ -582,18 +588,35 @@ class Tracker:
             s.component,
             s.pixel,
             s.normal,
-            s.jacobian,
             work.outside,
             work.depth,
-            twist,
             work.lo,
             work.hi,
             max(st.region_every, 1),
             self.part_table,
-            self.distinct,
             self.logs,
+        )
+
+    def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
+        """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region_cue.region_kernel`), read from
+        their profiles (:meth:`profile_lines`) in their search intervals moved with the parts; returns the number
+        of lines used."""
+        s, st = work.samples, self.settings
+        assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
+        assert work.outside is not None and work.depth is not None and work.profiles is not None
+        return region_kernel(
+            s.count,
+            s.camera,
+            s.component,
+            s.jacobian,
+            work.lo,
+            work.hi,
+            work.depth,
+            twist,
+            self.distinct,
             st.region_weight,
             st.region_sigma**2,
+            *work.profiles,
             work.region_mean,
             work.region_variance,
             work.information,
