@@ -9,6 +9,9 @@ from tracker.tracking.region_cue import (
     BINS,
     COLOURS,
     FACTOR,
+    PROFILE_MARGIN,
+    RESCALE,
+    Counts,
     Histograms,
     colour_bins,
     learn_kernel,
@@ -62,45 +65,39 @@ def bins_of(chroma):
 def table_of(h):
     """(p_f table, distinctness) of histograms ``h``."""
     out, distinct = np.zeros(h.foreground.shape), np.zeros(h.seen.shape)
-    part_table(h.foreground, h.background, h.seen, h.seen_background, out, distinct)
+    part_table(h.foreground, h.background, h.scale, h.seen, h.seen_background, out, distinct)
     return out, distinct
 
 
 def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, twist=None, h=None, **options):
     """The kernels on one sample in camera 0 of component 0 with normal +x, its line profiled where it was sampled
-    and read after the component moved by ``twist``; returns (mean, variance, C, eta, used)."""
+    (``margin`` half-size pixels wide, PROFILE_MARGIN unless given) and read after the component moved by
+    ``twist``; returns (mean, variance, C, eta, used)."""
     h = histograms() if h is None else h
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
     mean, variance = np.zeros(1), np.zeros(1)
-    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0) | options
+    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=PROFILE_MARGIN) | options
+    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1]]])
     table, distinct = table_of(h)
-    camera, component = np.zeros(1, np.int64), np.zeros(1, np.int64)
+    logs = log_table(settings["amplitude"], settings["slope"])
+    line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([pixel], float), np.array([[1.0, 0.0]]))
+    limits = (np.array([outside]), np.array([depth]))
     search = (np.array([lo]), np.array([hi]))
-    profiles = line_profiles(
-        bins_of(chroma),
-        np.array([[chroma.shape[2], chroma.shape[1]]]),
+    profiles = line_profiles(bins, size, 1, *line, *limits, *search, 1, table, logs, settings["margin"])
+    used = region_kernel(
+        bins,
+        size,
         1,
-        camera,
-        component,
-        np.array([pixel], float),
-        np.array([[1.0, 0.0]]),
-        np.array([outside]),
-        np.array([depth]),
+        *line,
+        jac,
+        *limits,
+        np.zeros((2, 6)) if twist is None else twist,
         *search,
         1,
         table,
-        log_table(settings["amplitude"], settings["slope"]),
-    )
-    used = region_kernel(
-        1,
-        camera,
-        component,
-        jac,
-        *search,
-        np.array([depth]),
-        np.zeros((2, 6)) if twist is None else twist,
         distinct,
+        logs,
         settings["weight"],
         settings["min_variance"],
         *profiles,
@@ -112,14 +109,12 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
     return mean[0], variance[0], information, eta, used
 
 
-def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5, candidates=None):
+def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
     """The posterior's mean and variance (full-size pixels) by the product over every pixel of the line, the step
-    flat beyond one pixel as the kernel takes it: over the ``candidates`` given (half-size pixels from ``pixel``
-    along the line), else over those of the search interval ``lo``..``hi``."""
+    flat beyond one pixel as the kernel takes it."""
     x0 = (pixel[0] + 0.5) / FACTOR - 0.5
     y0 = round((pixel[1] + 0.5) / FACTOR - 0.5)  # the tests' rows lie on pixel centres
-    if candidates is None:
-        candidates = np.arange(-(-lo // FACTOR), hi // FACTOR + 1)
+    candidates = np.arange(-(-lo // FACTOR), hi // FACTOR + 1)
     pixels = np.arange(candidates[0] - 1, candidates[-1] + 2)
 
     def step(x):
@@ -184,22 +179,60 @@ def test_a_line_adds_its_weighted_row_to_the_information():
     assert not information[1].any() and not eta[1].any()
 
 
-@pytest.mark.parametrize("pixels", [-5.0, -0.7, 1.4, 4.0])
-def test_a_moved_part_reads_its_profile_within_its_moved_search_interval(pixels):
-    """Moved by ``pixels`` along the normal since sampling, the part's line keeps the candidates of its profile
-    that lie in its search interval moved with it, and gives their posterior from its new place."""
-    chroma = split_image(32.0, noise=0.1, seed=5)
+def moved_by(pixels: float) -> tuple[np.ndarray, np.ndarray]:
+    """A Jacobian along the normal and a twist that moves component 0 by ``pixels`` (full-size) along it."""
     twist = np.zeros((2, 6))
     twist[0, 0] = pixels
-    jacobian = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    mean, variance, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist, lo=-14, hi=17)
-    shift = pixels / FACTOR
-    candidates = np.arange(max(np.ceil(-7 + shift), -7), min(np.floor(8 + shift), 8) + 1)
-    expected_mean, expected_variance = brute_force(chroma, (60.0, 40.5), -14, 17, histograms(), candidates=candidates)
-    assert mean == pytest.approx(expected_mean - pixels, abs=1e-4)
-    assert variance == pytest.approx(expected_variance, abs=1e-4)
-    still, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, lo=-14, hi=17)
-    assert 60.0 + pixels + mean == pytest.approx(60.0 + still, abs=0.25)  # the same boundary found from anywhere
+    return np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0]), twist
+
+
+@pytest.mark.parametrize("pixels", [-6.0, 4.0, 10.0])
+@pytest.mark.parametrize("margin", [0, PROFILE_MARGIN])
+def test_the_predicted_motion_moves_the_line(margin, pixels):
+    """With the component moved by a twist since sampling, the line starts at p + (L . twist) n: read from the
+    line's profile while the move is within its margin, scored afresh beyond."""
+    chroma = split_image(32.0, noise=0.1, seed=5)
+    jacobian, twist = moved_by(pixels)
+    moved, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist, margin=margin)
+    direct, *_ = run(chroma, (60.0 + pixels, 40.5), jacobian=jacobian)
+    assert moved == pytest.approx(direct, abs=1e-12)
+
+
+@pytest.mark.parametrize("pixels", [-3.3, -0.7, 1.4, 2.9])
+def test_a_move_between_pixels_read_from_the_profile_finds_the_boundary_as_a_fresh_line_does(pixels):
+    """The profile's candidates lie on the whole half-size pixels from the sampled place, a fresh line's on those
+    from the moved place: the two posteriors differ by that phase only."""
+    chroma = split_image(32.0, noise=0.05, seed=2)
+    jacobian, twist = moved_by(pixels)
+    profiled, profiled_variance, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist)
+    fresh, fresh_variance, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist, margin=0)
+    still, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian)
+    assert 60.0 + pixels + profiled == pytest.approx(60.0 + still, abs=0.25)  # the same boundary from anywhere
+    assert profiled == pytest.approx(fresh, abs=0.5)
+    assert profiled_variance == pytest.approx(fresh_variance, abs=0.5)
+
+
+def test_a_line_whose_margin_leaves_the_image_is_profiled_without_it():
+    """Near the image's edge the line is profiled on its own candidates, so it still counts where it was sampled,
+    and moved out of them it is scored afresh."""
+    chroma = split_image(62.0, noise=0.05, seed=4)  # the boundary at full-size x 123.5; the image is 160 wide
+    lo, hi = -20, 34  # the line reaches half-size x 78.75 of 79: the margin's pixels would leave it
+    bins, size = bins_of(chroma), np.array([[80, 40]])
+    line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([[122.0, 40.5]]), np.array([[1.0, 0.0]]))
+    limits = (np.array([-1]), np.array([41]), np.array([lo]), np.array([hi]))
+    logs = log_table(0.43, 0.5)
+    for x, (first, length) in ((122.0, (-10, 28)), (100.0, (-10 - PROFILE_MARGIN, 28 + 2 * PROFILE_MARGIN))):
+        line[2][0, 0] = x
+        _, _, profiled_first, profiled_length = line_profiles(
+            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], logs, PROFILE_MARGIN
+        )
+        assert (profiled_first[0], profiled_length[0]) == (first, length)
+    still, *_ = run(chroma, (122.0, 40.5), lo=lo, hi=hi)
+    assert 122.0 + still == pytest.approx(123.5, abs=1.0)
+    jacobian, twist = moved_by(-2.0)
+    moved, *_ = run(chroma, (122.0, 40.5), lo=lo, hi=hi, jacobian=jacobian, twist=twist)
+    direct, *_ = run(chroma, (120.0, 40.5), lo=lo, hi=hi, jacobian=jacobian)
+    assert moved == pytest.approx(direct, abs=1e-12)
 
 
 def test_lines_that_cannot_tell_are_left_out():
@@ -207,9 +240,6 @@ def test_lines_that_cannot_tell_are_left_out():
     assert np.isnan(run(chroma, (63.5, 40.5), outside=1)[0])  # another part outside: no background there
     assert np.isnan(run(chroma, (63.5, 40.5), lo=-2, hi=1)[0])  # too short a line
     assert np.isnan(run(chroma, (158.0, 40.5))[0])  # reaches beyond the image
-    twist = np.zeros((2, 6))
-    twist[0, 0] = 36.0
-    assert np.isnan(run(chroma, (63.5, 40.5), lo=-14, hi=17, twist=twist)[0])  # moved beyond its sampled line
     unseen = histograms()
     unseen.seen[0, 0] = False
     assert np.isnan(run(chroma, (63.5, 40.5), h=unseen)[0])
@@ -248,7 +278,7 @@ def learn(chroma, seen, mean, counts):
         2.0,
         2,
         5,
-        *counts,
+        *counts.arrays(),
     )
 
 
@@ -256,37 +286,67 @@ def test_known_colours_are_learnt_only_where_the_line_agrees_with_the_outline():
     chroma = split_image(32.0)
     seen = Histograms.empty(1, 2)
     seen.seen[:] = True
-    counts = (np.zeros_like(seen.foreground), np.zeros_like(seen.background))
+    counts = Counts.empty(1, 2)
     learn(chroma, seen, [1.5, 3.0], counts)  # the first line agrees within 2 pixels, the second does not
-    assert counts[0][0, 0].sum() == 2 and counts[0][0, 1].sum() == 0
+    assert counts.colours[0, 0, 0].sum() == 2 and counts.colours[0, 0, 1].sum() == 0
     learn(chroma, seen, [np.nan, -2.0], counts)  # a line the cue did not measure teaches nothing
-    assert counts[0][0, 0].sum() == 2 and counts[0][0, 1].sum() == 2
+    assert counts.colours[0, 0, 0].sum() == 2 and counts.colours[0, 0, 1].sum() == 2
+    assert counts.touched_count[0, 0].tolist() == [1, 1] and counts.touched[0, 0, :, 0].tolist() == [bin_of(PART)] * 2
 
 
 def test_learning_counts_inside_and_outside_then_blends():
     chroma = split_image(32.0)
     seen = Histograms.empty(1, 2)
-    counts = (np.zeros_like(seen.foreground), np.zeros_like(seen.background))
+    counts = Counts.empty(1, 2)
     learn(chroma, seen, [np.nan, np.nan], counts)
-    fg, bg = counts
+    fg, bg = counts.colours
     assert fg[0, 0, bin_of(PART)] == 2 and fg[0, 1, bin_of(PART)] == 2 and fg.sum() == 4
     assert bg[0, 0, bin_of(ROOM)] == 4 and bg.sum() == 4  # 2..5 out of the first line; the second has a part outside
-    seen.learn(fg, bg, rate=0.2)
+    seen.learn(counts, rate=0.2)
     assert seen.seen.all() and seen.seen_background.tolist() == [[True, False]] and seen.ready
-    assert not fg.any() and not bg.any()  # the counts are used up
-    assert seen.foreground[0, 0].sum() == pytest.approx(1.0) and seen.background[0, 0].sum() == pytest.approx(1.0)
-    background = seen.background.copy()
+    assert not counts.colours.any() and not counts.touched_count.any()  # the counts are used up
+    foreground, background = seen.frequencies()
+    assert foreground[0, 0].sum() == pytest.approx(1.0) and background[0, 0].sum() == pytest.approx(1.0)
     fg[0, 0, 0] = 1.0
-    seen.learn(fg, bg, rate=0.2)
-    assert seen.foreground[0, 0, 0] == pytest.approx(0.2)
-    assert seen.foreground[0, 0, bin_of(PART)] == pytest.approx(0.8)
-    np.testing.assert_array_equal(seen.background, background)
+    counts.touched[0, 0, 0, 0], counts.touched_count[0, 0, 0] = 0, 1
+    seen.learn(counts, rate=0.2)
+    foreground, after = seen.frequencies()
+    assert foreground[0, 0, 0] == pytest.approx(0.2)
+    assert foreground[0, 0, bin_of(PART)] == pytest.approx(0.8)
+    np.testing.assert_array_equal(after, background)
     table, distinct = table_of(seen)
     assert distinct[0, 0] == pytest.approx(1.0) and distinct[0, 1] == pytest.approx(1.0)  # no colour shared
     assert table[0, 1, bin_of(ROOM)] == 0.0  # the second part, with no background of its own, takes the camera's
     assert table[0, 0, bin_of(PART)] == pytest.approx(0.8 / (0.8 + 0.0)) and table[0, 0, 1] == 0.5
     assert table[0, 0, bin_of(ROOM)] == 0.0
     assert COLOURS == BINS**3
+
+
+def test_learning_only_the_colours_counted_is_the_whole_blend():
+    """The decay kept in each histogram's scale, through enough frames for the scale to be taken in
+    (``RESCALE``): the same frequencies and the same table as blending every bin each frame."""
+    rng = np.random.default_rng(7)
+    h, counts = Histograms.empty(2, 3), Counts.empty(2, 3)
+    dense = np.zeros((2, 2, 3, COLOURS))
+    learnt = np.zeros((2, 2, 3), bool)
+    frames = int(1.5 * np.log(RESCALE) / np.log(0.5))  # each histogram learns in four frames of five
+    for _ in range(frames):
+        for which, k, i in np.ndindex(2, 2, 3):
+            if rng.random() < 0.2:  # nothing counted this frame: the histogram keeps its colours
+                continue
+            for b in rng.choice(COLOURS, size=rng.integers(1, 30), replace=False):
+                counts.colours[which, k, i, b] = rng.integers(1, 5)
+                counts.touched[which, k, i, counts.touched_count[which, k, i]] = b
+                counts.touched_count[which, k, i] += 1
+            new = counts.colours[which, k, i] / counts.colours[which, k, i].sum()
+            dense[which, k, i] = 0.5 * dense[which, k, i] + 0.5 * new if learnt[which, k, i] else new
+            learnt[which, k, i] = True
+        h.learn(counts, rate=0.5)
+    assert (h.scale > RESCALE).all()  # 0.5 ** (4 / 5 * frames) is not: every scale was taken in on the way
+    for lazy, whole in zip(h.frequencies(), dense):
+        np.testing.assert_allclose(lazy, whole, rtol=1e-9, atol=1e-300)
+    reference = Histograms(dense[0], dense[1], np.ones((2, 2, 3)), learnt[0], learnt[1])
+    np.testing.assert_allclose(table_of(h)[0], table_of(reference)[0], rtol=1e-9)
 
 
 def test_the_table_of_likelihood_terms_is_the_logarithm():

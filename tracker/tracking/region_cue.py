@@ -48,17 +48,22 @@ BINS = 16  # per colour channel
 COLOURS = BINS**3
 FACTOR = 2  # the colour image is half the full size (4:2:0 chroma)
 MAX_LINE = 64  # half-size pixels a line may reach either side, at most
+PROFILE_MARGIN = 2  # half-size pixels a line's profile reaches beyond its candidates (line_profiles)
+RESCALE = 1e-150  # a histogram's scale below which its values take it in (blend_kernel)
 LOG_STEPS = 4096  # intervals of the likelihood terms' table over p_f in [0, 1] (log_table)
 
 
 @dataclass
 class Histograms:
-    """Colour frequencies per camera and component, of the part (``foreground`` (C, N, COLOURS)) and of the
-    background just outside its outline (``background`` (C, N, COLOURS)), each summing to 1 where ``seen`` (C, N) /
-    ``seen_background`` (C, N) say it was learnt."""
+    """Colour frequencies per camera and component, of the part (``scale[0, k, i] * foreground[k, i]``,
+    ``foreground`` (C, N, COLOURS)) and of the background just outside its outline (``scale[1, k, i] *
+    background[k, i]``), each summing to 1 where ``seen`` (C, N) / ``seen_background`` (C, N) say it was learnt.
+    The scales (2, C, N) carry each frame's decay, so that learning touches only the colours the frame showed
+    (:func:`blend_kernel`)."""
 
     foreground: np.ndarray
     background: np.ndarray
+    scale: np.ndarray
     seen: np.ndarray
     seen_background: np.ndarray
 
@@ -67,6 +72,7 @@ class Histograms:
         return cls(
             np.zeros((cameras, components, COLOURS)),
             np.zeros((cameras, components, COLOURS)),
+            np.ones((2, cameras, components)),
             np.zeros((cameras, components), np.bool_),
             np.zeros((cameras, components), np.bool_),
         )
@@ -76,9 +82,37 @@ class Histograms:
         """Whether any camera has both a background and a part learnt."""
         return bool((self.seen.any(axis=1) & self.seen_background.any(axis=1)).any())
 
-    def learn(self, counts: np.ndarray, counts_background: np.ndarray, *, rate: float) -> None:
-        """Mix a frame's counts (C, N, COLOURS) each in (:func:`blend_kernel`), which leaves them zero."""
-        blend_kernel(self.foreground, self.background, self.seen, self.seen_background, counts, counts_background, rate)
+    def frequencies(self) -> tuple[np.ndarray, np.ndarray]:
+        """The parts' and the backgrounds' colour frequencies (C, N, COLOURS), scaled."""
+        return self.scale[0][..., None] * self.foreground, self.scale[1][..., None] * self.background
+
+    def learn(self, counts: Counts, *, rate: float) -> None:
+        """Mix a frame's ``counts`` in (:func:`blend_kernel`), which leaves them empty."""
+        blend_kernel(
+            self.foreground, self.background, self.scale, self.seen, self.seen_background, *counts.arrays(), rate
+        )
+
+
+@dataclass
+class Counts:
+    """A frame's colour counts before they are learnt (:func:`learn_kernel`): of the parts (``colours[0]``) and of
+    their backgrounds (``colours[1]``), (2, C, N, COLOURS), and the bins each count holds, the first
+    ``touched_count`` (2, C, N) of ``touched`` (2, C, N, COLOURS)."""
+
+    colours: np.ndarray
+    touched: np.ndarray
+    touched_count: np.ndarray
+
+    @classmethod
+    def empty(cls, cameras: int, components: int) -> Counts:
+        return cls(
+            np.zeros((2, cameras, components, COLOURS)),
+            np.zeros((2, cameras, components, COLOURS), np.int16),
+            np.zeros((2, cameras, components), np.int64),
+        )
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.colours, self.touched, self.touched_count
 
 
 @njit(cache=True, nogil=True)
@@ -93,8 +127,9 @@ def colour_bins(chroma, out):
 
 
 @njit(cache=True, nogil=True)
-def part_table(foreground, background, seen, seen_background, out, o_distinct):
-    """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS) into ``out`` (0.5
+def part_table(foreground, background, scale, seen, seen_background, out, o_distinct):
+    """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS; the histograms
+    and their ``scale``, :class:`Histograms`) into ``out`` (0.5
     for a colour seen in neither; NaN where the camera has not learnt the part, or no background), ``g`` the mean of
     the part's background and the camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part
     whose lines all had another part outside), and how distinct the part's colours are from that background,
@@ -106,7 +141,7 @@ def part_table(foreground, background, seen, seen_background, out, o_distinct):
         parts = 0
         for i in range(foreground.shape[1]):
             if seen_background[k, i]:
-                around += background[k, i]
+                around += scale[1, k, i] * background[k, i]
                 parts += 1
         if parts:
             around /= parts
@@ -115,11 +150,12 @@ def part_table(foreground, background, seen, seen_background, out, o_distinct):
             if not (seen[k, i] and parts):
                 out[k, i, :] = np.nan
                 continue
-            own = 0.5 if seen_background[k, i] else 0.0
+            own = 0.5 * scale[1, k, i] if seen_background[k, i] else 0.0
+            camera = 0.5 if seen_background[k, i] else 1.0
             shared = 0.0
             for b in range(foreground.shape[2]):
-                f = foreground[k, i, b]
-                g = own * background[k, i, b] + (1.0 - own) * around[b]
+                f = scale[0, k, i] * foreground[k, i, b]
+                g = own * background[k, i, b] + camera * around[b]
                 if f <= 0.0:  # most colours: no share, no root to take
                     out[k, i, b] = 0.5 if g <= 0.0 else 0.0
                     continue
@@ -130,10 +166,9 @@ def part_table(foreground, background, seen, seen_background, out, o_distinct):
 
 @njit(cache=True, inline="always")
 def part_probability(bins, table, width, height, x, y):
-    """p_f at (x, y) of one camera's bin image (half-size coordinates), from one part's ``table`` (COLOURS,),
-    bilinear between the four pixels around it (pixel centres at integers); -1 where one of them is outside."""
-    if x < 0.0 or y < 0.0 or x > width - 1.0 or y > height - 1.0:
-        return -1.0
+    """p_f at (x, y) of one camera's bin image (half-size coordinates, within ``[0, width - 1] x [0, height - 1]``),
+    from one part's ``table`` (COLOURS,), bilinear between the four pixels around it (pixel centres at
+    integers)."""
     u = min(int(x), width - 2)
     v = min(int(y), height - 2)
     fx = x - u
@@ -190,35 +225,35 @@ def _used(s, every, table_ki, outside, d_lo, d_hi):
 
 
 @njit(cache=True, nogil=True)
-def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, pf, terms, out, at):
+def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
     """The log-likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
-    pixels) into ``out[at:]`` (module docstring); False where a pixel of the line lies outside the image.  ``pf``
-    (n + 2,) and ``terms`` (6, n + 3) are scratch."""
-    log_half = math.log(0.5)
+    pixels) into ``out[at:]`` (module docstring); False where the line leaves the image.  ``terms`` (5, n + 3) is
+    scratch."""
+    for t in (d_lo - 1, d_hi + 1):  # the line's ends: a straight line is in the image where both are
+        x = x0 + t * nx
+        y = y0 + t * ny
+        if x < 0.0 or y < 0.0 or x > width - 1.0 or y > height - 1.0:
+            return False
     n_pix = d_hi - d_lo + 3  # pixels t in [d_lo - 1, d_hi + 1]; index j = t - d_lo + 1
+    prefix_in = terms[0]
+    suffix_out = terms[1]
+    prefix_in[0] = 0.0
     for j in range(n_pix):
         t = d_lo - 1 + j
         p = part_probability(bins, table, width, height, x0 + t * nx, y0 + t * ny)
-        if p < 0.0:
-            return False
-        pf[j] = p
-    prefix_in = terms[4]
-    suffix_out = terms[5]
-    for j in range(n_pix):
-        x = pf[j] * LOG_STEPS
+        x = p * LOG_STEPS
         c = min(int(x), LOG_STEPS - 1)
         f = x - c
-        for row in range(4):
-            terms[row, j] = logs[row, c] + f * (logs[row, c + 1] - logs[row, c])
-    prefix_in[0] = 0.0
-    for j in range(n_pix):
-        prefix_in[j + 1] = prefix_in[j] + terms[0, j]
+        prefix_in[j + 1] = prefix_in[j] + logs[0, c] + f * (logs[0, c + 1] - logs[0, c])
+        for row in range(1, 4):
+            terms[row + 1, j] = logs[row, c] + f * (logs[row, c + 1] - logs[row, c])
     suffix_out[n_pix] = 0.0
     for j in range(n_pix - 1, -1, -1):
-        suffix_out[j] = suffix_out[j + 1] + terms[1, j]
+        suffix_out[j] = suffix_out[j + 1] + terms[2, j]
+    log_half = math.log(0.5)
     for c in range(d_hi - d_lo + 1):
         j = c + 1  # the pixel at t = d
-        out[at + c] = prefix_in[j - 1] + terms[2, j - 1] + log_half + terms[3, j + 1] + suffix_out[j + 2]
+        out[at + c] = prefix_in[j - 1] + terms[3, j - 1] + log_half + terms[4, j + 1] + suffix_out[j + 2]
     return True
 
 
@@ -237,19 +272,47 @@ def _moments(likelihood, at, n):
     return mean, variance / total
 
 
-@njit(cache=True, nogil=True)
-def line_profiles(
-    bins, chroma_size, count, s_cam, s_comp, s_pixel, s_normal, s_outside, s_depth, s_lo, s_hi, every, table, logs
-):
-    """Each line's likelihood of the outline at every candidate offset from its sampled place (module docstring),
-    divided by its largest, which :func:`region_kernel` reads for this and the next iterations until the next
-    sampling.  Returns the line profiles ``(likelihood, start, first, length)``: sample ``s``'s lie at
-    ``likelihood[start[s]:start[s] + length[s]]``, for the offsets ``first[s], first[s] + 1, ...`` (half-size
-    pixels along the line; length 0 for a line not used, or one that leaves the image).
+@njit(cache=True, inline="always")
+def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
+    """:func:`_scores` divided by their largest (exponentiated) into ``out[at:]``; False where the line leaves the
+    image.
 
     A line's log-likelihoods differ by at most 2 * (MAX_LINE + 1) pixels' terms, each within
     log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of another's: the smallest ratio (e^-340 then) is far from
     underflow, so any run of candidates keeps its posterior's shape to the last bits."""
+    if not _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
+        return False
+    n = d_hi - d_lo + 1
+    best = out[at : at + n].max()
+    for c in range(n):
+        out[at + c] = math.exp(out[at + c] - best)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def line_profiles(
+    bins,
+    chroma_size,
+    count,
+    s_cam,
+    s_comp,
+    s_pixel,
+    s_normal,
+    s_outside,
+    s_depth,
+    s_lo,
+    s_hi,
+    every,
+    table,
+    logs,
+    margin,
+):
+    """Each line's likelihood of the outline at every candidate offset from its sampled place (module docstring,
+    :func:`_likelihood`), reaching ``margin`` half-size pixels beyond its candidates either way (or none beyond,
+    where the wider line would leave the image), which :func:`region_kernel` reads for this and the next
+    iterations until the next sampling.  Returns the line profiles ``(likelihood, start, first, length)``: sample
+    ``s``'s lie at ``likelihood[start[s]:start[s] + length[s]]``, for the offsets ``first[s], first[s] + 1, ...``
+    (half-size pixels along the line; length 0 for a line not used, or one that leaves the image)."""
     start = np.zeros(count, np.int64)
     first = np.zeros(count, np.int64)
     length = np.zeros(count, np.int64)
@@ -258,11 +321,9 @@ def line_profiles(
         d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
         if _used(s, every, table[s_cam[s], s_comp[s]], s_outside[s], d_lo, d_hi):
             start[s] = total
-            total += d_hi - d_lo + 1
+            total += d_hi - d_lo + 1 + 2 * margin
     likelihood = np.empty(total)
-    n_max = 2 * MAX_LINE + 3
-    pf = np.empty(n_max)
-    terms = np.empty((6, n_max + 1))
+    terms = np.empty((5, 2 * (MAX_LINE + margin) + 4))
     for s in range(count):
         k = s_cam[s]
         i = s_comp[s]
@@ -272,43 +333,50 @@ def line_profiles(
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
         x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, 0.0)
-        if _scores(
-            bins[k],
-            table[k, i],
-            chroma_size[k, 0],
-            chroma_size[k, 1],
-            x0,
-            y0,
-            nx,
-            ny,
-            d_lo,
-            d_hi,
-            logs,
-            pf,
-            terms,
-            likelihood,
-            start[s],
-        ):
-            at, n = start[s], d_hi - d_lo + 1
-            best = likelihood[at : at + n].max()
-            for c in range(n):
-                likelihood[at + c] = math.exp(likelihood[at + c] - best)
-            first[s] = d_lo
-            length[s] = n
+        for wide in (margin, 0):
+            lo = d_lo - wide
+            hi = d_hi + wide
+            if _likelihood(
+                bins[k],
+                table[k, i],
+                chroma_size[k, 0],
+                chroma_size[k, 1],
+                x0,
+                y0,
+                nx,
+                ny,
+                lo,
+                hi,
+                logs,
+                terms,
+                likelihood,
+                start[s],
+            ):
+                first[s] = lo
+                length[s] = hi - lo + 1
+                break
     return likelihood, start, first, length
 
 
 @njit(cache=True, nogil=True)
 def region_kernel(
+    bins,
+    chroma_size,
     count,
     s_cam,
     s_comp,
+    s_pixel,
+    s_normal,
     s_jac,
-    s_lo,
-    s_hi,
+    s_outside,
     s_depth,
     twist,
+    s_lo,
+    s_hi,
+    every,
+    table,
     distinct,
+    logs,
     weight,
     min_variance,
     p_likelihood,
@@ -320,34 +388,60 @@ def region_kernel(
     information,
     eta,
 ):
-    """The outline's offset posterior along each line profiled at the sampling (``p_*``, :func:`line_profiles`),
-    added to C_i and eta_i (module docstring); returns the number of lines used.
+    """The outline's offset posterior along the lines of every ``every``-th sample, added to C_i and eta_i (module
+    docstring); returns the number of lines used.
 
-    The candidate offsets step by one half-size pixel.  Since the sampling, the part moved by ``L . twist_i``
-    along the line, and with it the line's search interval (``s_lo``, ``s_hi``, full-size pixels, short of the
-    part's far side ``s_depth``): the candidates are those of the profile that lie within the interval moved
-    (at least three, else the line is left out this iteration).  Writes each sample's posterior mean and variance
-    (full-size pixels, from the moved place; NaN for a line not used).  ``min_variance`` floors the variance in
-    the weight, ``weight`` is lambda."""
+    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one half-size
+    pixel from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the
+    line, ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the
+    part's far side.  Where the line's profile (``p_*``, :func:`line_profiles`) holds them all, the candidates are
+    read from it, on the whole half-size pixels from the sampled place; else the line is scored afresh.  Writes
+    each sample's posterior mean and variance (full-size pixels; NaN for a line not used).  ``min_variance``
+    floors the variance in the weight, ``weight`` is lambda."""
     used = 0
+    terms = np.empty((5, 2 * MAX_LINE + 4))
+    fresh = np.empty(2 * MAX_LINE + 1)
     for s in range(count):
         o_mean[s] = np.nan
         o_variance[s] = np.nan
-        if p_length[s] == 0:
-            continue
         k = s_cam[s]
         i = s_comp[s]
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
+        if not _used(s, every, table[k, i], s_outside[s], d_lo, d_hi):
+            continue
         moved = 0.0
         for a in range(6):
             moved += s_jac[s, a] * twist[i, a]
         shift = moved / FACTOR  # half-size pixels
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
-        u_lo = max(int(math.ceil(d_lo + shift - 1e-9)), p_first[s])
-        u_hi = min(int(math.floor(d_hi + shift + 1e-9)), p_first[s] + p_length[s] - 1)
-        if u_hi - u_lo < 2:
-            continue
-        step, variance = _moments(p_likelihood, p_start[s] + u_lo - p_first[s], u_hi - u_lo + 1)
-        mean = (u_lo + step - shift) * FACTOR
+        u_lo = int(math.ceil(d_lo + shift - 1e-9))
+        u_hi = int(math.floor(d_hi + shift + 1e-9))
+        if u_lo >= p_first[s] and u_hi < p_first[s] + p_length[s] and u_hi - u_lo >= 2:
+            step, variance = _moments(p_likelihood, p_start[s] + u_lo - p_first[s], u_hi - u_lo + 1)
+            mean = u_lo + step - shift
+        else:
+            nx = s_normal[s, 0]
+            ny = s_normal[s, 1]
+            x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved)
+            if not _likelihood(
+                bins[k],
+                table[k, i],
+                chroma_size[k, 0],
+                chroma_size[k, 1],
+                x0,
+                y0,
+                nx,
+                ny,
+                d_lo,
+                d_hi,
+                logs,
+                terms,
+                fresh,
+                0,
+            ):
+                continue
+            step, variance = _moments(fresh, 0, d_hi - d_lo + 1)
+            mean = d_lo + step
+        mean *= FACTOR
         variance *= FACTOR * FACTOR
         o_mean[s] = mean
         o_variance[s] = variance
@@ -381,13 +475,14 @@ def learn_kernel(
     agree,
     inside,
     outside,
-    o_foreground,
-    o_background,
+    o_colours,
+    o_touched,
+    o_touched_count,
 ):
-    """Count the colours along every sample's line at the poses ``twist`` moved them to: the half-size pixels
-    ``1..inside`` in from the outline are its component's (in ``o_foreground`` (C, N, COLOURS)), those
-    ``2..outside`` out are its background's (``o_background`` (C, N, COLOURS)) where the line's outside is the
-    background and within the search interval (and inside, short of the part's far side, ``s_depth``).
+    """Count the colours along every sample's line at the poses ``twist`` moved them to (into :class:`Counts`'
+    arrays ``o_*``): the half-size pixels ``1..inside`` in from the outline are its component's, those
+    ``2..outside`` out are its background's where the line's outside is the background and within the search
+    interval (and inside, short of the part's far side, ``s_depth``).
 
     Once camera k knows part i's colours (``seen[k, i]``), only the lines whose last offset posterior agrees with
     the outline (``|s_mean| <= agree``, full-size pixels) count: a part that strays would otherwise learn the room's
@@ -409,36 +504,77 @@ def learn_kernel(
         for t in range(1, deepest + 1):
             b = _colour(bins[k], width, height, x0 - t * nx, y0 - t * ny)
             if b >= 0:
-                o_foreground[k, i, b] += 1.0
+                _count(o_colours, o_touched, o_touched_count, 0, k, i, b)
         if s_outside[s] != -1:
             continue
         farthest = min(outside, s_hi[s] // FACTOR)
         for t in range(2, farthest + 1):
             b = _colour(bins[k], width, height, x0 + t * nx, y0 + t * ny)
             if b >= 0:
-                o_background[k, i, b] += 1.0
-
-
-@njit(cache=True, nogil=True)
-def blend_kernel(foreground, background, seen, seen_background, counts, counts_background, rate):
-    """Mix a frame's colour counts (:func:`learn_kernel`) into the histograms in place, each normalised,
-    ``h <- (1 - rate) h + rate h_new``, or taken whole where the histogram was never learnt; the counts are left
-    zero."""
-    for k in range(foreground.shape[0]):
-        for i in range(foreground.shape[1]):
-            seen[k, i] = _blend(foreground[k, i], counts[k, i], rate, seen[k, i])
-            seen_background[k, i] = _blend(background[k, i], counts_background[k, i], rate, seen_background[k, i])
+                _count(o_colours, o_touched, o_touched_count, 1, k, i, b)
 
 
 @njit(cache=True, inline="always")
-def _blend(histogram, counts, rate, learnt):
-    """Mix ``counts`` normalised into ``histogram`` (taken whole if it was never ``learnt``) and zero them
-    (:func:`blend_kernel`); returns whether the histogram is learnt now."""
-    total = counts.sum()
+def _count(colours, touched, touched_count, h, k, i, b):
+    """One more pixel of colour ``b`` in histogram ``h`` (0: the part's, 1: the background's) of part ``i`` in
+    camera ``k`` (:class:`Counts`)."""
+    if colours[h, k, i, b] == 0.0:
+        touched[h, k, i, touched_count[h, k, i]] = b
+        touched_count[h, k, i] += 1
+    colours[h, k, i, b] += 1.0
+
+
+@njit(cache=True, nogil=True)
+def blend_kernel(foreground, background, scale, seen, seen_background, colours, touched, touched_count, rate):
+    """Mix a frame's colour counts (:class:`Counts`' arrays, :func:`learn_kernel`) into the histograms in place,
+    each normalised, ``h <- (1 - rate) h + rate h_new``, or taken whole where the histogram was never learnt; the
+    counts are left empty.  The decay goes into the histogram's scale, so only the bins counted are written (and
+    every bin once in a few hundred frames, when the scale nears underflow)."""
+    for k in range(foreground.shape[0]):
+        for i in range(foreground.shape[1]):
+            seen[k, i] = _blend(
+                foreground[k, i],
+                scale[0, k, i : i + 1],
+                colours[0, k, i],
+                touched[0, k, i],
+                touched_count[0, k, i],
+                rate,
+                seen[k, i],
+            )
+            seen_background[k, i] = _blend(
+                background[k, i],
+                scale[1, k, i : i + 1],
+                colours[1, k, i],
+                touched[1, k, i],
+                touched_count[1, k, i],
+                rate,
+                seen_background[k, i],
+            )
+            touched_count[0, k, i] = 0
+            touched_count[1, k, i] = 0
+
+
+@njit(cache=True, inline="always")
+def _blend(histogram, scale, counts, touched, n, rate, learnt):
+    """Mix ``counts`` normalised into ``scale[0] * histogram`` (taken whole if it was never ``learnt``), reading and
+    zeroing only the first ``n`` bins ``touched`` (:func:`blend_kernel`); returns whether the histogram is learnt
+    now."""
+    total = 0.0
+    for c in range(n):
+        total += counts[touched[c]]
     if total <= 0.0:
         return learnt
-    keep = 1.0 - rate if learnt else 0.0
-    for b in range(histogram.shape[0]):
-        histogram[b] = keep * histogram[b] + (1.0 - keep) * counts[b] / total
+    if learnt:
+        scale[0] *= 1.0 - rate
+        share = rate / (total * scale[0])
+    else:  # a histogram never learnt is all zero
+        scale[0] = 1.0
+        share = 1.0 / total
+    for c in range(n):
+        b = touched[c]
+        histogram[b] += share * counts[b]
         counts[b] = 0.0
+    if scale[0] < RESCALE:
+        histogram *= scale[0]
+        scale[0] = 1.0
     return True

@@ -46,6 +46,8 @@ from tracker.tracking.ownership import Ownership
 from tracker.tracking.region_cue import (
     COLOURS,
     FACTOR,
+    PROFILE_MARGIN,
+    Counts,
     Histograms,
     colour_bins,
     learn_kernel,
@@ -405,8 +407,7 @@ class Tracker:
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
-        self.counts = np.zeros((len(cameras), n, COLOURS))  # a frame's colour counts, before they are learnt
-        self.counts_background = np.zeros((len(cameras), n, COLOURS))
+        self.counts = Counts.empty(len(cameras), n)  # a frame's colour counts, before they are learnt
         self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
 
     def with_cameras(self, cameras) -> Tracker:
@@ -595,25 +596,34 @@ class Tracker:
             max(st.region_every, 1),
             self.part_table,
             self.logs,
+            PROFILE_MARGIN,
         )
 
     def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
         """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region_cue.region_kernel`), read from
-        their profiles (:meth:`profile_lines`) in their search intervals moved with the parts; returns the number
-        of lines used."""
+        their profiles (:meth:`profile_lines`) where the parts moved little since; returns the number of lines
+        used."""
         s, st = work.samples, self.settings
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
         assert work.outside is not None and work.depth is not None and work.profiles is not None
         return region_kernel(
+            work.bins,
+            self.chroma_size,
             s.count,
             s.camera,
             s.component,
+            s.pixel,
+            s.normal,
             s.jacobian,
-            work.lo,
-            work.hi,
+            work.outside,
             work.depth,
             twist,
+            work.lo,
+            work.hi,
+            max(st.region_every, 1),
+            self.part_table,
             self.distinct,
+            self.logs,
             st.region_weight,
             st.region_sigma**2,
             *work.profiles,
@@ -650,12 +660,11 @@ class Tracker:
             st.region_agree,
             max(1, round(st.region_inside / FACTOR)),
             max(2, round(st.region_outside / FACTOR)),
-            self.counts,
-            self.counts_background,
+            *self.counts.arrays(),
         )
         h = self.histograms
-        h.learn(self.counts, self.counts_background, rate=st.region_learning_rate)
-        part_table(h.foreground, h.background, h.seen, h.seen_background, self.part_table, self.distinct)
+        h.learn(self.counts, rate=st.region_learning_rate)
+        part_table(h.foreground, h.background, h.scale, h.seen, h.seen_background, self.part_table, self.distinct)
         work.times.add("region", started)
 
     def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
