@@ -135,13 +135,16 @@ def part_table(foreground, background, scale, seen, seen_background, out, o_dist
     whose lines all had another part outside), and how distinct the part's colours are from that background,
     ``o_distinct`` (C, N): 1 minus the Bhattacharyya coefficient sum_y sqrt(h_f(y) g(y)) of the two histograms (0
     for the same colours, 1 for none shared)."""
-    around = np.zeros(foreground.shape[2])
+    colours = foreground.shape[2]
+    around = np.zeros(colours)
     for k in range(foreground.shape[0]):
         around[:] = 0.0
         parts = 0
         for i in range(foreground.shape[1]):
             if seen_background[k, i]:
-                around += scale[1, k, i] * background[k, i]
+                share = scale[1, k, i]
+                for b in range(colours):
+                    around[b] += share * background[k, i, b]
                 parts += 1
         if parts:
             around /= parts
@@ -152,9 +155,10 @@ def part_table(foreground, background, scale, seen, seen_background, out, o_dist
                 continue
             own = 0.5 * scale[1, k, i] if seen_background[k, i] else 0.0
             camera = 0.5 if seen_background[k, i] else 1.0
+            part = scale[0, k, i]
             shared = 0.0
-            for b in range(foreground.shape[2]):
-                f = scale[0, k, i] * foreground[k, i, b]
+            for b in range(colours):
+                f = part * foreground[k, i, b]
                 g = own * background[k, i, b] + camera * around[b]
                 if f <= 0.0:  # most colours: no share, no root to take
                     out[k, i, b] = 0.5 if g <= 0.0 else 0.0
@@ -224,7 +228,7 @@ def _used(s, every, table_ki, outside, d_lo, d_hi):
     return s % every == 0 and not np.isnan(table_ki[0]) and outside == -1 and d_hi - d_lo >= 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, inline="always")
 def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
     """The log-likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
     pixels) into ``out[at:]`` (module docstring); False where the line leaves the image.  ``terms`` (5, n + 3) is
@@ -235,25 +239,25 @@ def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms,
         if x < 0.0 or y < 0.0 or x > width - 1.0 or y > height - 1.0:
             return False
     n_pix = d_hi - d_lo + 3  # pixels t in [d_lo - 1, d_hi + 1]; index j = t - d_lo + 1
-    prefix_in = terms[0]
-    suffix_out = terms[1]
+    prefix_in, l_out, l_m1, l_p1, suffix_out = terms[0], terms[1], terms[2], terms[3], terms[4]
+    far_in, far_out, near_in, near_out = logs[0], logs[1], logs[2], logs[3]
     prefix_in[0] = 0.0
     for j in range(n_pix):
         t = d_lo - 1 + j
-        p = part_probability(bins, table, width, height, x0 + t * nx, y0 + t * ny)
-        x = p * LOG_STEPS
+        x = part_probability(bins, table, width, height, x0 + t * nx, y0 + t * ny) * LOG_STEPS
         c = min(int(x), LOG_STEPS - 1)
         f = x - c
-        prefix_in[j + 1] = prefix_in[j] + logs[0, c] + f * (logs[0, c + 1] - logs[0, c])
-        for row in range(1, 4):
-            terms[row + 1, j] = logs[row, c] + f * (logs[row, c + 1] - logs[row, c])
+        prefix_in[j + 1] = prefix_in[j] + far_in[c] + f * (far_in[c + 1] - far_in[c])
+        l_out[j] = far_out[c] + f * (far_out[c + 1] - far_out[c])
+        l_m1[j] = near_in[c] + f * (near_in[c + 1] - near_in[c])
+        l_p1[j] = near_out[c] + f * (near_out[c + 1] - near_out[c])
     suffix_out[n_pix] = 0.0
     for j in range(n_pix - 1, -1, -1):
-        suffix_out[j] = suffix_out[j + 1] + terms[2, j]
+        suffix_out[j] = suffix_out[j + 1] + l_out[j]
     log_half = math.log(0.5)
     for c in range(d_hi - d_lo + 1):
         j = c + 1  # the pixel at t = d
-        out[at + c] = prefix_in[j - 1] + terms[3, j - 1] + log_half + terms[4, j + 1] + suffix_out[j + 2]
+        out[at + c] = prefix_in[j - 1] + l_m1[j - 1] + log_half + l_p1[j + 1] + suffix_out[j + 2]
     return True
 
 
@@ -501,27 +505,17 @@ def learn_kernel(
         width = chroma_size[k, 0]
         height = chroma_size[k, 1]
         deepest = min(inside, -s_lo[s] // FACTOR, (s_depth[s] - 1) // FACTOR)
-        for t in range(1, deepest + 1):
-            b = _colour(bins[k], width, height, x0 - t * nx, y0 - t * ny)
-            if b >= 0:
-                _count(o_colours, o_touched, o_touched_count, 0, k, i, b)
-        if s_outside[s] != -1:
-            continue
-        farthest = min(outside, s_hi[s] // FACTOR)
-        for t in range(2, farthest + 1):
-            b = _colour(bins[k], width, height, x0 + t * nx, y0 + t * ny)
-            if b >= 0:
-                _count(o_colours, o_touched, o_touched_count, 1, k, i, b)
-
-
-@njit(cache=True, inline="always")
-def _count(colours, touched, touched_count, h, k, i, b):
-    """One more pixel of colour ``b`` in histogram ``h`` (0: the part's, 1: the background's) of part ``i`` in
-    camera ``k`` (:class:`Counts`)."""
-    if colours[h, k, i, b] == 0.0:
-        touched[h, k, i, touched_count[h, k, i]] = b
-        touched_count[h, k, i] += 1
-    colours[h, k, i, b] += 1.0
+        farthest = min(outside, s_hi[s] // FACTOR) if s_outside[s] == -1 else 1
+        for side in range(2):  # 0: the part's pixels, inwards; 1: the background's, outwards
+            sign = -1.0 if side == 0 else 1.0
+            for t in range(1 + side, (deepest if side == 0 else farthest) + 1):
+                b = _colour(bins[k], width, height, x0 + sign * t * nx, y0 + sign * t * ny)
+                if b < 0:
+                    continue
+                if o_colours[side, k, i, b] == 0.0:  # a colour new to this frame's counts
+                    o_touched[side, k, i, o_touched_count[side, k, i]] = b
+                    o_touched_count[side, k, i] += 1
+                o_colours[side, k, i, b] += 1.0
 
 
 @njit(cache=True, nogil=True)
