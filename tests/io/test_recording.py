@@ -343,3 +343,10 @@ def test_readers_give_every_frame_with_its_half_size_colour(tmp_path: Path) -> N
             left, right = half[:, : edge - 2].mean(axis=(0, 1)), half[:, edge + 2 :].mean(axis=(0, 1))
             assert np.abs(left - right).max() > 60  # the two colours are told apart
             assert np.abs(half[:, : edge - 2] - left).mean() < 8 and np.abs(half[:, edge + 2 :] - right).mean() < 8
+    binned = read_frames(sources, 0, 4, chroma=lambda half: half[..., 0] // 2, copies=copies)
+    for (_, frame), (_, again) in zip(binned, read_frames(sources, 0, 4, chroma=True, copies=copies)):
+        for item, colour in zip(frame, again):  # a callable chroma is what it makes of the colour image
+            if isinstance(item, WithColour):
+                item, colour = item.image, colour.image
+            np.testing.assert_array_equal(item.chroma, colour.chroma[..., 0] // 2)
+            np.testing.assert_array_equal(item.image, colour.image)

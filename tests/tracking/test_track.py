@@ -392,3 +392,18 @@ def test_the_overlay_of_hd_views_is_drawn_on_the_full_size_frames(hd_recording, 
     args = ["track", str(hd_recording), "--frames", "2", "--keypoints", "off", "--overlay", str(tmp_path / "o.avi")]
     assert main([*args, "--out", str(tmp_path / "out"), "--quiet"]) == 0
     assert len(drawn) == 2 and all(image.shape == (960, 1280) for images in drawn for image in images)
+
+
+def test_colours_binned_in_the_reader_threads_track_as_binned_by_the_tracker(striped_room):
+    """``chroma=tracker.bin_colours`` moves the colour bins into the readers' threads: the same poses to the last
+    bit as the tracker binning the colour images it is handed."""
+    rec = open_recording(striped_room)
+    model = load_model(rec.model_path)
+    first = load_pose_file(rec.init_path, model)
+    poses = []
+    for binned in (False, True):
+        tracker = Tracker(model, rec.cameras, first, Settings())
+        chroma = tracker.bin_colours if binned else True
+        poses.append([tracker.step(images).poses for _, images in frames(rec, 0, 12, chroma=chroma)])
+    assert tracker.histograms.ready
+    np.testing.assert_array_equal(poses[0], poses[1])

@@ -28,7 +28,7 @@ import statistics
 import tempfile
 import time
 import tomllib
-from collections.abc import Callable, Generator
+from collections.abc import Generator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -127,7 +127,7 @@ def track_run(
                 start=0,
                 stop=recording.frame_count,
                 prepare=tracker.smooth,
-                chroma=settings.region,
+                chroma=tracker.bin_colours if settings.region else False,
             ),
             out / "poses.npz",
             fps=recording.fps,
@@ -250,7 +250,7 @@ def long_run(
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     memory = {"start": resident_mb(), "settled": float("nan")}
-    passes = _Passes(recording, total, keypoint_step, settings, tracker.smooth)
+    passes = _Passes(recording, total, keypoint_step, tracker)
     bar = iter(progress(range(total), total=total))
 
     def counted(frame: Tracked) -> None:
@@ -284,13 +284,13 @@ def long_run(
 @dataclass
 class _Passes:
     """The frames of a long run: ``total`` frames numbered 0, 1, ..., the recording read again and again from its
-    first frame (``prepare``-d), each pass with a fresh keypoint worker at ``keypoint_step`` (0: none) beside it."""
+    first frame (read as ``tracker`` reads them), each pass with a fresh keypoint worker at ``keypoint_step`` (0:
+    none) beside it."""
 
     recording: Recording
     total: int
     keypoint_step: int
-    settings: Settings
-    prepare: Callable
+    tracker: Tracker
     stream: KeypointStream | None = None  # the pass's worker
     first: int = 0  # the number of the pass's first frame
 
@@ -299,10 +299,16 @@ class _Passes:
         done = 0
         while done < self.total:
             stop = min(self.recording.frame_count, self.total - done)
-            self.stream, self.first = _stream(self.recording, stop, self.keypoint_step, self.settings), done
+            tracker = self.tracker
+            self.stream, self.first = _stream(self.recording, stop, self.keypoint_step, tracker.settings), done
             try:
                 for _, images in tracked_frames(
-                    self.stream, self.recording, start=0, stop=stop, prepare=self.prepare, chroma=self.settings.region
+                    self.stream,
+                    self.recording,
+                    start=0,
+                    stop=stop,
+                    prepare=tracker.smooth,
+                    chroma=tracker.bin_colours if tracker.settings.region else False,
                 ):
                     yield done, images
                     done += 1

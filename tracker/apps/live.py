@@ -362,7 +362,7 @@ def track_live(
         print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
         tracker.warm_up()
         with _StopRequest() as stop:
-            capture.start(tracker.smooth, chroma=tracker.settings.region)
+            capture.start(tracker.smooth, chroma=tracker.bin_colours if tracker.settings.region else False)
             session = _Session(capture, cameras, stop, recorder, view, detector)
             run = track_frames(
                 tracker,

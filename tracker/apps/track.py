@@ -186,7 +186,7 @@ def track(
             stop=stop,
             prepare=prepare,
             colour=background is not None,
-            chroma=settings.region and background is None,
+            chroma=tracker.bin_colours if settings.region and background is None else False,
         )
         run = track_frames(
             tracker,

@@ -336,10 +336,16 @@ class Capture:
         self.stopping = threading.Event()
         self.threads: list[threading.Thread] = []
 
-    def start(self, prepare: Callable[[np.ndarray], np.ndarray] | None = None, *, chroma: bool = False) -> None:
+    def start(
+        self,
+        prepare: Callable[[np.ndarray], np.ndarray] | None = None,
+        *,
+        chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
+    ) -> None:
         """Start one thread per camera; ``prepare`` (grey image -> image) runs in them on every frame.  With
         ``chroma`` each frame's image comes as :class:`~tracker.io.readers.WithChroma`, its colour at half size
-        decoded from the same JPEG as the recording's readers decode it."""
+        decoded from the same JPEG as the recording's readers decode it (and given to ``chroma`` in the thread, if
+        that is a callable)."""
         self.started = time.monotonic()
         self.last = [self.started] * len(self.sources)
         self.threads = [
@@ -351,7 +357,7 @@ class Capture:
         for thread in self.threads:
             thread.start()
 
-    def _run(self, camera: int, prepare, chroma: bool) -> None:
+    def _run(self, camera: int, prepare, chroma) -> None:
         source = self.sources[camera]
         try:
             while not self.stopping.is_set():
@@ -372,7 +378,8 @@ class Capture:
                     colour = cv2.imdecode(jpeg, cv2.IMREAD_REDUCED_COLOR_2)
                     if colour is None:
                         raise CaptureError("delivered a frame that is not a decodable JPEG")
-                    prepared = WithChroma(prepared, half_size(colour, image.shape))
+                    half = half_size(colour, image.shape)
+                    prepared = WithChroma(prepared, chroma(half) if callable(chroma) else half)
                 self._arrive(camera, Frame(stamp, jpeg, prepared))
         except Exception as error:  # a failing camera is dropped; the others go on
             self.drop(camera, str(error) if isinstance(error, CaptureError) else f"failed: {error!r}")

@@ -65,7 +65,7 @@ class WithColour:
 class WithChroma:
     """A grey frame (or what ``prepare`` made of it) with its colour at half size, ``chroma`` (H // 2, W // 2, 3)
     uint8, in the video's own colour space (YUV from PyAV, BGR from JPEG and image files): each pixel the colour of
-    a block of 2 x 2 full-size pixels."""
+    a block of 2 x 2 full-size pixels (or what the reader's ``chroma`` callable made of it, :func:`read_frames`)."""
 
     image: Any
     chroma: np.ndarray
@@ -350,7 +350,7 @@ class _Reader:
         colour: bool = False,
         step: int = 1,
         copies: ColourCopies | None = None,
-        chroma: bool = False,
+        chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
     ):
         self.source, self.start, self.count, self.prepare, self.colour = source, start, count, prepare, colour
         self.step, self.copies, self.chroma = step, copies, chroma
@@ -361,7 +361,7 @@ class _Reader:
 
     def _run(self) -> None:
         frames = grey_frames(
-            self.source, self.start, colour=self.colour, step=self.step, copies=self.copies, chroma=self.chroma
+            self.source, self.start, colour=self.colour, step=self.step, copies=self.copies, chroma=bool(self.chroma)
         )
         try:
             for image in itertools.islice(frames, self.count):
@@ -373,13 +373,12 @@ class _Reader:
             frames.close()
 
     def _prepared(self, image):
-        if self.prepare is None:
-            return image
         if isinstance(image, WithColour):
             return WithColour(self._prepared(image.image), image.colour)
         if isinstance(image, WithChroma):
-            return WithChroma(self.prepare(image.image), image.chroma)
-        return self.prepare(image)
+            colour = self.chroma(image.chroma) if callable(self.chroma) else image.chroma
+            return WithChroma(self._prepared(image.image), colour)
+        return image if self.prepare is None else self.prepare(image)
 
     def _put(self, item) -> bool:
         while not self.stopping.is_set():
@@ -411,13 +410,14 @@ def read_frames(
     colour: bool = False,
     step: int = 1,
     copies: list[ColourCopies] | None = None,
-    chroma: bool = False,
+    chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
 ) -> Iterator[tuple[int, list]]:
     """(index, one grey image per source) for frames start, start + step, ... before stop, each source decoded
     by its own thread (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that
     thread too (e.g. the tracker's smoothing); a list of them gives each source its own.  With ``copies`` (one
     per source) the frames they name come as :class:`WithColour` (``prepare`` applied to the image); with
-    ``chroma`` every frame comes as :class:`WithChroma` (``prepare`` applied to its grey image)."""
+    ``chroma`` every frame comes as :class:`WithChroma` (``prepare`` applied to its grey image; a callable
+    ``chroma`` applied to its half-size colour image, in the reader's thread too)."""
     preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
     indices = range(start, stop, step)
     readers = [

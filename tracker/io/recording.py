@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -134,7 +134,7 @@ def frames(
     colour: bool = False,
     step: int = 1,
     copies: list[ColourCopies] | None = None,
-    chroma: bool = False,
+    chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
 ) -> Iterator[tuple[int, list]]:
     """Yield (frame index, grey uint8 images (H, W), one per camera) for frames start..stop-1 (every
     ``step``-th of them: the others are skipped undecoded where the container allows).
@@ -142,7 +142,8 @@ def frames(
     One reader thread per camera decodes ahead (see :mod:`tracker.io.readers`), in colour (BGR (H, W, 3))
     with ``colour``, and applies ``prepare`` (image -> anything; or one per camera) if given; the frames
     ``copies`` (one per camera) names also come with their reduced colour image (:class:`WithColour`), and with
-    ``chroma`` every frame with its half-size colour image (:class:`WithChroma`). A frame that
+    ``chroma`` every frame with its half-size colour image (:class:`WithChroma`; a callable ``chroma`` applied to
+    it in the reader thread). A frame that
     fails to decode raises TrackerInputError naming the file and the index.
     """
     stop = recording.frame_count if stop is None else stop

@@ -120,7 +120,7 @@ def tracked_frames(
     stop: int,
     prepare=None,
     colour: bool = False,
-    chroma: bool = False,
+    chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
 ) -> Iterator[tuple[int, list]]:
     """:func:`tracker.io.recording.frames` for the frame loop beside ``stream``: a fed stream gets the scheduled
     frames' colour images from the readers (:func:`_fed_ahead`)."""

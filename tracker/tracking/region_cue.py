@@ -30,7 +30,9 @@ measurement with offset ``mu`` and weight ``lambda / max(sigma^2, sigma_min^2)``
 ``a`` < 1/2 keeps a share of every pixel for misclassification (the step never reaches 0 or 1), so one odd pixel
 cannot veto an offset.  The pixels further than one from ``d`` lie on the step's flat parts; their terms are the
 same for every ``d`` on their side and are summed once per line (prefix sums), and the four terms a pixel can
-take are read from a table over ``p_f`` (:func:`log_table`), so a line costs a few table reads per pixel.
+take are read from a table over ``p_f`` (:func:`log_table`), so a line costs a few table reads per pixel.  Each
+line is scored once per sampling of the outlines (:func:`line_profiles`) and read in the iterations between, while
+its part moves little along it (:func:`region_kernel`).
 
 A line whose outside is another part (an arm across the trunk, perhaps in the same shirt) is left out: the colours
 there do not tell the part from the background.
@@ -281,9 +283,9 @@ def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, te
     """:func:`_scores` divided by their largest (exponentiated) into ``out[at:]``; False where the line leaves the
     image.
 
-    A line's log-likelihoods differ by at most 2 * (MAX_LINE + 1) pixels' terms, each within
-    log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of another's: the smallest ratio (e^-340 then) is far from
-    underflow, so any run of candidates keeps its posterior's shape to the last bits."""
+    Two of a line's log-likelihoods differ in at most 2 * (MAX_LINE + PROFILE_MARGIN) + 3 pixels' terms, each
+    within log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of the other's: the smallest ratio (about e^-350) is far
+    from underflow (e^-708), so any run of candidates keeps its posterior's shape to the last bits."""
     if not _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
         return False
     n = d_hi - d_lo + 1

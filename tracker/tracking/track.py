@@ -463,6 +463,16 @@ class Tracker:
         """
         return smooth(image, self.settings.blur_sigma, self.settings.work_side)
 
+    def bin_colours(self, chroma: np.ndarray) -> np.ndarray:
+        """The colour bins (H', W') int16 of a half-size colour image, as the region cue reads them
+        (:func:`tracker.tracking.region_cue.colour_bins`).
+
+        Thread-safe, so reader threads can run it beside the tracker (``chroma=tracker.bin_colours`` to
+        :func:`tracker.io.recording.frames`)."""
+        bins = np.empty(chroma.shape[:2], np.int16)
+        colour_bins(chroma, bins)
+        return bins
+
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, reduced and smoothed (:meth:`smooth`) unless
         ``smoothed`` says they already are."""
@@ -475,7 +485,10 @@ class Tracker:
         for k, image in enumerate(images):
             if isinstance(image, WithChroma):
                 h, w = image.chroma.shape[:2]
-                colour_bins(image.chroma, work.bins[k, :h, :w])
+                if image.chroma.ndim == 2:  # binned already, in a reader thread (bin_colours)
+                    work.bins[k, :h, :w] = image.chroma
+                else:
+                    colour_bins(image.chroma, work.bins[k, :h, :w])
                 image = image.image
             else:
                 coloured = False
