@@ -9,7 +9,6 @@ from tracker.tracking.region_cue import (
     BINS,
     COLOURS,
     FACTOR,
-    PROFILE_MARGIN,
     RESCALE,
     Counts,
     Histograms,
@@ -20,7 +19,9 @@ from tracker.tracking.region_cue import (
     part_table,
     region_kernel,
 )
+from tracker.tracking.track import Settings
 
+MARGIN = Settings().region_margin
 PART = (200, 40, 40)  # a colour of the part, as the chroma image holds it
 ROOM = (40, 200, 40)
 
@@ -71,13 +72,13 @@ def table_of(h):
 
 def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, twist=None, h=None, **options):
     """The kernels on one sample in camera 0 of component 0 with normal +x, its line profiled where it was sampled
-    (``margin`` half-size pixels wide, PROFILE_MARGIN unless given) and read after the component moved by
-    ``twist``; returns (mean, variance, C, eta, used)."""
+    (``margin`` half-size pixels beyond its candidates, the default's unless given) and read after the component
+    moved by ``twist``; returns (mean, variance, C, eta, used)."""
     h = histograms() if h is None else h
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
     mean, variance = np.zeros(1), np.zeros(1)
-    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=PROFILE_MARGIN) | options
+    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=MARGIN) | options
     bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1]]])
     table, distinct = table_of(h)
     logs = log_table(settings["amplitude"], settings["slope"])
@@ -187,7 +188,7 @@ def moved_by(pixels: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("pixels", [-6.0, 4.0, 10.0])
-@pytest.mark.parametrize("margin", [0, PROFILE_MARGIN])
+@pytest.mark.parametrize("margin", [0, MARGIN])
 def test_the_predicted_motion_moves_the_line(margin, pixels):
     """With the component moved by a twist since sampling, the line starts at p + (L . twist) n: read from the
     line's profile while the move is within its margin, scored afresh beyond."""
@@ -221,10 +222,10 @@ def test_a_line_whose_margin_leaves_the_image_is_profiled_without_it():
     line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([[122.0, 40.5]]), np.array([[1.0, 0.0]]))
     limits = (np.array([-1]), np.array([41]), np.array([lo]), np.array([hi]))
     logs = log_table(0.43, 0.5)
-    for x, (first, length) in ((122.0, (-10, 28)), (100.0, (-10 - PROFILE_MARGIN, 28 + 2 * PROFILE_MARGIN))):
+    for x, (first, length) in ((122.0, (-10, 28)), (100.0, (-10 - MARGIN, 28 + 2 * MARGIN))):
         line[2][0, 0] = x
         _, _, profiled_first, profiled_length = line_profiles(
-            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], logs, PROFILE_MARGIN
+            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], logs, MARGIN
         )
         assert (profiled_first[0], profiled_length[0]) == (first, length)
     still, *_ = run(chroma, (122.0, 40.5), lo=lo, hi=hi)

@@ -287,6 +287,7 @@ def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
     hd = scaled_to(base, 1080)
     assert hd.spacing == pytest.approx(9.0) and hd.search_range == 45 and hd.final_search_range == 14
     assert hd.blur_sigma == pytest.approx(2.25) and hd.threshold == pytest.approx(6.0 / 2.25)
+    assert hd.region_margin == 4  # the parts move as many more pixels between iterations
     assert scaled_to(hd, 1080) == hd  # already scaled: unchanged
 
 

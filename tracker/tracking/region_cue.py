@@ -50,7 +50,6 @@ BINS = 16  # per colour channel
 COLOURS = BINS**3
 FACTOR = 2  # the colour image is half the full size (4:2:0 chroma)
 MAX_LINE = 64  # half-size pixels a line may reach either side, at most
-PROFILE_MARGIN = 2  # half-size pixels a line's profile reaches beyond its candidates (line_profiles)
 RESCALE = 1e-150  # a histogram's scale below which its values take it in (blend_kernel)
 LOG_STEPS = 4096  # intervals of the likelihood terms' table over p_f in [0, 1] (log_table)
 
@@ -283,7 +282,7 @@ def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, te
     """:func:`_scores` divided by their largest (exponentiated) into ``out[at:]``; False where the line leaves the
     image.
 
-    Two of a line's log-likelihoods differ in at most 2 * (MAX_LINE + PROFILE_MARGIN) + 3 pixels' terms, each
+    Two of a line's log-likelihoods differ in at most 2 * (MAX_LINE + margin) + 3 pixels' terms, each
     within log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of the other's: the smallest ratio (about e^-350) is far
     from underflow (e^-708), so any run of candidates keeps its posterior's shape to the last bits."""
     if not _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):

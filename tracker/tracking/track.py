@@ -46,7 +46,6 @@ from tracker.tracking.ownership import Ownership
 from tracker.tracking.region_cue import (
     COLOURS,
     FACTOR,
-    PROFILE_MARGIN,
     Counts,
     Histograms,
     colour_bins,
@@ -121,6 +120,8 @@ class Settings:
     region_inside: int = 4  # pixels in from the outline whose colours are learnt as the part's
     region_outside: int = 10  # ... and out to which they are learnt as the background's (from 4)
     region_agree: float = 2.0  # pixels: once a part's colours are known, only lines whose offset is this close teach
+    region_margin: int = 2  # half-size pixels a line's scores reach beyond its candidates, for the iterations until
+    # the next sampling (region_cue.line_profiles): a part that moves further along the line is scored afresh
 
 
 def scaled_to(settings: Settings, short_side: int) -> Settings:
@@ -143,6 +144,7 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         region_slope=settings.region_slope * k,
         region_inside=max(1, round(settings.region_inside * k)),
         region_outside=max(2, round(settings.region_outside * k)),
+        region_margin=round(settings.region_margin * k),
         uncertain_residual=settings.uncertain_residual * k,
         lost_residual=settings.lost_residual * k,
         reference_size=short_side,
@@ -609,7 +611,7 @@ class Tracker:
             max(st.region_every, 1),
             self.part_table,
             self.logs,
-            PROFILE_MARGIN,
+            st.region_margin,
         )
 
     def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
