@@ -78,7 +78,7 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
     mean, variance = np.zeros(1), np.zeros(1)
-    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=MARGIN) | options
+    settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=MARGIN, afresh=False) | options
     bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1]]])
     table, distinct = table_of(h)
     logs = log_table(settings["amplitude"], settings["slope"])
@@ -102,6 +102,7 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
         settings["weight"],
         settings["min_variance"],
         *profiles,
+        settings["afresh"],
         mean,
         variance,
         information,
@@ -211,6 +212,17 @@ def test_a_move_between_pixels_read_from_the_profile_finds_the_boundary_as_a_fre
     assert 60.0 + pixels + profiled == pytest.approx(60.0 + still, abs=0.25)  # the same boundary from anywhere
     assert profiled == pytest.approx(fresh, abs=0.5)
     assert profiled_variance == pytest.approx(fresh_variance, abs=0.5)
+
+
+@pytest.mark.parametrize("pixels", [-1.3, 0.7, 2.9])
+def test_a_line_scored_afresh_takes_its_candidates_from_the_moved_place(pixels):
+    """The frame's last iteration scores every line afresh: the same posterior as a line sampled where the part
+    moved to, whatever the profile holds."""
+    chroma = split_image(32.0, noise=0.05, seed=2)
+    jacobian, twist = moved_by(pixels)
+    afresh, afresh_variance, *_ = run(chroma, (60.0, 40.5), jacobian=jacobian, twist=twist, afresh=True)
+    direct, direct_variance, *_ = run(chroma, (60.0 + pixels, 40.5), jacobian=jacobian)
+    assert afresh == pytest.approx(direct, abs=1e-12) and afresh_variance == pytest.approx(direct_variance, abs=1e-12)
 
 
 def test_a_line_whose_margin_leaves_the_image_is_profiled_without_it():

@@ -388,6 +388,7 @@ def region_kernel(
     p_start,
     p_first,
     p_length,
+    afresh,
     o_mean,
     o_variance,
     information,
@@ -400,7 +401,10 @@ def region_kernel(
     pixel from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the
     line, ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the
     part's far side.  Where the line's profile (``p_*``, :func:`line_profiles`) holds them all, the candidates are
-    read from it, on the whole half-size pixels from the sampled place; else the line is scored afresh.  Writes
+    read from it, on the whole half-size pixels from the sampled place; else, and for every line with ``afresh``
+    (the frame's last iteration), the line is scored afresh on those from the moved place: read from the profile,
+    the candidates lie a sub-pixel phase off it, and the outline's final place with them (the demo 4.8 mm against
+    4.4 with the last iteration afresh).  Writes
     each sample's posterior mean and variance (full-size pixels; NaN for a line not used).  ``min_variance``
     floors the variance in the weight, ``weight`` is lambda."""
     used = 0
@@ -420,7 +424,7 @@ def region_kernel(
         shift = moved / FACTOR  # half-size pixels
         u_lo = int(math.ceil(d_lo + shift - 1e-9))
         u_hi = int(math.floor(d_hi + shift + 1e-9))
-        if u_lo >= p_first[s] and u_hi < p_first[s] + p_length[s] and u_hi - u_lo >= 2:
+        if not afresh and u_lo >= p_first[s] and u_hi < p_first[s] + p_length[s] and u_hi - u_lo >= 2:
             step, variance = _moments(p_likelihood, p_start[s] + u_lo - p_first[s], u_hi - u_lo + 1)
             mean = u_lo + step - shift
         else:

@@ -533,7 +533,7 @@ class Tracker:
         if self.regions:
             if resampled:
                 self.profile_lines(work)
-            self.add_regions(work, twist)
+            self.add_regions(work, twist, afresh=iteration == st.iterations - 1 and not resampled)
             started = work.times.add("region", started)
         self.poses = self.update(self.poses)
         work.times.add("solve", started)
@@ -614,10 +614,10 @@ class Tracker:
             st.region_margin,
         )
 
-    def add_regions(self, work: Workspace, twist: np.ndarray) -> int:
+    def add_regions(self, work: Workspace, twist: np.ndarray, afresh: bool = False) -> int:
         """Add the region cue's lines to C_i, eta_i (:func:`tracker.tracking.region_cue.region_kernel`), read from
-        their profiles (:meth:`profile_lines`) where the parts moved little since; returns the number of lines
-        used."""
+        their profiles (:meth:`profile_lines`) where the parts moved little since, unless ``afresh`` (the frame's
+        last iteration); returns the number of lines used."""
         s, st = work.samples, self.settings
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
         assert work.outside is not None and work.depth is not None and work.profiles is not None
@@ -642,6 +642,7 @@ class Tracker:
             st.region_weight,
             st.region_sigma**2,
             *work.profiles,
+            afresh,
             work.region_mean,
             work.region_variance,
             work.information,
