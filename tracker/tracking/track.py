@@ -330,7 +330,8 @@ class Workspace:
     hi: np.ndarray | None = None
     outside: np.ndarray | None = None
     depth: np.ndarray | None = None
-    profiles: tuple[np.ndarray, ...] | None = None  # the region cue's lines scored at the sampling (line_profiles)
+    profiles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None  # the region cue's lines scored at
+    # the sampling (line_profiles: likelihood, start, first, length)
 
     @classmethod
     def around(cls, images: np.ndarray, ownership: Ownership) -> Workspace:
@@ -621,6 +622,7 @@ class Tracker:
         s, st = work.samples, self.settings
         assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
         assert work.outside is not None and work.depth is not None and work.profiles is not None
+        likelihood, start, first, length = work.profiles
         return region_kernel(
             work.bins,
             self.chroma_size,
@@ -641,7 +643,10 @@ class Tracker:
             self.logs,
             st.region_weight,
             st.region_sigma**2,
-            *work.profiles,
+            likelihood,
+            start,
+            first,
+            length,
             afresh,
             work.region_mean,
             work.region_variance,
