@@ -230,10 +230,29 @@ def _used(s, every, table_ki, outside, d_lo, d_hi):
 
 
 @njit(cache=True, inline="always")
-def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
-    """The log-likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
-    pixels) into ``out[at:]`` (module docstring); False where the line leaves the image.  ``terms`` (5, n + 3) is
-    scratch."""
+def _moments(likelihood, at, n):
+    """The mean and variance (in steps from ``at``) of the posterior ``likelihood[at:at + n]`` normalised."""
+    total = 0.0
+    mean = 0.0
+    for c in range(n):
+        total += likelihood[at + c]
+        mean += likelihood[at + c] * c
+    mean /= total
+    variance = 0.0
+    for c in range(n):
+        variance += likelihood[at + c] * (c - mean) ** 2
+    return mean, variance / total
+
+
+@njit(cache=True, inline="always")
+def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
+    """The likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
+    pixels; module docstring), divided by the largest, into ``out[at:]``; False where the line leaves the image.
+    ``terms`` (5, n + 3) is scratch.
+
+    Two of a line's log-likelihoods differ in at most 2 * (MAX_LINE + margin) + 3 pixels' terms, each
+    within log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of the other's: the smallest ratio (about e^-350) is far
+    from underflow (e^-708), so any run of candidates keeps its posterior's shape to the last bits."""
     for t in (d_lo - 1, d_hi + 1):  # the line's ends: a straight line is in the image where both are
         x = x0 + t * nx
         y = y0 + t * ny
@@ -259,34 +278,6 @@ def _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms,
     for c in range(d_hi - d_lo + 1):
         j = c + 1  # the pixel at t = d
         out[at + c] = prefix_in[j - 1] + l_m1[j - 1] + log_half + l_p1[j + 1] + suffix_out[j + 2]
-    return True
-
-
-@njit(cache=True, inline="always")
-def _moments(likelihood, at, n):
-    """The mean and variance (in steps from ``at``) of the posterior ``likelihood[at:at + n]`` normalised."""
-    total = 0.0
-    mean = 0.0
-    for c in range(n):
-        total += likelihood[at + c]
-        mean += likelihood[at + c] * c
-    mean /= total
-    variance = 0.0
-    for c in range(n):
-        variance += likelihood[at + c] * (c - mean) ** 2
-    return mean, variance / total
-
-
-@njit(cache=True, inline="always")
-def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
-    """:func:`_scores` divided by their largest (exponentiated) into ``out[at:]``; False where the line leaves the
-    image.
-
-    Two of a line's log-likelihoods differ in at most 2 * (MAX_LINE + margin) + 3 pixels' terms, each
-    within log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of the other's: the smallest ratio (about e^-350) is far
-    from underflow (e^-708), so any run of candidates keeps its posterior's shape to the last bits."""
-    if not _scores(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
-        return False
     n = d_hi - d_lo + 1
     best = out[at : at + n].max()
     for c in range(n):
@@ -404,9 +395,8 @@ def region_kernel(
     read from it, on the whole half-size pixels from the sampled place; else, and for every line with ``afresh``
     (the frame's last iteration), the line is scored afresh on those from the moved place: read from the profile,
     the candidates lie a sub-pixel phase off it, and the outline's final place with them (the demo 4.8 mm against
-    4.4 with the last iteration afresh).  Writes
-    each sample's posterior mean and variance (full-size pixels; NaN for a line not used).  ``min_variance``
-    floors the variance in the weight, ``weight`` is lambda."""
+    4.4 with the last iteration afresh).  Writes each sample's posterior mean and variance (full-size pixels; NaN
+    for a line not used).  ``min_variance`` floors the variance in the weight, ``weight`` is lambda."""
     used = 0
     terms = np.empty((5, 2 * MAX_LINE + 4))
     fresh = np.empty(2 * MAX_LINE + 1)

@@ -333,6 +333,11 @@ class Workspace:
     profiles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None  # the region cue's lines scored at
     # the sampling (line_profiles: likelihood, start, first, length)
 
+    def limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The samples' search limits as :meth:`Tracker.sample` set them: ``lo``, ``hi``, ``outside``, ``depth``."""
+        assert self.lo is not None and self.hi is not None and self.outside is not None and self.depth is not None
+        return self.lo, self.hi, self.outside, self.depth
+
     @classmethod
     def around(cls, images: np.ndarray, ownership: Ownership) -> Workspace:
         """Fresh buffers for a search in ``images`` with the search limits of ``ownership``, whose model, rig and
@@ -595,8 +600,7 @@ class Tracker:
         """Score the region cue's lines at the places just sampled, for this and the next iterations
         (:func:`tracker.tracking.region_cue.line_profiles`)."""
         s, st = work.samples, self.settings
-        assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
-        assert work.outside is not None and work.depth is not None
+        lo, hi, outside, depth = work.limits()
         work.profiles = line_profiles(
             work.bins,
             self.chroma_size,
@@ -605,10 +609,10 @@ class Tracker:
             s.component,
             s.pixel,
             s.normal,
-            work.outside,
-            work.depth,
-            work.lo,
-            work.hi,
+            outside,
+            depth,
+            lo,
+            hi,
             max(st.region_every, 1),
             self.part_table,
             self.logs,
@@ -620,8 +624,8 @@ class Tracker:
         their profiles (:meth:`profile_lines`) where the parts moved little since, unless ``afresh`` (the frame's
         last iteration); returns the number of lines used."""
         s, st = work.samples, self.settings
-        assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
-        assert work.outside is not None and work.depth is not None and work.profiles is not None
+        lo, hi, outside, depth = work.limits()
+        assert work.profiles is not None  # set by profile_lines()
         likelihood, start, first, length = work.profiles
         return region_kernel(
             work.bins,
@@ -632,11 +636,11 @@ class Tracker:
             s.pixel,
             s.normal,
             s.jacobian,
-            work.outside,
-            work.depth,
+            outside,
+            depth,
             twist,
-            work.lo,
-            work.hi,
+            lo,
+            hi,
             max(st.region_every, 1),
             self.part_table,
             self.distinct,
@@ -659,8 +663,7 @@ class Tracker:
         (:func:`tracker.tracking.region_cue.learn_kernel`) and blend them in."""
         st, work = self.settings, self.work
         s = work.samples
-        assert work.lo is not None and work.hi is not None  # set by sample(), with the two below
-        assert work.outside is not None and work.depth is not None
+        lo, hi, outside, depth = work.limits()
         started = time.perf_counter()
         learn_kernel(
             work.bins,
@@ -671,11 +674,11 @@ class Tracker:
             s.pixel,
             s.normal,
             s.jacobian,
-            work.outside,
-            work.depth,
+            outside,
+            depth,
             motion_since(self.sampled_poses, self.poses),
-            work.lo,
-            work.hi,
+            lo,
+            hi,
             work.region_mean,
             self.histograms.seen,
             st.region_agree,
