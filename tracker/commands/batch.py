@@ -293,10 +293,8 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool
                 progress.update(1)
                 progress.write(_finished(row), sys.stdout)
                 sys.stdout.flush()  # a line as each finishes, also through a pipe
-        except KeyboardInterrupt:
-            for ref in pending:
-                ray.cancel(ref, force=True)
-            return True
+        except KeyboardInterrupt:  # ray.shutdown() below ends the job, and with it the tasks it owns: cancelling
+            return True  # them first races their replies and can abort the driver (Ray 2.60: 'not pending')
         finally:
             progress.close()
     finally:
