@@ -4,6 +4,7 @@ the batched triangulation is the single one."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,25 @@ def test_perfect_views_are_all_kept(perfect):
     checked, dropped = consistent(keypoints, cameras)
     np.testing.assert_array_equal(checked.confidence, keypoints.confidence)
     np.testing.assert_array_equal(checked.pixels, keypoints.pixels)
+    assert not dropped.any()
+
+
+def test_landmarks_off_the_persons_mask_are_dropped_and_not_counted(perfect):
+    """Masks that show the person in every view of every frame but for cam2's knees' and ankles' pixels in frame 1
+    (a table before the legs): those landmarks go, nothing else, and the share dropped by the check stays 0."""
+    cameras, keypoints = perfect
+    square = np.zeros((5, 3, 3))
+    square[..., :2] = np.nanmean(keypoints.pixels, axis=2)
+    square[..., 2] = 400.0
+    mask = np.full((5, 3, 256, 256), 255, np.uint8)
+    legs = [LANDMARKS.index(f"{side}_{joint}") for side in ("left", "right") for joint in ("knee", "ankle")]
+    for j in legs:  # holes 30 crop pixels about each, twice the widening (FAR_OFF)
+        x, y = 256 / 400.0 * (keypoints.pixels[1, 2, j] - square[1, 2, :2]) + 128
+        mask[1, 2, max(0, int(y) - 30) : int(y) + 30, max(0, int(x) - 30) : int(x) + 30] = 0
+    checked, dropped = consistent(dataclasses.replace(keypoints, mask=mask, square=square), cameras)
+    expected = keypoints.confidence.copy()
+    expected[1, 2, legs] = 0.0
+    np.testing.assert_array_equal(checked.confidence, expected)
     assert not dropped.any()
 
 

@@ -3,6 +3,7 @@ keypoints.npz file and the command that writes and reuses it."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
 from pathlib import Path
 
@@ -74,6 +75,33 @@ def test_landmarks_sit_on_the_demo_body(demo_keypoints):
         assert np.median(errors) < 10.0, np.median(errors)
 
 
+def test_the_persons_mask_covers_the_demo_body(demo_keypoints):
+    """Frames 0-19 of the demo, cam0 and cam2: the detector's mask, taken from its square to the image, says
+    "person" (>= 0.5) on most of the body's true silhouette (the model ray-cast at the true poses) and on little of
+    the rest of its square."""
+    from tracker.model import load_model
+    from tracker.raycast import RayCaster
+    from tracker.tracking.person import person_grid
+
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = load_poses(DEMO / "truth.npz")
+    assert demo_keypoints.mask is not None and demo_keypoints.square is not None
+    for camera in (0, 2):
+        caster = RayCaster(model, recording.cameras[camera])
+        size = np.array(recording.cameras[camera].size) // 2
+        for frame in (0, 10, 19):
+            square = demo_keypoints.square[frame, camera]
+            assert np.isfinite(square).all()
+            body = caster.cast(truth["poses"][frame])[0][::2, ::2] >= 0  # on the half-size grid's pixels
+            person = person_grid(demo_keypoints.mask[frame, camera], square, size)[: body.shape[0], : body.shape[1]]
+            u, v = np.meshgrid(np.arange(body.shape[1]), np.arange(body.shape[0]))
+            inside = (np.abs(2 * u - square[0]) < square[2] / 2) & (np.abs(2 * v - square[1]) < square[2] / 2)
+            said = person >= 128
+            assert said[body].mean() > 0.9, (camera, frame, said[body].mean())
+            assert said[inside & ~body].mean() < 0.05, (camera, frame, said[inside & ~body].mean())
+
+
 def test_an_empty_image_has_no_person():
     detector = Detector()
     try:
@@ -101,10 +129,19 @@ def test_keypoints_file_round_trip_and_bad_files(tmp_path, demo_keypoints, one_l
         demo_keypoints.confidence,
         demo_keypoints.world,
     )
+    np.testing.assert_array_equal(loaded.mask, demo_keypoints.mask)
+    np.testing.assert_array_equal(loaded.square, demo_keypoints.square)
     save_keypoints(tmp_path / "short.npz", short)
     assert "pixels is (20, 3, 33, 2), expected (3, 3, 33, 2)" in one_line_error(
         lambda: load_keypoints(tmp_path / "short.npz")
     )
+    bare = dataclasses.replace(demo_keypoints, mask=None, square=None)  # a file of landmarks alone loads
+    save_keypoints(tmp_path / "bare.npz", bare)
+    assert load_keypoints(tmp_path / "bare.npz").mask is None
+    with np.load(path) as data:
+        arrays = {key: data[key] for key in data.files if key != "square"}
+    np.savez(tmp_path / "maskonly.npz", **arrays)
+    assert "a mask without its square" in one_line_error(lambda: load_keypoints(tmp_path / "maskonly.npz"))
 
 
 def test_command_writes_then_reuses_the_cache(tmp_path, capsys, monkeypatch):

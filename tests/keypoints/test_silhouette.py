@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -54,3 +55,28 @@ def test_the_mask_covers_the_demo_body_and_little_else():
             assert on[square & ~near].mean() < 0.05
     finally:
         segmenter.close()
+
+
+def test_landmarks_off_their_own_detections_mask_are_dropped():
+    """Two views of one frame with masks over squares of side 64 about (100, 50), the person filling the crop's
+    left half (image x < 100; widened by FAR_OFF, 15 crop pixels, 3.75 image pixels): the landmarks left of x 103.75
+    keep their confidence, those from it on get none; a view without a mask, or keypoints without masks, keep
+    theirs."""
+    from tracker.keypoints.silhouette import on_person
+    from tracker.keypoints.store import Keypoints
+
+    pixels = np.zeros((1, 3, 33, 2))
+    pixels[..., 0] = np.linspace(80.0, 120.0, 33)
+    pixels[..., 1] = 50.0
+    confidence = np.full((1, 3, 33), 0.9)
+    mask = np.zeros((1, 3, 256, 256), np.uint8)
+    mask[:, :, :, :128] = 255
+    square = np.tile([100.0, 50.0, 64.0], (1, 3, 1))
+    square[0, 2] = np.nan
+    keypoints = Keypoints(np.array([0]), ("a", "b", "c"), pixels, confidence, np.zeros((1, 3, 33, 3)))
+    kept = on_person(dataclasses.replace(keypoints, mask=mask, square=square)).confidence[0]
+    on = pixels[0, 0, :, 0] < 103.7
+    for view in (0, 1):
+        np.testing.assert_array_equal(kept[view], np.where(on, 0.9, 0.0))
+    np.testing.assert_array_equal(kept[2], 0.9)
+    assert on_person(keypoints) is keypoints

@@ -15,7 +15,8 @@ from tracker.io.recording import frames, open_recording
 from tracker.keypoints import stream as stream_module
 from tracker.keypoints.detect import detect_recording, fingerprint
 from tracker.keypoints.store import load_keypoints, save_keypoints
-from tracker.keypoints.stream import KeypointStream, default_step
+from tracker.keypoints.stream import KeypointStream, beside, default_step
+from tracker.tracking.track import Settings, Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
@@ -210,3 +211,57 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     with KeypointStream(recording, 0, 5, 2, cache) as fresh:
         first = fresh.get(4, near=off)
     assert not (first[1][:2, seen] >= 0.5).any()
+
+
+def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path, monkeypatch):
+    """A cache of frames 0 and 4 with masks, cam2 seeing nobody in frame 4: frames 0 and 4 get their masks, cam2
+    none in frame 4, frames 1-3 none; a cache without masks gives none.  beside() hands them to the tracker."""
+    from tracker.keypoints.detector import DETECTOR
+    from tracker.keypoints.region import CROP
+    from tracker.keypoints.store import Keypoints
+    from tracker.model import load_model
+    from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+
+    recording = open_recording(DEMO)
+    model = load_model(recording.model_path)
+    truth = np.load(DEMO / "truth.npz")
+    component = landmark_points(model, LANDMARKS)[0]
+    names = tuple(camera.name for camera in recording.cameras)
+    pixels = np.full((2, 3, len(LANDMARKS), 2), np.nan)
+    for k, camera in enumerate(recording.cameras):
+        for j in np.flatnonzero(component >= 0):
+            pixels[:, k, j] = camera.project(truth["poses"][[0, 4], component[j], :3, 3])
+    pixels[1, 2] = np.nan
+    confidence = np.where(np.isfinite(pixels[..., 0]), 1.0, 0.0)
+    mask = np.full((2, 3, CROP, CROP), 200, np.uint8)
+    mask[1] = 255
+    square = np.zeros((2, 3, 3))
+    square[..., :2] = np.nanmean(pixels[0], axis=1)  # about the body in each view, 400 pixels wide
+    square[..., 2] = 400.0
+    square[1, 2] = np.nan
+    held = Keypoints(np.array([0, 4]), names, pixels, confidence, np.zeros((2, 3, len(LANDMARKS), 3)), DETECTOR)
+    monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
+    cache = tmp_path / "keypoints.npz"
+    identity = fingerprint(recording)
+    save_keypoints(cache, dataclasses.replace(held, recording=identity, mask=mask, square=square))
+    with KeypointStream(recording, 0, 5, 4, cache) as stream:
+        for frame in range(5):
+            stream.get(frame)
+            person = stream.person(frame)
+            assert (person is not None) == (frame in (0, 4))
+        masks, squares = stream.person(4)
+        assert (masks == 255).all() and np.isfinite(squares[:2]).all() and np.isnan(squares[2]).all()
+        assert (stream.person(0)[0] == 200).all() and np.isfinite(stream.person(0)[1]).all()
+    tracker = Tracker(model, recording.cameras, truth["poses"][0])
+    trust = Settings().region_person
+    with KeypointStream(recording, 0, 5, 4, cache) as stream:
+        landmarks = beside(stream, tracker)
+        for frame, trusted in ((0, [trust] * 3), (1, [0.0] * 3), (4, [trust, trust, 0.0])):
+            landmarks(frame)
+            assert tracker.person_trust.tolist() == trusted
+        u, v = (square[1, 0, :2] // 2).astype(int)  # the centre on the half-size grid, and 250 pixels off
+        assert tracker.person[0, v, u] == 255 and tracker.person[0, v, max(0, u - 125)] == 0
+    save_keypoints(cache, dataclasses.replace(held, recording=identity))
+    with KeypointStream(recording, 0, 5, 4, cache) as stream:
+        stream.get(0)
+        assert stream.person(0) is None

@@ -70,10 +70,28 @@ def table_of(h):
     return out, distinct
 
 
-def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, twist=None, h=None, **options):
+NO_PERSON = (np.zeros((1, 1, 1), np.uint8), np.zeros(1))
+"""No person's mask: the region cue reads the colours alone."""
+
+
+def run(
+    chroma,
+    pixel,
+    *,
+    outside=-1,
+    depth=41,
+    lo=-20,
+    hi=20,
+    jacobian=None,
+    twist=None,
+    h=None,
+    person=NO_PERSON,
+    **options,
+):
     """The kernels on one sample in camera 0 of component 0 with normal +x, its line profiled where it was sampled
     (``margin`` half-size pixels beyond its candidates, the default's unless given) and read after the component
-    moved by ``twist``; returns (mean, variance, C, eta, used)."""
+    moved by ``twist``, with ``person`` (the camera's person mask and its trust); returns (mean, variance, C, eta,
+    used)."""
     h = histograms() if h is None else h
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
@@ -85,7 +103,7 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
     line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([pixel], float), np.array([[1.0, 0.0]]))
     limits = (np.array([outside]), np.array([depth]))
     search = (np.array([lo]), np.array([hi]))
-    profiles = line_profiles(bins, size, 1, *line, *limits, *search, 1, table, logs, settings["margin"])
+    profiles = line_profiles(bins, size, 1, *line, *limits, *search, 1, table, *person, logs, settings["margin"])
     used = region_kernel(
         bins,
         size,
@@ -97,6 +115,7 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
         *search,
         1,
         table,
+        *person,
         distinct,
         logs,
         settings["weight"],
@@ -111,9 +130,10 @@ def run(chroma, pixel, *, outside=-1, depth=41, lo=-20, hi=20, jacobian=None, tw
     return mean[0], variance[0], information, eta, used
 
 
-def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
+def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5, person=NO_PERSON):
     """The posterior's mean and variance (full-size pixels) by the product over every pixel of the line, the step
-    flat beyond one pixel as the kernel takes it."""
+    flat beyond one pixel as the kernel takes it; each pixel's p_f joined by the person's mask (``person``: the
+    camera's mask and trust), bilinear like p_f, as independent odds."""
     x0 = (pixel[0] + 0.5) / FACTOR - 0.5
     y0 = round((pixel[1] + 0.5) / FACTOR - 0.5)  # the tests' rows lie on pixel centres
     candidates = np.arange(-(-lo // FACTOR), hi // FACTOR + 1)
@@ -139,6 +159,10 @@ def brute_force(chroma, pixel, lo, hi, h, amplitude=0.43, slope=0.5):
                 )
                 for column, weight in ((u, 1 - (x - u)), (u + 1, x - u))
             )
+            if person[1][0] > 0:
+                mask = person[0][0, y0].astype(float)
+                m = 0.5 + person[1][0] * ((mask[u] * (1 - (x - u)) + mask[u + 1] * (x - u)) / 255 - 0.5)
+                p = p * m / (p * m + (1 - p) * (1 - m))
             total += np.log(step(t - d) * p + (1 - step(t - d)) * (1 - p))
         log_likelihood.append(total)
     posterior = np.exp(np.array(log_likelihood) - max(log_likelihood))
@@ -156,6 +180,37 @@ def test_the_posterior_equals_the_brute_force_product(edge, noise):
     expected_mean, expected_variance = brute_force(chroma, pixel, -14, 17, histograms())
     assert mean == pytest.approx(expected_mean, abs=1e-4)  # the likelihood terms are tabulated (region.log_table)
     assert variance == pytest.approx(expected_variance, abs=1e-4)
+
+
+def person_left_of(column: int, trust: float, width: int = 80, height: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """A camera's person mask that says "person" (0.9) left of half-size ``column`` and not (0.1) from it on."""
+    mask = np.where(np.arange(width) < column, 230, 25).astype(np.uint8)
+    return np.ascontiguousarray(np.broadcast_to(mask, (1, height, width))), np.array([trust])
+
+
+@pytest.mark.parametrize("trust", [0.3, 0.6, 1.0])
+@pytest.mark.parametrize("column", [30, 36])
+def test_the_persons_mask_joins_each_pixels_colour_as_the_brute_force_product(trust, column):
+    chroma = split_image(33.0, noise=0.2, seed=5)
+    pixel = (65.3, 40.5)
+    person = person_left_of(column, trust)
+    mean, variance, *_ = run(chroma, pixel, lo=-14, hi=17, person=person)
+    expected_mean, expected_variance = brute_force(chroma, pixel, -14, 17, histograms(), person=person)
+    assert mean == pytest.approx(expected_mean, abs=1e-4) and variance == pytest.approx(expected_variance, abs=1e-4)
+
+
+def test_where_the_colours_cannot_tell_the_mask_places_the_outline():
+    """The part's colours and the room's equally likely on either side: alone the line knows nothing (its mean at
+    the middle of its candidates, its variance theirs); with a mask that ends at half-size column 36 (full-size x
+    71.5), the outline goes there."""
+    chroma = split_image(32.0, noise=0.5, seed=2)
+    h = histograms()
+    h.foreground[0, :, bin_of(PART)] = h.foreground[0, :, bin_of(ROOM)] = 0.5
+    h.background[0, :, bin_of(PART)] = h.background[0, :, bin_of(ROOM)] = 0.5
+    blind_mean, blind_variance, *_ = run(chroma, (63.5, 40.5), h=h)
+    assert blind_mean == pytest.approx(0.0, abs=0.5) and blind_variance > 100.0
+    mean, variance, *_ = run(chroma, (63.5, 40.5), h=h, person=person_left_of(36, 0.6))
+    assert 63.5 + mean == pytest.approx(71.5, abs=0.5) and variance < blind_variance / 8
 
 
 @pytest.mark.parametrize("shift", [-6, -2, 0, 4, 8])
@@ -237,7 +292,7 @@ def test_a_line_whose_margin_leaves_the_image_is_profiled_without_it():
     for x, (first, length) in ((122.0, (-10, 28)), (100.0, (-10 - MARGIN, 28 + 2 * MARGIN))):
         line[2][0, 0] = x
         _, _, profiled_first, profiled_length = line_profiles(
-            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], logs, MARGIN
+            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], *NO_PERSON, logs, MARGIN
         )
         assert (profiled_first[0], profiled_length[0]) == (first, length)
     still, *_ = run(chroma, (122.0, 40.5), lo=lo, hi=hi)
@@ -269,9 +324,9 @@ def test_a_thin_part_keeps_its_offsets_within_half_its_width():
     assert far < -5.0  # without the width, the far side pulls the outline in: the reason the width is there
 
 
-def learn(chroma, seen, mean, counts):
+def learn(chroma, seen, mean, counts, person=NO_PERSON):
     """learn_kernel on two lines of camera 0 at half-size row 20 and 10: component 0 with the room outside,
-    component 1 with another part outside; their last offsets ``mean``."""
+    component 1 with another part outside; their last offsets ``mean``; ``person`` as :func:`run`'s."""
     learn_kernel(
         bins_of(chroma),
         np.array([[80, 40]]),
@@ -291,6 +346,7 @@ def learn(chroma, seen, mean, counts):
         2.0,
         2,
         5,
+        *person,
         *counts.arrays(),
     )
 
@@ -305,6 +361,16 @@ def test_known_colours_are_learnt_only_where_the_line_agrees_with_the_outline():
     learn(chroma, seen, [np.nan, -2.0], counts)  # a line the cue did not measure teaches nothing
     assert counts.colours[0, 0, 0].sum() == 2 and counts.colours[0, 0, 1].sum() == 2
     assert counts.touched_count[0, 0].tolist() == [1, 1] and counts.touched[0, 0, :, 0].tolist() == [bin_of(PART)] * 2
+
+
+def test_with_a_mask_colours_are_learnt_only_where_it_agrees():
+    """The mask says "person" everywhere: the part's pixels count and its background's do not; "not the person"
+    everywhere: the reverse (a leg hidden behind a table does not learn the table's colours as its own)."""
+    chroma = split_image(32.0)
+    for column, part, background in ((80, 2, 0), (0, 0, 4)):
+        counts = Counts.empty(1, 2)
+        learn(chroma, Histograms.empty(1, 2), [np.nan, np.nan], counts, person=person_left_of(column, 0.6))
+        assert counts.colours[0, 0, 0].sum() == part and counts.colours[1, 0, 0].sum() == background
 
 
 def test_learning_counts_inside_and_outside_then_blends():

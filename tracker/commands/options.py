@@ -30,6 +30,7 @@ TUNING = (
     "work_side",
     "region",
     "region_weight",
+    "region_person",
 )
 
 
@@ -206,6 +207,15 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
                 type=positive_float,
                 metavar="W",
                 help="the colour cue's weight beside the edges' (default 0.3)",
+            ),
+        ),
+        "region_person": (
+            ["--region-person"],
+            dict(
+                type=share,
+                metavar="T",
+                help="how far the colour cue trusts the detector's mask of the person, 0..1 (default 0.6; 0 ignores "
+                "it; docs/region.md)",
             ),
         ),
         "damping": (

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.camera import Camera
+from tracker.keypoints.silhouette import on_person
 from tracker.keypoints.store import Keypoints
 from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
 
@@ -174,9 +175,12 @@ def consistent(
     keypoints: Keypoints, cameras: list[Camera], *, min_confidence: float = 0.5, gate: float = GATE
 ) -> tuple[Keypoints, np.ndarray]:
     """``keypoints`` checked across the views, and the share (C,) of each camera's confident detections
-    dropped.  First the views that show someone else are dropped whole, then swapped views are put right
+    dropped.  First the landmarks off their own detection's mask of the person are dropped (confidence 0,
+    :func:`tracker.keypoints.silhouette.on_person`: guessed where a table hides the body; not counted in the
+    share), then the views that show someone else are dropped whole, then swapped views are put right
     (:func:`unswapped`: pixels, confidence and world of each swapped pair exchanged), then every detection
     that disagrees with the other views is dropped (confidence 0)."""
+    keypoints = on_person(keypoints)
     usable = _usable(keypoints, min_confidence)
     confidence = keypoints.confidence.copy()
     disagree, checked = _disagreements(keypoints, cameras, usable, gate)

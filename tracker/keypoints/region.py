@@ -70,6 +70,18 @@ def to_image(pixels_crop: np.ndarray, region: Region, size: int = CROP) -> np.nd
     return (region.side / size) * (pixels_crop - size / 2.0) + np.asarray(region.centre)
 
 
+def within(square: Region, region: Region, size: int = CROP) -> Region:
+    """The full-image square of ``square``, a square of ``region``'s ``size`` x ``size`` crop."""
+    ((x, y),) = to_image(np.array([square.centre]), region, size)
+    return Region((float(x), float(y)), square.side * region.side / size)
+
+
+def scaled(square: Region, factor: float) -> Region:
+    """``square`` of an image reduced by ``factor`` in the full image (a reduced image spans the full one's whole
+    blocks: its pixels' shares of the width and height are the full image's)."""
+    return Region((factor * square.centre[0], factor * square.centre[1]), factor * square.side)
+
+
 def search(width: int, height: int) -> list[Region]:
     """The squares a body never found is looked for in, over a ``width`` x ``height`` image, in order: the
     whole image shrunk into a square twice its long side (a body cut by the border, or too large, then

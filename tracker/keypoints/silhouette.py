@@ -10,10 +10,15 @@ mostly does.
 
 The mask is read like the landmarks, in a square around the person (:func:`tracker.keypoints.region.around`,
 so a small body fills the crop), and kept in that square's pixels.  docs/fit-model.md, "Partly in view".
+
+The video-mode detector of tracking segments the person in the same pass that places the landmarks
+(:class:`tracker.keypoints.detector.Detection`); :func:`on_person` drops the landmarks off that mask, so the hips
+and knees it guesses behind a table do not pull the tracked body onto the table (docs/keypoints.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
@@ -21,6 +26,7 @@ import numpy as np
 
 from tracker.keypoints.detector import native_logs_muted, pose_solution, rgb_of
 from tracker.keypoints.region import Region, around, crop_from_image, cut, to_image
+from tracker.keypoints.store import Keypoints
 
 LEVEL = 0.5
 """The mask's probability from which a pixel shows the person."""
@@ -59,6 +65,29 @@ class PersonMask:
         out = np.zeros(len(pixels), bool)
         out[inside] = self.person[at[inside, 1], at[inside, 0]]
         return out
+
+
+def on_person(keypoints: Keypoints) -> Keypoints:
+    """``keypoints`` with no confidence where a landmark lies off its own detection's mask of the person (at
+    :data:`LEVEL`, widened by :data:`SLACK` of its square's side); views without a mask as they were."""
+    if keypoints.mask is None or keypoints.square is None:
+        return keypoints
+    confidence = keypoints.confidence.copy()
+    size = keypoints.mask.shape[2]
+    reach = max(1, round(FAR_OFF * size))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+    for f, k in zip(*np.nonzero(np.isfinite(keypoints.square).all(axis=2) & (confidence > 0).any(axis=2))):
+        (x, y, side), mask = keypoints.square[f, k], keypoints.mask[f, k]
+        person = cv2.dilate((mask >= round(255 * LEVEL)).astype(np.uint8), disc) > 0
+        confidence[
+            f, k, ~PersonMask(Region((float(x), float(y)), float(side)), person).covers(keypoints.pixels[f, k])
+        ] = 0.0
+    return dataclasses.replace(keypoints, confidence=confidence)
+
+
+FAR_OFF = 0.06
+"""How far off its detection's mask a landmark must lie to be dropped in tracking (:func:`on_person`), a share of
+the square's side."""
 
 
 class Segmenter:

@@ -10,8 +10,10 @@ Arrays, F frames, C cameras, 33 landmarks (:data:`tracker.keypoints.detector.LAN
     world (F, C, 33, 3) float64          metric world landmarks, metres, origin between the hips
     detector () str                      what made them (a cache of another detector is not reused)
     recording () str                     the recording's fingerprint (optional; "" when unknown)
+    mask (F, C, 256, 256) uint8          the person's segmentation, probability x 255, over ``square`` (optional)
+    square (F, C, 3) float64             centre x, y and side of the mask's square, image pixels (NaN: no mask)
 
-Written atomically; loads without pickle.
+Written atomically and compressed (the masks are mostly zero); loads without pickle.
 """
 
 from __future__ import annotations
@@ -27,13 +29,15 @@ import numpy as np
 from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
 from tracker.keypoints.detector import DETECTOR
+from tracker.keypoints.region import CROP
 from tracker.tracking.keypoint_cue import LANDMARKS
 
 
 @dataclass(frozen=True)
 class Keypoints:
     """The landmarks of frames ``frame`` (F,) in cameras ``camera_names``: pixels (F, C, 33, 2),
-    confidence (F, C, 33), world (F, C, 33, 3)."""
+    confidence (F, C, 33), world (F, C, 33, 3); and the person's masks (F, C, CROP, CROP) uint8 over their
+    squares (F, C, 3), None when not known (a file without them)."""
 
     frame: np.ndarray
     camera_names: tuple[str, ...]
@@ -42,6 +46,8 @@ class Keypoints:
     world: np.ndarray
     detector: str = DETECTOR
     recording: str = ""
+    mask: np.ndarray | None = None
+    square: np.ndarray | None = None
 
     def at_frames(self, frames: np.ndarray) -> Keypoints:
         """The same keypoints for the frame numbers ``frames`` only (each must be held), in that order."""
@@ -58,7 +64,16 @@ class Keypoints:
             self.world[index],
             self.detector,
             self.recording,
+            None if self.mask is None else self.mask[index],
+            None if self.square is None else self.square[index],
         )
+
+    def masks(self) -> tuple[np.ndarray, np.ndarray]:
+        """The masks (F, C, CROP, CROP) and their squares (F, C, 3), all zero and NaN when not known."""
+        frames, cameras = self.confidence.shape[:2]
+        if self.mask is None or self.square is None:
+            return np.zeros((frames, cameras, CROP, CROP), np.uint8), np.full((frames, cameras, 3), np.nan)
+        return self.mask, self.square
 
 
 def save_keypoints(path: str | os.PathLike, keypoints: Keypoints) -> None:
@@ -73,7 +88,10 @@ def save_keypoints(path: str | os.PathLike, keypoints: Keypoints) -> None:
         "detector": np.array(keypoints.detector, dtype=str),
         "recording": np.array(keypoints.recording, dtype=str),
     }
-    atomic_write(path, lambda file: np.savez(file, **arrays))
+    if keypoints.mask is not None and keypoints.square is not None:
+        arrays["mask"] = np.asarray(keypoints.mask, dtype=np.uint8)
+        arrays["square"] = np.asarray(keypoints.square, dtype=np.float64)
+    atomic_write(path, lambda file: np.savez_compressed(file, **arrays))
 
 
 def load_keypoints(path: str | os.PathLike) -> Keypoints:
@@ -95,7 +113,11 @@ def load_keypoints(path: str | os.PathLike) -> Keypoints:
         "confidence": (frames, cameras, len(LANDMARKS)),
         "world": (frames, cameras, len(LANDMARKS), 3),
     }
+    if "mask" in arrays or "square" in arrays:
+        shapes |= {"mask": (frames, cameras, CROP, CROP), "square": (frames, cameras, 3)}
     for key, shape in shapes.items():
+        if key not in arrays:
+            raise TrackerInputError(f"{path}: a mask without its square, or the reverse; delete it to detect again")
         if arrays[key].shape != shape:
             raise TrackerInputError(
                 f"{path}: {key} is {arrays[key].shape}, expected {shape}; delete it to detect again"
@@ -110,4 +132,6 @@ def load_keypoints(path: str | os.PathLike) -> Keypoints:
         arrays["world"],
         str(arrays["detector"]),
         str(arrays["recording"]) if "recording" in arrays else "",
+        arrays.get("mask"),
+        arrays.get("square"),
     )

@@ -184,6 +184,24 @@ def part_probability(bins, table, width, height, x, y):
 
 
 @njit(cache=True, inline="always")
+def with_person(p, person, x, y, trust):
+    """A pixel's ``p`` (p_f) joined by the person's mask at the half-size point (x, y) (``person`` (H', W') uint8,
+    the probability x 255, :func:`tracker.tracking.person.person_grid`; bilinear between pixel centres, (x, y)
+    within the image as :func:`part_probability` takes it), as independent evidence whose odds multiply ``p``'s,
+    ``m`` taken as ``1/2 + trust (m - 1/2)``: the mask is coarse and a few frames old between detections, and the
+    network sometimes paints a hidden leg on the table before it (docs/region.md)."""
+    u = min(int(x), person.shape[1] - 2)
+    v = min(int(y), person.shape[0] - 2)
+    fx = x - u
+    fy = y - v
+    top = person[v, u] * (1.0 - fx) + person[v, u + 1] * fx
+    bottom = person[v + 1, u] * (1.0 - fx) + person[v + 1, u + 1] * fx
+    m = 0.5 + trust * ((top * (1.0 - fy) + bottom * fy) / 255.0 - 0.5)
+    a = p * m
+    return a / (a + (1.0 - p) * (1.0 - m))
+
+
+@njit(cache=True, inline="always")
 def _colour(bins, width, height, x, y):
     """The colour bin of the half-size pixel nearest to (x, y) (half-size coordinates); -1 outside the image."""
     u = int(math.floor(x + 0.5))
@@ -245,10 +263,11 @@ def _moments(likelihood, at, n):
 
 
 @njit(cache=True, inline="always")
-def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
+def _likelihood(bins, table, person, trust, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
     """The likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
     pixels; module docstring), divided by the largest, into ``out[at:]``; False where the line leaves the image.
-    ``terms`` (5, n + 3) is scratch.
+    ``terms`` (5, n + 3) is scratch.  With ``trust`` > 0 each pixel's p_f is joined by the person's mask ``person``
+    (:func:`with_person`).
 
     Two of a line's log-likelihoods differ in at most 2 * (MAX_LINE + margin) + 3 pixels' terms, each
     within log((1/2 + a) / (1/2 - a)) (2.6 for a = 0.43) of the other's: the smallest ratio (about e^-350) is far
@@ -264,7 +283,12 @@ def _likelihood(bins, table, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, te
     prefix_in[0] = 0.0
     for j in range(n_pix):
         t = d_lo - 1 + j
-        x = part_probability(bins, table, width, height, x0 + t * nx, y0 + t * ny) * LOG_STEPS
+        x = x0 + t * nx
+        y = y0 + t * ny
+        p = part_probability(bins, table, width, height, x, y)
+        if trust > 0.0:
+            p = with_person(p, person, x, y, trust)
+        x = p * LOG_STEPS
         c = min(int(x), LOG_STEPS - 1)
         f = x - c
         prefix_in[j + 1] = prefix_in[j] + far_in[c] + f * (far_in[c + 1] - far_in[c])
@@ -300,6 +324,8 @@ def line_profiles(
     s_hi,
     every,
     table,
+    person,
+    trust,
     logs,
     margin,
 ):
@@ -308,7 +334,9 @@ def line_profiles(
     where the wider line would leave the image), which :func:`region_kernel` reads for this and the next
     iterations until the next sampling.  Returns the line profiles ``(likelihood, start, first, length)``: sample
     ``s``'s lie at ``likelihood[start[s]:start[s] + length[s]]``, for the offsets ``first[s], first[s] + 1, ...``
-    (half-size pixels along the line; length 0 for a line not used, or one that leaves the image)."""
+    (half-size pixels along the line; length 0 for a line not used, or one that leaves the image).  ``person``
+    (C, H', W') and ``trust`` (C,): each camera's person mask and how far it is trusted (0: no mask;
+    :func:`with_person`)."""
     start = np.zeros(count, np.int64)
     first = np.zeros(count, np.int64)
     length = np.zeros(count, np.int64)
@@ -335,6 +363,8 @@ def line_profiles(
             if _likelihood(
                 bins[k],
                 table[k, i],
+                person[k],
+                trust[k],
                 chroma_size[k, 0],
                 chroma_size[k, 1],
                 x0,
@@ -371,6 +401,8 @@ def region_kernel(
     s_hi,
     every,
     table,
+    person,
+    trust,
     distinct,
     logs,
     weight,
@@ -388,15 +420,16 @@ def region_kernel(
     """The outline's offset posterior along the lines of every ``every``-th sample, added to C_i and eta_i (module
     docstring); returns the number of lines used.
 
-    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one half-size
-    pixel from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the
-    line, ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the
-    part's far side.  Where the line's profile (``p_*``, :func:`line_profiles`) holds them all, the candidates are
-    read from it, on the whole half-size pixels from the sampled place; else, and for every line with ``afresh``
-    (the frame's last iteration), the line is scored afresh on those from the moved place: read from the profile,
-    the candidates lie a sub-pixel phase off it, and the outline's final place with them (the demo 4.8 mm against
-    4.4 with the last iteration afresh).  Writes each sample's posterior mean and variance (full-size pixels; NaN
-    for a line not used).  ``min_variance`` floors the variance in the weight, ``weight`` is lambda."""
+    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one half-size pixel
+    from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the line,
+    ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the part's far
+    side.  Where the line's profile (``p_*``, :func:`line_profiles`) holds them all, the candidates are read from
+    it, on the whole half-size pixels from the sampled place; else, and for every line with ``afresh`` (the frame's
+    last iteration), the line is scored afresh on those from the moved place: read from the profile, the candidates
+    lie a sub-pixel phase off it, and the outline's final place with them (the demo 4.8 mm against 4.4 with the last
+    iteration afresh).  ``person``, ``trust``: as :func:`line_profiles`'.  Writes each sample's posterior mean and
+    variance (full-size pixels; NaN for a line not used).  ``min_variance`` floors the variance in the weight,
+    ``weight`` is lambda."""
     used = 0
     terms = np.empty((5, 2 * MAX_LINE + 4))
     fresh = np.empty(2 * MAX_LINE + 1)
@@ -424,6 +457,8 @@ def region_kernel(
             if not _likelihood(
                 bins[k],
                 table[k, i],
+                person[k],
+                trust[k],
                 chroma_size[k, 0],
                 chroma_size[k, 1],
                 x0,
@@ -474,6 +509,8 @@ def learn_kernel(
     agree,
     inside,
     outside,
+    person,
+    trust,
     o_colours,
     o_touched,
     o_touched_count,
@@ -485,7 +522,9 @@ def learn_kernel(
 
     Once camera k knows part i's colours (``seen[k, i]``), only the lines whose last offset posterior agrees with
     the outline (``|s_mean| <= agree``, full-size pixels) count: a part that strays would otherwise learn the room's
-    colours where it lies and hold itself there."""
+    colours where it lies and hold itself there.  Where camera k has the person's mask (``trust[k] > 0``), a pixel
+    counts for the part only where the mask says the person (``person`` >= 128), and for the background only where
+    it does not: a leg hidden behind a table would otherwise learn the table's colours as its own."""
     for s in range(count):
         k = s_cam[s]
         i = s_comp[s]
@@ -504,8 +543,12 @@ def learn_kernel(
         for side in range(2):  # 0: the part's pixels, inwards; 1: the background's, outwards
             sign = -1.0 if side == 0 else 1.0
             for t in range(1 + side, (deepest if side == 0 else farthest) + 1):
-                b = _colour(bins[k], width, height, x0 + sign * t * nx, y0 + sign * t * ny)
+                x = x0 + sign * t * nx
+                y = y0 + sign * t * ny
+                b = _colour(bins[k], width, height, x, y)
                 if b < 0:
+                    continue
+                if trust[k] > 0.0 and (person[k, int(y + 0.5), int(x + 0.5)] >= 128) != (side == 0):
                     continue
                 if o_colours[side, k, i, b] == 0.0:  # a colour new to this frame's counts
                     o_touched[side, k, i, o_touched_count[side, k, i]] = b

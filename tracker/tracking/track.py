@@ -43,6 +43,7 @@ from tracker.tracking.measure import Statistics, component_misfits, measure_kern
 from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
+from tracker.tracking.person import person_grid
 from tracker.tracking.region_cue import (
     COLOURS,
     FACTOR,
@@ -120,6 +121,8 @@ class Settings:
     region_inside: int = 4  # pixels in from the outline whose colours are learnt as the part's
     region_outside: int = 10  # ... and out to which they are learnt as the background's (from 4)
     region_agree: float = 2.0  # pixels: once a part's colours are known, only lines whose offset is this close teach
+    region_person: float = 0.6  # how far the region cue trusts the person's mask, where the detector gives one
+    # (region_cue.with_person: 0 ignores it, 1 takes its word as final)
     region_margin: int = 2  # half-size pixels a line's scores reach beyond its candidates, for the iterations until
     # the next sampling (region_cue.line_profiles): a part that moves further along the line is scored afresh
 
@@ -417,6 +420,9 @@ class Tracker:
         self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
         self.counts = Counts.empty(len(cameras), n)  # a frame's colour counts, before they are learnt
         self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
+        height, width = int(self.chroma_size[:, 1].max()), int(self.chroma_size[:, 0].max())
+        self.person = np.zeros((len(cameras), height, width), np.uint8)  # the person's mask per camera (see_person)
+        self.person_trust = np.zeros(len(cameras))  # how far the region cue trusts it: 0 where there is none
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
@@ -480,6 +486,19 @@ class Tracker:
         bins = np.empty(chroma.shape[:2], np.int16)
         colour_bins(chroma, bins)
         return bins
+
+    def see_person(self, masks: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Take each camera's person mask for the frame to track, ``masks``: (C, S, S) uint8 over squares (C, 3:
+        centre x, y and side, full-size pixels; NaN for a camera without one) (:func:`tracker.tracking.person.
+        person_grid`), or None: none in any camera."""
+        self.person_trust[:] = 0.0
+        if masks is None:
+            return
+        for k, (view, placed) in enumerate(zip(*masks)):
+            if np.isfinite(placed).all() and placed[2] > 0:
+                self.person_trust[k] = self.settings.region_person
+                w, h = self.chroma_size[k]
+                self.person[k, :h, :w] = person_grid(view, placed, self.chroma_size[k])
 
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, reduced and smoothed (:meth:`smooth`) unless
@@ -615,6 +634,8 @@ class Tracker:
             hi,
             max(st.region_every, 1),
             self.part_table,
+            self.person,
+            self.person_trust,
             self.logs,
             st.region_margin,
         )
@@ -643,6 +664,8 @@ class Tracker:
             hi,
             max(st.region_every, 1),
             self.part_table,
+            self.person,
+            self.person_trust,
             self.distinct,
             self.logs,
             st.region_weight,
@@ -684,6 +707,8 @@ class Tracker:
             st.region_agree,
             max(1, round(st.region_inside / FACTOR)),
             max(2, round(st.region_outside / FACTOR)),
+            self.person,
+            self.person_trust,
             *self.counts.arrays(),
         )
         h = self.histograms
