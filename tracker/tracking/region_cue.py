@@ -188,8 +188,8 @@ def with_person(p, person, x, y, trust):
     """A pixel's ``p`` (p_f) joined by the person's mask at the half-size point (x, y) (``person`` (H', W') uint8,
     the probability x 255, :func:`tracker.tracking.person.person_grid`; bilinear between pixel centres, (x, y)
     within the image as :func:`part_probability` takes it), as independent evidence whose odds multiply ``p``'s,
-    ``m`` taken as ``1/2 + trust (m - 1/2)``: the mask is coarse and a few frames old between detections, and the
-    network sometimes paints a hidden leg on the table before it (docs/region.md)."""
+    ``m`` taken as ``1/2 + trust (m - 1/2)``: the mask is coarse (a 1080p body's is 7 pixels a cell), and the network
+    sometimes paints a hidden leg on the table before it (docs/region.md)."""
     u = min(int(x), person.shape[1] - 2)
     v = min(int(y), person.shape[0] - 2)
     fx = x - u
@@ -427,7 +427,7 @@ def region_kernel(
     it, on the whole half-size pixels from the sampled place; else, and for every line with ``afresh`` (the frame's
     last iteration), the line is scored afresh on those from the moved place: read from the profile, the candidates
     lie a sub-pixel phase off it, and the outline's final place with them (the demo 4.8 mm against 4.4 with the last
-    iteration afresh).  ``person``, ``trust``: as :func:`line_profiles`'.  Writes each sample's posterior mean and
+    iteration afresh).  ``person``, ``trust``: as in :func:`line_profiles`.  Writes each sample's posterior mean and
     variance (full-size pixels; NaN for a line not used).  ``min_variance`` floors the variance in the weight,
     ``weight`` is lambda."""
     used = 0
