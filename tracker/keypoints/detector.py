@@ -45,6 +45,7 @@ Each pass depends only on the images given before, so a re-run gives the same la
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import sys
 import types
@@ -187,11 +188,8 @@ def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
     found = _read(landmarker, cut(rgb, region))
     if not found.found:
         return found
-    if found.mask is None or found.square is None:
-        return Detection(to_image(found.pixels, region), found.confidence, found.world)
-    return Detection(
-        to_image(found.pixels, region), found.confidence, found.world, found.mask, within(found.square, region)
-    )
+    square = None if found.square is None else within(found.square, region)
+    return dataclasses.replace(found, pixels=to_image(found.pixels, region), square=square)
 
 
 _BLACK = np.zeros((CROP, CROP, 3), np.uint8)

@@ -32,9 +32,10 @@ class Statistics:
     residual: float  # robust mean |m| = sum w|m| / sum w, pixels
 
 
-@njit(cache=True)
-def _bilinear(image, width, height, x, y):
-    """Grey value at (x, y) (pixel centres at integers); -1 outside the image."""
+@njit(cache=True, inline="always")
+def bilinear(image, width, height, x, y):
+    """The value of ``image`` (H, W) at (x, y) (pixel centres at integers, bilinear); -1 outside ``width`` x
+    ``height``."""
     if x < 0.0 or y < 0.0 or x > width - 1.0 or y > height - 1.0:
         return -1.0
     x0 = min(int(x), width - 2)
@@ -58,7 +59,7 @@ def edge_offset(image, width, height, px, py, nx, ny, search_range, threshold, p
     lo = max(lo, -r)
     hi = min(hi, r)
     for t in range(lo - 2, hi + 3):
-        profile[t + r + 2] = _bilinear(image, width, height, px + t * nx, py + t * ny)
+        profile[t + r + 2] = bilinear(image, width, height, px + t * nx, py + t * ny)
     for d in range(r + 1):
         for sign in (1, -1):
             if d == 0 and sign == -1:

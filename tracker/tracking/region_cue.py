@@ -46,6 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from tracker.tracking.measure import bilinear
+
 BINS = 16  # per colour channel
 COLOURS = BINS**3
 FACTOR = 2  # the colour image is half the full size (4:2:0 chroma)
@@ -184,19 +186,13 @@ def part_probability(bins, table, width, height, x, y):
 
 
 @njit(cache=True, inline="always")
-def with_person(p, person, x, y, trust):
+def with_person(p, person, width, height, x, y, trust):
     """A pixel's ``p`` (p_f) joined by the person's mask at the half-size point (x, y) (``person`` (H', W') uint8,
-    the probability x 255, :func:`tracker.tracking.person.person_grid`; bilinear between pixel centres, (x, y)
-    within the image as :func:`part_probability` takes it), as independent evidence whose odds multiply ``p``'s,
-    ``m`` taken as ``1/2 + trust (m - 1/2)``: the mask is coarse (a 1080p body's is 7 pixels a cell), and the network
-    sometimes paints a hidden leg on the table before it (docs/region.md)."""
-    u = min(int(x), person.shape[1] - 2)
-    v = min(int(y), person.shape[0] - 2)
-    fx = x - u
-    fy = y - v
-    top = person[v, u] * (1.0 - fx) + person[v, u + 1] * fx
-    bottom = person[v + 1, u] * (1.0 - fx) + person[v + 1, u + 1] * fx
-    m = 0.5 + trust * ((top * (1.0 - fy) + bottom * fy) / 255.0 - 0.5)
+    the probability x 255, :func:`tracker.tracking.person.person_grid`, read bilinearly within ``width`` x
+    ``height``), as independent evidence whose odds multiply ``p``'s, ``m`` taken as ``1/2 + trust (m - 1/2)``: the
+    mask is coarse (a 1080p body's is 7 pixels a cell), and the network sometimes paints a hidden leg on the table
+    before it (docs/region.md)."""
+    m = 0.5 + trust * (bilinear(person, width, height, x, y) / 255.0 - 0.5)
     a = p * m
     return a / (a + (1.0 - p) * (1.0 - m))
 
@@ -287,7 +283,7 @@ def _likelihood(bins, table, person, trust, width, height, x0, y0, nx, ny, d_lo,
         y = y0 + t * ny
         p = part_probability(bins, table, width, height, x, y)
         if trust > 0.0:
-            p = with_person(p, person, x, y, trust)
+            p = with_person(p, person, width, height, x, y, trust)
         x = p * LOG_STEPS
         c = min(int(x), LOG_STEPS - 1)
         f = x - c
