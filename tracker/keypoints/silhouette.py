@@ -53,6 +53,14 @@ class PersonMask:
     region: Region
     person: np.ndarray
 
+    @classmethod
+    def widened(cls, region: Region, probability: np.ndarray, slack: float) -> PersonMask:
+        """The person where the network's ``probability`` (n, n) over ``region`` is at least :data:`LEVEL`, widened by
+        ``slack`` of the side (a disc)."""
+        reach = max(1, round(slack * probability.shape[0]))
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+        return cls(region, cv2.dilate((probability >= LEVEL).astype(np.uint8), disc) > 0)
+
     def covers(self, pixels: np.ndarray) -> np.ndarray:
         """Whether each image point ``pixels`` (M, 2) lies on the person (M,) bool; not if outside the square or
         not finite."""
@@ -79,13 +87,10 @@ def on_person(keypoints: Keypoints) -> Keypoints:
     if keypoints.mask is None or keypoints.square is None:
         return keypoints
     confidence = keypoints.confidence.copy()
-    reach = max(1, round(FAR_OFF * keypoints.mask.shape[2]))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
     for f, k in zip(*np.nonzero(np.isfinite(keypoints.square).all(axis=2) & (confidence > 0).any(axis=2))):
         (x, y, side), mask = keypoints.square[f, k], keypoints.mask[f, k]
-        person = cv2.dilate((mask >= round(255 * LEVEL)).astype(np.uint8), disc) > 0
-        covered = PersonMask(Region((float(x), float(y)), float(side)), person).covers(keypoints.pixels[f, k])
-        confidence[f, k, ~covered] = 0.0
+        person = PersonMask.widened(Region((float(x), float(y)), float(side)), mask / 255.0, FAR_OFF)
+        confidence[f, k, ~person.covers(keypoints.pixels[f, k])] = 0.0
     return dataclasses.replace(keypoints, confidence=confidence)
 
 
@@ -109,11 +114,7 @@ class Segmenter:
                 found = self._pose.process(cut(rgb, region))
             if found.segmentation_mask is None or not _same_person(found, region, pixels):
                 continue
-            size = found.segmentation_mask.shape[0]
-            reach = max(1, round(SLACK * size))
-            disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
-            person = cv2.dilate((found.segmentation_mask >= LEVEL).astype(np.uint8), disc) > 0
-            return PersonMask(region, person)
+            return PersonMask.widened(region, found.segmentation_mask, SLACK)
         return None
 
     def close(self) -> None:
