@@ -80,8 +80,9 @@ def test_without_a_first_pose_or_keypoints_the_error_says_what_to_pass(demo_pngs
 
 def test_a_first_pose_30_cm_and_45_degrees_off_is_seeded_again_from_the_keypoints(demo_pngs, tmp_path):
     """From a first pose 30 cm and 45 degrees off, the edges alone stay lost; with the keypoints the body is
-    seeded again (status 3) as soon as it has WINDOW frames of landmarks to fit to (measured: frame 2, 22 mm)
-    and is tracked again within 10 frames (4-7 mm from frame 9)."""
+    seeded again (status 3) as soon as it has WINDOW frames of landmarks to fit to (measured: frame 2, 55 mm),
+    though by then the landmarks' pull has brought it under the recovery's threshold (Recovery.pending), and is
+    tracked again within 10 frames (5-12 mm from frame 9)."""
     model = load_model(DEMO / "model.toml")
     true = load_pose_file(DEMO / "init.toml", model)
     turn = se3.exp(np.r_[0.0, 0.0, 0.0, 0.0, 0.0, np.radians(45)])
@@ -96,7 +97,7 @@ def test_a_first_pose_30_cm_and_45_degrees_off_is_seeded_again_from_the_keypoint
     alone, fused = _errors(tmp_path / "edges"), _errors(tmp_path / "out")
     assert RESEEDED in load_poses(tmp_path / "out" / "poses.npz")["status"][:WINDOW]  # once it has frames to fit
     assert np.median(alone[10:]) > 0.15
-    assert fused[10:].max() < 0.03, fused.round(3)  # tracked again within 10 frames (measured: 7 mm at most)
+    assert fused[10:].max() < 0.03, fused.round(3)  # tracked again within 10 frames (measured: 11 mm at most)
 
 
 def test_a_body_lost_to_half_a_second_of_black_is_found_again(tmp_path):

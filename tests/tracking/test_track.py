@@ -18,6 +18,7 @@ from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synthetic.synth import Staging, synthesize
+from tracker.tracking.keypoint_cue import landmark_world
 from tracker.tracking.track import Settings, Tracker, motion_since, smoother
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -231,6 +232,48 @@ def test_motion_since_is_the_body_twist_between_poses():
     twist = rng.normal(size=(4, 6)) * 0.3
     current = np.stack([sampled[i] @ se3.exp(twist[i]) for i in range(4)])
     np.testing.assert_allclose(motion_since(sampled, current), twist, atol=1e-12)
+
+
+def _shifted(poses: np.ndarray, metres: float) -> np.ndarray:
+    """``poses`` (N, 4, 4) with the whole body moved ``metres`` along the world's x axis."""
+    moved = poses.copy()
+    moved[:, 0, 3] += metres
+    return moved
+
+
+def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_nearer():
+    """The demo's true frame 0 as the last pose, the frame before it 15 cm (then 1 cm) to one side, so that constant
+    velocity carries the body as far to the other side: with perfect landmarks at the last pose the prediction stays
+    there; with them where the motion carries it, or a carried centimetre (within the detector's noise), or no
+    landmarks, it moves on; and it moves on without the check, as live tracking sets it."""
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    current = load_poses(DEMO / "truth.npz")["poses"][0]
+    tracker = Tracker(model, rec.cameras, current)
+    component, point = tracker.landmarks[:2]
+
+    def landmarks(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        world = landmark_world(poses, component, point)
+        known = np.isfinite(world).all(axis=1)
+        pixels = np.full((len(rec.cameras), len(world), 2), np.nan)
+        for k, camera in enumerate(rec.cameras):
+            pixels[k, known] = camera.project(world[known])
+        return pixels, np.where(known, 1.0, 0.0)[None].repeat(len(rec.cameras), axis=0)
+
+    for before, seen_at, expected in (
+        (0.15, current, current),
+        (0.15, _shifted(current, -0.15), _shifted(current, -0.15)),
+        (0.01, current, _shifted(current, -0.01)),
+        (0.15, None, _shifted(current, -0.15)),
+    ):
+        tracker.motion = replace(tracker.motion, previous=_shifted(current, before))
+        tracker.keypoints = None if seen_at is None else landmarks(seen_at)
+        np.testing.assert_allclose(tracker.carried(current), model.coerce(expected), atol=1e-9)
+    tracker.keypoints = landmarks(current)
+    assert tracker.landmark_misfit(current) < 1e-6 < tracker.landmark_misfit(_shifted(current, 0.15))
+    tracker.settings = replace(tracker.settings, check_prediction=False)  # as live sets it
+    tracker.motion = replace(tracker.motion, previous=_shifted(current, 0.15))
+    np.testing.assert_allclose(tracker.carried(current), model.coerce(_shifted(current, -0.15)), atol=1e-9)
 
 
 def test_a_tracker_for_other_cameras_carries_the_motion_and_the_learnt_noise_whole():

@@ -9,7 +9,9 @@ The pose has strayed when the mean over the views of the median distance exceeds
 two views or more has lain, in the mean over them, :data:`LANDMARK_STRAYED` beyond its learnt noise
 zone for :data:`PERSISTENCE` frames in a row: a lost arm or leg moves too few landmarks to shift the
 median, and its edges, found on the clutter it strayed to, hold it there against the cue. When it
-has strayed, or the frame is lost, and the last :data:`WINDOW` frames all had landmarks, the model
+has strayed, or the frame is lost, and the last :data:`WINDOW` frames all had landmarks (or it strayed
+in a frame before they did: started far off, the landmarks' pull brings the body under the threshold
+in a few frames while its limbs still hold wrong edges, ``pending``), the model
 is fitted to those frames' landmarks, their triangulated points and then their detections
 (:mod:`tracker.keypoints.fit`; with one view, from the tracked pose fitted to the newest frame's
 detections), and snapped to the frame's edges as the first pose is
@@ -94,6 +96,7 @@ class Recovery:
     refusals: int = 0  # tries since the last re-seed that did not re-seed (declined, or the fit failed)
     wait: int = 0  # frames to go before the next re-seed of a frame that is not lost
     recent: list = dataclasses.field(default_factory=list)  # the last frames' (pixels, confidence), newest first
+    pending: bool = False  # the pose strayed, or was lost, in a frame before there were WINDOW frames to fit to
 
     def __post_init__(self) -> None:
         self.component, self.point = cue_points(self.model)
@@ -155,18 +158,21 @@ class Recovery:
         if keypoints is None:
             self.recent.clear()
             self.streak[:] = 0
+            self.pending = False
             return result
         pixels, confidence = keypoints
         self.recent = [keypoints, *self.recent[: WINDOW - 1]]
         body, each = self.misfit(result.poses, pixels, confidence)
         self.streak = np.where(each > LANDMARK_STRAYED + tracker.noise.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
-        strayed = body > limit or bool((self.streak >= PERSISTENCE).any())
+        strayed = body > limit or bool((self.streak >= PERSISTENCE).any()) or self.pending
         if result.status != LOST and (self.wait > 0 or not strayed):
             self.wait = max(self.wait - 1, 0)
             return result
         if len(self.recent) < WINDOW and len(self.cameras) >= 2:
-            return result  # not yet enough frames to fit to
+            self.pending = True  # tried once there are frames to fit to (module docstring)
+            return result
+        self.pending = False
         seed = self.fitted(result.poses)
         if seed is None:  # the landmarks cannot place the body: a failed try, as costly as a declined one
             self.back_off()

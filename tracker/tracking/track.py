@@ -60,6 +60,7 @@ from tracker.tracking.region_cue import (
 DYNAMICS = ("none", "constant-velocity", "kalman")
 LEAD_ITERATIONS = 3  # solves of the landmarks alone that move a limb they lead (Tracker.lead)
 PIN = 1e6  # the prior's multiple that holds the components a lead does not move at their predicted poses
+MISFIT_CAP = 0.3  # share of the body's size beyond which a landmark's misfit counts no more (Tracker.landmark_misfit)
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,8 @@ class Settings:
     keypoint_lead: float = 0.06  # share of the body's image size: where the landmarks at a limb's end lie this far
     # beyond their learnt zone off the tracked limb, the landmarks alone move it to them and the frame is tracked
     # again from there, kept if the limb's edges fit better (Tracker.lead); 0: never
+    check_prediction: bool = True  # constant velocity: where the frame's landmarks lie nearer the last poses than
+    # the moved ones, the last motion is not carried on (Tracker.carried); off live, whose landmarks moved with them
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = True  # read the colours along the samples' lines too (--region off: edges alone)
@@ -802,14 +805,14 @@ class Tracker:
             misfit=self.work.misfit,
         )
 
-    def pull(self, pixels, confidence, *, zone, information, eta, misfit) -> tuple[int, int]:
-        """Add the pull of the landmarks ``pixels`` (C, K, 2) at ``confidence`` (C, K) at the current poses
-        (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`) to ``information`` and ``eta``, and their misfits to
-        ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,))."""
+    def pull(self, pixels, confidence, *, zone, information, eta, misfit, poses=None) -> tuple[int, int]:
+        """Add the pull of the landmarks ``pixels`` (C, K, 2) at ``confidence`` (C, K) at ``poses`` (default: the
+        current ones) (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`) to ``information`` and ``eta``, and
+        their misfits to ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,))."""
         st = self.settings
         component, point, pairs = self.landmarks
         return keypoint_kernel(
-            self.poses,
+            self.poses if poses is None else poses,
             self.rig.camera_from_world,
             self.rig.matrix,
             self.rig.lens,
@@ -828,6 +831,34 @@ class Tracker:
             eta,
             misfit,
         )
+
+    def landmark_misfit(self, poses: np.ndarray) -> float:
+        """How far the frame's landmarks lie off ``poses`` (N, 4, 4): the mean over the usable landmarks of every
+        view of their image distance as a share of the body's size there
+        (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`), each counted up to :data:`MISFIT_CAP` (a wrong
+        detection weighs no more than a limb that far off); 0 without any."""
+        assert self.keypoints is not None  # the frame's (step)
+        work, misfit = self.work, np.empty_like(self.work.misfit)
+        scratch = (np.zeros_like(work.information), np.zeros_like(work.eta))
+        self.pull(*self.keypoints, zone=self.floor, information=scratch[0], eta=scratch[1], misfit=misfit, poses=poses)
+        seen = np.isfinite(misfit)
+        return float(np.minimum(misfit[seen], MISFIT_CAP).mean()) if seen.any() else 0.0
+
+    def carried(self, current: np.ndarray) -> np.ndarray:
+        """The frame's prediction under ``constant-velocity`` dynamics: the last frame's poses ``current`` moved on
+        by the motion between the two frames before (its ``damping`` share, :func:`constant_velocity`), unless
+        (with ``check_prediction``) the frame's landmarks lie nearer ``current`` than the moved poses by more than
+        the detector's noise (``keypoint_tolerance`` of the body's size, :meth:`landmark_misfit`); then
+        ``current``.  That motion is partly the correction of the frame before's error (a lead, the landmarks'
+        pull): at a low frame rate, carried on, it can throw the body a quarter of a metre off before any cue is
+        read, and the edges then hold it there (docs/motion-models.md)."""
+        st = self.settings
+        moved = self.model.coerce(constant_velocity(self.motion.previous, current, st.damping))
+        if self.keypoints is None or not st.check_prediction:
+            return moved
+        if self.landmark_misfit(moved) > self.landmark_misfit(current) + st.keypoint_tolerance:
+            return current
+        return moved
 
     def led_limbs(self, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray:
         """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead (:meth:`lead`) at the current
@@ -933,7 +964,7 @@ class Tracker:
         current = self.poses
         st = self.settings
         if st.dynamics == "constant-velocity" and self.motion.previous is not None:
-            self.poses = self.model.coerce(constant_velocity(self.motion.previous, current, st.damping))
+            self.poses = self.carried(current)
         elif st.dynamics == "kalman":
             inverse = self.predict_kalman(1.0 / st.frame_rate if dt is None else dt)
         self.anchor = self.poses
