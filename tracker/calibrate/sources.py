@@ -115,6 +115,13 @@ def detect_all(
     stop = threading.Event()
 
     def work(camera: CameraViews) -> None:
+        try:
+            search(camera)
+        except BaseException:
+            stop.set()  # at once: the pool's thread may take up the next camera before the caller sees the error
+            raise
+
+    def search(camera: CameraViews) -> None:
         detector = board.detector()
         for index, image in _frames(camera.source, stride):
             if stop.is_set():
