@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tracker.geometry.dlt import triangulate_many
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.keypoints.consistency import consistent, sided_with, triangulate, triangulate_many, unswapped
+from tracker.keypoints.consistency import consistent, sided_with, triangulate, unswapped
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
 from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.camera import Camera
+from tracker.geometry.dlt import triangulate_many
 from tracker.keypoints.silhouette import on_person
 from tracker.keypoints.store import Keypoints
 from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
@@ -62,24 +63,6 @@ def triangulate(cameras: list[Camera], normalised: np.ndarray) -> np.ndarray:
     ideal normalised image coordinates."""
     projections = np.array([camera.camera_from_world[:3] for camera in cameras])
     return triangulate_many(projections, normalised[None], np.ones((1, len(cameras)), bool))[0]
-
-
-def triangulate_many(projections: np.ndarray, normalised: np.ndarray, seen: np.ndarray) -> np.ndarray:
-    """World points (M, 3) nearest in the linear (DLT) sense to the rays of ``normalised`` (M, C, 2) in the
-    cameras whose ``seen`` (M, C) is set; NaN where fewer than two cameras see a point.  ``projections``
-    (C, 3, 4): each camera's [R | t]."""
-    x, y = normalised[..., 0:1], normalised[..., 1:2]  # (M, C, 1)
-    rows = np.concatenate(
-        [x * projections[None, :, 2] - projections[None, :, 0], y * projections[None, :, 2] - projections[None, :, 1]],
-        axis=1,
-    )  # (M, 2C, 4)
-    weight = np.concatenate([seen, seen], axis=1)[..., None]
-    rows = np.where(weight, np.nan_to_num(rows), 0.0)
-    point = np.linalg.svd(rows)[2][:, -1]  # (M, 4)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        world = point[:, :3] / point[:, 3:4]
-    world[seen.sum(axis=1) < 2] = np.nan
-    return world
 
 
 @dataclass(frozen=True)

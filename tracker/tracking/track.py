@@ -37,6 +37,7 @@ from tracker.io.readers import WithChroma
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
+from tracker.tracking.guessed import bone_lengths, guessed, hidden_parts
 from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, limbs, placers
 from tracker.tracking.landmark_noise import LandmarkNoise
 from tracker.tracking.measure import Statistics, component_misfits, measure_kernel, support
@@ -110,6 +111,9 @@ class Settings:
     keypoint_lead: float = 0.06  # share of the body's image size: where the landmarks at a limb's end lie this far
     # beyond their learnt zone off the tracked limb, the landmarks alone move it to them and the frame is tracked
     # again from there, kept if the limb's edges fit better (Tracker.lead); 0: never
+    hide_guessed: bool = True  # legs whose landmarks triangulate to bones under half the model's are guessed by
+    # the detector, hidden (a table): their landmarks are dropped and the parts get no edge or colour weight
+    # in that frame (tracker.tracking.guessed)
     check_prediction: bool = True  # constant velocity: where the frame's landmarks lie nearer the last poses than
     # the moved ones, the last motion is not carried on (Tracker.carried); off live, whose landmarks moved with them
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
@@ -390,6 +394,8 @@ class Tracker:
                 "kalman_q_translation, kalman_q_rotation, kalman_decay >= 0"
             )
         self.model = model
+        self.cameras = list(cameras)
+        self.hidden = np.zeros(model.size, bool)  # the parts hidden from every view in this frame (step)
         self.rig = Rig.from_cameras(cameras)
         settings = scaled_to(settings, int(self.rig.size.min(axis=1).max()))
         self.settings = settings
@@ -414,6 +420,7 @@ class Tracker:
         self.still = np.zeros((n, 6))
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
+        self.bone_lengths = bone_lengths(self.poses, *self.landmarks[:2])  # the legs' (tracker.tracking.guessed)
         self.limbs = limbs(model, self.landmarks[0])
         top = np.where(self.limbs.any(axis=1), self.limbs.argmax(axis=1), -1)  # breadth-first: the limb's first part
         self.roots = (self.landmarks[0][None, :] == top[:, None]) & (top[:, None] >= 0)  # (K, K): each limb's root
@@ -610,6 +617,11 @@ class Tracker:
             work.ownership.depth[: s.count] = search_range + 1
         work.outside = work.ownership.outside[: s.count]
         work.depth = work.ownership.depth[: s.count]
+        if self.hidden.any():  # no edge or colour weight: an empty search, no region line
+            hid = self.hidden[s.component[: s.count]]
+            work.lo[hid] = 1
+            work.hi[hid] = 0
+            work.outside[hid] = -2
         work.times.add("ownership", started)
 
     @property
@@ -956,13 +968,19 @@ class Tracker:
         ``keypoints``: the frame's landmarks, (pixels (C, 33, 2), confidence (C, 33)), fused with the edges
         in every iteration (:meth:`add_keypoints`).
         """
+        st = self.settings
         self.keypoints = None
         if keypoints is not None:
             pixels, confidence = keypoints
             self.keypoints = (np.ascontiguousarray(pixels, np.float64), np.ascontiguousarray(confidence, np.float64))
+        self.hidden = np.zeros(self.model.size, bool)
+        if self.keypoints is not None and st.hide_guessed and len(self.cameras) >= 2:
+            legs = guessed(self.cameras, *self.keypoints, lengths=self.bone_lengths)
+            if legs.any():
+                self.keypoints = (self.keypoints[0], np.where(legs[None], 0.0, self.keypoints[1]))
+                self.hidden = hidden_parts(self.model, self.landmarks[0], legs)
         self.load_images(images, smoothed)
         current = self.poses
-        st = self.settings
         if st.dynamics == "constant-velocity" and self.motion.previous is not None:
             self.poses = self.carried(current)
         elif st.dynamics == "kalman":

@@ -1,0 +1,128 @@
+"""Legs the detector guessed behind a table: bones that triangulate under half their length, on the demo's rig
+and true pose, and what the tracker does with them."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracker.io.poses import load_poses
+from tracker.io.recording import frames, open_recording
+from tracker.model import load_model
+from tracker.tracking.guessed import BONES, SHORT, bone_lengths, guessed, hidden_parts
+from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, landmark_world
+from tracker.tracking.track import Settings, Tracker
+
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+LEGS = ("knee", "ankle", "heel", "foot_index")
+
+
+@pytest.fixture(scope="module")
+def demo():
+    """The demo's cameras, model, first images and true first pose, and its landmarks' world points there."""
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    poses = load_poses(DEMO / "truth.npz")["poses"][0]
+    images = next(iter(frames(rec, 0, 1)))[1]
+    return rec.cameras, model, images, poses, landmark_world(poses, *cue_points(model))
+
+
+def _index(side: str, names) -> list[int]:
+    return [LANDMARKS.index(f"{side}_{name}") for name in names]
+
+
+def _drawn(cameras, world: np.ndarray, seen_by: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The detections of landmarks at ``world`` (K, 3): exact pixels in every camera (NaN, confidence 0 where the
+    model has no such point), or only in the first ``seen_by`` cameras."""
+    known = np.isfinite(world).all(axis=1)
+    pixels = np.full((len(cameras), len(world), 2), np.nan)
+    for k, camera in enumerate(cameras):
+        pixels[k, known] = camera.project(world[known])
+    confidence = np.where(known, 1.0, 0.0)[None].repeat(len(cameras), axis=0)
+    if seen_by is not None:
+        confidence[seen_by:] = 0.0
+    return pixels, confidence
+
+
+def _folded(world: np.ndarray, side: str, thigh: float, shin: float) -> np.ndarray:
+    """``world`` with one leg drawn as the detector guesses it behind a table: the knee ``thigh`` of the way from
+    the hip to its true place, and the ankle, heel and toes moved with it, their offsets from the knee scaled by
+    ``shin``."""
+    out = world.copy()
+    hip, knee = _index(side, ("hip",))[0], _index(side, ("knee",))[0]
+    out[knee] = world[hip] + thigh * (world[knee] - world[hip])
+    for j in _index(side, LEGS[1:]):
+        out[j] = out[knee] + shin * (world[j] - world[knee])
+    return out
+
+
+def test_true_legs_are_not_guessed_and_legs_folded_behind_a_table_are(demo):
+    cameras, model, _, poses, world = demo
+    lengths = bone_lengths(poses, *cue_points(model))
+    np.testing.assert_allclose(
+        lengths, [np.linalg.norm(world[upper] - world[lower]) for upper, lower in BONES], rtol=1e-12
+    )
+    assert not guessed(cameras, *_drawn(cameras, world), lengths=lengths).any()
+    above = 1.2 * SHORT  # the bones a fifth longer than the rule's limit
+    assert not guessed(cameras, *_drawn(cameras, _folded(world, "left", above, above)), lengths=lengths).any()
+
+    both = _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4)  # as table-booth's: under half
+    assert set(np.flatnonzero(guessed(cameras, *_drawn(cameras, both), lengths=lengths))) == set(
+        _index("left", LEGS) + _index("right", LEGS)
+    )
+    shin_only = _folded(world, "right", 1.0, 0.3)
+    assert set(np.flatnonzero(guessed(cameras, *_drawn(cameras, shin_only), lengths=lengths))) == set(
+        _index("right", LEGS[1:])
+    )
+    one_view = _drawn(cameras, both, seen_by=1)  # nothing to triangulate
+    assert not guessed(cameras, *one_view, lengths=lengths).any()
+
+
+def test_a_guessed_knee_hides_the_leg_below_the_hip_and_a_guessed_ankle_the_shin_down(demo):
+    _, model, _, _, _ = demo
+    component = cue_points(model)[0]
+    knee, ankle = np.zeros(len(LANDMARKS), bool), np.zeros(len(LANDMARKS), bool)
+    knee[_index("left", LEGS)] = True
+    ankle[_index("right", LEGS[1:])] = True
+    names = np.array(model.names)
+    assert set(names[hidden_parts(model, component, knee)]) == {"thigh_l", "shin_l", "foot_l"}
+    assert set(names[hidden_parts(model, component, ankle)]) == {"shin_r", "foot_r"}
+    assert not hidden_parts(model, component, np.zeros(len(LANDMARKS), bool)).any()
+
+
+def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo):
+    """A frame whose legs' landmarks are folded as behind a table: the legs' parts are hidden in that frame (their
+    samples search nothing and read no colours) and their landmarks are dropped; the true landmarks, or the rule
+    off, hide nothing."""
+    cameras, model, images, poses, world = demo
+    folded = _drawn(cameras, _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4))
+    names = np.array(model.names)
+
+    tracker = Tracker(model, cameras, poses)
+    tracker.step(images, keypoints=folded)
+    assert set(names[tracker.hidden]) == {"thigh_l", "shin_l", "foot_l", "thigh_r", "shin_r", "foot_r"}
+    assert tracker.keypoints is not None
+    assert not tracker.keypoints[1][:, _index("left", LEGS) + _index("right", LEGS)].any()
+    assert (tracker.keypoints[1][:, _index("left", ("hip", "shoulder", "wrist"))] == 1.0).all()
+    work = tracker.work
+    legs = tracker.hidden[work.samples.component[: work.samples.count]]
+    assert legs.any() and (~legs).any()
+    assert (work.lo[legs] > work.hi[legs]).all() and (work.outside[legs] == -2).all()
+    assert (work.lo[~legs] <= work.hi[~legs]).all()
+
+    for keypoints, settings in ((_drawn(cameras, world), Settings()), (folded, Settings(hide_guessed=False))):
+        tracker = Tracker(model, cameras, poses, settings)
+        tracker.step(images, keypoints=keypoints)
+        assert not tracker.hidden.any()
+        assert tracker.keypoints is not None and (tracker.keypoints[1] == keypoints[1]).all()
+
+
+def test_a_leg_whose_knee_the_detector_is_unsure_of_is_not_judged(demo):
+    """The rule triangulates only the confident detections (those the check across the views uses): with the
+    left knee below that confidence, neither of the left leg's bones is known, and only the right leg, folded
+    too, is guessed."""
+    cameras, model, _, poses, world = demo
+    pixels, confidence = _drawn(cameras, _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4))
+    confidence[:, _index("left", ("knee",))] = 0.4
+    lengths = bone_lengths(poses, *cue_points(model))
+    assert set(np.flatnonzero(guessed(cameras, pixels, confidence, lengths=lengths))) == set(_index("right", LEGS))
