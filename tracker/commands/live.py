@@ -90,9 +90,9 @@ def run(args: argparse.Namespace) -> int:
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
         # live landmarks are an earlier frame set's, moved by the motion tracked since: they cannot lead a limb
         # the edges lost (Tracker.lead), which would take it to where it was then, nor judge the predicted motion
-        # (Tracker.carried), having moved with the last poses
+        # or the frame's (Tracker.carried, Tracker.dragged), having moved with the last poses
         settings = dataclasses.replace(
-            options.settings_from(args, capture.fps), keypoint_lead=0.0, check_prediction=False
+            options.settings_from(args, capture.fps), keypoint_lead=0.0, check_prediction=False, keypoint_drag=0.0
         )
         tracker = Tracker(model, cameras, init, settings)
         print(

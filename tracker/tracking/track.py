@@ -114,6 +114,9 @@ class Settings:
     hide_guessed: bool = True  # legs whose landmarks triangulate to bones under half the model's are guessed by
     # the detector, hidden (a table): their landmarks are dropped and the parts get no edge or colour weight
     # in that frame (tracker.tracking.guessed)
+    keypoint_drag: float = 0.05  # share of the body's image size: where the frame's landmarks lie off its tracked
+    # poses by this much more than off the poses it was tracked from, the edges dragged the body off them, and the
+    # frame keeps those poses (Tracker.dragged); 0: never
     check_prediction: bool = True  # constant velocity: where the frame's landmarks lie nearer the last poses than
     # the moved ones, the last motion is not carried on (Tracker.carried); off live, whose landmarks moved with them
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
@@ -872,6 +875,18 @@ class Tracker:
             return current
         return moved
 
+    def dragged(self) -> bool:
+        """Whether the frame's edges and colours dragged the body off its landmarks: they lie off the tracked poses
+        by more than ``keypoint_drag`` of the body's size beyond how far they lay off the poses the frame was
+        tracked from (its prediction, or a kept lead's, :attr:`anchor`; :meth:`landmark_misfit`).  Behind a table,
+        the table top's edges can tip a whole trunk over onto it within one frame's iterations, though every view's
+        landmarks say it stands (docs/keypoints.md, "Dragged off the landmarks"); no trunk turns that far in a
+        frame, and the frame then keeps the poses it started from."""
+        st = self.settings
+        if self.keypoints is None or st.keypoint_drag <= 0:
+            return False
+        return self.landmark_misfit(self.poses) > self.landmark_misfit(self.anchor) + st.keypoint_drag
+
     def led_limbs(self, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray:
         """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead (:meth:`lead`) at the current
         poses: the limbs (:func:`tracker.tracking.keypoint_cue.limbs`) of the landmarks that lie more than
@@ -990,6 +1005,9 @@ class Tracker:
             stats = self.iterate(iteration)
         if self.keypoints is not None and st.keypoint_lead > 0:
             stats = self.lead(stats, *self.keypoints)
+        dragged = self.dragged()
+        if dragged:
+            self.poses = self.anchor.copy()
         if st.dynamics == "kalman":
             self.correct_kalman(inverse)
         self.motion = dataclasses.replace(self.motion, previous=current)
@@ -998,7 +1016,9 @@ class Tracker:
         self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
         share = stats.found / stats.visible if stats.visible else 0.0
         status = self.status(share, stats.residual)
-        if st.region and work.coloured and status != LOST:
+        if dragged and status == TRACKED:
+            status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
+        if st.region and work.coloured and status != LOST and not dragged:
             self.learn_colours()
         if self.keypoints is not None and status == TRACKED:
             self.noise = self.noise.learnt(
