@@ -12,7 +12,7 @@ from tracker import chain
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.geometry.quadric import evaluate
-from tracker.model import load_model, poses_from_rotations, rest_poses
+from tracker.model import load_model, poses_from_rotations, rest_poses, with_descendants
 
 HUMAN = Path(__file__).resolve().parents[1] / "models" / "human.toml"
 
@@ -209,3 +209,11 @@ def test_human_model_has_joint_limits():
     assert model.lower[elbow] == 0.0 and model.upper[elbow] == pytest.approx(2.6)
     assert model.upper[model.index("foot_r")] == pytest.approx(1.3)
     assert np.isinf(model.upper[model.index("thigh_l")])
+
+
+def test_with_descendants_takes_every_part_below_the_chosen_ones():
+    parent = np.array([-1, 0, 0, 1, 1, 2, 3])
+    below_one = with_descendants(parent, np.arange(7) == 1)
+    assert list(np.flatnonzero(below_one)) == [1, 3, 4, 6]
+    assert list(np.flatnonzero(with_descendants(parent, np.isin(np.arange(7), [2, 3])))) == [2, 3, 5, 6]
+    assert not with_descendants(parent, np.zeros(7, bool)).any()

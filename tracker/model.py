@@ -272,6 +272,16 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
     )
 
 
+def with_descendants(parent: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """The components (N,) bool ``chosen`` and every one below them, in a tree of ``parent`` indices (N,) in
+    breadth-first order (a parent comes before its children, the root's parent is -1)."""
+    out = np.array(chosen, bool)
+    for i in range(len(parent)):
+        if parent[i] >= 0 and out[parent[i]]:
+            out[i] = True
+    return out
+
+
 def rest_poses(model: Model, root: np.ndarray) -> np.ndarray:
     """World poses with every joint at rest: E_i = E_parent T0_i, E_root = ``root``."""
     poses = np.empty((model.size, 4, 4))

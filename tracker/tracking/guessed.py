@@ -22,7 +22,7 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.geometry.dlt import triangulate_many
-from tracker.model import Model
+from tracker.model import Model, with_descendants
 from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
 
 SHORT = 0.5
@@ -79,12 +79,9 @@ def hidden_parts(model: Model, component: np.ndarray, landmarks: np.ndarray) -> 
     """The components (N,) bool that the guessed ``landmarks`` (K,) bool hide: for each (on ``component``),
     the part its joint hangs from (the thigh above a knee, the shin above an ankle) and every part below
     that."""
-    out = np.zeros(model.size, bool)
+    tops = np.zeros(model.size, bool)
     for j in np.flatnonzero(landmarks & (component >= 0)):
         top = model.parent[component[j]]
         if top >= 0:
-            out[top] = True
-    for i in range(model.size):  # breadth-first: a parent comes before its children
-        if model.parent[i] >= 0 and out[model.parent[i]]:
-            out[i] = True
-    return out
+            tops[top] = True
+    return with_descendants(model.parent, tops)

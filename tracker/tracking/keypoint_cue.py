@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from tracker.geometry.lens import distort
-from tracker.model import Model
+from tracker.model import Model, with_descendants
 from tracker.tracking.outline import component_row
 
 LANDMARKS = (
@@ -169,9 +169,7 @@ def limbs(model: Model, component: np.ndarray) -> np.ndarray:
         top = parent[i]
         while parent[top] >= 0 and children[parent[top]] == 1:
             top = parent[top]
-        out[j, top] = True
-        for below in range(top + 1, model.size):  # breadth-first order: a parent comes before its children
-            out[j, below] = out[j, parent[below]]
+        out[j] = with_descendants(parent, np.arange(model.size) == top)
     return out
 
 

@@ -23,18 +23,14 @@ from tracker.io.posefile import save_pose_file
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording
 from tracker.keypoints.first_pose import snap_to_edges
-from tracker.model import Model
+from tracker.model import Model, with_descendants
 from tracker.tracking.track import Settings, Tracker
 from tracker.viewer.scene import Frame, Scene
 
 
 def subtree(parent: np.ndarray, root: int) -> np.ndarray:
     """Indices of ``root`` and all its descendants (components in breadth-first order, parent[i] < i)."""
-    inside = np.zeros(len(parent), bool)
-    inside[root] = True
-    for i in range(root + 1, len(parent)):
-        inside[i] = parent[i] >= 0 and inside[parent[i]]
-    return np.flatnonzero(inside)
+    return np.flatnonzero(with_descendants(parent, np.arange(len(parent)) == root))
 
 
 def in_view(cameras, height: float = 1.0) -> np.ndarray:
