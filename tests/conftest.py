@@ -1,9 +1,10 @@
-"""Shared fixtures: small rendered recordings with ground truth (made once per test session), and the
-check that bad input gets a one-line error; where the tests' real data is (:data:`TEST_DATA`,
-:data:`SHARED_DATA`)."""
+"""Shared fixtures: small rendered recordings with ground truth (made once per test session), the
+check that bad input gets a one-line error, and perfect keypoint detections; where the tests' real data
+is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tracker.camera import look_at_camera, save_calibration
@@ -40,6 +41,25 @@ def one_line_error():
         return message
 
     return check
+
+
+@pytest.fixture(scope="session")
+def perfect_detections():
+    """Draw a detector's perfect landmarks: ``draw(cameras, world)`` of world points ``world`` (33, 3) (NaN where
+    the model has no such point) gives their exact pixels (C, 33, 2) in ``cameras`` and confidence (C, 33), 1
+    where known and 0 elsewhere; with ``seen_by=n`` only the first n cameras see them."""
+
+    def draw(cameras, world: np.ndarray, seen_by: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        known = np.isfinite(world).all(axis=1)
+        pixels = np.full((len(cameras), len(world), 2), np.nan)
+        for k, camera in enumerate(cameras):
+            pixels[k, known] = camera.project(world[known])
+        confidence = np.where(known, 1.0, 0.0)[None].repeat(len(cameras), axis=0)
+        if seen_by is not None:
+            confidence[seen_by:] = 0.0
+        return pixels, confidence
+
+    return draw
 
 
 @pytest.fixture(scope="session")

@@ -20,7 +20,7 @@ from tracker.io.recording import frames, open_recording
 from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, STRAYED, WINDOW, Recovery
 from tracker.model import load_model
 from tracker.status import RESEEDED
-from tracker.tracking.keypoint_cue import LANDMARKS
+from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 COUNT = 70
@@ -152,15 +152,15 @@ def _at_truth():
     return model, truth, Recovery(model, load_calibration(DEMO / "calibration.toml"))
 
 
-def _true_landmarks(recovery: Recovery, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The demo's cameras' perfect detections (pixels (3, 33, 2), confidence (3, 33)) of the landmarks at ``truth``."""
-    known = recovery.component >= 0
-    world = np.einsum("kij,kj->ki", truth[recovery.component[known], :3, :3], recovery.point[known])
-    world += truth[recovery.component[known], :3, 3]
-    pixels = np.full((3, 33, 2), np.nan)
-    for k, camera in enumerate(recovery.cameras):
-        pixels[k, known] = camera.project(world)
-    return pixels, np.isfinite(pixels[..., 0]).astype(float)
+@pytest.fixture
+def true_landmarks(perfect_detections):
+    """``at(recovery, truth)``: the demo's cameras' perfect detections (pixels (3, 33, 2), confidence (3, 33)) of the
+    landmarks at ``truth``."""
+
+    def at(recovery: Recovery, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return perfect_detections(recovery.cameras, landmark_world(truth, recovery.component, recovery.point))
+
+    return at
 
 
 def _moved(truth: np.ndarray) -> np.ndarray:
@@ -178,22 +178,22 @@ def _swung_arm(model, truth: np.ndarray) -> np.ndarray:
     return swung
 
 
-def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance():
+def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance(true_landmarks):
     """At the demo's true pose with perfect landmarks nothing strays; moved 30 cm, it has."""
     _, truth, recovery = _at_truth()
-    pixels, confidence = _true_landmarks(recovery, truth)
+    pixels, confidence = true_landmarks(recovery, truth)
     assert not recovery.misfit(truth, pixels, confidence)[0] > STRAYED
     assert recovery.misfit(_moved(truth), pixels, confidence)[0] > STRAYED
     no_landmark = recovery.misfit(_moved(truth), pixels, np.zeros_like(confidence))[0]
     assert not no_landmark > STRAYED  # no landmark: no judgement
 
 
-def test_one_limb_off_is_seen_in_its_landmarks_though_the_median_holds():
+def test_one_limb_off_is_seen_in_its_landmarks_though_the_median_holds(true_landmarks):
     """The demo's true pose with its right arm swung 80 cm off: the median landmark is still on the body, but the
     wrist and elbow lie beyond LANDMARK_STRAYED in the mean over the views; seen by one view only, they are not
     judged."""
     model, truth, recovery = _at_truth()
-    pixels, confidence = _true_landmarks(recovery, truth)
+    pixels, confidence = true_landmarks(recovery, truth)
     body, each = recovery.misfit(_swung_arm(model, truth), pixels, confidence)
     arm = [LANDMARKS.index(f"right_{part}") for part in ("elbow", "wrist")]
     assert body < 0.01 and (each[arm] > 1.2 * LANDMARK_STRAYED).all(), each[arm]
@@ -203,14 +203,14 @@ def test_one_limb_off_is_seen_in_its_landmarks_though_the_median_holds():
     assert np.isnan(recovery.misfit(_swung_arm(model, truth), pixels, once)[1][arm]).all()
 
 
-def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch):
+def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch, true_landmarks):
     """The swung arm's frames: no re-seed is tried until the landmarks have lain off for PERSISTENCE frames in a
     row."""
     import tracker.keypoints.recovery as recovery_module
     from tracker.tracking.track import FrameResult, Tracker
 
     model, truth, recovery = _at_truth()
-    keypoints = _true_landmarks(recovery, truth)
+    keypoints = true_landmarks(recovery, truth)
     tries = []
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
     snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
@@ -226,14 +226,14 @@ def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch)
 
 
 @pytest.mark.parametrize(("snapped_share", "kept"), [(0.5, True), (0.9, False)])
-def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapped_share, kept):
+def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapped_share, kept, true_landmarks):
     """A strayed frame's re-seed is taken only when its outlines find at least the tracked pose's share of edges:
     the tracked pose (share 0.8) stays against a re-seed finding 0.5, and gives way to one finding 0.9."""
     import tracker.keypoints.recovery as recovery_module
     from tracker.tracking.track import FrameResult, Tracker
 
     model, truth, recovery = _at_truth()
-    keypoints = _true_landmarks(recovery, truth)
+    keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     snapped = FrameResult(truth, 0, 1.0, snapped_share, 1000)
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
@@ -246,14 +246,14 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
 
 
-def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkeypatch):
+def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkeypatch, true_landmarks):
     """A strayed pose whose landmarks cannot be fitted (fitted gives None) is tried once, then not again for
     WINDOW frames, then after twice as long; a lost frame is tried all the same."""
     from tracker.status import LOST
     from tracker.tracking.track import FrameResult, Tracker
 
     model, truth, recovery = _at_truth()
-    keypoints = _true_landmarks(recovery, truth)
+    keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     fits = []
     monkeypatch.setattr(recovery, "fitted", lambda start: fits.append(1))

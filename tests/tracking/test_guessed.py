@@ -31,19 +31,6 @@ def _index(side: str, names) -> list[int]:
     return [LANDMARKS.index(f"{side}_{name}") for name in names]
 
 
-def _drawn(cameras, world: np.ndarray, seen_by: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The detections of landmarks at ``world`` (K, 3): exact pixels in every camera (NaN, confidence 0 where the
-    model has no such point), or only in the first ``seen_by`` cameras."""
-    known = np.isfinite(world).all(axis=1)
-    pixels = np.full((len(cameras), len(world), 2), np.nan)
-    for k, camera in enumerate(cameras):
-        pixels[k, known] = camera.project(world[known])
-    confidence = np.where(known, 1.0, 0.0)[None].repeat(len(cameras), axis=0)
-    if seen_by is not None:
-        confidence[seen_by:] = 0.0
-    return pixels, confidence
-
-
 def _folded(world: np.ndarray, side: str, thigh: float, shin: float) -> np.ndarray:
     """``world`` with one leg drawn as the detector guesses it behind a table: the knee ``thigh`` of the way from
     the hip to its true place, and the ankle, heel and toes moved with it, their offsets from the knee scaled by
@@ -56,25 +43,27 @@ def _folded(world: np.ndarray, side: str, thigh: float, shin: float) -> np.ndarr
     return out
 
 
-def test_true_legs_are_not_guessed_and_legs_folded_behind_a_table_are(demo):
+def test_true_legs_are_not_guessed_and_legs_folded_behind_a_table_are(demo, perfect_detections):
     cameras, model, _, poses, world = demo
     lengths = bone_lengths(poses, *cue_points(model))
     np.testing.assert_allclose(
         lengths, [np.linalg.norm(world[upper] - world[lower]) for upper, lower in BONES], rtol=1e-12
     )
-    assert not guessed(cameras, *_drawn(cameras, world), lengths=lengths).any()
+    assert not guessed(cameras, *perfect_detections(cameras, world), lengths=lengths).any()
     above = 1.2 * SHORT  # the bones a fifth longer than the rule's limit
-    assert not guessed(cameras, *_drawn(cameras, _folded(world, "left", above, above)), lengths=lengths).any()
+    assert not guessed(
+        cameras, *perfect_detections(cameras, _folded(world, "left", above, above)), lengths=lengths
+    ).any()
 
     both = _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4)  # as table-booth's: under half
-    assert set(np.flatnonzero(guessed(cameras, *_drawn(cameras, both), lengths=lengths))) == set(
+    assert set(np.flatnonzero(guessed(cameras, *perfect_detections(cameras, both), lengths=lengths))) == set(
         _index("left", LEGS) + _index("right", LEGS)
     )
     shin_only = _folded(world, "right", 1.0, 0.3)
-    assert set(np.flatnonzero(guessed(cameras, *_drawn(cameras, shin_only), lengths=lengths))) == set(
+    assert set(np.flatnonzero(guessed(cameras, *perfect_detections(cameras, shin_only), lengths=lengths))) == set(
         _index("right", LEGS[1:])
     )
-    one_view = _drawn(cameras, both, seen_by=1)  # nothing to triangulate
+    one_view = perfect_detections(cameras, both, seen_by=1)  # nothing to triangulate
     assert not guessed(cameras, *one_view, lengths=lengths).any()
 
 
@@ -90,12 +79,12 @@ def test_a_guessed_knee_hides_the_leg_below_the_hip_and_a_guessed_ankle_the_shin
     assert not hidden_parts(model, component, np.zeros(len(LANDMARKS), bool)).any()
 
 
-def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo):
+def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo, perfect_detections):
     """A frame whose legs' landmarks are folded as behind a table: the legs' parts are hidden in that frame (their
     samples search nothing and read no colours) and their landmarks are dropped; the true landmarks, or the rule
     off, hide nothing."""
     cameras, model, images, poses, world = demo
-    folded = _drawn(cameras, _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4))
+    folded = perfect_detections(cameras, _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4))
     names = np.array(model.names)
 
     tracker = Tracker(model, cameras, poses)
@@ -110,19 +99,22 @@ def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo):
     assert (work.lo[legs] > work.hi[legs]).all() and (work.outside[legs] == -2).all()
     assert (work.lo[~legs] <= work.hi[~legs]).all()
 
-    for keypoints, settings in ((_drawn(cameras, world), Settings()), (folded, Settings(hide_guessed=False))):
+    for keypoints, settings in (
+        (perfect_detections(cameras, world), Settings()),
+        (folded, Settings(hide_guessed=False)),
+    ):
         tracker = Tracker(model, cameras, poses, settings)
         tracker.step(images, keypoints=keypoints)
         assert not tracker.hidden.any()
         assert tracker.keypoints is not None and (tracker.keypoints[1] == keypoints[1]).all()
 
 
-def test_a_leg_whose_knee_the_detector_is_unsure_of_is_not_judged(demo):
+def test_a_leg_whose_knee_the_detector_is_unsure_of_is_not_judged(demo, perfect_detections):
     """The rule triangulates only the confident detections (those the check across the views uses): with the
     left knee below that confidence, neither of the left leg's bones is known, and only the right leg, folded
     too, is guessed."""
     cameras, model, _, poses, world = demo
-    pixels, confidence = _drawn(cameras, _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4))
+    pixels, confidence = perfect_detections(cameras, _folded(_folded(world, "left", 0.4, 0.4), "right", 0.4, 0.4))
     confidence[:, _index("left", ("knee",))] = 0.4
     lengths = bone_lengths(poses, *cue_points(model))
     assert set(np.flatnonzero(guessed(cameras, pixels, confidence, lengths=lengths))) == set(_index("right", LEGS))

@@ -241,7 +241,7 @@ def _shifted(poses: np.ndarray, metres: float) -> np.ndarray:
     return moved
 
 
-def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_nearer():
+def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_nearer(perfect_detections):
     """The demo's true frame 0 as the last pose, the frame before it 15 cm (then 1 cm) to one side, so that constant
     velocity carries the body as far to the other side: with perfect landmarks at the last pose the prediction stays
     there; with them where the motion carries it, or a carried centimetre (within the detector's noise), or no
@@ -253,12 +253,7 @@ def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_
     component, point = tracker.landmarks[:2]
 
     def landmarks(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        world = landmark_world(poses, component, point)
-        known = np.isfinite(world).all(axis=1)
-        pixels = np.full((len(rec.cameras), len(world), 2), np.nan)
-        for k, camera in enumerate(rec.cameras):
-            pixels[k, known] = camera.project(world[known])
-        return pixels, np.where(known, 1.0, 0.0)[None].repeat(len(rec.cameras), axis=0)
+        return perfect_detections(rec.cameras, landmark_world(poses, component, point))
 
     for before, seen_at, expected in (
         (0.15, current, current),
@@ -276,7 +271,7 @@ def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_
     np.testing.assert_allclose(tracker.carried(current), model.coerce(_shifted(current, -0.15)), atol=1e-9)
 
 
-def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_started_from():
+def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_started_from(perfect_detections):
     """The demo's frame 0 with every image moved 60 px sideways, from the true pose, with the true landmarks weighed
     at a 300th of their default (the edges outweigh them): without the check the frame's iterations take the body
     a metre off its landmarks (measured: capped mean misfit 0.20); with it the frame keeps the poses it was tracked
@@ -285,12 +280,7 @@ def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_
     model = load_model(rec.model_path)
     start = load_poses(DEMO / "truth.npz")["poses"][0]
     images = [np.roll(image, 60, axis=1) for image in next(iter(frames(rec, 0, 1)))[1]]
-    world = landmark_world(start, *cue_points(model))
-    known = np.isfinite(world).all(axis=1)
-    pixels = np.full((len(rec.cameras), len(world), 2), np.nan)
-    for k, camera in enumerate(rec.cameras):
-        pixels[k, known] = camera.project(world[known])
-    keypoints = (pixels, np.where(known, 1.0, 0.0)[None].repeat(len(rec.cameras), axis=0))
+    keypoints = perfect_detections(rec.cameras, landmark_world(start, *cue_points(model)))
     settings = Settings(dynamics="none", keypoint_weight=0.01)
 
     free = Tracker(model, rec.cameras, start, replace(settings, keypoint_drag=0.0))
