@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tracker.camera import look_at_camera
 from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.io.poses import load_poses
@@ -105,7 +106,7 @@ def test_the_persons_mask_covers_the_demo_body(demo_keypoints):
 def test_an_empty_image_has_no_person():
     detector = Detector()
     try:
-        [found] = detect_views([detector], [np.full((240, 320), 128, np.uint8)])
+        [found] = detect_views([detector], [np.full((240, 320), 128, np.uint8)], cameras=_RIG[:1])
     finally:
         detector.close()
     assert np.isnan(found.pixels).all() and np.isnan(found.world).all() and not found.confidence.any()
@@ -171,16 +172,31 @@ def test_command_errors_are_one_line(tmp_path, capsys):
 
 
 def test_views_that_disagree_are_dropped(demo_keypoints):
-    """Frames 0-19 of the demo: cam1's detector follows a basketball player in the background photo, whose
-    landmarks triangulate with neither other view, so most of cam1's are dropped; cam0's and cam2's, which
-    agree, are kept."""
+    """Frames 0-19 of the demo with cam1's landmarks and mask moved 230 px to the left, onto the basketball player
+    in its background photo, where its whole image's pass finds him: they triangulate with neither other view, so most
+    of cam1's are dropped; cam0's and cam2's, which agree, are kept."""
     from tracker.keypoints.consistency import consistent
 
     recording = open_recording(DEMO)
-    checked, dropped = consistent(demo_keypoints, recording.cameras)
+    pixels, square = demo_keypoints.pixels.copy(), demo_keypoints.square.copy()
+    pixels[:, 1, :, 0] -= 230.0
+    square[:, 1, 0] -= 230.0  # his mask of the person goes with him
+    player = dataclasses.replace(demo_keypoints, pixels=pixels, square=square)
+    checked, dropped = consistent(player, recording.cameras)
     assert dropped[1] > 0.5 and dropped[0] < 0.2 and dropped[2] < 0.2, dropped
-    assert (checked.confidence <= demo_keypoints.confidence).all()
-    np.testing.assert_array_equal(checked.pixels, demo_keypoints.pixels)
+    assert (checked.confidence[:, 1] <= player.confidence[:, 1]).all()
+    np.testing.assert_array_equal(checked.pixels[:, 1], player.pixels[:, 1])
+
+
+def test_a_view_whose_whole_image_shows_someone_else_is_read_where_the_others_place_the_body(demo_keypoints):
+    """On the demo, cam1's whole image shows the mannequin to nobody, or shows the player in its background
+    photo; read where cam0 and cam2 place the body, it shows the mannequin in most frames, and its landmarks
+    agree with theirs."""
+    from tracker.keypoints.consistency import consistent
+
+    _, dropped = consistent(demo_keypoints, open_recording(DEMO).cameras)
+    assert (dropped < 0.2).all(), dropped
+    assert np.isfinite(demo_keypoints.pixels[:, 1]).all(axis=(1, 2)).mean() > 0.8
 
 
 def test_triangulation_of_exact_rays_is_exact():
@@ -192,30 +208,68 @@ def test_triangulation_of_exact_rays_is_exact():
     np.testing.assert_allclose(triangulate(cameras, normalised), point, atol=1e-9)
 
 
-class _Scripted:
-    """A stand-in detector whose whole-image pass finds a person or not, as scripted, and which counts its crops."""
+_RIG = [
+    look_at_camera("cam0", (3.0, 0.0, 1.2)),
+    look_at_camera("cam1", (0.0, 3.0, 1.2)),
+    look_at_camera("cam2", (-2.5, -2.0, 1.5)),
+]
+_BODY = np.random.default_rng(3).uniform((-0.2, -0.15, 0.05), (0.2, 0.15, 1.75), (33, 3))
 
-    def __init__(self, sees: bool) -> None:
-        self.sees, self.crops = sees, 0
+
+class _Scripted:
+    """A stand-in detector for one of :data:`_RIG`'s views whose whole-image pass finds the body, something else
+    (a chair beside it) or nobody, as scripted; its crops and guided reads find the body, and it counts them."""
+
+    def __init__(self, view: int, sees: str) -> None:
+        self.camera, self.sees, self.crops, self.guided_reads = _RIG[view], sees, 0, 0
+
+    def _found(self, offset=(0.0, 0.0, 0.0)) -> Detection:
+        return Detection(self.camera.project(_BODY + offset), np.ones(33), np.zeros((33, 3)))
 
     def whole(self, image) -> Detection:
-        return Detection(np.zeros((33, 2)), np.ones(33), np.zeros((33, 3))) if self.sees else Detection.none()
+        return {"body": self._found(), "chair": self._found((1.0, 0.0, 0.8)), "nobody": Detection.none()}[self.sees]
 
     def cropped(self, image) -> Detection:
         self.crops += 1
-        return Detection(np.ones((33, 2)), np.ones(33), np.zeros((33, 3)))
+        return self._found()
+
+    def guided(self, image, square, accept) -> Detection:
+        self.guided_reads += 1
+        found = self._found()
+        return found if accept(found) else Detection.none()
 
 
 @pytest.mark.parametrize(
-    ("sees", "images", "crops"),
+    ("sees", "images", "crops", "guided"),
     [
-        ((True, True, False), (1, 1, 1), (0, 0, 0)),  # two whole images place the body: no crop
-        ((True, False, False), (1, 1, 1), (0, 1, 1)),  # one: the others are cropped
-        ((False, False, False), (1, None, 1), (1, 0, 1)),  # none; a view without an image is not
+        (("body", "body", "nobody"), (1, 1, 1), (0, 0, 0), (0, 0, 1)),  # two whole images place the body
+        (("body", "nobody", "nobody"), (1, 1, 1), (0, 1, 1), (0, 0, 0)),  # one: the others are cropped
+        (("nobody", "nobody", "nobody"), (1, None, 1), (1, 0, 1), (0, 0, 0)),  # a view without an image is not
+        (("body", "chair", "nobody"), (1, 1, 1), (0, 0, 1), (0, 1, 0)),  # two that disagree: crops, then guided
+        (("body", "body", "chair"), (1, 1, 1), (0, 0, 0), (0, 0, 1)),  # a chair read where the others see him
     ],
 )
-def test_crops_run_only_where_fewer_than_two_whole_images_show_someone(sees, images, crops):
-    detectors = [_Scripted(seen) for seen in sees]
-    found = detect_views(detectors, [None if image is None else np.zeros((4, 4, 3), np.uint8) for image in images])
+def test_crops_run_where_fewer_than_two_views_agree_and_guided_reads_where_one_disagrees(sees, images, crops, guided):
+    detectors = [_Scripted(view, seen) for view, seen in enumerate(sees)]
+    found = detect_views(
+        detectors, [None if image is None else np.zeros((4, 4, 3), np.uint8) for image in images], cameras=_RIG
+    )
     assert tuple(detector.crops for detector in detectors) == crops
-    assert [detection.found for detection in found] == [seen or cropped > 0 for seen, cropped in zip(sees, crops)]
+    assert tuple(detector.guided_reads for detector in detectors) == guided
+    on_body = [
+        detection.found and np.allclose(detection.pixels, _RIG[k].project(_BODY)) for k, detection in enumerate(found)
+    ]
+    assert on_body == [image is not None for image in images]
+
+
+def test_a_guided_read_that_disagrees_with_the_others_is_not_taken():
+    class _Stubborn(_Scripted):
+        def guided(self, image, square, accept) -> Detection:
+            self.guided_reads += 1
+            found = self._found((1.0, 0.0, 0.8))  # the chair again
+            return found if accept(found) else Detection.none()
+
+    detectors = [_Scripted(0, "body"), _Scripted(1, "body"), _Stubborn(2, "chair")]
+    found = detect_views(detectors, [np.zeros((4, 4, 3), np.uint8)] * 3, cameras=_RIG)
+    assert detectors[2].guided_reads == 1
+    np.testing.assert_allclose(found[2].pixels, _RIG[2].project(_BODY + (1.0, 0.0, 0.8)))  # the whole image's

@@ -34,12 +34,10 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.geometry.dlt import triangulate_many
+from tracker.keypoints.guided import GATE, undistorted
 from tracker.keypoints.silhouette import on_person
 from tracker.keypoints.store import Keypoints
 from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
-
-GATE = 0.05
-"""Reprojection distance, as a share of the image's short side, within which a view agrees."""
 
 NEAR = 0.05
 """Image distance, as a share of the tracked body's size in that view, within which a disputed detection sides with
@@ -252,15 +250,6 @@ def _project(cameras: list[Camera], points: np.ndarray) -> np.ndarray:
 def _normalised(keypoints: Keypoints, cameras: list[Camera], usable: np.ndarray) -> np.ndarray:
     """Ideal normalised image coordinates (F, C, K, 2) of the ``usable`` detections, NaN elsewhere."""
     return undistorted(np.where(usable[..., None], keypoints.pixels, np.nan), cameras)
-
-
-def undistorted(pixels: np.ndarray, cameras: list[Camera]) -> np.ndarray:
-    """Ideal normalised coordinates (F, C, K, 2) of recorded ``pixels`` (F, C, K, 2), NaN where they are NaN."""
-    normalised = np.full(pixels.shape, np.nan)
-    for k, camera in enumerate(cameras):
-        seen = np.isfinite(pixels[:, k]).all(axis=2)
-        normalised[:, k][seen] = camera.undistort_pixels(pixels[:, k][seen])
-    return normalised
 
 
 def sided_with(

@@ -88,7 +88,12 @@ def detections(recording: Recording, start: int, stop: int, *, step: int = 1) ->
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):
-            yield index, frame_keypoints(index, detect_views(detectors, images), names=names, identity=identity)
+            yield (
+                index,
+                frame_keypoints(
+                    index, detect_views(detectors, images, cameras=recording.cameras), names=names, identity=identity
+                ),
+            )
 
 
 def frame_keypoints(

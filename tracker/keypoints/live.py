@@ -49,7 +49,7 @@ def _work(cameras: list[Camera], jobs, results) -> None:
                 pixels = np.full((len(cameras), len(LANDMARKS), 2), np.nan)
                 confidence = np.zeros((len(cameras), len(LANDMARKS)))
                 images = [None if jpeg is None else cv2.imdecode(jpeg, cv2.IMREAD_COLOR) for jpeg in jpegs]
-                for camera, found in enumerate(detect_views(detectors, images)):
+                for camera, found in enumerate(detect_views(detectors, images, cameras=cameras)):
                     pixels[camera], confidence[camera] = found.pixels, found.confidence
                 world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
                 raw = Keypoints(np.array([number]), names, pixels[None], confidence[None], world)

@@ -104,7 +104,11 @@ def _detect_fed(recording: Recording, fed, reduction, results) -> None:
         while (item := fed.get()) is not None:
             index, images = item
             raw = frame_keypoints(
-                index, detect_views(detectors, images), names=names, identity=identity, reduction=reduction
+                index,
+                detect_views(detectors, images, cameras=recording.cameras, reduction=reduction),
+                names=names,
+                identity=identity,
+                reduction=reduction,
             )
             results.put((raw, consistent(raw, recording.cameras)[0]))
     finally:

@@ -24,7 +24,8 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.keypoints.anchors import reach, rigid_distances
-from tracker.keypoints.consistency import GATE, Reading, readings, undistorted
+from tracker.keypoints.consistency import Reading, readings
+from tracker.keypoints.guided import GATE, undistorted
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model
 from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
