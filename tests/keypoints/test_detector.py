@@ -220,13 +220,15 @@ class _Scripted:
     """A stand-in detector for one of :data:`_RIG`'s views whose whole-image pass finds the body, something else
     (a chair beside it) or nobody, as scripted; its crops and guided reads find the body, and it counts them."""
 
-    def __init__(self, view: int, sees: str) -> None:
-        self.camera, self.sees, self.crops, self.guided_reads = _RIG[view], sees, 0, 0
+    def __init__(self, view: int, sees: str, guiding: bool = False) -> None:
+        self.camera, self.sees, self.guiding = _RIG[view], sees, guiding
+        self.wholes = self.crops = self.guided_reads = 0
 
     def _found(self, offset=(0.0, 0.0, 0.0)) -> Detection:
         return Detection(self.camera.project(_BODY + offset), np.ones(33), np.zeros((33, 3)))
 
     def whole(self, image) -> Detection:
+        self.wholes += 1
         return {"body": self._found(), "chair": self._found((1.0, 0.0, 0.8)), "nobody": Detection.none()}[self.sees]
 
     def cropped(self, image) -> Detection:
@@ -262,6 +264,21 @@ def test_crops_run_where_fewer_than_two_views_agree_and_guided_reads_where_one_d
     assert on_body == [image is not None for image in images]
 
 
+@pytest.mark.parametrize(
+    ("sees", "guiding", "wholes", "guided"),
+    [
+        (("body", "body", "chair"), (False, False, True), (1, 1, 0), (0, 0, 1)),  # read where the others place him
+        (("body", "nobody", "chair"), (False, False, True), (1, 1, 1), (0, 0, 1)),  # the others do not: read whole
+    ],
+)
+def test_a_view_whose_last_guided_reading_was_taken_is_read_there_before_its_whole_image(sees, guiding, wholes, guided):
+    detectors = [_Scripted(view, seen, follows) for view, (seen, follows) in enumerate(zip(sees, guiding))]
+    found = detect_views(detectors, [np.zeros((4, 4, 3), np.uint8)] * 3, cameras=_RIG)
+    assert tuple(detector.wholes for detector in detectors) == wholes
+    assert tuple(detector.guided_reads for detector in detectors) == guided
+    assert all(np.allclose(detection.pixels, _RIG[k].project(_BODY)) for k, detection in enumerate(found))
+
+
 def test_a_guided_read_that_disagrees_with_the_others_is_not_taken():
     class _Stubborn(_Scripted):
         def guided(self, image, square, accept) -> Detection:
@@ -269,7 +286,8 @@ def test_a_guided_read_that_disagrees_with_the_others_is_not_taken():
             found = self._found((1.0, 0.0, 0.8))  # the chair again
             return found if accept(found) else Detection.none()
 
-    detectors = [_Scripted(0, "body"), _Scripted(1, "body"), _Stubborn(2, "chair")]
-    found = detect_views(detectors, [np.zeros((4, 4, 3), np.uint8)] * 3, cameras=_RIG)
-    assert detectors[2].guided_reads == 1
-    np.testing.assert_allclose(found[2].pixels, _RIG[2].project(_BODY + (1.0, 0.0, 0.8)))  # the whole image's
+    for guiding in (False, True):  # the whole image read first, or after the guided reading
+        detectors = [_Scripted(0, "body"), _Scripted(1, "body"), _Stubborn(2, "chair", guiding)]
+        found = detect_views(detectors, [np.zeros((4, 4, 3), np.uint8)] * 3, cameras=_RIG)
+        assert detectors[2].guided_reads == 1 and detectors[2].wholes == 1
+        np.testing.assert_allclose(found[2].pixels, _RIG[2].project(_BODY + (1.0, 0.0, 0.8)))  # the whole image's

@@ -250,6 +250,12 @@ class Detector:
         self._last = around(found.pixels)
         return found
 
+    @property
+    def guiding(self) -> bool:
+        """Whether this camera's last guided reading (:meth:`guided`) was taken, and nothing was read since by the
+        crops: its next image is read where the other views place the body, before its whole image."""
+        return self._guided
+
     def guided(self, image: np.ndarray, square: Region, accept: Callable[[Detection], bool]) -> Detection:
         """The landmarks the crops' landmarker finds in ``square`` of the image just given to :meth:`whole`, where
         the other views place the body, if ``accept`` takes them; else nobody.  The landmarker goes on from its
@@ -295,15 +301,28 @@ def detect_views(
     """One frame's landmarks in every view (``images`` in camera order, None for a view without one; with
     ``reduction``, one integer factor per camera, each image is its camera's reduced by it).
 
-    The whole images go first.  When fewer than two views agree (:func:`tracker.keypoints.guided.agreeing_views`),
-    the crops are read in the views the whole image shows nobody in: two views place the body, and a crop's pass
-    costs what the whole image's does (on the demo, cam1's crops would find its background photo's player, whom
-    the check across the views drops anyway).  Then each view that agrees with none of two or more agreeing ones
-    is read again in the square where they place the body (:meth:`Detector.guided`), and that reading is kept
-    when its landmarks lie where they place them (:func:`tracker.keypoints.guided.fits`)."""
+    The whole images go first, but for the views whose last guided reading was taken (:attr:`Detector.guiding`):
+    those are read in the square where the others place the body again, and their whole images only when fewer
+    than two of the others agree or that reading is not taken.  When fewer than two views agree
+    (:func:`tracker.keypoints.guided.agreeing_views`), the crops are read in the views the whole image shows nobody
+    in: two views place the body, and a crop's pass costs what the whole image's does (on the demo, cam1's crops
+    would find its background photo's player, whom the check across the views drops anyway).  Then each view that
+    agrees with none of two or more agreeing ones is read again in the square where they place the body
+    (:meth:`Detector.guided`), and that reading is kept when its landmarks lie where they place them
+    (:func:`tracker.keypoints.guided.fits`)."""
     scale = np.ones(len(images)) if reduction is None else np.asarray(reduction, float)
-    found = [Detection.none() if image is None else detector.whole(image) for detector, image in zip(detectors, images)]
+    guiding = [image is not None and detector.guiding for detector, image in zip(detectors, images)]
+    found = [
+        Detection.none() if image is None or skip else detector.whole(image)
+        for detector, image, skip in zip(detectors, images, guiding)
+    ]
     agree = _agreeing(cameras, found, scale)
+    if agree.sum() < 2 and any(guiding):
+        found = [
+            detector.whole(image) if skip else detection
+            for detector, image, detection, skip in zip(detectors, images, found, guiding)
+        ]
+        agree = _agreeing(cameras, found, scale)
     if agree.sum() < 2:
         found = [
             detection if detection.found or image is None else detector.cropped(image)
@@ -326,7 +345,10 @@ def detect_views(
         reading = detectors[view].guided(images[view], reduced, agrees)
         if reading.found:
             found[view] = reading
-    return found
+    return [
+        detector.whole(image) if skip and not detection.found else detection
+        for detector, image, detection, skip in zip(detectors, images, found, guiding)
+    ]
 
 
 def _agreeing(cameras: list[Camera], found: list[Detection], scale: np.ndarray) -> np.ndarray:
