@@ -313,13 +313,13 @@ def detect_views(
     scale = np.ones(len(images)) if reduction is None else np.asarray(reduction, float)
     guiding = [image is not None and detector.guiding for detector, image in zip(detectors, images)]
     found = [
-        Detection.none() if image is None or skip else detector.whole(image)
+        Detection.none() if skip else _whole(detector, image)
         for detector, image, skip in zip(detectors, images, guiding)
     ]
     agree = _agreeing(cameras, found, scale)
     if agree.sum() < 2 and any(guiding):
         found = [
-            detector.whole(image) if skip else detection
+            _whole(detector, image) if skip else detection
             for detector, image, detection, skip in zip(detectors, images, found, guiding)
         ]
         agree = _agreeing(cameras, found, scale)
@@ -334,21 +334,26 @@ def detect_views(
     pixels = np.array([detection.pixels for detection in found]) * scale[:, None, None]
     points = placed_points(cameras, pixels, np.array([detection.confidence for detection in found]), among=agree)
     for view in np.flatnonzero(~agree):
-        square = placed(cameras[view], points)
-        if images[view] is None or square is None:
+        square, image = placed(cameras[view], points), images[view]
+        if image is None or square is None:
             continue
         reduced = Region((square.centre[0] / scale[view], square.centre[1] / scale[view]), square.side / scale[view])
 
         def agrees(reading: Detection, camera: Camera = cameras[view], factor: float = scale[view]) -> bool:
             return fits(camera, points, reading.pixels * factor, confidence=reading.confidence)
 
-        reading = detectors[view].guided(images[view], reduced, agrees)
+        reading = detectors[view].guided(image, reduced, agrees)
         if reading.found:
             found[view] = reading
     return [
-        detector.whole(image) if skip and not detection.found else detection
+        _whole(detector, image) if skip and not detection.found else detection
         for detector, image, detection, skip in zip(detectors, images, found, guiding)
     ]
+
+
+def _whole(detector: Detector, image: np.ndarray | None) -> Detection:
+    """:meth:`Detector.whole` of ``image``; nobody without one."""
+    return Detection.none() if image is None else detector.whole(image)
 
 
 def _agreeing(cameras: list[Camera], found: list[Detection], scale: np.ndarray) -> np.ndarray:
