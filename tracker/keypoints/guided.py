@@ -9,7 +9,9 @@ views' landmarks projected into it (docs/keypoints.md, "Views read where the oth
 
 Two views agree when most of the landmarks both see confidently (at least :data:`SHARED`) triangulate to a
 point in front of both cameras that reprojects within :data:`GATE` of the image's
-short side in both: two readings of different things meet that only by chance, on a few landmarks.
+short side in both: two readings of different things meet that only by chance, on a few landmarks.  The same
+gate, and the recorded pixels' ideal normalised coordinates (:func:`undistorted`), serve the check of each
+landmark across the views (:mod:`tracker.keypoints.consistency`).
 """
 
 from __future__ import annotations
@@ -47,8 +49,7 @@ def agreeing_views(
     """(V,) bool: the views whose landmarks ``pixels`` (V, K, 2) (full-image pixels, NaN where none) agree with
     at least one other view's (see the module); ``confidence`` (V, K)."""
     seen = (confidence >= CONFIDENT) & np.isfinite(pixels).all(axis=2)
-    normalised = undistorted(np.where(seen[..., None], pixels, np.nan)[None], cameras)[0].transpose(1, 0, 2)
-    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    projections, normalised = _rays(cameras, pixels, seen)
     agree = np.zeros(len(cameras), bool)
     for a, b in itertools.combinations(range(len(cameras)), 2):
         both = seen[a] & seen[b]
@@ -74,8 +75,7 @@ def placed_points(
     points' median (two views that agree on most landmarks may read a few differently, and two views close
     together place such a point anywhere along their rays: on the demo, metres behind the body)."""
     seen = (confidence >= CONFIDENT) & np.isfinite(pixels).all(axis=2) & among[:, None]
-    normalised = undistorted(np.where(seen[..., None], pixels, np.nan)[None], cameras)[0].transpose(1, 0, 2)
-    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    projections, normalised = _rays(cameras, pixels, seen)
     points = triangulate_many(projections, normalised, seen.T)
     for k in np.flatnonzero(among):
         missed = seen[k] & ~_reaches(cameras[k], points, pixels[k], gate * min(cameras[k].size))
@@ -111,6 +111,15 @@ def fits(camera: Camera, points: np.ndarray, pixels: np.ndarray, *, confidence: 
         return False
     reach = _reaches(camera, points, np.where(seen[:, None], pixels, np.nan), gate * min(camera.size))
     return 2 * int(reach.sum()) > int(seen.sum())
+
+
+def _rays(cameras: list[Camera], pixels: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cameras' [R | t] (V, 3, 4) and the ideal normalised coordinates (K, V, 2) of the landmarks ``pixels``
+    (V, K, 2) that are ``seen`` (V, K) bool (NaN elsewhere), as :func:`tracker.geometry.dlt.triangulate_many` takes
+    them."""
+    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
+    normalised = undistorted(np.where(seen[..., None], pixels, np.nan)[None], cameras)[0].transpose(1, 0, 2)
+    return projections, normalised
 
 
 def _reaches(camera: Camera, points: np.ndarray, pixels: np.ndarray, limit: float) -> np.ndarray:
