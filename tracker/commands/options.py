@@ -206,7 +206,7 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] =
             dict(
                 type=positive_float,
                 metavar="W",
-                help="the colour cue's weight beside the edges' (default 0.3)",
+                help="the colour cue's weight beside the edges', per line read (every second sample's; default 0.6)",
             ),
         ),
         "region_person": (

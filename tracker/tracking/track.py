@@ -122,12 +122,12 @@ class Settings:
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = True  # read the colours along the samples' lines too (--region off: edges alone)
-    region_weight: float = 0.3  # lambda: a line's weight is lambda / max(sigma^2, region_sigma^2)
+    region_weight: float = 0.6  # lambda: a line's weight is lambda / max(sigma^2, region_sigma^2)
     region_sigma: float = 1.0  # full-size pixels: the smallest standard deviation a line's offset is given
     region_amplitude: float = 0.43  # a: the smoothed step H(x) = 1/2 - a tanh(x / 2s) between inside and outside
     region_slope: float = 0.5  # s, half-size pixels
     region_learning_rate: float = 0.2  # h <- (1 - rate) h + rate h_new per frame
-    region_every: int = 1  # use every k-th sample's line
+    region_every: int = 2  # use every k-th sample's line (each weighs lambda; 2 at 0.6 weighs what 1 at 0.3 did)
     region_inside: int = 4  # pixels in from the outline whose colours are learnt as the part's
     region_outside: int = 10  # ... and out to which they are learnt as the background's (from 4)
     region_agree: float = 2.0  # pixels: once a part's colours are known, only lines whose offset is this close teach
