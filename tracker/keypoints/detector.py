@@ -281,8 +281,9 @@ class Detector:
         return self._guided
 
     def guided(self, image: np.ndarray, square: Region, accept: Callable[[Detection], bool]) -> Detection:
-        """The landmarks the crops' landmarker finds in ``square`` of the image just given to :meth:`whole`, where
-        the other views place the body, if ``accept`` takes them; else nobody.  The landmarker goes on from its
+        """The landmarks the crops' landmarker finds in ``square`` of this frame's ``image`` (read whole before it,
+        or not at all while the camera is :attr:`guiding`), where the other views place the body, if ``accept``
+        takes them; else nobody.  The landmarker goes on from its
         last reading only when that was a guided one that was taken: else it reads an empty image first, so that
         it finds the person in the square afresh."""
         if not self._guided:
