@@ -213,6 +213,13 @@ _BLACK = np.zeros((CROP, CROP, 3), np.uint8)
 """An image with nobody in it: reading it ends a video-mode landmarker's track."""
 
 
+def _afresh(landmarker, rgb: np.ndarray, region: Region) -> Detection:
+    """:func:`_in` after ``landmarker`` (video mode) has read :data:`_BLACK`, which ends its track: its person
+    detector finds the person in ``region``'s crop afresh, rather than follow the landmarks of another crop."""
+    _read(landmarker, _BLACK)
+    return _in(landmarker, rgb, region)
+
+
 def _in_squares(crops, rgb: np.ndarray) -> Detection:
     """The person in the first of the search's squares of an RGB image that the video-mode landmarker
     ``crops`` finds one in, read again in the square around its landmarks; or nobody.  Between the two
@@ -221,8 +228,7 @@ def _in_squares(crops, rgb: np.ndarray) -> Detection:
     for square in search(rgb.shape[1], rgb.shape[0]):
         glimpse = _in(crops, rgb, square)
         if glimpse.found and (region := around(glimpse.pixels)) is not None:
-            _read(crops, _BLACK)
-            found = _in(crops, rgb, region)
+            found = _afresh(crops, rgb, region)
             if found.found:
                 return found
     return Detection.none()
@@ -254,9 +260,8 @@ class Detector:
         if square is not None and last is not None:
             moved = np.hypot(square.centre[0] - last.centre[0], square.centre[1] - last.centre[1]) / last.side
             if moved > LAG:
-                _read(self._cropper(), _BLACK)
                 self._guided = False
-                again = _in(self._cropper(), rgb, square)
+                again = _afresh(self._cropper(), rgb, square)
                 if again.found:
                     found, square = again, around(again.pixels)
         self._last = square
@@ -286,9 +291,8 @@ class Detector:
         takes them; else nobody.  The landmarker goes on from its
         last reading only when that was a guided one that was taken: else it reads an empty image first, so that
         it finds the person in the square afresh."""
-        if not self._guided:
-            _read(self._cropper(), _BLACK)
-        found = _in(self._cropper(), rgb_of(image), square)
+        read = _in if self._guided else _afresh
+        found = read(self._cropper(), rgb_of(image), square)
         self._guided = found.found and accept(found)
         if not self._guided:
             return Detection.none()
@@ -356,8 +360,8 @@ def detect_views(
         agree = _agreeing(cameras, found, scale)
     if agree.sum() < 2:
         return found
-    pixels = np.array([detection.pixels for detection in found]) * scale[:, None, None]
-    points = placed_points(cameras, pixels, np.array([detection.confidence for detection in found]), among=agree)
+    pixels, confidence = _landmarks(found, scale)
+    points = placed_points(cameras, pixels, confidence, among=agree)
     for view in np.flatnonzero(~agree):
         square, image = placed(cameras[view], points), images[view]
         if image is None or square is None:
@@ -383,5 +387,10 @@ def _whole(detector: Detector, image: np.ndarray | None) -> Detection:
 
 def _agreeing(cameras: list[Camera], found: list[Detection], scale: np.ndarray) -> np.ndarray:
     """(V,) bool: the views whose detections (in images reduced by ``scale``) agree with another view's."""
-    pixels = np.array([detection.pixels for detection in found]) * scale[:, None, None]
-    return agreeing_views(cameras, pixels, np.array([detection.confidence for detection in found]))
+    return agreeing_views(cameras, *_landmarks(found, scale))
+
+
+def _landmarks(found: list[Detection], scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The views' landmark pixels (V, K, 2) in full-size images (``found`` in images reduced by ``scale``) and
+    their confidences (V, K)."""
+    return np.array([d.pixels for d in found]) * scale[:, None, None], np.array([d.confidence for d in found])
