@@ -462,3 +462,33 @@ def test_a_parts_background_is_the_mean_of_its_own_and_the_cameras():
     for i, g in enumerate((0.5 * (h.background[0, 0] + camera), 0.5 * (h.background[0, 1] + camera), camera)):
         np.testing.assert_allclose(table[0, i], h.foreground[0, i] / (h.foreground[0, i] + g), rtol=1e-12)
         assert distinct[0, i] == pytest.approx(1.0 - np.sqrt(h.foreground[0, i] * g).sum(), rel=1e-12)
+
+
+def test_with_every_second_line_only_the_even_samples_lines_are_read():
+    """``every`` = 2 (the default, ``Settings.region_every``): of two samples, the first's line is profiled and adds
+    exactly the row it adds alone, the second's is left out, in both the profiles and the information."""
+    chroma, h = split_image(32.0, noise=0.05, seed=3), histograms()
+    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1]]])
+    table, distinct = table_of(h)
+    logs = log_table(0.43, 0.5)
+    pixels, normals = np.array([[60.0, 30.0], [60.0, 50.0]]), np.tile([1.0, 0.0], (2, 1))
+    jac = np.tile([1.0, 0.2, 0.0, 0.0, 0.3, -0.1], (2, 1))
+
+    def read(count: int, every: int):
+        line = (np.zeros(count, np.int64), np.zeros(count, np.int64), pixels[:count], normals[:count])
+        limits, search = (np.full(count, -1), np.full(count, 41)), (np.full(count, -20), np.full(count, 20))
+        profiles = line_profiles(bins, size, count, *line, *limits, *search, every, table, *NO_PERSON, logs, MARGIN)
+        information, eta, mean, variance = np.zeros((2, 6, 6)), np.zeros((2, 6)), np.zeros(count), np.zeros(count)
+        used = region_kernel(
+            bins, size, count, *line, jac[:count], *limits, np.zeros((2, 6)), *search, every, table, *NO_PERSON,
+            distinct, logs, 2.0, 1.0, *profiles, False, mean, variance, information, eta,
+        )  # fmt: skip
+        return used, profiles[3], mean, information, eta
+
+    assert read(2, 1)[0] == 2
+    used, length, mean, information, eta = read(2, 2)
+    alone = read(1, 1)
+    assert used == 1 and length[0] > 0 and length[1] == 0 and np.isnan(mean[1])
+    assert mean[0] == alone[2][0]
+    np.testing.assert_array_equal(information, alone[3])
+    np.testing.assert_array_equal(eta, alone[4])
