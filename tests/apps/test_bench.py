@@ -20,6 +20,7 @@ KEYS = {
     "frames",
     "detector_ms_per_view",
     "fps_all_views_with_keypoints",
+    "stage_ms_per_frame_with_keypoints",
 }
 
 
@@ -33,6 +34,7 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert set(result["stage_ms_per_frame_all_views"]) >= {"decode", "outline", "measure", "solve", "output"}
     assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0  # the default at the recording's 60 fps
     assert result["fps_all_views_with_keypoints"] > 0
+    assert set(result["stage_ms_per_frame_with_keypoints"]) >= {"outline", "measure", "region", "solve", "output"}
 
 
 def test_bench_without_the_cue_times_the_edges_only(tiny_recording, capsys):
@@ -40,13 +42,15 @@ def test_bench_without_the_cue_times_the_edges_only(tiny_recording, capsys):
     result = json.loads(capsys.readouterr().out)
     assert result["keypoint_step"] == 0 and result["fps_all_views"] > 0
     assert result["fps_all_views_with_keypoints"] != result["fps_all_views_with_keypoints"]  # NaN: not timed
+    assert result["stage_ms_per_frame_with_keypoints"] == {}
 
 
 def test_bench_table_is_printed(tiny_recording, capsys):
     assert main(["bench", str(tiny_recording), "--repeats", "1"]) == 0
     out = capsys.readouterr().out
-    stages = [float(ms) for ms in re.findall(r"^\| [a-z][^|]* \| ([\d.]+) \|$", out, re.M)]
-    assert len(stages) >= 6 and all(ms >= 0 for ms in stages)  # decode, grey, outline, ..., output
+    rows = re.findall(r"^\| [a-z][^|]* \| ([\d.]+) \| ?([\d.]*) \|$", out, re.M)
+    assert len(rows) >= 6 and all(float(ms) >= 0 for ms, _ in rows)  # decode, grey, outline, ..., output
+    assert rows[0][1] == "" and all(float(ms) >= 0 for _, ms in rows[1:])  # with the cue: the tracker's stages
     tracking, decoding, ratio = (
         [float(value) for value in re.findall(rf"^\| {row} \| ([\d.]+) \| ([\d.]+) \|$", out, re.M)[0]]
         for row in ("tracking, frames per second", "decode only, frames per second", r"ratio tracking / decode only")

@@ -20,16 +20,19 @@ def bilinear(mask: np.ndarray, x: float, y: float) -> float:
     return total
 
 
+@pytest.mark.parametrize("factor", [2, 4])
 @pytest.mark.parametrize("square", [(100.0, 80.0, 120.0), (37.3, 151.9, 64.5)])
-def test_each_half_size_pixel_reads_the_mask_where_its_full_size_point_falls(square):
+def test_each_grid_pixel_reads_the_mask_where_its_full_size_point_falls(square, factor):
+    """A pixel (u, v) of a colour grid of ``factor`` full-size pixels each is the full-size point (f u + (f - 1) / 2,
+    f v + (f - 1) / 2): half size (2) for most views, a quarter for those the edge search reduces by 2."""
     rng = np.random.default_rng(3)
     mask = rng.integers(0, 256, (32, 32)).astype(np.uint8)
     size = np.array([110, 100])
-    grid = person_grid(mask, np.array(square), size)
+    grid = person_grid(mask, np.array(square), size, factor=factor)
     assert grid.shape == (100, 110) and grid.dtype == np.uint8
     cx, cy, side = square
     for v, u in rng.integers(0, 100, (200, 2)):
-        x, y = 2 * u + 0.5, 2 * v + 0.5
+        x, y = factor * u + (factor - 1) / 2, factor * v + (factor - 1) / 2
         mx, my = 32 / side * (x - cx) + 16, 32 / side * (y - cy) + 16
         expected = bilinear(mask, mx, my) if -1 < mx < 32 and -1 < my < 32 else 0.0
         assert grid[v, u] == pytest.approx(expected, abs=1.0), (u, v)

@@ -13,6 +13,8 @@ from tracker.tracking.region_cue import (
     Counts,
     Histograms,
     colour_bins,
+    colour_grids,
+    colour_reduction,
     learn_kernel,
     line_profiles,
     log_table,
@@ -86,24 +88,27 @@ def run(
     twist=None,
     h=None,
     person=NO_PERSON,
+    factor=FACTOR,
     **options,
 ):
     """The kernels on one sample in camera 0 of component 0 with normal +x, its line profiled where it was sampled
     (``margin`` half-size pixels beyond its candidates, the default's unless given) and read after the component
-    moved by ``twist``, with ``person`` (the camera's person mask and its trust); returns (mean, variance, C, eta,
-    used)."""
+    moved by ``twist``, with ``person`` (the camera's person mask and its trust), ``chroma`` a colour image of
+    ``factor`` full-size pixels a pixel; returns (mean, variance, C, eta, used)."""
     h = histograms() if h is None else h
     jac = np.array([jacobian if jacobian is not None else [1.0, 0.2, 0.0, 0.0, 0.3, -0.1]])
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
     mean, variance = np.zeros(1), np.zeros(1)
     settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=MARGIN, afresh=False) | options
-    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1]]])
+    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1], factor]])
     table, distinct = table_of(h)
-    logs = log_table(settings["amplitude"], settings["slope"])
+    logs = log_table(settings["amplitude"], settings["slope"])[None]
     line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([pixel], float), np.array([[1.0, 0.0]]))
     limits = (np.array([outside]), np.array([depth]))
     search = (np.array([lo]), np.array([hi]))
-    profiles = line_profiles(bins, size, 1, *line, *limits, *search, 1, table, *person, logs, settings["margin"])
+    profiles = line_profiles(
+        bins, size, 1, *line, *limits, *search, 1, table, *person, logs, np.array([settings["margin"]])
+    )
     used = region_kernel(
         bins,
         size,
@@ -213,15 +218,29 @@ def test_where_the_colours_cannot_tell_the_mask_places_the_outline():
     assert 63.5 + mean == pytest.approx(71.5, abs=0.5) and variance < blind_variance / 8
 
 
+@pytest.mark.parametrize("factor", [FACTOR, 2 * FACTOR])
 @pytest.mark.parametrize("shift", [-6, -2, 0, 4, 8])
-def test_the_mean_finds_the_boundary_along_the_outward_normal(shift):
+def test_the_mean_finds_the_boundary_along_the_outward_normal(shift, factor):
     """The part lies at x < edge: a sample at the boundary's full-size place gives an offset near 0; moved by
-    ``shift`` pixels along its normal (+x), the offset brings it back, to within the half-size pixel."""
-    edge = 32.0  # half-size column where the room begins: the boundary at half-size x 31.5, full-size x 63.5
-    chroma = split_image(edge, noise=0.05)
-    mean, variance, *_ = run(chroma, (63.5 + shift, 40.5))
-    assert mean == pytest.approx(-shift, abs=0.5)
-    assert variance < 9.0  # a standard deviation under 3 pixels, with these histograms' weak contrast
+    ``shift`` pixels along its normal (+x), the offset brings it back, to within a quarter of the colour pixel, on
+    the half-size colour image and on a quarter-size one (a view the edge search reads reduced)."""
+    edge = 64 // factor  # column where the room begins: the boundary at full-size x 63.5 (half-size x 31.5)
+    chroma = split_image(edge, width=160 // factor, height=80 // factor, noise=0.05)
+    mean, variance, *_ = run(chroma, (63.5 + shift, 40.5), factor=factor)
+    assert mean == pytest.approx(-shift, abs=factor / 4)
+    assert variance < (1.5 * factor) ** 2  # a standard deviation under 1.5 colour pixels, with this weak contrast
+
+
+def test_each_camera_reads_its_colour_at_the_edge_searchs_scale():
+    """Half size, reduced further by the factor that keeps the half-size short side at least half of work_side (the
+    edge search's reduction for the view); the grid's width and height are the half-size image's whole blocks."""
+    size = np.array([[1920, 1080], [640, 480], [1280, 720], [1280, 960], [3840, 2160], [1923, 1081]])
+    np.testing.assert_array_equal(
+        colour_grids(size, 480),
+        [[480, 270, 4], [320, 240, 2], [640, 360, 2], [320, 240, 4], [480, 270, 8], [480, 270, 4]],
+    )
+    np.testing.assert_array_equal(colour_grids(size, 0)[:, 2], 2)
+    assert [colour_reduction(half, 480) for half in (120, 239, 240, 479, 480, 540, 1080)] == [1, 1, 1, 1, 2, 2, 4]
 
 
 def test_a_line_adds_its_weighted_row_to_the_information():
@@ -285,14 +304,14 @@ def test_a_line_whose_margin_leaves_the_image_is_profiled_without_it():
     and moved out of them it is scored afresh."""
     chroma = split_image(62.0, noise=0.05, seed=4)  # the boundary at full-size x 123.5; the image is 160 wide
     lo, hi = -20, 34  # the line reaches half-size x 78.75 of 79: the margin's pixels would leave it
-    bins, size = bins_of(chroma), np.array([[80, 40]])
+    bins, size = bins_of(chroma), np.array([[80, 40, FACTOR]])
     line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([[122.0, 40.5]]), np.array([[1.0, 0.0]]))
     limits = (np.array([-1]), np.array([41]), np.array([lo]), np.array([hi]))
-    logs = log_table(0.43, 0.5)
+    logs = log_table(0.43, 0.5)[None]
     for x, (first, length) in ((122.0, (-10, 28)), (100.0, (-10 - MARGIN, 28 + 2 * MARGIN))):
         line[2][0, 0] = x
         _, _, profiled_first, profiled_length = line_profiles(
-            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], *NO_PERSON, logs, MARGIN
+            bins, size, 1, *line, *limits, 1, table_of(histograms())[0], *NO_PERSON, logs, np.array([MARGIN])
         )
         assert (profiled_first[0], profiled_length[0]) == (first, length)
     still, *_ = run(chroma, (122.0, 40.5), lo=lo, hi=hi)
@@ -329,7 +348,7 @@ def learn(chroma, seen, mean, counts, person=NO_PERSON):
     component 1 with another part outside; their last offsets ``mean``; ``person`` as :func:`run`'s."""
     learn_kernel(
         bins_of(chroma),
-        np.array([[80, 40]]),
+        np.array([[80, 40, FACTOR]]),
         2,
         np.zeros(2, np.int64),
         np.array([0, 1]),
@@ -344,8 +363,8 @@ def learn(chroma, seen, mean, counts, person=NO_PERSON):
         np.asarray(mean, float),
         seen.seen,
         2.0,
-        2,
-        5,
+        np.array([2]),
+        np.array([5]),
         *person,
         *counts.arrays(),
     )
@@ -468,16 +487,18 @@ def test_with_every_second_line_only_the_even_samples_lines_are_read():
     """``every`` = 2 (the default, ``Settings.region_every``): of two samples, the first's line is profiled and adds
     exactly the row it adds alone, the second's is left out, in both the profiles and the information."""
     chroma, h = split_image(32.0, noise=0.05, seed=3), histograms()
-    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1]]])
+    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1], FACTOR]])
     table, distinct = table_of(h)
-    logs = log_table(0.43, 0.5)
+    logs = log_table(0.43, 0.5)[None]
     pixels, normals = np.array([[60.0, 30.0], [60.0, 50.0]]), np.tile([1.0, 0.0], (2, 1))
     jac = np.tile([1.0, 0.2, 0.0, 0.0, 0.3, -0.1], (2, 1))
 
     def read(count: int, every: int):
         line = (np.zeros(count, np.int64), np.zeros(count, np.int64), pixels[:count], normals[:count])
         limits, search = (np.full(count, -1), np.full(count, 41)), (np.full(count, -20), np.full(count, 20))
-        profiles = line_profiles(bins, size, count, *line, *limits, *search, every, table, *NO_PERSON, logs, MARGIN)
+        profiles = line_profiles(
+            bins, size, count, *line, *limits, *search, every, table, *NO_PERSON, logs, np.array([MARGIN])
+        )
         information, eta, mean, variance = np.zeros((2, 6, 6)), np.zeros((2, 6)), np.zeros(count), np.zeros(count)
         used = region_kernel(
             bins, size, count, *line, jac[:count], *limits, np.zeros((2, 6)), *search, every, table, *NO_PERSON,

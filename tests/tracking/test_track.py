@@ -415,6 +415,30 @@ def test_large_images_are_searched_reduced_by_a_whole_factor():
     assert Tracker(model, cameras, tracker.poses, Settings(work_side=0)).work.images.shape == (2, 1080, 1920)
 
 
+def test_the_region_cue_reads_large_views_colour_reduced_as_their_grey():
+    """A view the edge search reads at half size has its colour read at a quarter (region_cue.colour_grids): the
+    reader threads' bins are those of the half-size colour image's block means; smaller views keep theirs."""
+    from dataclasses import replace
+
+    from tracker.io.readers import reduced
+    from tracker.tracking.region_cue import colour_bins
+
+    model = load_model(ROOT / "models" / "human.toml")
+    demo = load_calibration(DEMO / "calibration.toml")
+    cameras = [replace(demo[0], size=(1920, 1080)), replace(demo[1], size=(640, 480))]
+    tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
+    np.testing.assert_array_equal(tracker.grid, [[480, 270, 4], [320, 240, 2]])
+    full = Tracker(model, cameras, tracker.poses, Settings(work_side=0))
+    np.testing.assert_array_equal(full.grid, [[960, 540, 2], [320, 240, 2]])
+    chroma = np.random.default_rng(4).integers(0, 256, (540, 960, 3), dtype=np.uint8)
+    expected = np.empty((270, 480), np.int16)
+    colour_bins(reduced(chroma, 2), expected)
+    np.testing.assert_array_equal(tracker.bin_colours(chroma), expected)
+    small = chroma[:240, :320]
+    np.testing.assert_array_equal(tracker.bin_colours(small), full.bin_colours(small))
+    assert tracker.bin_colours(small).shape == (240, 320)
+
+
 @pytest.fixture(scope="module")
 def hd_recording(tmp_path_factory) -> Path:
     """Three 1280x960 views (short side 960: searched at half size by default) of the human model, encoded

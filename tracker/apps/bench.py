@@ -192,6 +192,7 @@ def run(
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
+    stage_cue = {stage: _median([r.stage_ms[stage] for r in runs_cue]) for stage in (*STAGES, "output") if runs_cue}
     core = sum(stage_ms[s] for s in ("outline", "ownership", "measure", "solve"))
     fps_all = _median([r.fps for r in runs_all])
     decode_all = _median(floor_all)
@@ -203,6 +204,7 @@ def run(
         "spacing_px": settings.spacing,
         "repeats": repeats,
         "stage_ms_per_frame_all_views": stage_ms,
+        "stage_ms_per_frame_with_keypoints": stage_cue,
         "core_ms_per_view_iteration": core / (len(every.cameras) * settings.iterations),
         "fps_one_view": _median([r.fps for r in runs_one]),
         "fps_all_views": fps_all,
@@ -352,15 +354,19 @@ def format_table(result: dict) -> str:
         "solve": "chain solve and coercion",
         "output": "output (joints, poses.npz)",
     }
+    cue = result["stage_ms_per_frame_with_keypoints"]
     lines = [
         f"Recording `{result['recording']}`: {result['views']} views, {result['frames']} frames, "
         f"{result['iterations']} IRLS iterations, {result['spacing_px']:g} px spacing; "
         f"medians of {result['repeats']} passes.",
         "",
-        "| stage | ms per frame (all views) |",
-        "| --- | --- |",
+        "| stage | ms per frame (all views) |" + (" with the keypoint cue |" if cue else ""),
+        "| --- | --- |" + (" --- |" if cue else ""),
     ]
-    lines += [f"| {names[stage]} | {ms:.3f} |" for stage, ms in result["stage_ms_per_frame_all_views"].items()]
+    lines += [
+        f"| {names[stage]} | {ms:.3f} |" + (f" {cue[stage]:.3f} |" if stage in cue else " |" if cue else "")
+        for stage, ms in result["stage_ms_per_frame_all_views"].items()
+    ]
     lines += [
         "",
         "| | one view | all views |",

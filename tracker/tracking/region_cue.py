@@ -3,8 +3,10 @@
 
 The edge search takes the nearest grey-level edge, which in a furnished room or on patterned clothes is often
 not the body's outline.  The region cue reads the same lines in colour instead, in the half-size colour image the
-readers decode beside the grey one (:class:`tracker.io.readers.WithChroma`), and asks which offset ``d`` of the
-outline along the line best splits it into the part's colours inside and the background's outside.
+readers decode beside the grey one (:class:`tracker.io.readers.WithChroma`), reduced further by the factor the edge
+search reduces the view's grey image by (:func:`colour_reduction`), and asks which offset ``d`` of the outline along
+the line best splits it into the part's colours inside and the background's outside.  Each camera's colour image is
+``grid[k, 2]`` full-size pixels to one of its own, the *colour pixels*, and ``grid[k, :2]`` of them wide and high.
 
 Colour statistics: each colour (16 bins per channel, 4096 bins) has a frequency ``h_f`` among the pixels of
 component ``i`` in camera ``k`` and ``h_b`` among the background pixels just outside that part's outline in camera
@@ -15,7 +17,7 @@ legs are seen against the floor, the arms and the head against the walls, and a 
 from its few lines, is too sparse to be fair to a printed costume (:func:`part_table`).  Between pixel centres,
 ``p_f`` is interpolated bilinearly, so that the line's points lie where the line is.
 
-Along the line ``x_t = p + t n`` (``t`` in half-size pixels, ``n`` the outward normal), with a smoothed step
+Along the line ``x_t = p + t n`` (``t`` in colour pixels, ``n`` the outward normal), with a smoothed step
 ``H(x) = 1/2 - a tanh(x / (2 s))`` (taken flat, ``1/2 -+ a``, beyond one pixel) for the chance that a pixel
 ``x`` from the outline is the part's, the likelihood of the outline at ``d`` is
 
@@ -50,8 +52,8 @@ from tracker.tracking.measure import bilinear
 
 BINS = 16  # per colour channel
 COLOURS = BINS**3
-FACTOR = 2  # the colour image is half the full size (4:2:0 chroma)
-MAX_LINE = 64  # half-size pixels a line may reach either side, at most
+FACTOR = 2  # the readers' colour image is half the full size (4:2:0 chroma)
+MAX_LINE = 64  # colour pixels a line may reach either side, at most
 RESCALE = 1e-150  # a histogram's scale below which its values take it in (blend_kernel)
 LOG_STEPS = 4096  # intervals of the likelihood terms' table over p_f in [0, 1] (log_table)
 
@@ -118,9 +120,29 @@ class Counts:
         return self.colours, self.touched, self.touched_count
 
 
+def colour_reduction(short_side: int, work_side: int) -> int:
+    """The factor by which the region cue reduces a half-size colour image ``short_side`` pixels on its short side
+    further: the largest integer that keeps it at least ``work_side / 2`` long (1: as it is; always 1 for
+    ``work_side`` 0), the edge search's factor for the view (:func:`tracker.tracking.track.reduction`) where
+    ``work_side`` is even.  A 1080-pixel view's lines then hold as many colour pixels as a 480-pixel one's, as its
+    edge search's do grey ones (docs/region.md)."""
+    half_work = work_side // FACTOR
+    return max(1, short_side // half_work) if half_work > 0 else 1
+
+
+def colour_grids(size: np.ndarray, work_side: int) -> np.ndarray:
+    """Each camera's colour image as the region cue reads it, (C, 3) int64: width, height and the full-size pixels
+    to one of its pixels, for full-size images ``size`` (C, 2: width, height): the readers' half-size colour image
+    (:data:`FACTOR`) reduced by :func:`colour_reduction`, each pixel the mean of a block, the rows and columns past
+    the last whole block dropped (:func:`tracker.io.readers.reduced`)."""
+    half = np.asarray(size, np.int64) // FACTOR
+    factor = np.array([colour_reduction(int(min(h)), work_side) for h in half], np.int64)
+    return np.column_stack([half // factor[:, None], FACTOR * factor])
+
+
 @njit(cache=True, nogil=True)
 def colour_bins(chroma, out):
-    """Each pixel's colour bin (of 16 x 16 x 16) of a half-size colour image (H', W', 3) into ``out`` (H', W')."""
+    """Each pixel's colour bin (of 16 x 16 x 16) of a colour image (H', W', 3) into ``out`` (H', W')."""
     step = 256 // BINS
     for v in range(chroma.shape[0]):
         for u in range(chroma.shape[1]):
@@ -173,7 +195,7 @@ def part_table(foreground, background, scale, seen, seen_background, out, o_dist
 
 @njit(cache=True, inline="always")
 def part_probability(bins, table, width, height, x, y):
-    """p_f at (x, y) of one camera's bin image (half-size coordinates, within ``[0, width - 1] x [0, height - 1]``),
+    """p_f at (x, y) of one camera's bin image (colour pixels, within ``[0, width - 1] x [0, height - 1]``),
     from one part's ``table`` (COLOURS,), bilinear between the four pixels around it (pixel centres at
     integers)."""
     u = min(int(x), width - 2)
@@ -187,7 +209,7 @@ def part_probability(bins, table, width, height, x, y):
 
 @njit(cache=True, inline="always")
 def with_person(p, person, width, height, x, y, trust):
-    """A pixel's ``p`` (p_f) joined by the person's mask at the half-size point (x, y) (``person`` (H', W') uint8,
+    """A pixel's ``p`` (p_f) joined by the person's mask at the colour pixel (x, y) (``person`` (H', W') uint8,
     the probability x 255, :func:`tracker.tracking.person.person_grid`, read bilinearly within ``width`` x
     ``height``), as independent evidence whose odds multiply ``p``'s, ``m`` taken as ``1/2 + trust (m - 1/2)``: the
     mask is coarse (a 1080p body's is 7 pixels a cell), and the network sometimes paints a hidden leg on the table
@@ -199,7 +221,7 @@ def with_person(p, person, width, height, x, y, trust):
 
 @njit(cache=True, inline="always")
 def _colour(bins, width, height, x, y):
-    """The colour bin of the half-size pixel nearest to (x, y) (half-size coordinates); -1 outside the image."""
+    """The colour bin of the colour pixel nearest to (x, y) (colour pixels); -1 outside the image."""
     u = int(math.floor(x + 0.5))
     v = int(math.floor(y + 0.5))
     if u < 0 or v < 0 or u >= width or v >= height:
@@ -224,16 +246,18 @@ def log_table(amplitude, slope):
 
 
 @njit(cache=True, inline="always")
-def _half(px, py, nx, ny, moved):
-    """A full-size sample moved by ``moved`` pixels along its normal, in half-size coordinates."""
-    return ((px + moved * nx) + 0.5) / FACTOR - 0.5, ((py + moved * ny) + 0.5) / FACTOR - 0.5
+def _on_grid(px, py, nx, ny, moved, factor):
+    """A full-size sample moved by ``moved`` pixels along its normal, in colour pixels of ``factor`` full-size
+    ones."""
+    return ((px + moved * nx) + 0.5) / factor - 0.5, ((py + moved * ny) + 0.5) / factor - 0.5
 
 
 @njit(cache=True, inline="always")
-def _limits(s_lo, s_hi, s_depth):
-    """A line's candidate offsets (half-size pixels, :func:`region_kernel`): from the search interval ``s_lo``,
-    ``s_hi`` (full-size pixels) and short of the part's far side (half its width along the line, ``s_depth``)."""
-    return -min(-s_lo // FACTOR, s_depth // (2 * FACTOR), MAX_LINE), min(s_hi // FACTOR, MAX_LINE)
+def _limits(s_lo, s_hi, s_depth, factor):
+    """A line's candidate offsets (colour pixels of ``factor`` full-size ones, :func:`region_kernel`): from the
+    search interval ``s_lo``, ``s_hi`` (full-size pixels) and short of the part's far side (half its width along the
+    line, ``s_depth``)."""
+    return -min(-s_lo // factor, s_depth // (2 * factor), MAX_LINE), min(s_hi // factor, MAX_LINE)
 
 
 @njit(cache=True, inline="always")
@@ -260,7 +284,7 @@ def _moments(likelihood, at, n):
 
 @njit(cache=True, inline="always")
 def _likelihood(bins, table, person, trust, width, height, x0, y0, nx, ny, d_lo, d_hi, logs, terms, out, at):
-    """The likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (half-size
+    """The likelihood of the outline at each offset ``d_lo..d_hi`` along the line ``(x0, y0) + t n`` (colour
     pixels; module docstring), divided by the largest, into ``out[at:]``; False where the line leaves the image.
     ``terms`` (5, n + 3) is scratch.  With ``trust`` > 0 each pixel's p_f is joined by the person's mask ``person``
     (:func:`with_person`).
@@ -308,7 +332,7 @@ def _likelihood(bins, table, person, trust, width, height, x0, y0, nx, ny, d_lo,
 @njit(cache=True, nogil=True)
 def line_profiles(
     bins,
-    chroma_size,
+    grid,
     count,
     s_cam,
     s_comp,
@@ -326,34 +350,36 @@ def line_profiles(
     margin,
 ):
     """Each line's likelihood of the outline at every candidate offset from its sampled place (module docstring,
-    :func:`_likelihood`), reaching ``margin`` half-size pixels beyond its candidates either way (or none beyond,
+    :func:`_likelihood`), reaching ``margin[k]`` colour pixels beyond its candidates either way (or none beyond,
     where the wider line would leave the image), which :func:`region_kernel` reads for this and the next
     iterations until the next sampling.  Returns the line profiles ``(likelihood, start, first, length)``: sample
     ``s``'s lie at ``likelihood[start[s]:start[s] + length[s]]``, for the offsets ``first[s], first[s] + 1, ...``
-    (half-size pixels along the line; length 0 for a line not used, or one that leaves the image).  ``person``
-    (C, H', W') and ``trust`` (C,): each camera's person mask and how far it is trusted (0: no mask;
-    :func:`with_person`)."""
+    (colour pixels along the line; length 0 for a line not used, or one that leaves the image).  ``grid`` (C, 3):
+    each camera's colour image's width, height and full-size pixels to one of its own (module docstring);
+    ``logs`` (C, 4, LOG_STEPS + 1): each camera's :func:`log_table`; ``person`` (C, H', W') and ``trust`` (C,): each
+    camera's person mask and how far it is trusted (0: no mask; :func:`with_person`)."""
     start = np.zeros(count, np.int64)
     first = np.zeros(count, np.int64)
     length = np.zeros(count, np.int64)
     total = 0
     for s in range(count):
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
-        if _used(s, every, table[s_cam[s], s_comp[s]], s_outside[s], d_lo, d_hi):
+        k = s_cam[s]
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s], grid[k, 2])
+        if _used(s, every, table[k, s_comp[s]], s_outside[s], d_lo, d_hi):
             start[s] = total
-            total += d_hi - d_lo + 1 + 2 * margin
+            total += d_hi - d_lo + 1 + 2 * margin[k]
     likelihood = np.empty(total)
-    terms = np.empty((5, 2 * (MAX_LINE + margin) + 4))
+    terms = np.empty((5, 2 * (MAX_LINE + margin.max()) + 4))
     for s in range(count):
         k = s_cam[s]
         i = s_comp[s]
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s], grid[k, 2])
         if not _used(s, every, table[k, i], s_outside[s], d_lo, d_hi):
             continue
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
-        x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, 0.0)
-        for wide in (margin, 0):
+        x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, 0.0, grid[k, 2])
+        for wide in (margin[k], 0):
             lo = d_lo - wide
             hi = d_hi + wide
             if _likelihood(
@@ -361,15 +387,15 @@ def line_profiles(
                 table[k, i],
                 person[k],
                 trust[k],
-                chroma_size[k, 0],
-                chroma_size[k, 1],
+                grid[k, 0],
+                grid[k, 1],
                 x0,
                 y0,
                 nx,
                 ny,
                 lo,
                 hi,
-                logs,
+                logs[k],
                 terms,
                 likelihood,
                 start[s],
@@ -383,7 +409,7 @@ def line_profiles(
 @njit(cache=True, nogil=True)
 def region_kernel(
     bins,
-    chroma_size,
+    grid,
     count,
     s_cam,
     s_comp,
@@ -416,16 +442,16 @@ def region_kernel(
     """The outline's offset posterior along the lines of every ``every``-th sample, added to C_i and eta_i (module
     docstring); returns the number of lines used.
 
-    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one half-size pixel
+    ``s_lo``, ``s_hi`` (full-size pixels, per sample) bound the candidate offsets, which step by one colour pixel
     from the sample's predicted place ``p + (L . twist_i) n``, and so does half the part's width along the line,
     ``s_depth`` (:func:`tracker.tracking.ownership.search_limits`): beyond it the line would see the part's far
     side.  Where the line's profile (``p_*``, :func:`line_profiles`) holds them all, the candidates are read from
-    it, on the whole half-size pixels from the sampled place; else, and for every line with ``afresh`` (the frame's
+    it, on the whole colour pixels from the sampled place; else, and for every line with ``afresh`` (the frame's
     last iteration), the line is scored afresh on those from the moved place: read from the profile, the candidates
     lie a sub-pixel phase off it, and the outline's final place with them (the demo 4.8 mm against 4.4 with the last
-    iteration afresh).  ``person``, ``trust``: as in :func:`line_profiles`.  Writes each sample's posterior mean and
-    variance (full-size pixels; NaN for a line not used).  ``min_variance`` floors the variance in the weight,
-    ``weight`` is lambda."""
+    iteration afresh).  ``grid``, ``logs``, ``person``, ``trust``: as in :func:`line_profiles`.  Writes each sample's
+    posterior mean and variance (full-size pixels; NaN for a line not used).  ``min_variance`` floors the variance in
+    the weight, ``weight`` is lambda."""
     used = 0
     terms = np.empty((5, 2 * MAX_LINE + 4))
     fresh = np.empty(2 * MAX_LINE + 1)
@@ -434,13 +460,14 @@ def region_kernel(
         o_variance[s] = np.nan
         k = s_cam[s]
         i = s_comp[s]
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s])
+        factor = grid[k, 2]
+        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s], factor)
         if not _used(s, every, table[k, i], s_outside[s], d_lo, d_hi):
             continue
         moved = 0.0
         for a in range(6):
             moved += s_jac[s, a] * twist[i, a]
-        shift = moved / FACTOR  # half-size pixels
+        shift = moved / factor  # colour pixels
         u_lo = int(math.ceil(d_lo + shift - 1e-9))
         u_hi = int(math.floor(d_hi + shift + 1e-9))
         if not afresh and u_lo >= p_first[s] and u_hi < p_first[s] + p_length[s] and u_hi - u_lo >= 2:
@@ -449,21 +476,21 @@ def region_kernel(
         else:
             nx = s_normal[s, 0]
             ny = s_normal[s, 1]
-            x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved)
+            x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved, factor)
             if not _likelihood(
                 bins[k],
                 table[k, i],
                 person[k],
                 trust[k],
-                chroma_size[k, 0],
-                chroma_size[k, 1],
+                grid[k, 0],
+                grid[k, 1],
                 x0,
                 y0,
                 nx,
                 ny,
                 d_lo,
                 d_hi,
-                logs,
+                logs[k],
                 terms,
                 fresh,
                 0,
@@ -471,8 +498,8 @@ def region_kernel(
                 continue
             step, variance = _moments(fresh, 0, d_hi - d_lo + 1)
             mean = d_lo + step
-        mean *= FACTOR
-        variance *= FACTOR * FACTOR
+        mean *= factor
+        variance *= factor * factor
         o_mean[s] = mean
         o_variance[s] = variance
         w = weight * distinct[k, i] / max(variance, min_variance)
@@ -488,7 +515,7 @@ def region_kernel(
 @njit(cache=True, nogil=True)
 def learn_kernel(
     bins,
-    chroma_size,
+    grid,
     count,
     s_cam,
     s_comp,
@@ -512,9 +539,9 @@ def learn_kernel(
     o_touched_count,
 ):
     """Count the colours along every sample's line at the poses ``twist`` moved them to (into :class:`Counts`'
-    arrays ``o_*``): the half-size pixels ``1..inside`` in from the outline are its component's, those
-    ``2..outside`` out are its background's where the line's outside is the background and within the search
-    interval (and inside, short of the part's far side, ``s_depth``).
+    arrays ``o_*``): the colour pixels ``1..inside[k]`` in from the outline are its component's, those
+    ``2..outside[k]`` out are its background's where the line's outside is the background and within the search
+    interval (and inside, short of the part's far side, ``s_depth``); ``grid`` as in :func:`line_profiles`.
 
     Once camera k knows part i's colours (``seen[k, i]``), only the lines whose last offset posterior agrees with
     the outline (``|s_mean| <= agree``, full-size pixels) count: a part that strays would otherwise learn the room's
@@ -531,11 +558,12 @@ def learn_kernel(
             moved += s_jac[s, a] * twist[i, a]
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
-        x0, y0 = _half(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved)
-        width = chroma_size[k, 0]
-        height = chroma_size[k, 1]
-        deepest = min(inside, -s_lo[s] // FACTOR, (s_depth[s] - 1) // FACTOR)
-        farthest = min(outside, s_hi[s] // FACTOR) if s_outside[s] == -1 else 1
+        factor = grid[k, 2]
+        x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved, factor)
+        width = grid[k, 0]
+        height = grid[k, 1]
+        deepest = min(inside[k], -s_lo[s] // factor, (s_depth[s] - 1) // factor)
+        farthest = min(outside[k], s_hi[s] // factor) if s_outside[s] == -1 else 1
         for side in range(2):  # 0: the part's pixels, inwards; 1: the background's, outwards
             sign = -1.0 if side == 0 else 1.0
             for t in range(1 + side, (deepest if side == 0 else farthest) + 1):

@@ -33,7 +33,7 @@ from numba import njit
 
 from tracker.chain import coerce_kernel, solve_kernel
 from tracker.geometry.se3 import between, exp, log
-from tracker.io.readers import WithChroma
+from tracker.io.readers import WithChroma, reduced
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
@@ -51,6 +51,8 @@ from tracker.tracking.region_cue import (
     Counts,
     Histograms,
     colour_bins,
+    colour_grids,
+    colour_reduction,
     learn_kernel,
     line_profiles,
     log_table,
@@ -125,7 +127,7 @@ class Settings:
     region_weight: float = 0.6  # lambda: a line's weight is lambda / max(sigma^2, region_sigma^2)
     region_sigma: float = 1.0  # full-size pixels: the smallest standard deviation a line's offset is given
     region_amplitude: float = 0.43  # a: the smoothed step H(x) = 1/2 - a tanh(x / 2s) between inside and outside
-    region_slope: float = 0.5  # s, half-size pixels
+    region_slope: float = 0.5  # s, full-size pixels
     region_learning_rate: float = 0.2  # h <- (1 - rate) h + rate h_new per frame
     region_every: int = 2  # use every k-th sample's line (each weighs lambda; 2 at 0.6 weighs what 1 at 0.3 did)
     region_inside: int = 4  # pixels in from the outline whose colours are learnt as the part's
@@ -430,10 +432,15 @@ class Tracker:
         self.floor = (np.full(len(LANDMARKS), settings.keypoint_tolerance), np.full(len(LANDMARKS), np.inf))
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
-        self.chroma_size = self.rig.size // FACTOR  # each camera's colour image as the region cue reads it
+        self.grid = colour_grids(self.rig.size, settings.work_side)  # each camera's colour image as the region cue
+        # reads it: width, height and full-size pixels to one of its own (region_cue's module docstring)
+        factor = self.grid[:, 2]
         self.counts = Counts.empty(len(cameras), n)  # a frame's colour counts, before they are learnt
-        self.logs = log_table(settings.region_amplitude, settings.region_slope / FACTOR)  # a line's likelihood terms
-        height, width = int(self.chroma_size[:, 1].max()), int(self.chroma_size[:, 0].max())
+        self.logs = np.stack([log_table(settings.region_amplitude, settings.region_slope / f) for f in factor])
+        self.margin = np.array([round(settings.region_margin * FACTOR / f) for f in factor], np.int64)
+        self.inside = np.array([max(1, round(settings.region_inside / f)) for f in factor], np.int64)
+        self.outside = np.array([max(2, round(settings.region_outside / f)) for f in factor], np.int64)
+        height, width = int(self.grid[:, 1].max()), int(self.grid[:, 0].max())
         self.person = np.zeros((len(cameras), height, width), np.uint8)  # the person's mask per camera (see_person)
         self.person_trust = np.zeros(len(cameras))  # how far the region cue trusts it: 0 where there is none
 
@@ -491,11 +498,12 @@ class Tracker:
         return smooth(image, self.settings.blur_sigma, self.settings.work_side)
 
     def bin_colours(self, chroma: np.ndarray) -> np.ndarray:
-        """The colour bins (H', W') int16 of a half-size colour image, as the region cue reads them
-        (:func:`tracker.tracking.region_cue.colour_bins`).
+        """The colour bins (H', W') int16 of a half-size colour image, reduced as the region cue reads it
+        (:func:`tracker.tracking.region_cue.colour_reduction`, :func:`tracker.tracking.region_cue.colour_bins`).
 
         Thread-safe, so reader threads can run it beside the tracker (``chroma=tracker.bin_colours`` to
         :func:`tracker.io.recording.frames`)."""
+        chroma = reduced(chroma, colour_reduction(min(chroma.shape[:2]), self.settings.work_side))
         bins = np.empty(chroma.shape[:2], np.int16)
         colour_bins(chroma, bins)
         return bins
@@ -510,8 +518,8 @@ class Tracker:
         for k, (view, placed) in enumerate(zip(*masks)):
             if np.isfinite(placed).all() and placed[2] > 0:
                 self.person_trust[k] = self.settings.region_person
-                w, h = self.chroma_size[k]
-                self.person[k, :h, :w] = person_grid(view, placed, self.chroma_size[k])
+                w, h, f = self.grid[k]
+                self.person[k, :h, :w] = person_grid(view, placed, self.grid[k, :2], factor=f)
 
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, reduced and smoothed (:meth:`smooth`) unless
@@ -524,11 +532,10 @@ class Tracker:
         coloured = True
         for k, image in enumerate(images):
             if isinstance(image, WithChroma):
-                h, w = image.chroma.shape[:2]
-                if image.chroma.ndim == 2:  # binned already, in a reader thread (bin_colours)
-                    work.bins[k, :h, :w] = image.chroma
-                else:
-                    colour_bins(image.chroma, work.bins[k, :h, :w])
+                bins = image.chroma if image.chroma.ndim == 2 else self.bin_colours(image.chroma)  # 2-D: binned in a
+                # reader thread already
+                h, w = bins.shape
+                work.bins[k, :h, :w] = bins
                 image = image.image
             else:
                 coloured = False
@@ -640,7 +647,7 @@ class Tracker:
         lo, hi, outside, depth = work.limits()
         work.profiles = line_profiles(
             work.bins,
-            self.chroma_size,
+            self.grid,
             s.count,
             s.camera,
             s.component,
@@ -655,7 +662,7 @@ class Tracker:
             self.person,
             self.person_trust,
             self.logs,
-            st.region_margin,
+            self.margin,
         )
 
     def add_regions(self, work: Workspace, twist: np.ndarray, afresh: bool = False) -> int:
@@ -668,7 +675,7 @@ class Tracker:
         likelihood, start, first, length = work.profiles
         return region_kernel(
             work.bins,
-            self.chroma_size,
+            self.grid,
             s.count,
             s.camera,
             s.component,
@@ -708,7 +715,7 @@ class Tracker:
         started = time.perf_counter()
         learn_kernel(
             work.bins,
-            self.chroma_size,
+            self.grid,
             s.count,
             s.camera,
             s.component,
@@ -723,8 +730,8 @@ class Tracker:
             work.region_mean,
             self.histograms.seen,
             st.region_agree,
-            max(1, round(st.region_inside / FACTOR)),
-            max(2, round(st.region_outside / FACTOR)),
+            self.inside,
+            self.outside,
             self.person,
             self.person_trust,
             *self.counts.arrays(),
