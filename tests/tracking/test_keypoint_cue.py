@@ -350,16 +350,52 @@ def test_a_limb_far_off_its_landmarks_is_led_to_them_and_the_rest_stays(demo_fra
         (60.0, shoulder_off, confidence, []),
     ):
         tracker = Tracker(model, recording.cameras, _arm_turned(model, poses, degrees))
-        assert np.flatnonzero(tracker.led_limbs(seen, sure)).tolist() == led, (degrees, sure.sum())
+        chosen, crossed = tracker.led_limbs(seen, sure)
+        assert np.flatnonzero(chosen).tolist() == led and not crossed, (degrees, sure.sum())
     wrist = model.index("hand_l")
     start = tracker.poses.copy()  # the start, coerced
     before = 1000 * np.linalg.norm(joint_centres(start)[wrist] - joint_centres(poses)[wrist])
-    tracker.move_limbs(tracker.led_limbs(pixels, confidence), pixels, confidence)
+    tracker.move_limbs(tracker.led_limbs(pixels, confidence)[0], pixels, confidence)
     after = 1000 * np.linalg.norm(joint_centres(tracker.poses) - joint_centres(poses), axis=1)
     assert before > 300.0 and after[wrist] < 20.0, (before, after[wrist])
     np.testing.assert_array_equal(tracker.anchor, tracker.poses)  # the prediction the edges start from
     rest = np.setdiff1d(np.arange(model.size), arm)
     np.testing.assert_allclose(tracker.poses[rest], start[rest], atol=1e-4)
+
+
+def test_legs_whose_landmarks_fit_better_swapped_in_every_view_are_led_to_them_as_detected(demo_frame):
+    """The demo's frame 0 at its true poses, with the legs' landmarks swapped left for right in every view, as they
+    would be if the tracked legs had crossed over: both legs, and only they, are led, with the swap check off, and
+    moved to the landmarks as detected (the left foot towards the right one's image); swapped in one view only, it is
+    that view's detector's swap, left out as before, and nothing is led."""
+    from tracker.model import joint_centres
+    from tracker.tracking.track import Tracker
+
+    model, _, _, _, pairs, poses, pixels = demo_frame
+    recording = open_recording(DEMO)
+    confidence = np.ones(pixels.shape[:2])
+    legs = [LANDMARKS.index(f"{side}_{part}") for part in ("knee", "ankle") for side in ("left", "right")]
+    swapped = pixels.copy()
+    one_view = pixels.copy()
+    for a, b in pairs:
+        if a in legs or b in legs:
+            swapped[:, [a, b]] = pixels[:, [b, a]]
+            one_view[0, [a, b]] = pixels[0, [b, a]]
+    leg_parts = sorted(model.index(f"{part}_{side}") for part in ("thigh", "shin", "foot") for side in "lr")
+    tracker = Tracker(model, recording.cameras, poses)
+    led, crossed = tracker.led_limbs(swapped, confidence)
+    assert crossed and np.flatnonzero(led).tolist() == leg_parts
+    led_one, crossed_one = tracker.led_limbs(one_view, confidence)
+    assert not crossed_one and not led_one.any()
+    foot_l, foot_r = model.index("foot_l"), model.index("foot_r")
+    start = joint_centres(tracker.poses)
+    tracker.move_limbs(led, swapped, confidence, swaps=False)
+    moved = joint_centres(tracker.poses)
+    assert np.linalg.norm(moved[foot_l] - start[foot_r]) < 0.5 * np.linalg.norm(start[foot_l] - start[foot_r])
+    held = Tracker(model, recording.cameras, poses)
+    held.move_limbs(led, swapped, confidence)  # with the swap check on, the swapped landmarks pull nothing
+    np.testing.assert_allclose(held.poses, held.anchor)
+    np.testing.assert_allclose(joint_centres(held.poses)[foot_l], start[foot_l], atol=1e-6)
 
 
 def test_the_edges_keep_a_led_limb_where_the_landmarks_are_right_and_refuse_it_where_they_are_wrong(demo_frame):

@@ -61,6 +61,7 @@ from tracker.tracking.region_cue import (
 )
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
+CROSSED_VIEWS = 3  # views in which a left/right pair must fit better swapped to say the tracked limbs crossed over
 LEAD_ITERATIONS = 3  # solves of the landmarks alone that move a limb they lead (Tracker.lead)
 PIN = 1e6  # the prior's multiple that holds the components a lead does not move at their predicted poses
 MISFIT_CAP = 0.3  # share of the body's size beyond which a landmark's misfit counts no more (Tracker.landmark_misfit)
@@ -827,12 +828,17 @@ class Tracker:
             misfit=self.work.misfit,
         )
 
-    def pull(self, pixels, confidence, *, zone, information, eta, misfit, poses=None) -> tuple[int, int]:
+    def pull(
+        self, pixels, confidence, *, zone, information, eta, misfit, poses=None, swaps: bool = True
+    ) -> tuple[int, int]:
         """Add the pull of the landmarks ``pixels`` (C, K, 2) at ``confidence`` (C, K) at ``poses`` (default: the
         current ones) (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`) to ``information`` and ``eta``, and
-        their misfits to ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,))."""
+        their misfits to ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,)); a
+        left/right pair that fits better swapped is left out unless ``swaps`` is False."""
         st = self.settings
         component, point, pairs = self.landmarks
+        if not swaps:
+            pairs = pairs[:0]
         return keypoint_kernel(
             self.poses if poses is None else poses,
             self.rig.camera_from_world,
@@ -894,7 +900,7 @@ class Tracker:
             return False
         return self.landmark_misfit(self.poses) > self.landmark_misfit(self.anchor) + st.keypoint_drag
 
-    def led_limbs(self, pixels: np.ndarray, confidence: np.ndarray) -> np.ndarray:
+    def led_limbs(self, pixels: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, bool]:
         """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead (:meth:`lead`) at the current
         poses: the limbs (:func:`tracker.tracking.keypoint_cue.limbs`) of the landmarks that lie more than
         ``keypoint_lead`` of the body's image size beyond their learnt noise zone
@@ -902,31 +908,44 @@ class Tracker:
         them (their detections already checked to agree, :mod:`tracker.keypoints.consistency`; one view may be all there
         is: the edges arbitrate, :meth:`lead`), where the landmarks at the limb's root (the shoulder of an arm, the hip
         of a leg) lie within that of theirs: a limb is led from a trunk in place; a trunk off its landmarks is the
-        recovery's (:mod:`tracker.keypoints.recovery`), and leading its limbs would hide it from it."""
+        recovery's (:mod:`tracker.keypoints.recovery`), and leading its limbs would hide it from it.
+
+        A left/right pair that fits better swapped in every view that sees it, :data:`CROSSED_VIEWS` or more, says the
+        tracked limbs crossed over (a leg taken for the other as they pass): its landmarks, left out of the pull as a
+        detector's swap, would then hold nothing (a detector's own swap is one view's, or two's alike from behind).
+        Both limbs are led by their landmarks as detected, with the swap check off, however near; returns the led
+        components and whether any was led so."""
         st = self.settings
-        misfit = np.empty_like(self.work.misfit)
-        self.pull(
-            pixels,
-            confidence,
-            zone=self.floor,
-            information=np.zeros_like(self.work.information),
-            eta=np.zeros_like(self.work.eta),
-            misfit=misfit,
-        )
+        checked, free = np.empty_like(self.work.misfit), np.empty_like(self.work.misfit)
+        for misfit, swaps in ((checked, True), (free, False)):
+            self.pull(
+                pixels,
+                confidence,
+                zone=self.floor,
+                information=np.zeros_like(self.work.information),
+                eta=np.zeros_like(self.work.eta),
+                misfit=misfit,
+                swaps=swaps,
+            )
+        seen = np.isfinite(free)
+        views = seen.sum(axis=0)
+        crossed = (views >= CROSSED_VIEWS) & ~np.isfinite(checked).any(axis=0)
+        misfit = np.where(crossed, free, checked)
         seen = np.isfinite(misfit)
         views = seen.sum(axis=0)
         far = np.array([np.median(misfit[seen[:, j], j]) if views[j] else 0.0 for j in range(misfit.shape[1])])
         judged = views >= 1
-        off = judged & (far > st.keypoint_lead + self.noise.tolerance)
+        off = judged & ((far > st.keypoint_lead + self.noise.tolerance) | crossed)
         placed = judged & ~off
         rooted = self.roots.any(axis=1) & ~(self.roots & ~placed).any(axis=1)
-        return self.limbs[off & rooted].any(axis=0)
+        return self.limbs[off & rooted].any(axis=0), bool((off & rooted & crossed).any())
 
-    def move_limbs(self, led: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> None:
+    def move_limbs(self, led: np.ndarray, pixels: np.ndarray, confidence: np.ndarray, *, swaps: bool = True) -> None:
         """Move the components ``led`` (N,) bool to the landmarks ``pixels`` at ``confidence``, landmarks alone:
         :data:`LEAD_ITERATIONS` solves of the landmarks on them, from the floor zone with no fade, while the other
         components are held where they are (their prior times :data:`PIN`) and the prior about each step's start
-        damps the led ones.  The moved pose becomes the frame's prediction (the anchor)."""
+        damps the led ones.  The moved pose becomes the frame's prediction (the anchor).  ``swaps``: as in
+        :meth:`pull`."""
         work, component = self.work, self.landmarks[0]
         chosen = np.where((component >= 0) & led[np.maximum(component, 0)], confidence, 0.0)
         prior = np.where(led[:, None, None], self.prior, PIN * self.prior)
@@ -935,7 +954,7 @@ class Tracker:
             self.anchor = self.poses
             information[:] = 0.0
             eta[:] = 0.0
-            self.pull(pixels, chosen, zone=self.floor, information=information, eta=eta, misfit=misfit)
+            self.pull(pixels, chosen, zone=self.floor, information=information, eta=eta, misfit=misfit, swaps=swaps)
             self.poses = self._update(information, eta, prior, self.poses)
         self.anchor = self.poses
 
@@ -953,7 +972,7 @@ class Tracker:
         the tracked ones did; a detector that is wrong where the edges are right (a faceless mannequin's wrists) is
         then outvoted."""
         st, work = self.settings, self.work
-        led = self.led_limbs(pixels, confidence)
+        led, crossed = self.led_limbs(pixels, confidence)
         if not led.any():
             return stats
         tracked, anchor = self.poses, self.anchor
@@ -966,7 +985,7 @@ class Tracker:
         before = fit(work)
         self.work, self.retry = self.retry, work  # the try searches in the spare buffers, the frame's kept
         self.work.coloured = work.coloured
-        self.move_limbs(led, pixels, confidence)
+        self.move_limbs(led, pixels, confidence, swaps=not crossed)
         for iteration in range(st.iterations):
             again = self.iterate(iteration)
         tried = self.work
