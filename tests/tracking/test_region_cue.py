@@ -100,7 +100,7 @@ def run(
     information, eta = np.zeros((2, 6, 6)), np.zeros((2, 6))
     mean, variance = np.zeros(1), np.zeros(1)
     settings = dict(amplitude=0.43, slope=0.5, weight=2.0, min_variance=1.0, margin=MARGIN, afresh=False) | options
-    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1], factor]])
+    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1], factor, 0]])
     table, distinct = table_of(h)
     logs = log_table(settings["amplitude"], settings["slope"])[None]
     line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([pixel], float), np.array([[1.0, 0.0]]))
@@ -304,7 +304,7 @@ def test_a_line_whose_margin_leaves_the_image_is_profiled_without_it():
     and moved out of them it is scored afresh."""
     chroma = split_image(62.0, noise=0.05, seed=4)  # the boundary at full-size x 123.5; the image is 160 wide
     lo, hi = -20, 34  # the line reaches half-size x 78.75 of 79: the margin's pixels would leave it
-    bins, size = bins_of(chroma), np.array([[80, 40, FACTOR]])
+    bins, size = bins_of(chroma), np.array([[80, 40, FACTOR, 0]])
     line = (np.zeros(1, np.int64), np.zeros(1, np.int64), np.array([[122.0, 40.5]]), np.array([[1.0, 0.0]]))
     limits = (np.array([-1]), np.array([41]), np.array([lo]), np.array([hi]))
     logs = log_table(0.43, 0.5)[None]
@@ -348,7 +348,7 @@ def learn(chroma, seen, mean, counts, person=NO_PERSON):
     component 1 with another part outside; their last offsets ``mean``; ``person`` as :func:`run`'s."""
     learn_kernel(
         bins_of(chroma),
-        np.array([[80, 40, FACTOR]]),
+        np.array([[80, 40, FACTOR, 0]]),
         2,
         np.zeros(2, np.int64),
         np.array([0, 1]),
@@ -487,7 +487,7 @@ def test_with_every_second_line_only_the_even_samples_lines_are_read():
     """``every`` = 2 (the default, ``Settings.region_every``): of two samples, the first's line is profiled and adds
     exactly the row it adds alone, the second's is left out, in both the profiles and the information."""
     chroma, h = split_image(32.0, noise=0.05, seed=3), histograms()
-    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1], FACTOR]])
+    bins, size = bins_of(chroma), np.array([[chroma.shape[2], chroma.shape[1], FACTOR, 0]])
     table, distinct = table_of(h)
     logs = log_table(0.43, 0.5)[None]
     pixels, normals = np.array([[60.0, 30.0], [60.0, 50.0]]), np.tile([1.0, 0.0], (2, 1))

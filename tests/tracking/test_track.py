@@ -427,9 +427,11 @@ def test_the_region_cue_reads_large_views_colour_reduced_as_their_grey():
     demo = load_calibration(DEMO / "calibration.toml")
     cameras = [replace(demo[0], size=(1920, 1080)), replace(demo[1], size=(640, 480))]
     tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
-    np.testing.assert_array_equal(tracker.grid, [[480, 270, 4], [320, 240, 2]])
+    np.testing.assert_array_equal(tracker.grid, [[480, 270, 4, 1], [320, 240, 2, 0]])  # and each one's logs row
+    assert tracker.logs.shape[0] == 2
     full = Tracker(model, cameras, tracker.poses, Settings(work_side=0))
-    np.testing.assert_array_equal(full.grid, [[960, 540, 2], [320, 240, 2]])
+    np.testing.assert_array_equal(full.grid, [[960, 540, 2, 0], [320, 240, 2, 0]])
+    assert full.logs.shape[0] == 1  # one table for both: the same pixel size
     chroma = np.random.default_rng(4).integers(0, 256, (540, 960, 3), dtype=np.uint8)
     expected = np.empty((270, 480), np.int16)
     colour_bins(reduced(chroma, 2), expected)

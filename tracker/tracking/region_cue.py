@@ -246,10 +246,11 @@ def log_table(amplitude, slope):
 
 
 @njit(cache=True, inline="always")
-def _on_grid(px, py, nx, ny, moved, factor):
-    """A full-size sample moved by ``moved`` pixels along its normal, in colour pixels of ``factor`` full-size
-    ones."""
-    return ((px + moved * nx) + 0.5) / factor - 0.5, ((py + moved * ny) + 0.5) / factor - 0.5
+def _on_grid(px, py, nx, ny, moved, inverse):
+    """A full-size sample moved by ``moved`` pixels along its normal, in colour pixels of ``1 / inverse`` full-size
+    ones (a product, not a quotient: it is taken for every line in every iteration, and for the factors 2 and 4 the
+    same to the last bit)."""
+    return ((px + moved * nx) + 0.5) * inverse - 0.5, ((py + moved * ny) + 0.5) * inverse - 0.5
 
 
 @njit(cache=True, inline="always")
@@ -261,10 +262,14 @@ def _limits(s_lo, s_hi, s_depth, factor):
 
 
 @njit(cache=True, inline="always")
-def _used(s, every, table_ki, outside, d_lo, d_hi):
-    """Whether a line takes part: every ``every``-th, of a part whose colours the camera knows, with the
-    background outside, and at least three candidates long."""
-    return s % every == 0 and not np.isnan(table_ki[0]) and outside == -1 and d_hi - d_lo >= 2
+def _line(s, every, table_ki, outside, s_lo, s_hi, s_depth, factor):
+    """Whether sample ``s``'s line takes part (every ``every``-th, of a part whose colours the camera knows, with the
+    background outside, and at least three candidates long) and its candidate offsets (:func:`_limits`, 0 for a
+    line not used).  The tests that need no division come first: most samples fail them."""
+    if s % every != 0 or outside != -1 or np.isnan(table_ki[0]):
+        return False, 0, 0
+    d_lo, d_hi = _limits(s_lo, s_hi, s_depth, factor)
+    return d_hi - d_lo >= 2, d_lo, d_hi
 
 
 @njit(cache=True, inline="always")
@@ -354,31 +359,32 @@ def line_profiles(
     where the wider line would leave the image), which :func:`region_kernel` reads for this and the next
     iterations until the next sampling.  Returns the line profiles ``(likelihood, start, first, length)``: sample
     ``s``'s lie at ``likelihood[start[s]:start[s] + length[s]]``, for the offsets ``first[s], first[s] + 1, ...``
-    (colour pixels along the line; length 0 for a line not used, or one that leaves the image).  ``grid`` (C, 3):
-    each camera's colour image's width, height and full-size pixels to one of its own (module docstring);
-    ``logs`` (C, 4, LOG_STEPS + 1): each camera's :func:`log_table`; ``person`` (C, H', W') and ``trust`` (C,): each
-    camera's person mask and how far it is trusted (0: no mask; :func:`with_person`)."""
+    (colour pixels along the line; length 0 for a line not used, or one that leaves the image).  ``grid`` (C, 4):
+    each camera's colour image's width, height and full-size pixels to one of its own (module docstring), and the
+    row of ``logs`` (T, 4, LOG_STEPS + 1) that holds its :func:`log_table`; ``person`` (C, H', W') and ``trust``
+    (C,): each camera's person mask and how far it is trusted (0: no mask; :func:`with_person`)."""
     start = np.zeros(count, np.int64)
     first = np.zeros(count, np.int64)
     length = np.zeros(count, np.int64)
     total = 0
     for s in range(count):
         k = s_cam[s]
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s], grid[k, 2])
-        if _used(s, every, table[k, s_comp[s]], s_outside[s], d_lo, d_hi):
+        taken, d_lo, d_hi = _line(s, every, table[k, s_comp[s]], s_outside[s], s_lo[s], s_hi[s], s_depth[s], grid[k, 2])
+        if taken:
             start[s] = total
             total += d_hi - d_lo + 1 + 2 * margin[k]
     likelihood = np.empty(total)
     terms = np.empty((5, 2 * (MAX_LINE + margin.max()) + 4))
+    inverse = 1.0 / grid[:, 2]
     for s in range(count):
         k = s_cam[s]
         i = s_comp[s]
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s], grid[k, 2])
-        if not _used(s, every, table[k, i], s_outside[s], d_lo, d_hi):
+        taken, d_lo, d_hi = _line(s, every, table[k, i], s_outside[s], s_lo[s], s_hi[s], s_depth[s], grid[k, 2])
+        if not taken:
             continue
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
-        x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, 0.0, grid[k, 2])
+        x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, 0.0, inverse[k])
         for wide in (margin[k], 0):
             lo = d_lo - wide
             hi = d_hi + wide
@@ -395,7 +401,7 @@ def line_profiles(
                 ny,
                 lo,
                 hi,
-                logs[k],
+                logs[grid[k, 3]],
                 terms,
                 likelihood,
                 start[s],
@@ -455,19 +461,20 @@ def region_kernel(
     used = 0
     terms = np.empty((5, 2 * MAX_LINE + 4))
     fresh = np.empty(2 * MAX_LINE + 1)
+    inverse = 1.0 / grid[:, 2]
     for s in range(count):
         o_mean[s] = np.nan
         o_variance[s] = np.nan
         k = s_cam[s]
         i = s_comp[s]
         factor = grid[k, 2]
-        d_lo, d_hi = _limits(s_lo[s], s_hi[s], s_depth[s], factor)
-        if not _used(s, every, table[k, i], s_outside[s], d_lo, d_hi):
+        taken, d_lo, d_hi = _line(s, every, table[k, i], s_outside[s], s_lo[s], s_hi[s], s_depth[s], factor)
+        if not taken:
             continue
         moved = 0.0
         for a in range(6):
             moved += s_jac[s, a] * twist[i, a]
-        shift = moved / factor  # colour pixels
+        shift = moved * inverse[k]  # colour pixels
         u_lo = int(math.ceil(d_lo + shift - 1e-9))
         u_hi = int(math.floor(d_hi + shift + 1e-9))
         if not afresh and u_lo >= p_first[s] and u_hi < p_first[s] + p_length[s] and u_hi - u_lo >= 2:
@@ -476,7 +483,7 @@ def region_kernel(
         else:
             nx = s_normal[s, 0]
             ny = s_normal[s, 1]
-            x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved, factor)
+            x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved, inverse[k])
             if not _likelihood(
                 bins[k],
                 table[k, i],
@@ -490,7 +497,7 @@ def region_kernel(
                 ny,
                 d_lo,
                 d_hi,
-                logs[k],
+                logs[grid[k, 3]],
                 terms,
                 fresh,
                 0,
@@ -548,6 +555,7 @@ def learn_kernel(
     colours where it lies and hold itself there.  Where camera k has the person's mask (``trust[k] > 0``), a pixel
     counts for the part only where the mask says the person (``person`` >= 128), and for the background only where
     it does not: a leg hidden behind a table would otherwise learn the table's colours as its own."""
+    inverse = 1.0 / grid[:, 2]
     for s in range(count):
         k = s_cam[s]
         i = s_comp[s]
@@ -559,7 +567,7 @@ def learn_kernel(
         nx = s_normal[s, 0]
         ny = s_normal[s, 1]
         factor = grid[k, 2]
-        x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved, factor)
+        x0, y0 = _on_grid(s_pixel[s, 0], s_pixel[s, 1], nx, ny, moved, inverse[k])
         width = grid[k, 0]
         height = grid[k, 1]
         deepest = min(inside[k], -s_lo[s] // factor, (s_depth[s] - 1) // factor)

@@ -433,11 +433,16 @@ class Tracker:
         self.floor = (np.full(len(LANDMARKS), settings.keypoint_tolerance), np.full(len(LANDMARKS), np.inf))
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
-        self.grid = colour_grids(self.rig.size, settings.work_side)  # each camera's colour image as the region cue
-        # reads it: width, height and full-size pixels to one of its own (region_cue's module docstring)
-        factor = self.grid[:, 2]
+        # each camera's colour image as the region cue reads it (region_cue's module docstring): width, height,
+        # full-size pixels to one of its own, and the row of the likelihood terms' tables (one per pixel size: a table
+        # per camera would hold the same terms in as many places in the cache, and cost the demo a sixth of its
+        # region stage)
+        grids = colour_grids(self.rig.size, settings.work_side)
+        sizes, row = np.unique(grids[:, 2], return_inverse=True)
+        self.grid = np.column_stack([grids, row])
+        self.logs = np.stack([log_table(settings.region_amplitude, settings.region_slope / f) for f in sizes])
+        factor = grids[:, 2]
         self.counts = Counts.empty(len(cameras), n)  # a frame's colour counts, before they are learnt
-        self.logs = np.stack([log_table(settings.region_amplitude, settings.region_slope / f) for f in factor])
         self.margin = np.array([round(settings.region_margin * FACTOR / f) for f in factor], np.int64)
         self.inside = np.array([max(1, round(settings.region_inside / f)) for f in factor], np.int64)
         self.outside = np.array([max(2, round(settings.region_outside / f)) for f in factor], np.int64)
@@ -519,7 +524,7 @@ class Tracker:
         for k, (view, placed) in enumerate(zip(*masks)):
             if np.isfinite(placed).all() and placed[2] > 0:
                 self.person_trust[k] = self.settings.region_person
-                w, h, f = self.grid[k]
+                w, h, f, _ = self.grid[k]
                 self.person[k, :h, :w] = person_grid(view, placed, self.grid[k, :2], factor=f)
 
     def load_images(self, images, smoothed: bool = False) -> None:
