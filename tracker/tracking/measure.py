@@ -32,6 +32,12 @@ class Statistics:
     residual: float  # robust mean |m| = sum w|m| / sum w, pixels
 
 
+def reduction(short_side: int, work_side: int) -> int:
+    """The factor by which the edge search reduces images ``short_side`` pixels on their short side: the largest
+    integer that keeps it at least ``work_side`` long (1: full size; always 1 for ``work_side`` 0)."""
+    return max(1, short_side // work_side) if work_side > 0 else 1
+
+
 @njit(cache=True, inline="always")
 def bilinear(image, width, height, x, y):
     """The value of ``image`` (H, W) at (x, y) (pixel centres at integers, bilinear); -1 outside ``width`` x

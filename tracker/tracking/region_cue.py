@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from tracker.tracking.measure import bilinear
+from tracker.tracking.measure import bilinear, reduction
 
 BINS = 16  # per colour channel
 COLOURS = BINS**3
@@ -123,11 +123,10 @@ class Counts:
 def colour_reduction(short_side: int, work_side: int) -> int:
     """The factor by which the region cue reduces a half-size colour image ``short_side`` pixels on its short side
     further: the largest integer that keeps it at least ``work_side / 2`` long (1: as it is; always 1 for
-    ``work_side`` 0), the edge search's factor for the view (:func:`tracker.tracking.track.reduction`) where
+    ``work_side`` 0), the edge search's factor for the view (:func:`tracker.tracking.measure.reduction`) where
     ``work_side`` is even.  A 1080-pixel view's lines then hold as many colour pixels as a 480-pixel one's, as its
     edge search's do grey ones (docs/region.md)."""
-    half_work = work_side // FACTOR
-    return max(1, short_side // half_work) if half_work > 0 else 1
+    return reduction(short_side, work_side // FACTOR)
 
 
 def colour_grids(size: np.ndarray, work_side: int) -> np.ndarray:

@@ -40,7 +40,7 @@ from tracker.tracking import motion_prior
 from tracker.tracking.guessed import bone_lengths, guessed, hidden_parts
 from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, limbs, placers
 from tracker.tracking.landmark_noise import LandmarkNoise
-from tracker.tracking.measure import Statistics, component_misfits, measure_kernel, support
+from tracker.tracking.measure import Statistics, component_misfits, measure_kernel, reduction, support
 from tracker.tracking.motion_prior import Motion
 from tracker.tracking.outline import Placed, Rig, Samples, sample_outlines
 from tracker.tracking.ownership import Ownership
@@ -165,12 +165,6 @@ def scaled_to(settings: Settings, short_side: int) -> Settings:
         lost_residual=settings.lost_residual * k,
         reference_size=short_side,
     )
-
-
-def reduction(short_side: int, work_side: int) -> int:
-    """The factor by which the edge search reduces images ``short_side`` pixels on their short side: the largest
-    integer that keeps it at least ``work_side`` long (1: full size; always 1 for ``work_side`` 0)."""
-    return max(1, short_side // work_side) if work_side > 0 else 1
 
 
 def reductions(settings: Settings, cameras) -> np.ndarray:
@@ -434,9 +428,7 @@ class Tracker:
         self.keypoints: tuple[np.ndarray, np.ndarray] | None = None
         self.noise = LandmarkNoise.start(len(LANDMARKS), n, settings.keypoint_tolerance)
         # each camera's colour image as the region cue reads it (region_cue's module docstring): width, height,
-        # full-size pixels to one of its own, and the row of the likelihood terms' tables (one per pixel size: a table
-        # per camera would hold the same terms in as many places in the cache, and cost the demo a sixth of its
-        # region stage)
+        # full-size pixels to one of its own, and its row of the likelihood terms' tables, one per pixel size
         grids = colour_grids(self.rig.size, settings.work_side)
         sizes, row = np.unique(grids[:, 2], return_inverse=True)
         self.grid = np.column_stack([grids, row])
@@ -922,19 +914,16 @@ class Tracker:
         components and whether any was led so."""
         st = self.settings
         checked, free = np.empty_like(self.work.misfit), np.empty_like(self.work.misfit)
-        for misfit, swaps in ((checked, True), (free, False)):
+        scratch = np.zeros_like(self.work.information), np.zeros_like(self.work.eta)
+        _, rejected = self.pull(
+            pixels, confidence, zone=self.floor, information=scratch[0], eta=scratch[1], misfit=checked
+        )
+        crossed = np.zeros(checked.shape[1], bool)
+        if rejected:  # some pair fits better swapped in some view: where in every view that sees it?
             self.pull(
-                pixels,
-                confidence,
-                zone=self.floor,
-                information=np.zeros_like(self.work.information),
-                eta=np.zeros_like(self.work.eta),
-                misfit=misfit,
-                swaps=swaps,
+                pixels, confidence, zone=self.floor, information=scratch[0], eta=scratch[1], misfit=free, swaps=False
             )
-        seen = np.isfinite(free)
-        views = seen.sum(axis=0)
-        crossed = (views >= CROSSED_VIEWS) & ~np.isfinite(checked).any(axis=0)
+            crossed = (np.isfinite(free).sum(axis=0) >= CROSSED_VIEWS) & ~np.isfinite(checked).any(axis=0)
         misfit = np.where(crossed, free, checked)
         seen = np.isfinite(misfit)
         views = seen.sum(axis=0)
