@@ -67,8 +67,9 @@ def bins_of(chroma):
 
 def table_of(h):
     """(p_f table, distinctness) of histograms ``h``."""
-    out, distinct = np.zeros(h.foreground.shape), np.zeros(h.seen.shape)
-    part_table(h.foreground, h.background, h.scale, h.seen, h.seen_background, out, distinct)
+    out, distinct = np.full(h.foreground.shape, np.nan), np.zeros(h.seen.shape)
+    h.gather_palette()
+    part_table(h.foreground, h.background, h.scale, h.seen, h.seen_background, h.palette, h.palette_size, out, distinct)
     return out, distinct
 
 
@@ -445,6 +446,39 @@ def test_learning_only_the_colours_counted_is_the_whole_blend():
         np.testing.assert_allclose(lazy, whole, rtol=1e-9, atol=1e-300)
     reference = Histograms(dense[0], dense[1], np.ones((2, 2, 3)), learnt[0], learnt[1])
     np.testing.assert_allclose(table_of(h)[0], table_of(reference)[0], rtol=1e-9)
+
+
+def test_the_table_kept_over_the_palette_is_the_table_of_every_colour():
+    """Frames of colours learnt, parts and backgrounds first seen at different frames, a camera whose parts have no
+    background for a while: the table kept from frame to frame over each camera's palette is, to the last bit, the
+    table of every colour computed afresh, and the palette is the colours the histograms hold, ascending."""
+    rng = np.random.default_rng(11)
+    h, counts = Histograms.empty(2, 4), Counts.empty(2, 4)
+    kept, kept_distinct = np.full(h.foreground.shape, np.nan), np.zeros(h.seen.shape)
+    every = np.tile(np.arange(COLOURS, dtype=np.int16), (2, 1)), np.full(2, COLOURS)
+    unlearnt = []  # per frame, the rows not learnt yet
+    for frame in range(40):
+        for which, k, i in np.ndindex(2, 2, 4):
+            if rng.random() < 0.5 or (which == 1 and k == 1 and frame < 10) or frame < 2 * i:
+                continue
+            for b in rng.choice(COLOURS, size=rng.integers(1, 40), replace=False) // 8:
+                if counts.colours[which, k, i, b] == 0:
+                    counts.touched[which, k, i, counts.touched_count[which, k, i]] = b
+                    counts.touched_count[which, k, i] += 1
+                counts.colours[which, k, i, b] += rng.integers(1, 5)
+        h.learn(counts, rate=0.3)
+        arrays = h.foreground, h.background, h.scale, h.seen, h.seen_background
+        part_table(*arrays, h.palette, h.palette_size, kept, kept_distinct)
+        afresh, distinct = np.full(h.foreground.shape, np.nan), np.zeros(h.seen.shape)
+        part_table(*arrays, *every, afresh, distinct)
+        np.testing.assert_array_equal(kept, afresh)
+        np.testing.assert_array_equal(kept_distinct, distinct)
+        unlearnt.append(int(np.isnan(kept[..., 0]).sum()))
+    for k in range(2):
+        held = np.flatnonzero(((h.foreground[k] != 0) | (h.background[k] != 0)).any(axis=0))
+        np.testing.assert_array_equal(h.palette[k, : h.palette_size[k]], held)
+    assert unlearnt[0] > unlearnt[5] > unlearnt[-1] == 0 and (kept == 0.5).any() and (kept == 0.0).any()
+    assert 0 < h.palette_size.max() <= COLOURS // 8
 
 
 def test_the_table_of_likelihood_terms_is_the_logarithm():

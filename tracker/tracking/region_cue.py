@@ -43,7 +43,7 @@ there do not tell the part from the background.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
@@ -64,13 +64,21 @@ class Histograms:
     ``foreground`` (C, N, COLOURS)) and of the background just outside its outline (``scale[1, k, i] *
     background[k, i]``), each summing to 1 where ``seen`` (C, N) / ``seen_background`` (C, N) say it was learnt.
     The scales (2, C, N) carry each frame's decay, so that learning touches only the colours the frame showed
-    (:func:`blend_kernel`)."""
+    (:func:`blend_kernel`).  Each camera's *palette*, the first ``palette_size[k]`` bins of ``palette[k]``
+    (ascending; ``in_palette`` (C, COLOURS) says which), holds every colour any of its histograms ever counted,
+    so that :func:`part_table` need not visit the thousands no histogram holds."""
 
     foreground: np.ndarray
     background: np.ndarray
     scale: np.ndarray
     seen: np.ndarray
     seen_background: np.ndarray
+    palette: np.ndarray = field(init=False)
+    palette_size: np.ndarray = field(init=False)
+    in_palette: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.gather_palette()
 
     @classmethod
     def empty(cls, cameras: int, components: int) -> Histograms:
@@ -81,6 +89,14 @@ class Histograms:
             np.zeros((cameras, components), np.bool_),
             np.zeros((cameras, components), np.bool_),
         )
+
+    def gather_palette(self) -> None:
+        """Each camera's palette from the colours its histograms hold now (after they were written directly)."""
+        self.in_palette = ((self.foreground != 0) | (self.background != 0)).any(axis=1)
+        self.palette = np.zeros(self.in_palette.shape, np.int16)
+        self.palette_size = self.in_palette.sum(axis=1).astype(np.int64)
+        for k, held in enumerate(self.in_palette):
+            self.palette[k, : self.palette_size[k]] = np.flatnonzero(held)
 
     @property
     def ready(self) -> bool:
@@ -93,6 +109,7 @@ class Histograms:
 
     def learn(self, counts: Counts, *, rate: float) -> None:
         """Mix a frame's ``counts`` in (:func:`blend_kernel`), which leaves them empty."""
+        widen_palette(self.palette, self.palette_size, self.in_palette, counts.touched, counts.touched_count)
         blend_kernel(
             self.foreground, self.background, self.scale, self.seen, self.seen_background, *counts.arrays(), rate
         )
@@ -151,45 +168,74 @@ def colour_bins(chroma, out):
 
 
 @njit(cache=True, nogil=True)
-def part_table(foreground, background, scale, seen, seen_background, out, o_distinct):
-    """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS; the histograms
-    and their ``scale``, :class:`Histograms`) into ``out`` (0.5
-    for a colour seen in neither; NaN where the camera has not learnt the part, or no background), ``g`` the mean of
-    the part's background and the camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part
-    whose lines all had another part outside), and how distinct the part's colours are from that background,
+def part_table(foreground, background, scale, seen, seen_background, palette, palette_size, out, o_distinct):
+    """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS; the histograms,
+    their ``scale`` and each camera's ``palette``, :class:`Histograms`) into ``out`` (0.5 for a colour seen in
+    neither; NaN where the camera has not learnt the part, or no background), ``g`` the mean of the part's
+    background and the camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part whose
+    lines all had another part outside), and how distinct the part's colours are from that background,
     ``o_distinct`` (C, N): 1 minus the Bhattacharyya coefficient sum_y sqrt(h_f(y) g(y)) of the two histograms (0
-    for the same colours, 1 for none shared)."""
-    colours = foreground.shape[2]
-    around = np.zeros(colours)
+    for the same colours, 1 for none shared).
+
+    Only the palette's colours are visited: every other one is 0.5 in a row that has been learnt, written once
+    when the row is (a row is all NaN or all numbers, so its first bin tells which), and no other colour can
+    change until it joins the palette."""
+    around = np.zeros(foreground.shape[2])
     for k in range(foreground.shape[0]):
-        around[:] = 0.0
+        colours = palette[k, : palette_size[k]]
+        for b in colours:
+            around[b] = 0.0
         parts = 0
         for i in range(foreground.shape[1]):
             if seen_background[k, i]:
                 share = scale[1, k, i]
-                for b in range(colours):
+                for b in colours:
                     around[b] += share * background[k, i, b]
                 parts += 1
         if parts:
-            around /= parts
+            for b in colours:
+                around[b] /= parts
         for i in range(foreground.shape[1]):
             o_distinct[k, i] = 0.0
             if not (seen[k, i] and parts):
-                out[k, i, :] = np.nan
+                if not np.isnan(out[k, i, 0]):
+                    out[k, i, :] = np.nan
                 continue
+            if np.isnan(out[k, i, 0]):
+                out[k, i, :] = 0.5
             own = 0.5 * scale[1, k, i] if seen_background[k, i] else 0.0
             camera = 0.5 if seen_background[k, i] else 1.0
             part = scale[0, k, i]
             shared = 0.0
-            for b in range(colours):
+            for b in colours:
                 f = part * foreground[k, i, b]
                 g = own * background[k, i, b] + camera * around[b]
-                if f <= 0.0:  # most colours: no share, no root to take
+                if f <= 0.0:  # no share, no root to take
                     out[k, i, b] = 0.5 if g <= 0.0 else 0.0
                     continue
                 out[k, i, b] = f / (f + g)
                 shared += math.sqrt(f * g)
             o_distinct[k, i] = max(0.0, 1.0 - shared)
+
+
+@njit(cache=True, nogil=True)
+def widen_palette(palette, palette_size, in_palette, touched, touched_count):
+    """Add the colours a frame counted (:class:`Counts`' ``touched``, (2, C, N, COLOURS), the first
+    ``touched_count`` of each) to their cameras' palettes, kept ascending (:class:`Histograms`)."""
+    for side in range(touched.shape[0]):
+        for k in range(touched.shape[1]):
+            for i in range(touched.shape[2]):
+                for c in range(touched_count[side, k, i]):
+                    b = touched[side, k, i, c]
+                    if in_palette[k, b]:
+                        continue
+                    in_palette[k, b] = True
+                    at = palette_size[k]
+                    while at > 0 and palette[k, at - 1] > b:
+                        palette[k, at] = palette[k, at - 1]
+                        at -= 1
+                    palette[k, at] = b
+                    palette_size[k] += 1
 
 
 @njit(cache=True, inline="always")

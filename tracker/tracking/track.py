@@ -736,7 +736,17 @@ class Tracker:
         )
         h = self.histograms
         h.learn(self.counts, rate=st.region_learning_rate)
-        part_table(h.foreground, h.background, h.scale, h.seen, h.seen_background, self.part_table, self.distinct)
+        part_table(
+            h.foreground,
+            h.background,
+            h.scale,
+            h.seen,
+            h.seen_background,
+            h.palette,
+            h.palette_size,
+            self.part_table,
+            self.distinct,
+        )
         work.times.add("region", started)
 
     def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
