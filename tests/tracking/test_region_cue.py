@@ -65,11 +65,17 @@ def bins_of(chroma):
     return out
 
 
+def arrays_of(h):
+    """The arguments of :func:`part_table` that ``h`` holds."""
+    colours = h.own, h.own_size, h.backed, h.newly_backed, h.newly_backed_size
+    return (h.foreground, h.background, h.scale, h.seen, h.seen_background, *colours)
+
+
 def table_of(h):
     """(p_f table, distinctness) of histograms ``h``."""
     out, distinct = np.full(h.foreground.shape, np.nan), np.zeros(h.seen.shape)
-    h.gather_palette()
-    part_table(h.foreground, h.background, h.scale, h.seen, h.seen_background, h.palette, h.palette_size, out, distinct)
+    h.gather_colours()
+    part_table(*arrays_of(h), out, distinct)
     return out, distinct
 
 
@@ -448,14 +454,34 @@ def test_learning_only_the_colours_counted_is_the_whole_blend():
     np.testing.assert_allclose(table_of(h)[0], table_of(reference)[0], rtol=1e-9)
 
 
-def test_the_table_kept_over_the_palette_is_the_table_of_every_colour():
+def brute_table(h):
+    """p_f of every colour by its definition (module docstring of region_cue), bin by bin."""
+    part, background = h.frequencies()
+    out = np.full(part.shape, np.nan)
+    for k in range(len(part)):
+        learnt = np.flatnonzero(h.seen_background[k])
+        if not len(learnt):
+            continue
+        around = np.zeros(COLOURS)
+        for j in learnt:
+            around += background[k, j]
+        around /= len(learnt)
+        for i in np.flatnonzero(h.seen[k]):
+            g = (0.5 * background[k, i] + 0.5 * around) if h.seen_background[k, i] else around
+            f = part[k, i]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[k, i] = np.where(f > 0, f / (f + g), np.where(g > 0, 0.0, 0.5))
+    return out
+
+
+def test_the_table_kept_from_frame_to_frame_is_the_table_of_every_colour():
     """Frames of colours learnt, parts and backgrounds first seen at different frames, a camera whose parts have no
-    background for a while: the table kept from frame to frame over each camera's palette is, to the last bit, the
-    table of every colour computed afresh, and the palette is the colours the histograms hold, ascending."""
+    background for a while: the table kept from frame to frame at each part's own colours and the newly backed
+    ones is, to the last bit, the table made afresh, and within rounding the table of every colour by its
+    definition; the parts' own colours are those their histograms hold, ascending."""
     rng = np.random.default_rng(11)
     h, counts = Histograms.empty(2, 4), Counts.empty(2, 4)
     kept, kept_distinct = np.full(h.foreground.shape, np.nan), np.zeros(h.seen.shape)
-    every = np.tile(np.arange(COLOURS, dtype=np.int16), (2, 1)), np.full(2, COLOURS)
     unlearnt = []  # per frame, the rows not learnt yet
     for frame in range(40):
         for which, k, i in np.ndindex(2, 2, 4):
@@ -467,18 +493,16 @@ def test_the_table_kept_over_the_palette_is_the_table_of_every_colour():
                     counts.touched_count[which, k, i] += 1
                 counts.colours[which, k, i, b] += rng.integers(1, 5)
         h.learn(counts, rate=0.3)
-        arrays = h.foreground, h.background, h.scale, h.seen, h.seen_background
-        part_table(*arrays, h.palette, h.palette_size, kept, kept_distinct)
-        afresh, distinct = np.full(h.foreground.shape, np.nan), np.zeros(h.seen.shape)
-        part_table(*arrays, *every, afresh, distinct)
-        np.testing.assert_array_equal(kept, afresh)
+        part_table(*arrays_of(h), kept, kept_distinct)
+        afresh = Histograms(h.foreground, h.background, h.scale, h.seen, h.seen_background)
+        table, distinct = table_of(afresh)
+        np.testing.assert_array_equal(kept, table)
         np.testing.assert_array_equal(kept_distinct, distinct)
+        np.testing.assert_allclose(kept, brute_table(h), rtol=1e-12)
         unlearnt.append(int(np.isnan(kept[..., 0]).sum()))
-    for k in range(2):
-        held = np.flatnonzero(((h.foreground[k] != 0) | (h.background[k] != 0)).any(axis=0))
-        np.testing.assert_array_equal(h.palette[k, : h.palette_size[k]], held)
+    for k, i in np.ndindex(2, 4):
+        np.testing.assert_array_equal(h.own[k, i, : h.own_size[k, i]], np.flatnonzero(h.foreground[k, i]))
     assert unlearnt[0] > unlearnt[5] > unlearnt[-1] == 0 and (kept == 0.5).any() and (kept == 0.0).any()
-    assert 0 < h.palette_size.max() <= COLOURS // 8
 
 
 def test_the_table_of_likelihood_terms_is_the_logarithm():

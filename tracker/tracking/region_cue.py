@@ -64,21 +64,28 @@ class Histograms:
     ``foreground`` (C, N, COLOURS)) and of the background just outside its outline (``scale[1, k, i] *
     background[k, i]``), each summing to 1 where ``seen`` (C, N) / ``seen_background`` (C, N) say it was learnt.
     The scales (2, C, N) carry each frame's decay, so that learning touches only the colours the frame showed
-    (:func:`blend_kernel`).  Each camera's *palette*, the first ``palette_size[k]`` bins of ``palette[k]``
-    (ascending; ``in_palette`` (C, COLOURS) says which), holds every colour any of its histograms ever counted,
-    so that :func:`part_table` need not visit the thousands no histogram holds."""
+    (:func:`blend_kernel`).
+
+    What :func:`part_table` needs to visit only the colours that matter, kept as they learn (:func:`index_colours`):
+    each part's *own* colours, those its foreground ever counted, the first ``own_size[k, i]`` of ``own[k, i]``
+    (ascending; ``is_own`` (C, N, COLOURS) says which); the colours some background of camera ``k`` ever counted,
+    ``backed`` (C, COLOURS); and those that joined them since the table last read them, the first
+    ``newly_backed_size[k]`` of ``newly_backed[k]``."""
 
     foreground: np.ndarray
     background: np.ndarray
     scale: np.ndarray
     seen: np.ndarray
     seen_background: np.ndarray
-    palette: np.ndarray = field(init=False)
-    palette_size: np.ndarray = field(init=False)
-    in_palette: np.ndarray = field(init=False)
+    own: np.ndarray = field(init=False)
+    own_size: np.ndarray = field(init=False)
+    is_own: np.ndarray = field(init=False)
+    backed: np.ndarray = field(init=False)
+    newly_backed: np.ndarray = field(init=False)
+    newly_backed_size: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        self.gather_palette()
+        self.gather_colours()
 
     @classmethod
     def empty(cls, cameras: int, components: int) -> Histograms:
@@ -90,13 +97,17 @@ class Histograms:
             np.zeros((cameras, components), np.bool_),
         )
 
-    def gather_palette(self) -> None:
-        """Each camera's palette from the colours its histograms hold now (after they were written directly)."""
-        self.in_palette = ((self.foreground != 0) | (self.background != 0)).any(axis=1)
-        self.palette = np.zeros(self.in_palette.shape, np.int16)
-        self.palette_size = self.in_palette.sum(axis=1).astype(np.int64)
-        for k, held in enumerate(self.in_palette):
-            self.palette[k, : self.palette_size[k]] = np.flatnonzero(held)
+    def gather_colours(self) -> None:
+        """The parts' own colours and the backed ones from the histograms as they are now (after they were written
+        directly); the table must then be made afresh (every row NaN), as nothing is newly backed."""
+        self.is_own = self.foreground != 0
+        self.own_size = self.is_own.sum(axis=2).astype(np.int64)
+        self.own = np.zeros(self.foreground.shape, np.int16)
+        for k, i in np.ndindex(*self.own_size.shape):
+            self.own[k, i, : self.own_size[k, i]] = np.flatnonzero(self.is_own[k, i])
+        self.backed = (self.background != 0).any(axis=1)
+        self.newly_backed = np.zeros(self.backed.shape, np.int16)
+        self.newly_backed_size = np.zeros(len(self.backed), np.int64)
 
     @property
     def ready(self) -> bool:
@@ -109,7 +120,16 @@ class Histograms:
 
     def learn(self, counts: Counts, *, rate: float) -> None:
         """Mix a frame's ``counts`` in (:func:`blend_kernel`), which leaves them empty."""
-        widen_palette(self.palette, self.palette_size, self.in_palette, counts.touched, counts.touched_count)
+        index_colours(
+            self.own,
+            self.own_size,
+            self.is_own,
+            self.backed,
+            self.newly_backed,
+            self.newly_backed_size,
+            counts.touched,
+            counts.touched_count,
+        )
         blend_kernel(
             self.foreground, self.background, self.scale, self.seen, self.seen_background, *counts.arrays(), rate
         )
@@ -168,33 +188,38 @@ def colour_bins(chroma, out):
 
 
 @njit(cache=True, nogil=True)
-def part_table(foreground, background, scale, seen, seen_background, palette, palette_size, out, o_distinct):
+def part_table(
+    foreground,
+    background,
+    scale,
+    seen,
+    seen_background,
+    own,
+    own_size,
+    backed,
+    newly_backed,
+    newly_backed_size,
+    out,
+    o_distinct,
+):
     """p_f = h_f / (h_f + g) of every colour bin for every camera and component (C, N, COLOURS; the histograms,
-    their ``scale`` and each camera's ``palette``, :class:`Histograms`) into ``out`` (0.5 for a colour seen in
-    neither; NaN where the camera has not learnt the part, or no background), ``g`` the mean of the part's
-    background and the camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part whose
-    lines all had another part outside), and how distinct the part's colours are from that background,
-    ``o_distinct`` (C, N): 1 minus the Bhattacharyya coefficient sum_y sqrt(h_f(y) g(y)) of the two histograms (0
-    for the same colours, 1 for none shared).
+    their ``scale`` and the colours they counted, :class:`Histograms`) into ``out``, kept from frame to frame (NaN
+    where the camera has not learnt the part, or no background), ``g`` the mean of the part's background and the
+    camera's (the mean of its parts' backgrounds learnt; the camera's alone for a part whose lines all had another
+    part outside), and how distinct the part's colours are from that background, ``o_distinct`` (C, N): 1 minus the
+    Bhattacharyya coefficient sum_y sqrt(h_f(y) g(y)) of the two histograms (0 for the same colours, 1 for none
+    shared).
 
-    Only the palette's colours are visited: every other one is 0.5 in a row that has been learnt, written once
-    when the row is (a row is all NaN or all numbers, so its first bin tells which), and no other colour can
-    change until it joins the palette."""
+    A colour the part never counted has p_f 0 where a background of the camera did, 0.5 where none did (a colour
+    seen in neither).  Only the part's own colours change from frame to frame, so a learnt row is written whole
+    once, when it is first learnt (a row is all NaN or all numbers: its first bin tells which), and then at its own
+    colours and at the colours newly backed, which it reads and empties."""
     around = np.zeros(foreground.shape[2])
+    done = np.zeros(foreground.shape[2], np.int64)  # the camera (plus one) whose ``around`` a colour holds
     for k in range(foreground.shape[0]):
-        colours = palette[k, : palette_size[k]]
-        for b in colours:
-            around[b] = 0.0
         parts = 0
         for i in range(foreground.shape[1]):
-            if seen_background[k, i]:
-                share = scale[1, k, i]
-                for b in colours:
-                    around[b] += share * background[k, i, b]
-                parts += 1
-        if parts:
-            for b in colours:
-                around[b] /= parts
+            parts += seen_background[k, i]
         for i in range(foreground.shape[1]):
             o_distinct[k, i] = 0.0
             if not (seen[k, i] and parts):
@@ -202,40 +227,59 @@ def part_table(foreground, background, scale, seen, seen_background, palette, pa
                     out[k, i, :] = np.nan
                 continue
             if np.isnan(out[k, i, 0]):
-                out[k, i, :] = 0.5
-            own = 0.5 * scale[1, k, i] if seen_background[k, i] else 0.0
+                for b in range(foreground.shape[2]):
+                    out[k, i, b] = 0.0 if backed[k, b] else 0.5
+            else:
+                for c in range(newly_backed_size[k]):
+                    out[k, i, newly_backed[k, c]] = 0.0
+            own_share = 0.5 * scale[1, k, i] if seen_background[k, i] else 0.0
             camera = 0.5 if seen_background[k, i] else 1.0
             part = scale[0, k, i]
             shared = 0.0
-            for b in colours:
+            for c in range(own_size[k, i]):
+                b = own[k, i, c]
+                if done[b] != k + 1:
+                    total = 0.0
+                    for j in range(foreground.shape[1]):
+                        if seen_background[k, j]:
+                            total += scale[1, k, j] * background[k, j, b]
+                    around[b] = total / parts
+                    done[b] = k + 1
                 f = part * foreground[k, i, b]
-                g = own * background[k, i, b] + camera * around[b]
-                if f <= 0.0:  # no share, no root to take
-                    out[k, i, b] = 0.5 if g <= 0.0 else 0.0
+                g = own_share * background[k, i, b] + camera * around[b]
+                if f <= 0.0:  # only after the histogram's values underflowed
+                    out[k, i, b] = 0.0 if backed[k, b] else 0.5
                     continue
                 out[k, i, b] = f / (f + g)
                 shared += math.sqrt(f * g)
             o_distinct[k, i] = max(0.0, 1.0 - shared)
+        newly_backed_size[k] = 0
 
 
 @njit(cache=True, nogil=True)
-def widen_palette(palette, palette_size, in_palette, touched, touched_count):
+def index_colours(own, own_size, is_own, backed, newly_backed, newly_backed_size, touched, touched_count):
     """Add the colours a frame counted (:class:`Counts`' ``touched``, (2, C, N, COLOURS), the first
-    ``touched_count`` of each) to their cameras' palettes, kept ascending (:class:`Histograms`)."""
-    for side in range(touched.shape[0]):
-        for k in range(touched.shape[1]):
-            for i in range(touched.shape[2]):
-                for c in range(touched_count[side, k, i]):
-                    b = touched[side, k, i, c]
-                    if in_palette[k, b]:
-                        continue
-                    in_palette[k, b] = True
-                    at = palette_size[k]
-                    while at > 0 and palette[k, at - 1] > b:
-                        palette[k, at] = palette[k, at - 1]
-                        at -= 1
-                    palette[k, at] = b
-                    palette_size[k] += 1
+    ``touched_count`` of each) to their parts' own colours (kept ascending) and to their cameras' backed ones
+    (:class:`Histograms`)."""
+    for k in range(touched.shape[1]):
+        for i in range(touched.shape[2]):
+            for c in range(touched_count[0, k, i]):
+                b = touched[0, k, i, c]
+                if is_own[k, i, b]:
+                    continue
+                is_own[k, i, b] = True
+                at = own_size[k, i]
+                while at > 0 and own[k, i, at - 1] > b:
+                    own[k, i, at] = own[k, i, at - 1]
+                    at -= 1
+                own[k, i, at] = b
+                own_size[k, i] += 1
+            for c in range(touched_count[1, k, i]):
+                b = touched[1, k, i, c]
+                if not backed[k, b]:
+                    backed[k, b] = True
+                    newly_backed[k, newly_backed_size[k]] = b
+                    newly_backed_size[k] += 1
 
 
 @njit(cache=True, inline="always")

@@ -742,8 +742,11 @@ class Tracker:
             h.scale,
             h.seen,
             h.seen_background,
-            h.palette,
-            h.palette_size,
+            h.own,
+            h.own_size,
+            h.backed,
+            h.newly_backed,
+            h.newly_backed_size,
             self.part_table,
             self.distinct,
         )
