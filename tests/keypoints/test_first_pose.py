@@ -3,6 +3,7 @@ follow someone else, the model fitted to them, snapped to the edges; its errors;
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from pathlib import Path
 
@@ -12,13 +13,14 @@ import pytest
 from tracker.chain import FREE, SLIDE
 from tracker.cli import main
 from tracker.commands.init import keypoint_pose
+from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.keypoints import detector
 from tracker.keypoints.anchors import anchors, reach, rigid_distances
 from tracker.keypoints.detect import detect_recording
-from tracker.keypoints.first_pose import first_pose
+from tracker.keypoints.first_pose import first_pose, placed_in_depth
 from tracker.keypoints.fit import Body, fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
@@ -46,9 +48,10 @@ def landmark_world(model, poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def perfect(recording, model, truth, frames: int = 5) -> Keypoints:
-    """Detections that are the exact images of the true landmark points, frames 0..frames-1, every camera."""
-    cameras = recording.cameras
+def perfect(recording, model, truth, frames: int = 5, cameras=None) -> Keypoints:
+    """Detections that are the exact images of the true landmark points, frames 0..frames-1, in every camera of
+    the recording (or of ``cameras``)."""
+    cameras = recording.cameras if cameras is None else cameras
     pixels = np.full((frames, len(cameras), len(LANDMARKS), 2), np.nan)
     for f in range(frames):
         points = landmark_world(model, truth["poses"][f])
@@ -159,6 +162,30 @@ def test_first_pose_from_perfect_keypoints(demo):
     recording, model, truth = demo
     poses = first_pose(recording, model, perfect(recording, model, truth))
     assert mean_error(poses, truth["poses"][0]) < 0.005
+
+
+def turned_about_the_body(camera, centre: np.ndarray, angle: float):
+    """``camera`` carried round the vertical line through ``centre`` by ``angle`` (radians), still facing it."""
+    turn = se3.exp_so3(np.array([0.0, 0.0, angle]))
+    world_from_turned = se3.from_rotation(turn, centre - turn @ centre)
+    return camera.with_camera_from_world(camera.camera_from_world @ np.linalg.inv(world_from_turned))
+
+
+@pytest.mark.parametrize(
+    "degrees, placed", [(180, False), (165, False), (10, False), (90, True), (120, True), (45, True)]
+)
+def test_two_views_that_face_each_other_or_stand_together_do_not_place_the_body(demo, degrees, placed):
+    """cam0 and a copy of it carried round the body: facing it (180 or 165 degrees) or beside it (10) they leave
+    the body free along their common line of sight, and the first pose waits for views that place it in depth
+    (30 to 150 degrees apart); perfect detections either way."""
+    recording, model, truth = demo
+    centre = truth["poses"][0][0, :3, 3]
+    cameras = [recording.cameras[0], turned_about_the_body(recording.cameras[0], centre, np.radians(degrees))]
+    keypoints = perfect(recording, model, truth, cameras=cameras)
+    assert placed_in_depth(triangulated(keypoints, cameras, model, frames=5), cameras) == placed
+    if not placed:
+        with pytest.raises(TrackerInputError, match="face each other or stand together"):
+            first_pose(dataclasses.replace(recording, cameras=cameras), model, keypoints)
 
 
 def test_a_view_that_reads_left_and_right_swapped(demo):

@@ -32,8 +32,8 @@ def _errors(out: Path) -> np.ndarray:
     return np.linalg.norm(poses["joints"] - truth["joints"][poses["frame"]], axis=2).mean(axis=1)
 
 
-def _demo_copy(folder: Path, black: range = range(0)) -> Path:
-    """The demo's first COUNT frames as PNG folders, the frames of ``black`` all black in every camera."""
+def _demo_copy(folder: Path, black: range = range(0), blind: tuple[int, ...] = (0, 1, 2)) -> Path:
+    """The demo's first COUNT frames as PNG folders, the frames of ``black`` all black in the cameras ``blind``."""
     recording = open_recording(DEMO)
     folder.mkdir()
     for name in ("calibration.toml", "model.toml", "truth.npz"):
@@ -41,8 +41,9 @@ def _demo_copy(folder: Path, black: range = range(0)) -> Path:
     for camera in recording.cameras:
         (folder / camera.name).mkdir()
     for index, images in frames(recording, 0, COUNT, colour=True):
-        for camera, image in zip(recording.cameras, images):
-            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image * (index not in black))
+        for number, (camera, image) in enumerate(zip(recording.cameras, images)):
+            dark = index in black and number in blind
+            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image * (not dark))
     return folder
 
 
@@ -69,6 +70,19 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
     assert "no person found by the keypoint detector in two views in frames 0..4" in err and "trying again" in err
     assert f"fitting the body to the keypoints of frames {later}..{later + 4}" in err
     assert list(load_poses(out / "poses.npz")["frame"]) == list(range(later, COUNT))
+    assert _errors(out).max() < 0.05
+
+
+def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames(tmp_path, capsys):
+    """The first 5 frames black in cam1 and cam2: cam0 alone sees him, which cannot place the body, so the detector
+    tries the next five frames (not a second later) and tracking starts there."""
+    folder = _demo_copy(tmp_path / "rec", black=range(5), blind=(1, 2))
+    out = tmp_path / "out"
+    assert main(["track", str(folder), "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "in frames 0..4" in err and "trying again with the next frames, where someone was seen" in err
+    assert "fitting the body to the keypoints of frames 5..9" in err
+    assert list(load_poses(out / "poses.npz")["frame"]) == list(range(5, COUNT))
     assert _errors(out).max() < 0.05
 
 

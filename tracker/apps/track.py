@@ -271,8 +271,9 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
 def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
     """The pose at the first frame and that frame (``start``, or later): ``given`` (``--init``), else the recording's
     init.toml, else fitted to the keypoints of the first frames (:func:`tracker.keypoints.first_pose.first_pose`,
-    detections cached in OUT/keypoints.npz).  When they show nobody, the detector keeps trying a second of frames later,
-    and tracking starts where it first finds the person."""
+    detections cached in OUT/keypoints.npz).  When they cannot place the body, the detector tries the next frames
+    if it saw someone in them (a body cut by the borders, in one view only, or in views that face each other), else
+    a second of frames later, and tracking starts where the body is first placed."""
     from tracker.io.posefile import load_pose_file
 
     given = given or rec.init_path
@@ -288,8 +289,9 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
     from tracker.keypoints.first_pose import FRAMES, first_pose
 
     cache = ensure_writable_folder(out) / "keypoints.npz"
-    tries = range(start, max(start + 1, stop - FRAMES + 1), max(1, round(rec.fps)))
-    for begin in tries:
+    last_begin = max(start, stop - FRAMES)
+    begin = start
+    while True:
         last = min(stop, begin + FRAMES)
         print(
             f"first pose: no init.toml, fitting the body to the keypoints of frames {begin}..{last - 1}",
@@ -299,10 +301,12 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
         try:
             return first_pose(rec, model, keypoints, settings=settings), begin
         except TrackerInputError as error:
-            if len(rec.cameras) < 2 or begin == tries[-1]:
+            if len(rec.cameras) < 2 or begin == last_begin:
                 raise
-            print(f"first pose: {error}; trying again a second later", file=sys.stderr)
-    raise TrackerInputError(f"{rec.path}: no frames to fit a first pose to; pass --init")
+            seen = bool((keypoints.confidence > 0).any())
+            begin = min(begin + FRAMES if seen else begin + max(1, round(rec.fps)), last_begin)
+            when = "with the next frames, where someone was seen" if seen else "a second later"
+            print(f"first pose: {error}; trying again {when}", file=sys.stderr)
 
 
 def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):

@@ -14,6 +14,7 @@ Poses are world_from_component (N, 4, 4).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 
@@ -24,13 +25,23 @@ from tracker.io.recording import frames as frames_of
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.fit import fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
-from tracker.keypoints.triangulation import triangulated
+from tracker.keypoints.triangulation import Triangulated, triangulated
 from tracker.model import Model
+from tracker.tracking.keypoint_cue import LANDMARKS
 from tracker.tracking.track import FrameResult, Settings, Tracker
 
 FRAMES = 5
 """Frames, from the first, whose landmarks are triangulated: the body moves a few millimetres in them, while
 one frame's detection may be swapped or missing."""
+
+TRUNK = ("hip", "shoulder")
+"""The landmarks whose points, left and right, place the body's centre for :func:`placed_in_depth`."""
+
+APART = 0.5
+"""The sine of the angle between two views' lines of sight to the body, at the least, for them to place it in
+depth (30 to 150 degrees: its depth then as sure as half its breadth): two views that stand together, or face each
+other, leave it free along their common line of sight, where a few pixels of the detector's error become
+decimetres (:func:`placed_in_depth`)."""
 
 SNAP = Settings(dynamics="none", iterations=10)
 """The edge snap's tracker settings: no motion model, ten IRLS iterations a round."""
@@ -63,19 +74,52 @@ def snap_to_edges(
     return result
 
 
+def agreeing_views(found: Triangulated) -> np.ndarray:
+    """The views (indices) whose detections agree with the person's points in a frame of ``found``."""
+    return np.flatnonzero(found.agree.any(axis=(0, 2)))
+
+
+def placed_in_depth(found: Triangulated, cameras: list[Camera]) -> bool:
+    """Whether two of the views that agree on the person in ``found`` see its trunk (the mean of the hips' and
+    shoulders' points, or of all its points) along lines of sight at least :data:`APART` apart (the sine of their
+    angle)."""
+    trunk = found.points[[LANDMARKS.index(f"{side}_{joint}") for side in ("left", "right") for joint in TRUNK]]
+    known = trunk[np.isfinite(trunk).all(axis=1)]
+    if not len(known):
+        known = found.points[np.isfinite(found.points).all(axis=1)]
+    if not len(known):
+        return False
+    centre = known.mean(axis=0)
+    sights = [(cameras[k].center - centre) / np.linalg.norm(cameras[k].center - centre) for k in agreeing_views(found)]
+    return any(np.linalg.norm(np.cross(a, b)) >= APART for a, b in itertools.combinations(sights, 2))
+
+
 def fitted_to_frames(
-    model: Model, cameras: list[Camera], keypoints: Keypoints, *, frames: int = FRAMES, source: object = "the recording"
+    model: Model,
+    cameras: list[Camera],
+    keypoints: Keypoints,
+    *,
+    frames: int = FRAMES,
+    source: object = "the recording",
+    in_depth: bool = False,
 ) -> np.ndarray:
     """World poses (N, 4, 4) of ``model`` fitted to the landmarks of the first ``frames`` frames of ``keypoints``
     (in ``cameras``): their triangulated points, then their detections (steps 1-3 of the module docstring),
-    unsnapped; a one-line error naming the frames of ``source`` when they show nobody or cannot place the
-    body."""
+    unsnapped; a one-line error naming the frames of ``source`` when they show nobody or cannot place the body, or
+    (``in_depth``) when the two views or more that agree on it do not place it in depth (:func:`placed_in_depth`)."""
     found = triangulated(keypoints, cameras, model, frames=frames)
     first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
     if len(found.frames) == 0:
         raise TrackerInputError(
             f"no person found by the keypoint detector in two views in frames {first}..{last} of {source}; "
             "pass --init or start later with --start"
+        )
+    views = agreeing_views(found)
+    if in_depth and len(views) >= 2 and not placed_in_depth(found, cameras):
+        raise TrackerInputError(
+            f"frames {first}..{last} of {source}: the views that agree on the person "
+            f"({', '.join(cameras[k].name for k in views)}) face each other or stand together, and do not place it "
+            "in depth; pass --init or start later with --start"
         )
     try:
         fitted = fit_pose(model, found.points)
@@ -113,7 +157,7 @@ def first_pose(
         raise TrackerInputError(
             f"{recording.path}: the keypoints place the first pose from two cameras or more, it has one; pass --init"
         )
-    poses = fitted_to_frames(model, recording.cameras, keypoints, frames=frames, source=recording.path)
+    poses = fitted_to_frames(model, recording.cameras, keypoints, frames=frames, source=recording.path, in_depth=True)
     if images is None:
         first = int(keypoints.frame[0])
         [images] = [grey for _, grey in frames_of(recording, first, first + 1)]
