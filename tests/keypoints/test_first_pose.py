@@ -20,7 +20,7 @@ from tracker.io.recording import open_recording
 from tracker.keypoints import detector
 from tracker.keypoints.anchors import anchors, reach, rigid_distances
 from tracker.keypoints.detect import detect_recording
-from tracker.keypoints.first_pose import first_pose, placed_in_depth
+from tracker.keypoints.first_pose import agreeing_views, first_pose, placed_in_depth
 from tracker.keypoints.fit import Body, fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
@@ -182,7 +182,8 @@ def test_two_views_that_face_each_other_or_stand_together_do_not_place_the_body(
     centre = truth["poses"][0][0, :3, 3]
     cameras = [recording.cameras[0], turned_about_the_body(recording.cameras[0], centre, np.radians(degrees))]
     keypoints = perfect(recording, model, truth, cameras=cameras)
-    assert placed_in_depth(triangulated(keypoints, cameras, model, frames=5), cameras) == placed
+    found = triangulated(keypoints, cameras, model, frames=5)
+    assert placed_in_depth(found, cameras, agreeing_views(found)) == placed
     if not placed:
         with pytest.raises(TrackerInputError, match="face each other or stand together"):
             first_pose(dataclasses.replace(recording, cameras=cameras), model, keypoints)

@@ -25,17 +25,13 @@ from tracker.io.recording import frames as frames_of
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.fit import fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
-from tracker.keypoints.triangulation import Triangulated, triangulated
+from tracker.keypoints.triangulation import Triangulated, middle, triangulated
 from tracker.model import Model
-from tracker.tracking.keypoint_cue import LANDMARKS
 from tracker.tracking.track import FrameResult, Settings, Tracker
 
 FRAMES = 5
 """Frames, from the first, whose landmarks are triangulated: the body moves a few millimetres in them, while
 one frame's detection may be swapped or missing."""
-
-TRUNK = ("hip", "shoulder")
-"""The landmarks whose points, left and right, place the body's centre for :func:`placed_in_depth`."""
 
 APART = 0.5
 """The sine of the angle between two views' lines of sight to the body, at the least, for them to place it in
@@ -79,18 +75,14 @@ def agreeing_views(found: Triangulated) -> np.ndarray:
     return np.flatnonzero(found.agree.any(axis=(0, 2)))
 
 
-def placed_in_depth(found: Triangulated, cameras: list[Camera]) -> bool:
-    """Whether two of the views that agree on the person in ``found`` see its trunk (the mean of the hips' and
-    shoulders' points, or of all its points) along lines of sight at least :data:`APART` apart (the sine of their
-    angle)."""
-    trunk = found.points[[LANDMARKS.index(f"{side}_{joint}") for side in ("left", "right") for joint in TRUNK]]
-    known = trunk[np.isfinite(trunk).all(axis=1)]
-    if not len(known):
-        known = found.points[np.isfinite(found.points).all(axis=1)]
-    if not len(known):
-        return False
-    centre = known.mean(axis=0)
-    sights = [(cameras[k].center - centre) / np.linalg.norm(cameras[k].center - centre) for k in agreeing_views(found)]
+def placed_in_depth(found: Triangulated, cameras: list[Camera], views: np.ndarray) -> bool:
+    """Whether two of ``views`` (those that agree on the person in ``found``, :func:`agreeing_views`) see its trunk
+    (the midpoint of its hips' and shoulders' midpoints) along lines of sight at least :data:`APART` apart (the sine
+    of their angle); True where the trunk is not known, which the fit reports (:func:`fit_pose`)."""
+    centre = (middle(found.points, "hip") + middle(found.points, "shoulder")) / 2
+    if not np.isfinite(centre).all():
+        return True
+    sights = [(cameras[k].center - centre) / np.linalg.norm(cameras[k].center - centre) for k in views]
     return any(np.linalg.norm(np.cross(a, b)) >= APART for a, b in itertools.combinations(sights, 2))
 
 
@@ -115,7 +107,7 @@ def fitted_to_frames(
             "pass --init or start later with --start"
         )
     views = agreeing_views(found)
-    if in_depth and len(views) >= 2 and not placed_in_depth(found, cameras):
+    if in_depth and len(views) >= 2 and not placed_in_depth(found, cameras, views):
         raise TrackerInputError(
             f"frames {first}..{last} of {source}: the views that agree on the person "
             f"({', '.join(cameras[k].name for k in views)}) face each other or stand together, and do not place it "
