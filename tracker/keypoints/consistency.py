@@ -284,6 +284,8 @@ def sided_with(
     kept = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
     seen = (detected[1] >= min_confidence) & np.isfinite(detected[0]).all(axis=2)
     unsettled = (kept.sum(axis=0) < 2) & (seen.sum(axis=0) == 2)
+    if not unsettled.any():  # no dispute to settle: most frames
+        return pixels, confidence
     if previous is not None:
         steady = np.array([_steady(detected[0][k], seen[k], previous[k], shows) for k in range(len(cameras))])
         wins = unsettled & seen & steady[:, None] & ((seen & ~steady[:, None]).sum(axis=0) == 1)
