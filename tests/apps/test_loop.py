@@ -115,3 +115,20 @@ def test_retarget_picks_the_tracker_of_each_frame(tiny, tmp_path):
     run = track_frames(tracker, items, tmp_path / "poses.npz", fps=rec.fps, retarget=one_camera_late)
     assert run.frames == rec.frame_count and used[0] is used[1] is tracker
     assert all(len(later.rig.names) == 1 for later in used[2:]) and used[2] is used[-1]
+
+
+def test_rows_tracked_before_are_written_first_and_not_counted(tiny, tmp_path):
+    """The frames tracked back from a first pose (rows of a poses.npz, in frame order) lead the file, its times
+    counted from the first of them; the loop counts only the frames it tracked."""
+    rec, model, init = tiny
+    tracker = Tracker(model, rec.cameras, init)
+    read = _smoothed(rec, tracker)
+    track_frames(Tracker(model, rec.cameras, init), read[:2], tmp_path / "back.npz", fps=rec.fps)
+    before = load_poses(tmp_path / "back.npz")
+    run = track_frames(tracker, read[2:], tmp_path / "poses.npz", fps=rec.fps, before=before)
+    written = load_poses(tmp_path / "poses.npz")
+    assert run.frames == rec.frame_count - 2
+    np.testing.assert_array_equal(written["frame"], np.arange(rec.frame_count))
+    assert written["poses"][:2].tobytes() == before["poses"].tobytes()
+    np.testing.assert_array_equal(written["status"][:2], before["status"])
+    np.testing.assert_allclose(written["time"], np.arange(rec.frame_count) / rec.fps)

@@ -17,7 +17,9 @@ from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file, save_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
+from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, STRAYED, WINDOW, Recovery
+from tracker.keypoints.store import save_keypoints
 from tracker.model import load_model
 from tracker.status import RESEEDED
 from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
@@ -32,8 +34,8 @@ def _errors(out: Path) -> np.ndarray:
     return np.linalg.norm(poses["joints"] - truth["joints"][poses["frame"]], axis=2).mean(axis=1)
 
 
-def _demo_copy(folder: Path, black: range = range(0), blind: tuple[int, ...] = (0, 1, 2)) -> Path:
-    """The demo's first COUNT frames as PNG folders, the frames of ``black`` all black in the cameras ``blind``."""
+def _demo_copy(folder: Path, black: range = range(0)) -> Path:
+    """The demo's first COUNT frames as PNG folders, the frames of ``black`` all black in every camera."""
     recording = open_recording(DEMO)
     folder.mkdir()
     for name in ("calibration.toml", "model.toml", "truth.npz"):
@@ -41,9 +43,8 @@ def _demo_copy(folder: Path, black: range = range(0), blind: tuple[int, ...] = (
     for camera in recording.cameras:
         (folder / camera.name).mkdir()
     for index, images in frames(recording, 0, COUNT, colour=True):
-        for number, (camera, image) in enumerate(zip(recording.cameras, images)):
-            dark = index in black and number in blind
-            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image * (not dark))
+        for camera, image in zip(recording.cameras, images):
+            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image * (index not in black))
     return folder
 
 
@@ -73,17 +74,62 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
     assert _errors(out).max() < 0.05
 
 
-def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames(tmp_path, capsys):
-    """The first 5 frames black in cam1 and cam2: cam0 alone sees him, which cannot place the body, so the detector
-    tries the next five frames (not a second later) and tracking starts there."""
-    folder = _demo_copy(tmp_path / "rec", black=range(5), blind=(1, 2))
+def _seen_in_cam0_alone(recording: Path, out: Path, frames_alone: range) -> None:
+    """OUT/keypoints.npz with the detector's landmarks of the recording's first 15 frames, those of cam1 and cam2 taken
+    out in ``frames_alone``: there cam0 alone sees him, and the images are as they were."""
+    found, _ = detect_recording(open_recording(recording), 0, 15)
+    alone = np.isin(found.frame, frames_alone)[:, None] & (np.arange(len(found.camera_names)) > 0)[None]
+    out.mkdir()
+    save_keypoints(
+        out / "keypoints.npz",
+        dataclasses.replace(
+            found,
+            pixels=np.where(alone[..., None, None], np.nan, found.pixels),
+            confidence=np.where(alone[..., None], 0.0, found.confidence),
+            world=np.where(alone[..., None, None], np.nan, found.world),
+        ),
+    )
+
+
+def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tracked_back(demo_pngs, tmp_path, capsys):
+    """In frames 0..4 cam0 alone detects him, which cannot place the body, so the detector tries the next five frames
+    (not a second later) and tracking starts there; the five frames before, where he was seen, are tracked back from
+    that first pose (after the tracker has settled on it over frames 5..14)."""
     out = tmp_path / "out"
-    assert main(["track", str(folder), "--out", str(out), "--quiet"]) == 0
+    _seen_in_cam0_alone(demo_pngs, out, range(5))
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "in frames 0..4" in err and "trying again with the next frames, where someone was seen" in err
     assert "fitting the body to the keypoints of frames 5..9" in err
-    assert list(load_poses(out / "poses.npz")["frame"]) == list(range(5, COUNT))
-    assert _errors(out).max() < 0.05
+    assert "tracking back from frame 5 to frame 0" in err
+    assert list(load_poses(out / "poses.npz")["frame"]) == list(range(COUNT))
+    assert _errors(out).max() < 0.05  # measured: 4-5 mm tracked back, 19-29 mm in frames 5..8 after the first pose
+
+
+def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(demo_pngs, tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the frames before the first pose (frame 5) are tracked back, two at a time, as the last two are
+    read: the three tracked back are written, in frame order, no frame after the first pose is tracked, and the run
+    exits 130."""
+    import tracker.apps.track as app
+    import tracker.keypoints.stream as stream
+
+    out = tmp_path / "out"
+    _seen_in_cam0_alone(demo_pngs, out, range(5))
+    read = stream.tracked_frames
+    starts = []
+
+    def stopped_at_frame_0(*args, **kwargs):
+        starts.append(kwargs["start"])
+        if kwargs["start"] == 0:
+            raise KeyboardInterrupt
+        return read(*args, **kwargs)
+
+    monkeypatch.setattr(app, "BACK_CHUNK", 2)
+    monkeypatch.setattr(stream, "tracked_frames", stopped_at_frame_0)
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 130
+    assert "interrupted: the frames done so far are saved" in capsys.readouterr().err
+    assert starts[:8] == [5, 12, 10, 8, 6, 4, 2, 0]  # settled on frames 5..14, then back from frame 13
+    assert list(load_poses(out / "poses.npz")["frame"]) == [2, 3, 4]
 
 
 def test_without_a_first_pose_or_keypoints_the_error_says_what_to_pass(demo_pngs, tmp_path, capsys):

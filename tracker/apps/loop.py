@@ -72,6 +72,7 @@ def track_frames(
     times: Callable[[int], float] | None = None,
     retarget: Callable[[Tracker], Tracker] | None = None,
     each: Callable[[Tracked], None] | None = None,
+    before: dict[str, np.ndarray] | None = None,
 ) -> Loop:
     """Track the ``frames`` with ``tracker`` and write each one's row to the poses.npz at ``path`` (frames at ``fps``)
     as it is done: poses, joint centres, status, residual, seconds spent and capture time.  Ctrl-C ends the loop
@@ -82,11 +83,24 @@ def track_frames(
     ``check``: sees each result before it is written (:data:`Check`).  ``times(index)``: the frame's capture time in
     seconds (live capture), written in its row; the step's ``dt`` is the time since the frame before.
     ``retarget(tracker)``: before each frame, the tracker to track it with (``tracker live`` rebuilds it for the
-    cameras still delivering).  ``each``: called with every frame once its row is written.
+    cameras still delivering).  ``each``: called with every frame once its row is written.  ``before``: rows of a
+    poses.npz (its arrays: frame, poses, joints, status, residual, elapsed, time) written first, in their order, as the
+    frames tracked back from the first pose of ``frames`` (:func:`tracker.apps.track.track`); not counted in the loop.
     """
     done, writing, interrupted, last = 0, 0.0, False, None
     started = time.perf_counter()
     with PosesWriter(path, list(tracker.model.names), list(tracker.model.joint_names), fps) as writer:
+        for row in range(0 if before is None else len(before["frame"])):
+            assert before is not None
+            writer.append(
+                int(before["frame"][row]),
+                before["poses"][row],
+                before["joints"][row],
+                status=int(before["status"][row]),
+                residual=float(before["residual"][row]),
+                elapsed=float(before["elapsed"][row]),
+                time=None if times is None else float(before["time"][row]),
+            )
         try:
             for index, images in frames:
                 if retarget is not None:

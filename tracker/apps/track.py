@@ -102,7 +102,7 @@ def track(
     from tracker.apps.loop import Tracked, track_frames
     from tracker.evaluate import evaluate
     from tracker.io.poses import load_poses
-    from tracker.io.readers import keeping_grey, split_kept
+    from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
     from tracker.keypoints.stream import beside, tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
@@ -117,15 +117,38 @@ def track(
     stop = rec.frame_count if tracking.frames is None else min(rec.frame_count, start + tracking.frames)
     model = _model(tracking.model, rec, out, step, bar)
     background = _background(tracking.background, rec, out, bar)
-    init, begin = _first_pose(tracking.init, start, rec, model, stop, out, settings, step)
+    init, begin, back_to = _first_pose(tracking.init, start, rec, model, stop, out, settings, step)
     print(
-        f"tracking {rec.path} frames {begin}..{stop - 1} with {len(rec.cameras)} camera(s) "
+        f"tracking {rec.path} frames {back_to}..{stop - 1} with {len(rec.cameras)} camera(s) "
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
+    times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
+    before, back_interrupted = None, False
+    if back_to < begin:
+        from tracker.keypoints.first_pose import FRAMES
+
+        before, back_interrupted = _tracked_back(
+            rec,
+            tracking,
+            model,
+            init,
+            span=(back_to, begin, min(stop, begin + 2 * FRAMES)),
+            out=out,
+            background=background,
+            times=times,
+            bar=bar,
+        )
+    if back_interrupted:  # Ctrl-C while tracking back: the frames tracked back are written, and no others
+        stop = begin
     # the detector starts up while the kernels load; fed the tracker's own images unless they are differences
     stream = _keypoints(
-        rec, begin, stop, out, step, None if background is not None else reductions(settings, rec.cameras)
+        rec,
+        begin,
+        stop,
+        out,
+        step if stop > begin else 0,
+        None if background is not None else reductions(settings, rec.cameras),
     )
     recovery = None
     if stream is not None:
@@ -145,18 +168,13 @@ def track(
     # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
     # reduced at HD, or colour differences)
     shows = video is not None or live is not None
-    if background is None:
-        prepare: Callable[[np.ndarray], object] | list[Callable[[np.ndarray], object]] = (
-            keeping_grey(tracker.smooth) if shows else tracker.smooth
-        )
-    else:
-        from tracker.tracking.foreground import preparers
-
-        measured = preparers(background, tracker.smooth)
-        prepare = [keeping_grey(camera) for camera in measured] if shows else list(measured)
+    prepare = _preparer(tracker, background, keep=shows)
     counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
     residuals = []
-    times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
+    if before is not None:
+        for status in before["status"]:
+            counts[int(status)] += 1
+        residuals.extend(before["residual"])
     grey: Sequence[np.ndarray] = ()  # the frame in hand as recorded, for the overlay and the viewer
 
     def searched(read):
@@ -197,6 +215,7 @@ def track(
             check=recovery,
             times=None if times is None else lambda index: float(times[index]),
             each=counted_and_shown,
+            before=before,
         )
     finally:
         if video is not None:
@@ -205,7 +224,7 @@ def track(
             stream.close()
     if live is not None:
         live.close()
-    done = run.frames
+    done = run.frames + (0 if before is None else len(before["frame"]))
     poses = out / "poses.npz"
     results = load_poses(poses) if not run.interrupted and (truth is not None or live is not None) else None
     report = evaluate(results, truth) if results is not None and truth is not None else None
@@ -229,10 +248,103 @@ def track(
         residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
         counts=counts,
         declined=None if recovery is None else recovery.declined,
-        interrupted=run.interrupted,
+        interrupted=run.interrupted or back_interrupted,
         report=report,
         review=review,
     )
+
+
+BACK_CHUNK = 30
+"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`):
+they are held in memory, as smoothed images, until tracked."""
+
+
+def _tracked_back(
+    rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, bar
+):
+    """The frames ``span`` = (first, begin, ...) before the first pose ``init`` (at frame ``begin``) tracked backwards:
+    the rows of a poses.npz in frame order (None if none was tracked), and whether Ctrl-C stopped it.  The tracker first
+    settles on the first pose over the frames from ``begin`` to the span's third frame (the first pose's own
+    :data:`tracker.keypoints.first_pose.FRAMES` frames and as many again, so that a limb the fit left off is mended),
+    then turns round, its motion dropped, and tracks from there back to ``first``, the last frame first, with its own
+    detections and recovery; read :data:`BACK_CHUNK` frames at a time."""
+    import tempfile
+
+    import numpy as np
+
+    from tracker.apps.loop import track_frames
+    from tracker.io.poses import load_poses
+    from tracker.keypoints.stream import beside, tracked_frames
+    from tracker.tracking.track import Tracker
+
+    first, begin, settled = span
+    settings = tracking.settings
+    stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
+    recovery = None
+    if stream is not None:
+        from tracker.keypoints.recovery import Recovery
+
+        recovery = Recovery(model, rec.cameras)
+    tracker = Tracker(model, rec.cameras, init, settings)
+    tracker.warm_up()
+    prepare = _preparer(tracker, background, keep=False)
+    chroma = tracker.bin_colours if settings.region and background is None else False
+
+    def read(start: int, stop: int) -> list:
+        return list(
+            tracked_frames(
+                None, rec, start=start, stop=stop, prepare=prepare, colour=background is not None, chroma=chroma
+            )
+        )
+
+    def backwards():
+        for stop in range(settled - 1, first, -BACK_CHUNK):
+            yield from reversed(read(max(first, stop - BACK_CHUNK), stop))
+
+    def tracked(frames, path: Path, total: int):
+        return track_frames(
+            tracker,
+            bar(f"back to frame {first}", "frame")(frames, total=total),
+            path,
+            fps=rec.fps,
+            keypoints=None if stream is None else beside(stream, tracker),
+            check=recovery,
+            times=None if times is None else lambda index: float(times[index]),
+        )
+
+    print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
+    with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
+        try:
+            run = tracked(read(begin, settled), Path(folder) / "settled.npz", settled - begin)
+            if not run.interrupted:
+                tracker.restart(tracker.poses)  # the motion so far points the other way
+                run = tracked(backwards(), Path(folder) / "poses.npz", settled - 1 - first)
+        finally:
+            if stream is not None:
+                stream.close()
+        path = Path(folder) / "poses.npz"
+        rows = load_poses(path) if path.is_file() else None
+    if rows is None or not (rows["frame"] < begin).any():
+        return None, run.interrupted
+    kept = np.flatnonzero(rows["frame"] < begin)
+    kept = kept[np.argsort(rows["frame"][kept])]
+    return {key: rows[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}, (
+        run.interrupted
+    )
+
+
+def _preparer(tracker, background, *, keep: bool):
+    """What the readers make of each frame for ``tracker``: its smoothing, of the frame itself or of its difference
+    from ``background`` (:func:`tracker.tracking.foreground.preparers`), one per camera; with ``keep``, each also keeps
+    the grey frame as recorded, for the overlay and the viewer (:func:`tracker.io.readers.keeping_grey`)."""
+    from tracker.io.readers import keeping_grey
+
+    if background is None:
+        return keeping_grey(tracker.smooth) if keep else tracker.smooth
+    from tracker.tracking.foreground import preparers
+
+    measured = preparers(background, tracker.smooth)
+    return [keeping_grey(camera) for camera in measured] if keep else list(measured)
 
 
 def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
@@ -269,16 +381,18 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
 
 
 def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
-    """The pose at the first frame and that frame (``start``, or later): ``given`` (``--init``), else the recording's
-    init.toml, else fitted to the keypoints of the first frames (:func:`tracker.keypoints.first_pose.first_pose`,
-    detections cached in OUT/keypoints.npz).  When they cannot place the body, the detector tries the next frames
-    if it saw someone in them (a body cut by the borders, in one view only, or in views that face each other), else
-    a second of frames later, and tracking starts where the body is first placed."""
+    """The pose at the first frame, that frame (``start``, or later) and the first frame to track back to from it:
+    ``given`` (``--init``), else the recording's init.toml, else fitted to the keypoints of the first frames
+    (:func:`tracker.keypoints.first_pose.first_pose`, detections cached in OUT/keypoints.npz).  When they cannot place
+    the body, the detector tries the next frames if it saw someone in them (a body cut by the borders, in one view
+    only, or in views that face each other), else a second of frames later, and tracking starts where the body is
+    first placed; the frames before it back to the first of those in which someone was seen, one try after another,
+    are tracked backwards from it (:func:`_tracked_back`)."""
     from tracker.io.posefile import load_pose_file
 
     given = given or rec.init_path
     if given is not None:
-        return load_pose_file(given, model), start
+        return load_pose_file(given, model), start, start
     if not step:
         raise TrackerInputError(
             f"{rec.path}: no init.toml in the recording folder and --keypoints off; pass --init, or let the "
@@ -290,7 +404,7 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
 
     cache = ensure_writable_folder(out) / "keypoints.npz"
     last_begin = max(start, stop - FRAMES)
-    begin = start
+    begin = back_to = start
     while True:
         last = min(stop, begin + FRAMES)
         print(
@@ -298,12 +412,14 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
             file=sys.stderr,
         )
         keypoints, _ = detect_recording(rec, begin, last, cache=cache)
+        seen = bool((keypoints.confidence > 0).any())
+        if not seen:
+            back_to = min(begin + max(1, round(rec.fps)), last_begin)  # nobody here: nothing to track back to
         try:
-            return first_pose(rec, model, keypoints, settings=settings), begin
+            return first_pose(rec, model, keypoints, settings=settings), begin, back_to
         except TrackerInputError as error:
             if len(rec.cameras) < 2 or begin == last_begin:
                 raise
-            seen = bool((keypoints.confidence > 0).any())
             begin = min(begin + FRAMES if seen else begin + max(1, round(rec.fps)), last_begin)
             when = "with the next frames, where someone was seen" if seen else "a second later"
             print(f"first pose: {error}; trying again {when}", file=sys.stderr)
