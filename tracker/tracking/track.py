@@ -316,7 +316,9 @@ class Workspace:
     limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each
     sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
     them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); each camera's
-    half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one (``coloured``), and
+    half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one in every camera and no
+    camera's is of a single colour, as a black frame a camera dropped is (``coloured``; the region cue would read it
+    as the background everywhere and shrink every outline there onto nothing, docs/region.md), and
     the region cue's mean and variance per sample (:func:`tracker.tracking.region_cue.region_kernel`).
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
@@ -535,6 +537,7 @@ class Tracker:
                 h, w = bins.shape
                 work.bins[k, :h, :w] = bins
                 image = image.image
+                coloured &= bool(bins.min() != bins.max())  # a view of one colour shows nothing (a dropped frame)
             else:
                 coloured = False
             searched = image if smoothed else self.smooth(image)
