@@ -91,19 +91,26 @@ def _seen_in_cam0_alone(recording: Path, out: Path, frames_alone: range) -> None
     )
 
 
-def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tracked_back(demo_pngs, tmp_path, capsys):
-    """In frames 0..4 cam0 alone detects him, which cannot place the body, so the detector tries the next five frames
-    (not a second later) and tracking starts there; the five frames before, where he was seen, are tracked back from
-    that first pose (after the tracker has settled on it over frames 5..14)."""
+@pytest.mark.parametrize("nobody", [0, 3])
+def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tracked_back(
+    nobody, demo_pngs, tmp_path, capsys
+):
+    """In frames 0..4 cam0 alone detects him (and nobody is seen in the first ``nobody`` frames, all black), which
+    cannot place the body, so the detector tries the next five frames (not a second later) and tracking starts there;
+    the frames before, from the first where he was seen, are tracked back from that first pose (after the tracker has
+    settled on it over frames 5..14), none where nobody was."""
+    recording = _demo_copy(tmp_path / "rec", black=range(nobody)) if nobody else demo_pngs
     out = tmp_path / "out"
-    _seen_in_cam0_alone(demo_pngs, out, range(5))
-    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 0
+    _seen_in_cam0_alone(recording, out, range(5))
+    assert main(["track", str(recording), "--out", str(out), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "in frames 0..4" in err and "trying again with the next frames, where someone was seen" in err
     assert "fitting the body to the keypoints of frames 5..9" in err
-    assert "tracking back from frame 5 to frame 0" in err
-    assert list(load_poses(out / "poses.npz")["frame"]) == list(range(COUNT))
-    assert _errors(out).max() < 0.05  # measured: 4-5 mm tracked back, 19-29 mm in frames 5..8 after the first pose
+    assert f"tracking back from frame 5 to frame {nobody}" in err
+    assert list(load_poses(out / "poses.npz")["frame"]) == list(range(nobody, COUNT))
+    error = _errors(out)
+    assert error[: 5 - nobody].max() < 0.015  # tracked back (measured: 4-5 mm; the first pose lies 29 mm off)
+    assert error.max() < 0.05  # measured: 19-29 mm in frames 5..8 after the first pose
 
 
 def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(demo_pngs, tmp_path, capsys, monkeypatch):
@@ -160,11 +167,12 @@ def test_a_first_pose_30_cm_and_45_degrees_off_is_seeded_again_from_the_keypoint
     assert fused[10:].max() < 0.03, fused.round(3)  # tracked again within 10 frames (measured: 11 mm at most)
 
 
-def test_a_body_lost_to_half_a_second_of_black_is_found_again(tmp_path):
-    """A render with a face in a room (procedural motion, the demo's rig), frames 20-49 (0.5 s) black in
-    every camera: the edges lose the body in the black and, once the images are back, take the room's edges
-    (measured: 210-310 mm for good); with the keypoints it is back within 10 frames (measured: 28-44 mm
-    from frame 58; 5-8 mm before the black)."""
+def test_a_body_lost_to_half_a_second_of_noise_is_found_again(tmp_path):
+    """A render with a face in a room (procedural motion, the demo's rig), frames 20-49 (0.5 s) seeded noise in
+    every camera (a glitch): the edges lose the body in the noise and, once the images are back, take the room's
+    edges (measured: 0.9-1.5 m for good); with the keypoints it is seeded again at the first frame with images
+    (measured: 9-27 mm from frame 50; 4-10 mm before the noise).  Black frames would not do: a view of one colour
+    is tracked by the edges alone, which find nothing to pull the body away in it, and it is held through them."""
     from tracker.synthetic.synth import Staging, synthesize
 
     root = Path(__file__).resolve().parents[2]
@@ -186,9 +194,12 @@ def test_a_body_lost_to_half_a_second_of_black_is_found_again(tmp_path):
         shutil.copy(source / name, folder / name)
     for camera in recording.cameras:
         (folder / camera.name).mkdir()
+    noise = np.random.default_rng(5)
     for index, images in frames(recording, 0, COUNT, colour=True):
         for camera, image in zip(recording.cameras, images):
-            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image * (index not in range(20, 50)))
+            if index in range(20, 50):
+                image = noise.integers(0, 256, image.shape, dtype=np.uint8)
+            cv2.imwrite(str(folder / camera.name / f"{index:06d}.png"), image)
     truth = load_poses(source / "truth.npz")
 
     def errors(*extra: str) -> np.ndarray:

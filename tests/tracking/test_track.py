@@ -485,8 +485,9 @@ def test_the_overlay_of_hd_views_is_drawn_on_the_full_size_frames(hd_recording, 
 def test_views_that_go_black_are_tracked_without_the_colours(striped_room):
     """Two of the three views black for eight frames (a camera that drops frames, after the colours are learnt): a
     frame with a view of one colour is tracked without the region cue and teaches no colours, so the third view's
-    edges carry the body and the colours hold it again after (measured: 8-61 mm in the black frames, 22 mm in the first
-    frame after and 6-11 mm from the sixth; read as colours, the black views shrank every outline in them and lost the body, 0.4-0.6 m)."""
+    edges carry the body and the colours hold it again after (measured: 8-61 mm in the black frames, 22 mm in the
+    first frame after and 6-11 mm from the sixth; read as colours, the black views shrank every outline in them and
+    lost the body, 1.0 m)."""
     rec = open_recording(striped_room)
     model = load_model(rec.model_path)
     tracker = Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), Settings())

@@ -124,11 +124,11 @@ def track(
         file=sys.stderr,
     )
     times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
-    before, back_interrupted = None, False
+    back = TrackedBack(None, 0, False)
     if back_to < begin:
         from tracker.keypoints.first_pose import FRAMES
 
-        before, back_interrupted = _tracked_back(
+        back = _tracked_back(
             rec,
             tracking,
             model,
@@ -139,7 +139,8 @@ def track(
             times=times,
             bar=bar,
         )
-    if back_interrupted:  # Ctrl-C while tracking back: the frames tracked back are written, and no others
+    before = back.rows
+    if back.interrupted:  # Ctrl-C while tracking back: the frames tracked back are written, and no others
         stop = begin
     # the detector starts up while the kernels load; fed the tracker's own images unless they are differences
     stream = _keypoints(
@@ -244,11 +245,11 @@ def track(
         frames=done,
         views=len(rec.cameras),
         iterations=settings.iterations,
-        fps=done / run.seconds if run.seconds > 0 else float("inf"),
+        fps=run.frames / run.seconds if run.seconds > 0 else float("inf"),
         residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
         counts=counts,
-        declined=None if recovery is None else recovery.declined,
-        interrupted=run.interrupted or back_interrupted,
+        declined=None if recovery is None else recovery.declined + back.declined,
+        interrupted=run.interrupted or back.interrupted,
         report=report,
         review=review,
     )
@@ -259,15 +260,26 @@ BACK_CHUNK = 30
 they are held in memory, as smoothed images, until tracked."""
 
 
+@dataclasses.dataclass(frozen=True)
+class TrackedBack:
+    """What :func:`_tracked_back` did: the rows tracked back, of a poses.npz in frame order (None if none was), the
+    re-seeds its recovery declined, and whether Ctrl-C stopped it."""
+
+    rows: dict[str, Any] | None
+    declined: int
+    interrupted: bool
+
+
 def _tracked_back(
     rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, bar
-):
-    """The frames ``span`` = (first, begin, ...) before the first pose ``init`` (at frame ``begin``) tracked backwards:
-    the rows of a poses.npz in frame order (None if none was tracked), and whether Ctrl-C stopped it.  The tracker first
-    settles on the first pose over the frames from ``begin`` to the span's third frame (the first pose's own
-    :data:`tracker.keypoints.first_pose.FRAMES` frames and as many again, so that a limb the fit left off is mended),
-    then turns round, its motion dropped, and tracks from there back to ``first``, the last frame first, with its own
-    detections and recovery; read :data:`BACK_CHUNK` frames at a time."""
+) -> TrackedBack:
+    """The frames ``span`` = (first, begin, settled) before the first pose ``init`` (at frame ``begin``) tracked
+    backwards: the tracker settles on the first pose over the frames from ``begin`` to ``settled`` - 1 (the first
+    pose's own :data:`tracker.keypoints.first_pose.FRAMES` frames and as many again, so that a limb the fit left off
+    is mended), turns round, its motion dropped, and tracks back to ``first``, the last frame first, with its own
+    detections and recovery, reading :data:`BACK_CHUNK` frames at a time.  Time runs backwards there: the loop is
+    given the capture times (a live recording's) negated, so that its steps are forward in that time, and the rows
+    get them back.  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on keeps them."""
     import tempfile
 
     import numpy as np
@@ -279,16 +291,6 @@ def _tracked_back(
 
     first, begin, settled = span
     settings = tracking.settings
-    stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
-    recovery = None
-    if stream is not None:
-        from tracker.keypoints.recovery import Recovery
-
-        recovery = Recovery(model, rec.cameras)
-    tracker = Tracker(model, rec.cameras, init, settings)
-    tracker.warm_up()
-    prepare = _preparer(tracker, background, keep=False)
-    chroma = tracker.bin_colours if settings.region and background is None else False
 
     def read(start: int, stop: int) -> list:
         return list(
@@ -296,6 +298,9 @@ def _tracked_back(
                 None, rec, start=start, stop=stop, prepare=prepare, colour=background is not None, chroma=chroma
             )
         )
+
+    def settling():
+        yield from read(begin, settled)
 
     def backwards():
         for stop in range(settled - 1, first, -BACK_CHUNK):
@@ -309,13 +314,23 @@ def _tracked_back(
             fps=rec.fps,
             keypoints=None if stream is None else beside(stream, tracker),
             check=recovery,
-            times=None if times is None else lambda index: float(times[index]),
+            times=None if times is None else lambda index: -float(times[index]),
         )
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
+    stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
+    recovery = None
     with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
         try:
-            run = tracked(read(begin, settled), Path(folder) / "settled.npz", settled - begin)
+            if stream is not None:
+                from tracker.keypoints.recovery import Recovery
+
+                recovery = Recovery(model, rec.cameras)
+            tracker = Tracker(model, rec.cameras, init, settings)
+            tracker.warm_up()
+            prepare = _preparer(tracker, background, keep=False)
+            chroma = tracker.bin_colours if settings.region and background is None else False
+            run = tracked(settling(), Path(folder) / "settled.npz", settled - begin)
             if not run.interrupted:
                 tracker.restart(tracker.poses)  # the motion so far points the other way
                 run = tracked(backwards(), Path(folder) / "poses.npz", settled - 1 - first)
@@ -323,14 +338,17 @@ def _tracked_back(
             if stream is not None:
                 stream.close()
         path = Path(folder) / "poses.npz"
-        rows = load_poses(path) if path.is_file() else None
-    if rows is None or not (rows["frame"] < begin).any():
-        return None, run.interrupted
-    kept = np.flatnonzero(rows["frame"] < begin)
-    kept = kept[np.argsort(rows["frame"][kept])]
-    return {key: rows[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}, (
-        run.interrupted
-    )
+        found = load_poses(path) if path.is_file() else None
+    declined = 0 if recovery is None else recovery.declined
+    if found is None or not (found["frame"] < begin).any():
+        return TrackedBack(None, declined, run.interrupted)
+    kept = np.flatnonzero(found["frame"] < begin)
+    kept = kept[np.argsort(found["frame"][kept])]
+    rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}
+    rows["time"] = -rows["time"]
+    timed = None if times is None else lambda index: float(times[index])  # only whether rows carry times matters
+    track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=timed, before=rows)
+    return TrackedBack(rows, declined, run.interrupted)
 
 
 def _preparer(tracker, background, *, keep: bool):
@@ -404,7 +422,7 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
 
     cache = ensure_writable_folder(out) / "keypoints.npz"
     last_begin = max(start, stop - FRAMES)
-    begin = back_to = start
+    begin, back_to = start, None  # back_to: the first frame someone was seen in, try after try up to now
     while True:
         last = min(stop, begin + FRAMES)
         print(
@@ -412,11 +430,11 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
             file=sys.stderr,
         )
         keypoints, _ = detect_recording(rec, begin, last, cache=cache)
-        seen = bool((keypoints.confidence > 0).any())
-        if not seen:
-            back_to = min(begin + max(1, round(rec.fps)), last_begin)  # nobody here: nothing to track back to
+        found = keypoints.frame[(keypoints.confidence > 0).any(axis=(1, 2))]
+        seen = len(found) > 0
+        back_to = None if not seen else int(found.min()) if back_to is None else back_to
         try:
-            return first_pose(rec, model, keypoints, settings=settings), begin, back_to
+            return first_pose(rec, model, keypoints, settings=settings), begin, begin if back_to is None else back_to
         except TrackerInputError as error:
             if len(rec.cameras) < 2 or begin == last_begin:
                 raise
