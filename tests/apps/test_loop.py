@@ -132,3 +132,8 @@ def test_rows_tracked_before_are_written_first_and_not_counted(tiny, tmp_path):
     assert written["poses"][:2].tobytes() == before["poses"].tobytes()
     np.testing.assert_array_equal(written["status"][:2], before["status"])
     np.testing.assert_allclose(written["time"], np.arange(rec.frame_count) / rec.fps)
+    at = {index: 0.5 + 0.04 * index**2 for index in range(rec.frame_count)}  # a live capture's times, carried
+    timed = dict(before, time=np.array([at[index] for index in before["frame"]]))
+    again = Tracker(model, rec.cameras, init)
+    track_frames(again, read[2:], tmp_path / "timed.npz", fps=rec.fps, before=timed, times=at.__getitem__)
+    np.testing.assert_array_equal(load_poses(tmp_path / "timed.npz")["time"], list(at.values()))

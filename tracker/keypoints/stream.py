@@ -229,14 +229,15 @@ class KeypointStream:
         worker if need be.  Between two detected frames the landmarks are interpolated linearly (each
         where both frames hold it, at the lower confidence); None after the last detected frame.  With ``near``,
         the tracked body's landmark points (33, 3) in the world, the disputes the views could not settle are given
-        to the views that show that body, or that moved on steadily from the landmarks given at the last detected
-        frame asked for (:func:`tracker.keypoints.consistency.sided_with`; ask in frame order)."""
+        to the views that show that body, or that moved on steadily from the landmarks given at the last other
+        detected frame asked for (:func:`tracker.keypoints.consistency.sided_with`; ask in frame order, or in reverse
+        order when tracking back)."""
         checked = self._between(frame, self._checked)
         if checked is None or near is None:
             return checked
         detected = self._between(frame, self._detected)
         assert detected is not None  # every checked frame was detected
-        last = self.settled[1] if self.settled is not None and self.settled[0] < frame else None
+        last = self.settled[1] if self.settled is not None and self.settled[0] != frame else None
         pixels, confidence = sided_with(detected, checked, expected=near, cameras=self.recording.cameras, previous=last)
         if frame in self.checked:  # a detected frame: the next ones' own last frame
             self.settled = (frame, np.where((confidence >= CONFIDENT)[..., None], pixels, np.nan))
