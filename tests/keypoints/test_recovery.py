@@ -113,10 +113,11 @@ def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tr
     assert error.max() < 0.05  # measured: 19-29 mm in frames 5..8 after the first pose
 
 
-def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(demo_pngs, tmp_path, capsys, monkeypatch):
-    """Ctrl-C while the frames before the first pose (frame 5) are tracked back, two at a time, as the last two are
-    read: the three tracked back are written, in frame order, no frame after the first pose is tracked, and the run
-    exits 130."""
+@pytest.mark.parametrize(("at", "kept"), [(0, [2, 3, 4]), (5, [])])
+def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(at, kept, demo_pngs, tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the frames before the first pose (frame 5) are tracked back, two at a time: as the last two are
+    read, the three tracked back are written, in frame order; while the tracker settles on the first pose (reading
+    frames 5..14), none.  No frame after the first pose is tracked either way, and the run exits 130."""
     import tracker.apps.track as app
     import tracker.keypoints.stream as stream
 
@@ -125,18 +126,19 @@ def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(demo_pngs, tmp
     read = stream.tracked_frames
     starts = []
 
-    def stopped_at_frame_0(*args, **kwargs):
+    def stopped(*args, **kwargs):
         starts.append(kwargs["start"])
-        if kwargs["start"] == 0:
+        if kwargs["start"] == at and starts.count(at) == 1:  # once: the frames from the first pose on start there too
             raise KeyboardInterrupt
         return read(*args, **kwargs)
 
     monkeypatch.setattr(app, "BACK_CHUNK", 2)
-    monkeypatch.setattr(stream, "tracked_frames", stopped_at_frame_0)
+    monkeypatch.setattr(stream, "tracked_frames", stopped)
     assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 130
     assert "interrupted: the frames done so far are saved" in capsys.readouterr().err
-    assert starts[:8] == [5, 12, 10, 8, 6, 4, 2, 0]  # settled on frames 5..14, then back from frame 13
-    assert list(load_poses(out / "poses.npz")["frame"]) == [2, 3, 4]
+    settled_then_back = [5, 12, 10, 8, 6, 4, 2, 0]  # settled on frames 5..14, then back from frame 13
+    assert starts[: settled_then_back.index(at) + 1] == settled_then_back[: settled_then_back.index(at) + 1]
+    assert list(load_poses(out / "poses.npz")["frame"]) == kept
 
 
 def test_without_a_first_pose_or_keypoints_the_error_says_what_to_pass(demo_pngs, tmp_path, capsys):
