@@ -90,17 +90,17 @@ def track_frames(
     done, writing, interrupted, last = 0, 0.0, False, None
     started = time.perf_counter()
     with PosesWriter(path, list(tracker.model.names), list(tracker.model.joint_names), fps) as writer:
-        for row in range(0 if before is None else len(before["frame"])):
-            assert before is not None
-            writer.append(
-                int(before["frame"][row]),
-                before["poses"][row],
-                before["joints"][row],
-                status=int(before["status"][row]),
-                residual=float(before["residual"][row]),
-                elapsed=float(before["elapsed"][row]),
-                time=None if times is None else float(before["time"][row]),
-            )
+        if before is not None:
+            for row, frame in enumerate(before["frame"]):
+                writer.append(
+                    int(frame),
+                    before["poses"][row],
+                    before["joints"][row],
+                    status=int(before["status"][row]),
+                    residual=float(before["residual"][row]),
+                    elapsed=float(before["elapsed"][row]),
+                    time=None if times is None else float(before["time"][row]),
+                )
         try:
             for index, images in frames:
                 if retarget is not None:

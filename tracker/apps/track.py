@@ -124,6 +124,7 @@ def track(
         file=sys.stderr,
     )
     times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
+    timed = None if times is None else lambda index: float(times[index])
     back = TrackedBack(None, 0, False)
     if back_to < begin:
         from tracker.keypoints.first_pose import FRAMES
@@ -136,7 +137,7 @@ def track(
             span=(back_to, begin, min(stop, begin + 2 * FRAMES)),
             out=out,
             background=background,
-            times=times,
+            times=timed,
             bar=bar,
         )
     before = back.rows
@@ -214,7 +215,7 @@ def track(
             fps=rec.fps,
             keypoints=None if stream is None else beside(stream, tracker),
             check=recovery,
-            times=None if times is None else lambda index: float(times[index]),
+            times=timed,
             each=counted_and_shown,
             before=before,
         )
@@ -278,8 +279,9 @@ def _tracked_back(
     pose's own :data:`tracker.keypoints.first_pose.FRAMES` frames and as many again, so that a limb the fit left off
     is mended), turns round, its motion dropped, and tracks back to ``first``, the last frame first, with its own
     detections and recovery, reading :data:`BACK_CHUNK` frames at a time.  Time runs backwards there: the loop is
-    given the capture times (a live recording's) negated, so that its steps are forward in that time, and the rows
-    get them back.  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on keeps them."""
+    given the capture times ``times(index)`` (a live recording's) negated, so that its steps are forward in that
+    time, and the rows get them back.  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on
+    keeps them."""
     import tempfile
 
     import numpy as np
@@ -314,7 +316,7 @@ def _tracked_back(
             fps=rec.fps,
             keypoints=None if stream is None else beside(stream, tracker),
             check=recovery,
-            times=None if times is None else lambda index: -float(times[index]),
+            times=None if times is None else lambda index: -times(index),
         )
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
@@ -346,8 +348,7 @@ def _tracked_back(
     kept = kept[np.argsort(found["frame"][kept])]
     rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}
     rows["time"] = -rows["time"]
-    timed = None if times is None else lambda index: float(times[index])  # only whether rows carry times matters
-    track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=timed, before=rows)
+    track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=times, before=rows)
     return TrackedBack(rows, declined, run.interrupted)
 
 
@@ -432,7 +433,10 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
         keypoints, _ = detect_recording(rec, begin, last, cache=cache)
         found = keypoints.frame[(keypoints.confidence > 0).any(axis=(1, 2))]
         seen = len(found) > 0
-        back_to = None if not seen else int(found.min()) if back_to is None else back_to
+        if not seen:  # nobody here: nothing before to track back to
+            back_to = None
+        elif back_to is None:
+            back_to = int(found.min())
         try:
             return first_pose(rec, model, keypoints, settings=settings), begin, begin if back_to is None else back_to
         except TrackerInputError as error:
