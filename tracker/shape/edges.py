@@ -94,6 +94,12 @@ class FrameRows:
         hidden = drop[self.component] if drop.ndim == 1 else drop[self.camera, self.component]
         return FrameRows(*(getattr(self, field.name)[~hidden] for field in dataclasses.fields(self)))
 
+    def joined(self, other: FrameRows) -> FrameRows:
+        """These rows and ``other``'s (of the same frame, e.g. another cue's) together."""
+        return FrameRows(
+            *(np.concatenate([getattr(self, f.name), getattr(other, f.name)]) for f in dataclasses.fields(self))
+        )
+
 
 def joint_twists(model: Model, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each joint motion's world twist (P, 6), (omega, v) (a world point p of a component it moves goes at

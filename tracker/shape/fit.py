@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from tracker.errors import TrackerInputError
+from tracker.io.readers import WithChroma, half_size
 from tracker.io.recording import Recording
 from tracker.io.recording import frames as frames_of
 from tracker.keypoints.consistency import consistent
@@ -139,17 +140,18 @@ def fit_shape(
     say(f"keypoints: detecting the body in every {step}th frame" if step > 1 else "keypoints: detecting the body")
     keypoints, _ = detect_recording(recording, 0, recording.frame_count, step=step, cache=cache, progress=progress)
     say("silhouettes: which landmarks lie on the person")
-    keypoints, greys, masks = _on_person(recording, keypoints, step, progress)
+    keypoints, coloured, masks = _on_person(recording, keypoints, step, progress)
     found = frame_by_frame(keypoints, recording.cameras, model)
     say(f"landmarks: {len(found.rows)} of {len(keypoints.frame)} frames show the body in two views or more")
     landmarks = fit_landmarks(layout, document, found.points, frames=keypoints.frame[found.rows], progress=progress)
     model = model_from_dict(layout.document(landmarks.x, document))
-    images = [greys[row] for row in np.searchsorted(keypoints.frame, landmarks.frames)]
+    images = [coloured[row] for row in np.searchsorted(keypoints.frame, landmarks.frames)]
     poses, held = [], []
     for k, row in enumerate(progress(np.searchsorted(keypoints.frame, landmarks.frames), total=len(images))):
         marks = consistent(keypoints.rows(slice(row, row + 1)), recording.cameras)[0]
         landmarks_now = (marks.pixels[0], marks.confidence[0])
-        result = snap_to_edges(model, recording.cameras, landmarks.poses[k], images=images[k], keypoints=landmarks_now)
+        greys = [view.image for view in images[k]]
+        result = snap_to_edges(model, recording.cameras, landmarks.poses[k], images=greys, keypoints=landmarks_now)
         poses.append(result.poses)
         held.append(result.status != LOST)
     kept = np.flatnonzero(held)
@@ -197,7 +199,7 @@ def _edge_rounds(
     layout: Layout,
     document: dict,
     start: _State,
-    views: list[tuple[list[np.ndarray], list[PersonMask | None], np.ndarray]],
+    views: list[tuple[list[WithChroma], list[PersonMask | None], np.ndarray]],
     prior: np.ndarray,
     cameras: list,
     progress: Callable[..., Iterable],
@@ -209,14 +211,17 @@ def _edge_rounds(
     for search in progress(RANGES, total=len(RANGES)):
         tracker = Tracker(now.model, cameras, now.poses[0], dataclasses.replace(SNAP, search_range=search))
         scaled = tracker.settings.search_range  # for the image size
+        for k, (pose, (images, _, _)) in enumerate(zip(now.poses, views)):
+            tracker.teach(images, poses=pose, rate=1.0 / (k + 1), search_range=scaled)  # the mean over the frames
         factors = layout.factors(now.x)
         measured = []
         for pose, (images, masks, unseen) in zip(now.poses, views):
             seen_here = tracker.inspect(images, poses=pose, search_range=scaled)
             hidden = unseen | off_person(seen_here, masks, now.model.size)
-            measured.append(
-                frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here).without(hidden)
-            )
+            edges = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here)
+            lines = tracker.inspect_regions(images, poses=pose, search_range=scaled)
+            regions = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=lines)
+            measured.append(edges.joined(regions).without(hidden))
         seen = np.bincount(np.concatenate([frame.component for frame in measured]), minlength=now.model.size)
         rows = held_rows(measured, now.model.size)
         weight = np.concatenate([frame.weight for frame in rows])
@@ -292,14 +297,14 @@ def held_rows(frames: list[FrameRows], components: int) -> list[FrameRows]:
 
 def _on_person(
     recording: Recording, keypoints: Keypoints, step: int, progress: Callable[..., Iterable]
-) -> tuple[Keypoints, list[list[np.ndarray]], list[list[PersonMask | None]]]:
+) -> tuple[Keypoints, list[list[WithChroma]], list[list[PersonMask | None]]]:
     """``keypoints`` with no confidence where a landmark lies off the person's segmentation in its view (kept as
-    detected where the segmenter finds nobody), the grey images (one per camera) of their frames (every one a
-    multiple of ``step``) and the person's mask in each (None where not found).  MediaPipe's native logs are
-    muted the whole time, as while detecting."""
+    detected where the segmenter finds nobody), the grey images with their colour at half size (one per camera) of
+    their frames (every one a multiple of ``step``) and the person's mask in each (None where not found).
+    MediaPipe's native logs are muted the whole time, as while detecting."""
     wanted = {int(frame): row for row, frame in enumerate(keypoints.frame)}
     confidence = keypoints.confidence.copy()
-    greys: list[list[np.ndarray]] = [[] for _ in wanted]
+    coloured: list[list[WithChroma]] = [[] for _ in wanted]
     masks: list[list[PersonMask | None]] = [[] for _ in wanted]
     with ExitStack() as stack:
         stack.enter_context(native_logs_muted())  # the graph's threads log while it runs
@@ -311,12 +316,12 @@ def _on_person(
                 continue
             row = wanted[index]
             for view, image in enumerate(images):
-                greys[row].append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
+                coloured[row].append(WithChroma(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), half_size(image, image.shape)))
                 mask = segmenter.mask(image, keypoints.pixels[row, view])
                 if mask is not None:
                     confidence[row, view] *= mask.covers(keypoints.pixels[row, view])
                 masks[row].append(mask)
-    return dataclasses.replace(keypoints, confidence=confidence), greys, masks
+    return dataclasses.replace(keypoints, confidence=confidence), coloured, masks
 
 
 def off_person(inspection: Inspection, masks: list[PersonMask | None], components: int) -> np.ndarray:

@@ -707,9 +707,10 @@ class Tracker:
             work.eta,
         )
 
-    def learn_colours(self) -> None:
+    def learn_colours(self, rate: float | None = None) -> None:
         """Count the colours along the lines at the current poses into the histograms
-        (:func:`tracker.tracking.region_cue.learn_kernel`) and blend them in."""
+        (:func:`tracker.tracking.region_cue.learn_kernel`) and blend them in at ``rate`` (default
+        ``region_learning_rate``)."""
         st, work = self.settings, self.work
         s = work.samples
         lo, hi, outside, depth = work.limits()
@@ -738,7 +739,7 @@ class Tracker:
             *self.counts.arrays(),
         )
         h = self.histograms
-        h.learn(self.counts, rate=st.region_learning_rate)
+        h.learn(self.counts, rate=st.region_learning_rate if rate is None else rate)
         part_table(
             h.foreground,
             h.background,
@@ -797,6 +798,48 @@ class Tracker:
         A query: it searches in buffers of its own (:meth:`Workspace.spare`) and leaves the tracker as it was (its
         poses, the frame's images, its motion and learnt noise), so a viewer may inspect with the tracker it shows,
         also from a thread of its own while the tracker steps (given ``images`` and ``poses``)."""
+        work = self._inspected(images, smoothed, poses, search_range)
+        n = work.samples.count
+        return self._inspection(work, work.offset[:n].copy(), work.weight[:n].copy())
+
+    def inspect_regions(self, images, *, poses: np.ndarray, search_range: int | None = None) -> Inspection:
+        """:meth:`inspect`, with the region cue's reading of each sample's line in place of its edge: the posterior
+        mean of the outline's offset as the sample's ``offset`` and lambda / max(sigma^2, sigma_min^2) as its
+        ``weight`` (:func:`tracker.tracking.region_cue.region_kernel`); NaN and 0 where no line was read (between
+        every ``region_every``-th sample, where the line's outside is another part, in a view of one colour) and
+        everywhere until colours are learnt (:meth:`teach`).  ``images`` as for :meth:`inspect`, with their colour
+        (:class:`tracker.io.readers.WithChroma`)."""
+        work = self._inspected(images, False, poses, search_range)
+        s, n, st = work.samples, work.samples.count, self.settings
+        offset, weight = np.full(n, np.nan), np.zeros(n)
+        if st.region and work.coloured and self.histograms.ready:
+            self.profile_lines(work)
+            self.add_regions(work, self.still, afresh=True)
+            offset = work.region_mean[:n].copy()
+            read = np.isfinite(offset)
+            variance = np.maximum(work.region_variance[:n][read], st.region_sigma**2)
+            weight[read] = st.region_weight * self.distinct[s.camera[:n][read], s.component[:n][read]] / variance
+        return self._inspection(work, offset, weight)
+
+    def teach(self, images, *, poses: np.ndarray, rate: float, search_range: int | None = None) -> None:
+        """Learn the colours of one frame whose ``poses`` are known (a model fit's frames, docs/fit-model.md), mixed
+        in at ``rate`` (:meth:`learn_colours`); the tracker is left at ``poses``.  ``images``: one grey image per
+        camera with its colour (:class:`tracker.io.readers.WithChroma`); a frame without colour teaches nothing."""
+        work = self.work
+        self.load_images(images)
+        self.poses = self.sampled_poses = self.model.coerce(poses)
+        if not work.coloured:
+            return
+        self.sample(work, self.poses, self.search_range(0) if search_range is None else search_range)
+        work.region_mean[: work.samples.count] = np.nan
+        if self.regions:  # once colours are known, only the lines that agree with the outline teach
+            self.profile_lines(work)
+            self.add_regions(work, self.still, afresh=True)
+        self.learn_colours(rate)
+
+    def _inspected(self, images, smoothed: bool, poses: np.ndarray | None, search_range: int | None) -> Workspace:
+        """A spare workspace in which the outlines at ``poses`` (else the current ones) are sampled and their edges
+        searched in ``images`` (else the frame just tracked) over ``search_range`` (else the last iteration's)."""
         frame = self.work.images
         work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
@@ -805,6 +848,11 @@ class Tracker:
             search_range = self.search_range(self.settings.iterations - 1)
         self.sample(work, self.poses if poses is None else poses, search_range)
         self.measure(work, search_range, self.still)
+        return work
+
+    @staticmethod
+    def _inspection(work: Workspace, offset: np.ndarray, weight: np.ndarray) -> Inspection:
+        """The :class:`Inspection` of the samples in ``work`` with each one's ``offset`` and ``weight``."""
         s, n = work.samples, work.samples.count
         assert work.lo is not None and work.hi is not None  # set by sample()
         return Inspection(
@@ -814,8 +862,8 @@ class Tracker:
             s.normal[:n].copy(),
             work.lo.copy(),
             work.hi.copy(),
-            work.offset[:n].copy(),
-            work.weight[:n].copy(),
+            offset,
+            weight,
             s.quadric[:n].copy(),
             s.point[:n].copy(),
             s.jacobian[:n].copy(),
