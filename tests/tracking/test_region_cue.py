@@ -571,3 +571,15 @@ def test_with_every_second_line_only_the_even_samples_lines_are_read():
     assert mean[0] == alone[2][0]
     np.testing.assert_array_equal(information, alone[3])
     np.testing.assert_array_equal(eta, alone[4])
+
+
+def test_learning_at_a_rate_of_one_replaces_what_was_learnt():
+    """A fit teaches its frames' mean (``rate`` 1 / (k + 1)) in a tracker that may have learnt before: at a rate of
+    1 the frame's colours replace the histogram, scale and all."""
+    h, counts = Histograms.empty(1, 1), Counts.empty(1, 1)
+    for colour, rate in ((3, 0.2), (5, 0.5), (9, 1.0)):
+        counts.colours[0, 0, 0, colour] = 2.0
+        counts.touched[0, 0, 0, 0], counts.touched_count[0, 0, 0] = colour, 1
+        h.learn(counts, rate=rate)
+    foreground, _ = h.frequencies()
+    assert foreground[0, 0, 9] == 1.0 and foreground[0, 0].sum() == 1.0 and h.scale[0, 0, 0] == 1.0

@@ -7,7 +7,10 @@
 2. The joints fitted to them, each frame's pose fitted first (:func:`tracker.shape.landmarks.fit_landmarks`).
 3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
    the frames the edges hold (status not lost) are kept.
-4. One round per search range of :data:`RANGES`: every kept frame's outlines measured at its pose, then one
+4. One round per search range of :data:`RANGES`: the parts' and the room's colours learnt over the kept frames at
+   their poses (:meth:`tracker.tracking.track.Tracker.teach`), every kept frame's outlines measured at its pose by
+   their edges and by the region cue's lines (:meth:`tracker.tracking.track.Tracker.inspect_regions`: where the
+   colours change from the part's to the room's, which a pattern inside the outline does not move), then one
    Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`);
    a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`)
    or where its outline falls off the person's segmentation (:func:`off_person`), and a joint the detector

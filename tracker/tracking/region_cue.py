@@ -682,8 +682,8 @@ def learn_kernel(
 @njit(cache=True, nogil=True)
 def blend_kernel(foreground, background, scale, seen, seen_background, colours, touched, touched_count, rate):
     """Mix a frame's colour counts (:class:`Counts`' arrays, :func:`learn_kernel`) into the histograms in place,
-    each normalised, ``h <- (1 - rate) h + rate h_new``, or taken whole where the histogram was never learnt; the
-    counts are left empty.  The decay goes into the histogram's scale, so only the bins counted are written (and
+    each normalised, ``h <- (1 - rate) h + rate h_new``, or taken whole where the histogram was never learnt or the
+    ``rate`` is 1; the counts are left empty.  The decay goes into the histogram's scale, so only the bins counted are written (and
     every bin once in a few hundred frames, when the scale nears underflow)."""
     for k in range(foreground.shape[0]):
         for i in range(foreground.shape[1]):
@@ -719,10 +719,12 @@ def _blend(histogram, scale, counts, touched, n, rate, learnt):
         total += counts[touched[c]]
     if total <= 0.0:
         return learnt
-    if learnt:
+    if learnt and rate < 1.0:
         scale[0] *= 1.0 - rate
         share = rate / (total * scale[0])
-    else:  # a histogram never learnt is all zero
+    else:  # a histogram never learnt is all zero; at a rate of 1 the counts replace it
+        if learnt:
+            histogram[:] = 0.0
         scale[0] = 1.0
         share = 1.0 / total
     for c in range(n):
