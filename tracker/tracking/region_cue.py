@@ -683,8 +683,8 @@ def learn_kernel(
 def blend_kernel(foreground, background, scale, seen, seen_background, colours, touched, touched_count, rate):
     """Mix a frame's colour counts (:class:`Counts`' arrays, :func:`learn_kernel`) into the histograms in place,
     each normalised, ``h <- (1 - rate) h + rate h_new``, or taken whole where the histogram was never learnt or the
-    ``rate`` is 1; the counts are left empty.  The decay goes into the histogram's scale, so only the bins counted are written (and
-    every bin once in a few hundred frames, when the scale nears underflow)."""
+    ``rate`` is 1; the counts are left empty.  The decay goes into the histogram's scale, so only the bins counted
+    are written (and every bin once in a few hundred frames, when the scale nears underflow)."""
     for k in range(foreground.shape[0]):
         for i in range(foreground.shape[1]):
             seen[k, i] = _blend(
