@@ -217,15 +217,16 @@ def _edge_rounds(
         for k, (pose, (images, _, _)) in enumerate(zip(now.poses, views)):
             tracker.teach(images, poses=pose, rate=1.0 / (k + 1), search_range=scaled)  # the mean over the frames
         factors = layout.factors(now.x)
-        measured = []
+        measured, edged = [], []
         for pose, (images, masks, unseen) in zip(now.poses, views):
             seen_here = tracker.inspect(images, poses=pose, search_range=scaled)
             hidden = unseen | off_person(seen_here, masks, now.model.size)
-            edges = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here)
+            edges = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here).without(hidden)
             lines = tracker.inspect_regions(images, poses=pose, search_range=scaled)
-            regions = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=lines)
-            measured.append(edges.joined(regions).without(hidden))
-        seen = np.bincount(np.concatenate([frame.component for frame in measured]), minlength=now.model.size)
+            regions = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=lines).without(hidden)
+            measured.append(edges.joined(regions))
+            edged.append(edges.component)
+        seen = np.bincount(np.concatenate(edged), minlength=now.model.size)  # a part is measured by its edges
         rows = held_rows(measured, now.model.size)
         weight = np.concatenate([frame.weight for frame in rows])
         residual = float((weight * np.abs(np.concatenate([frame.offset for frame in rows]))).sum() / weight.sum())
