@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 from tracker.errors import TrackerInputError
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from tracker.evaluate import Report
     from tracker.io.recording import Recording
     from tracker.tracking.track import Settings
@@ -141,6 +143,8 @@ def track(
             bar=bar,
         )
     before = back.rows
+    if back.mended is not None:  # the forward pass starts from the first pose as the settling mended it
+        init = back.mended
     if back.interrupted:  # Ctrl-C while tracking back: the frames tracked back are written, and no others
         stop = begin
     # the detector starts up while the kernels load; fed the tracker's own images unless they are differences
@@ -264,11 +268,13 @@ they are held in memory, as smoothed images, until tracked."""
 @dataclasses.dataclass(frozen=True)
 class TrackedBack:
     """What :func:`_tracked_back` did: the rows tracked back, of a poses.npz in frame order (None if none was), the
-    re-seeds its recovery declined, and whether Ctrl-C stopped it."""
+    re-seeds its recovery declined, whether Ctrl-C stopped it, and the poses it passed the first pose's frame with
+    (None if it did not): the first pose as the settling mended it."""
 
     rows: dict[str, Any] | None
     declined: int
     interrupted: bool
+    mended: np.ndarray | None = None
 
 
 def _tracked_back(
@@ -344,12 +350,14 @@ def _tracked_back(
     declined = 0 if recovery is None else recovery.declined
     if found is None or not (found["frame"] < begin).any():
         return TrackedBack(None, declined, run.interrupted)
+    at = np.flatnonzero(found["frame"] == begin)
+    mended = found["poses"][at[0]] if len(at) else None
     kept = np.flatnonzero(found["frame"] < begin)
     kept = kept[np.argsort(found["frame"][kept])]
     rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}
     rows["time"] = -rows["time"]
     track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=times, before=rows)
-    return TrackedBack(rows, declined, run.interrupted)
+    return TrackedBack(rows, declined, run.interrupted, mended)
 
 
 def _preparer(tracker, background, *, keep: bool):
