@@ -538,7 +538,7 @@ def _expected_offsets(inspection, poses, cameras, move):
 
 
 def test_colours_taught_at_known_poses_read_how_far_the_outlines_moved(striped_room):
-    """:meth:`Tracker.teach` at the true poses of five frames, then :meth:`Tracker.inspect_regions` of a later frame
+    """:meth:`Tracker.teach` at the true poses of five frames, then :meth:`Tracker.inspect_cues` of a later frame
     with the body moved 4 cm: the region cue's offsets follow the outlines' move as each view sees it (correlation
     measured 0.70), where the edges' are pulled by the stripes (0.33); before any teaching it reads no line."""
     rec = open_recording(striped_room)
@@ -546,7 +546,7 @@ def test_colours_taught_at_known_poses_read_how_far_the_outlines_moved(striped_r
     truth = load_poses(rec.truth_path)["poses"]
     read = dict(frames(rec, 0, 31, chroma=True))
     tracker = Tracker(model, rec.cameras, truth[0], Settings())
-    untaught = tracker.inspect_regions(read[30], poses=truth[30], search_range=12)
+    _, untaught = tracker.inspect_cues(read[30], poses=truth[30], search_range=12)
     assert not np.isfinite(untaught.offset).any() and not untaught.weight.any()
     for k, index in enumerate(range(0, 20, 4)):
         tracker.teach(read[index], poses=truth[index], rate=1.0 / (k + 1), search_range=12)
@@ -555,10 +555,8 @@ def test_colours_taught_at_known_poses_read_how_far_the_outlines_moved(striped_r
     moved = truth[30].copy()
     moved[:, :3, 3] += move
     correlation, lines = {}, {}
-    for cue, inspection in (
-        ("region", tracker.inspect_regions(read[30], poses=moved, search_range=12)),
-        ("edges", tracker.inspect(read[30], poses=moved, search_range=12)),
-    ):
+    edges, regions = tracker.inspect_cues(read[30], poses=moved, search_range=12)
+    for cue, inspection in (("region", regions), ("edges", edges)):
         read_here = np.isfinite(inspection.offset) & (inspection.weight > 0)
         expected = _expected_offsets(inspection, moved, rec.cameras, move)
         correlation[cue] = np.corrcoef(inspection.offset[read_here], expected[read_here])[0, 1]

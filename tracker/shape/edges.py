@@ -18,7 +18,7 @@ tracker's robust cost with the layout's prior over every sample of every frame:
 
     sum w (row dx + (R_c g) . dt_f - m)^2 + |P (x + dx)|^2,    w = 1 / (c + |m|)
 
-(a region line of the same sample, :meth:`tracker.tracking.track.Tracker.inspect_regions`, gives a row of its own:
+(a region line of the same sample, :meth:`tracker.tracking.track.Tracker.inspect_cues`, gives a row of its own:
 the same row, with the posterior mean of where the colours change as its m and the tracker's weight of it as its w),
 solved as one set of normal equations (:func:`shape_step`); the poses are then fitted to the edges again with the
 new shape (:mod:`tracker.shape.fit`), and so on in turn.
@@ -120,7 +120,7 @@ def frame_rows(
     layout: Layout, model: Model, *, factors: np.ndarray, poses: np.ndarray, inspection: Inspection
 ) -> FrameRows:
     """The rows (module docstring) of the samples in ``inspection`` that found an edge (or whose line the region cue
-    read, :meth:`tracker.tracking.track.Tracker.inspect_regions`), the model at ``poses``
+    read, :meth:`tracker.tracking.track.Tracker.inspect_cues`), the model at ``poses``
     (N, 4, 4) with stretch ``factors`` (N, 3)."""
     found = np.isfinite(inspection.offset) & (inspection.weight > 0)
     seen = Inspection(

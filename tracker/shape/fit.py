@@ -9,7 +9,7 @@
    the frames the edges hold (status not lost) are kept.
 4. One round per search range of :data:`RANGES`: the parts' and the room's colours learnt over the kept frames at
    their poses (:meth:`tracker.tracking.track.Tracker.teach`), every kept frame's outlines measured at its pose by
-   their edges and by the region cue's lines (:meth:`tracker.tracking.track.Tracker.inspect_regions`: where the
+   their edges and by the region cue's lines (:meth:`tracker.tracking.track.Tracker.inspect_cues`: where the
    colours change from the part's to the room's, which a pattern inside the outline does not move), then one
    Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`);
    a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`)
@@ -219,10 +219,9 @@ def _edge_rounds(
         factors = layout.factors(now.x)
         measured, edged = [], []
         for pose, (images, masks, unseen) in zip(now.poses, views):
-            seen_here = tracker.inspect(images, poses=pose, search_range=scaled)
+            seen_here, lines = tracker.inspect_cues(images, poses=pose, search_range=scaled)
             hidden = unseen | off_person(seen_here, masks, now.model.size)
             edges = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here).without(hidden)
-            lines = tracker.inspect_regions(images, poses=pose, search_range=scaled)
             regions = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=lines).without(hidden)
             measured.append(edges.joined(regions))
             edged.append(edges.component)

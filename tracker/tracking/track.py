@@ -802,13 +802,15 @@ class Tracker:
         n = work.samples.count
         return self._inspection(work, work.offset[:n].copy(), work.weight[:n].copy())
 
-    def inspect_regions(self, images, *, poses: np.ndarray, search_range: int | None = None) -> Inspection:
-        """:meth:`inspect`, with the region cue's reading of each sample's line in place of its edge: the posterior
+    def inspect_cues(
+        self, images, *, poses: np.ndarray, search_range: int | None = None
+    ) -> tuple[Inspection, Inspection]:
+        """:meth:`inspect` of ``images`` (with their colour, :class:`tracker.io.readers.WithChroma`) at ``poses``, and
+        from the same sampling the region cue's reading of each sample's line in place of its edge: the posterior
         mean of the outline's offset as the sample's ``offset`` and lambda / max(sigma^2, sigma_min^2) as its
         ``weight`` (:func:`tracker.tracking.region_cue.region_kernel`); NaN and 0 where no line was read (between
         every ``region_every``-th sample, where the line's outside is another part, in a view of one colour) and
-        everywhere until colours are learnt (:meth:`teach`).  ``images`` as for :meth:`inspect`, with their colour
-        (:class:`tracker.io.readers.WithChroma`)."""
+        everywhere until colours are learnt (:meth:`teach`).  Returns (edges, region lines)."""
         work = self._inspected(images, False, poses, search_range)
         s, n, st = work.samples, work.samples.count, self.settings
         offset, weight = np.full(n, np.nan), np.zeros(n)
@@ -819,7 +821,8 @@ class Tracker:
             read = np.isfinite(offset)
             variance = np.maximum(work.region_variance[:n][read], st.region_sigma**2)
             weight[read] = st.region_weight * self.distinct[s.camera[:n][read], s.component[:n][read]] / variance
-        return self._inspection(work, offset, weight)
+        edges = self._inspection(work, work.offset[:n].copy(), work.weight[:n].copy())
+        return edges, self._inspection(work, offset, weight)
 
     def teach(self, images, *, poses: np.ndarray, rate: float, search_range: int | None = None) -> None:
         """Learn the colours of one frame whose ``poses`` are known (a model fit's frames, docs/fit-model.md), mixed
