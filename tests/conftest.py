@@ -73,3 +73,24 @@ def tiny_recording(tmp_path_factory) -> Path:
     save_calibration(rig, folder / "rig.toml")
     synthesize(HUMAN, folder / "rig.toml", folder / "rec", motion="procedural", frames=6, seed=1)
     return folder / "rec"
+
+
+@pytest.fixture
+def person_masks():
+    """Draw a segmenter's perfect person masks: ``draw(model, cameras, poses)`` gives each camera's silhouette of the
+    body at ``poses`` as the detector hands it over (:meth:`tracker.tracking.track.Tracker.see_person`): masks (C, S,
+    S) uint8, 255 on the body, over squares (C, 3: centre x, y and side) that cover the whole image."""
+
+    def draw(model, cameras, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from tracker.raycast import RayCaster
+
+        side = max(max(camera.size) for camera in cameras)
+        masks = np.zeros((len(cameras), side, side), np.uint8)
+        squares = np.zeros((len(cameras), 3))
+        for k, camera in enumerate(cameras):
+            width, height = camera.size
+            masks[k, :height, :width] = np.where(RayCaster(model, camera).cast(poses)[0] >= 0, 255, 0)
+            squares[k] = (side / 2.0 - 0.5, side / 2.0 - 0.5, side)
+        return masks, squares
+
+    return draw

@@ -320,6 +320,30 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
 
 
+@pytest.mark.parametrize("masked", [False, True])
+def test_a_re_seed_on_the_persons_mask_is_taken_though_it_finds_fewer_edges(
+    monkeypatch, masked, true_landmarks, person_masks
+):
+    """Clutter gives a strayed pose edges: the tracked pose moved 30 cm finds 0.8 of its edges, the true re-seed
+    0.7.  The edges alone keep the tracked pose; with the person's masks (the true silhouettes), the re-seed, which
+    lies on them, is taken."""
+    import tracker.keypoints.recovery as recovery_module
+    from tracker.tracking.track import FrameResult, Tracker
+
+    model, truth, recovery = _at_truth()
+    keypoints = true_landmarks(recovery, truth)
+    moved = _moved(truth)
+    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(truth, 0, 1.0, 0.7, 1000))
+    tracker = Tracker(model, recovery.cameras, moved)
+    if masked:
+        tracker.see_person(person_masks(model, recovery.cameras, truth))
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    for _ in range(WINDOW):
+        recovery(tracker, None, keypoints, tracked)
+    assert (recovery.declined, recovery.reseeded) == ((0, 1) if masked else (1, 0))
+    assert np.allclose(tracker.poses, truth if masked else moved, atol=1e-6)
+
+
 def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkeypatch, true_landmarks):
     """A strayed pose whose landmarks cannot be fitted (fitted gives None) is tried once, then not again for
     WINDOW frames, then after twice as long; a lost frame is tried all the same."""

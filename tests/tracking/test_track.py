@@ -537,6 +537,20 @@ def _expected_offsets(inspection, poses, cameras, move):
     return out
 
 
+def test_the_share_of_the_body_on_the_persons_mask(person_masks):
+    """On the demo's frame 0 with every camera's mask the true silhouette, the points along the true pose's bones
+    all lie on it, and those of the pose moved 30 cm sideways mostly off it; without masks the share is 0."""
+    recording = open_recording(DEMO)
+    model, truth = load_model(recording.model_path), load_poses(DEMO / "truth.npz")["poses"][0]
+    moved = truth.copy()
+    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
+    tracker = Tracker(model, recording.cameras, truth)
+    assert tracker.on_person(truth) == 0.0
+    tracker.see_person(person_masks(model, recording.cameras, truth))
+    assert tracker.on_person(truth) > 0.95
+    assert tracker.on_person(moved) < 0.5
+
+
 def test_colours_taught_at_known_poses_read_how_far_the_outlines_moved(striped_room):
     """:meth:`Tracker.teach` at the true poses of five frames, then :meth:`Tracker.inspect_cues` of a later frame
     with the body moved 4 cm: the region cue's offsets follow the outlines' move as each view sees it (correlation

@@ -17,11 +17,14 @@ is fitted to those frames' landmarks, their triangulated points and then their d
 detections), and snapped to the frame's edges as the first pose is
 (:func:`tracker.keypoints.first_pose.snap_to_edges`).
 
-The edges then arbitrate: the tracker starts again from the snapped pose, its status saying so
-(:data:`tracker.status.RESEEDED`), unless its outlines find a smaller share of edges than the
-tracked pose's did (a frame that is not lost). Landmarks that two views agree on can still be
-wrong, the detector following a bystander or reading an arm the other way round; a re-seed fitted
-to them lands off the body's outlines, and the tracked pose is kept (``declined`` counts these). A
+The image then arbitrates: the tracker starts again from the snapped pose, its status saying so
+(:data:`tracker.status.RESEEDED`), unless the image backs it less than the tracked pose (a frame
+that is not lost): the share of its outline samples that found an edge plus the share of its body
+on the person's masks (:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the
+detector gave no mask). Landmarks that two views agree on can still be wrong, the detector following
+a bystander or reading an arm the other way round; a re-seed fitted to them lands off the body's
+outlines and off its masks, and the tracked pose is kept (``declined`` counts these). A pose strayed
+onto clutter finds edges there too, but not the person's mask. A
 try costs the time of many frames (the fit and the snap), so after a declined one, or one whose landmarks cannot
 place the body (which would otherwise be tried again in every frame), the recovery waits
 :data:`WINDOW` frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost
@@ -180,12 +183,18 @@ class Recovery:
         snapped = snap_to_edges(
             self.model, self.cameras, seed, images=images, keypoints=keypoints, settings=tracker.settings, smoothed=True
         )
-        if result.status != LOST and snapped.share < result.share:
+        if result.status != LOST and _backing(tracker, snapped) < _backing(tracker, result):
             self.declined += 1
             self.back_off()
-            return result  # the edges side with the tracked pose (module docstring)
+            return result  # the image sides with the tracked pose (module docstring)
         self.refusals = 0
         self.streak[:] = 0
         tracker.restart(snapped.poses)
         self.reseeded += 1
         return dataclasses.replace(snapped, status=RESEEDED)
+
+
+def _backing(tracker: Tracker, result: FrameResult) -> float:
+    """How well the frame's image backs ``result``: the share of its samples that found an edge, plus the share of
+    its body on the person's masks (:meth:`tracker.tracking.track.Tracker.on_person`; 0 without masks)."""
+    return result.share + tracker.on_person(result.poses)

@@ -65,6 +65,7 @@ CROSSED_VIEWS = 3  # views in which a left/right pair must fit better swapped to
 LEAD_ITERATIONS = 3  # solves of the landmarks alone that move a limb they lead (Tracker.lead)
 PIN = 1e6  # the prior's multiple that holds the components a lead does not move at their predicted poses
 MISFIT_CAP = 0.3  # share of the body's size beyond which a landmark's misfit counts no more (Tracker.landmark_misfit)
+BONE_POINTS = (0.25, 0.5, 0.75)  # where along each bone Tracker.on_person reads the mask
 
 
 @dataclass(frozen=True)
@@ -935,6 +936,25 @@ class Tracker:
         self.pull(*self.keypoints, zone=self.floor, information=scratch[0], eta=scratch[1], misfit=misfit, poses=poses)
         seen = np.isfinite(misfit)
         return float(np.minimum(misfit[seen], MISFIT_CAP).mean()) if seen.any() else 0.0
+
+    def on_person(self, poses: np.ndarray) -> float:
+        """How much of the body at ``poses`` (N, 4, 4) lies on the person's masks of the frame
+        (:meth:`see_person`): the share of the points a quarter, a half and three quarters along every bone (a
+        joint to its child's) that fall where the mask says the person, averaged over the cameras with a mask; 0
+        where none has one.  Outlines find edges on clutter, while the mask is read from the person alone
+        (docs/keypoints.md, "Re-seeds judged by the person's mask")."""
+        child = np.flatnonzero(self.model.parent >= 0)
+        joints = poses[:, :3, 3]
+        ends = joints[self.model.parent[child]], joints[child]
+        points = np.concatenate([(1.0 - s) * ends[0] + s * ends[1] for s in BONE_POINTS])
+        shares = []
+        for k in np.flatnonzero(self.person_trust > 0):
+            w, h, f, _ = self.grid[k]
+            grid = np.rint((self.cameras[k].project(points) - (f - 1) / 2.0) / f)
+            inside = np.isfinite(grid).all(axis=1) & (grid >= 0).all(axis=1) & (grid[:, 0] < w) & (grid[:, 1] < h)
+            u, v = grid[inside].astype(np.int64).T
+            shares.append(np.count_nonzero(self.person[k, v, u] >= 128) / len(points))
+        return float(np.mean(shares)) if shares else 0.0
 
     def carried(self, current: np.ndarray) -> np.ndarray:
         """The frame's prediction under ``constant-velocity`` dynamics: the last frame's poses ``current`` moved on
