@@ -344,6 +344,30 @@ def test_a_re_seed_on_the_persons_mask_is_taken_though_it_finds_fewer_edges(
     assert np.allclose(tracker.poses, truth if masked else moved, atol=1e-6)
 
 
+def test_a_frame_without_the_persons_mask_waits_for_one_with_it(monkeypatch, true_landmarks, person_masks):
+    """Once the detector has given the person's masks, a strayed frame between its detections (landmarks
+    interpolated, no mask) does not try a re-seed that the edges alone would judge: the next frame with masks does."""
+    import tracker.keypoints.recovery as recovery_module
+    from tracker.tracking.track import FrameResult, Tracker
+
+    model, truth, recovery = _at_truth()
+    keypoints = true_landmarks(recovery, truth)
+    moved = _moved(truth)
+    tries = []
+    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
+    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
+    tracker = Tracker(model, recovery.cameras, moved)
+    masks = person_masks(model, recovery.cameras, truth)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    counts = []
+    for masked in [True] + [False] * WINDOW + [True]:
+        tracker.see_person(masks if masked else None)
+        recovery(tracker, None, keypoints, tracked)
+        counts.append(len(tries))
+    assert counts == [0] * (WINDOW + 1) + [1]
+    assert recovery.reseeded == 1 and np.allclose(tracker.poses, truth, atol=1e-6)
+
+
 def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkeypatch, true_landmarks):
     """A strayed pose whose landmarks cannot be fitted (fitted gives None) is tried once, then not again for
     WINDOW frames, then after twice as long; a lost frame is tried all the same."""

@@ -24,7 +24,9 @@ on the person's masks (:meth:`tracker.tracking.track.Tracker.on_person`; the edg
 detector gave no mask). Landmarks that two views agree on can still be wrong, the detector following
 a bystander or reading an arm the other way round; a re-seed fitted to them lands off the body's
 outlines and off its masks, and the tracked pose is kept (``declined`` counts these). A pose strayed
-onto clutter finds edges there too, but not the person's mask. A
+onto clutter finds edges there too, but not the person's mask. Once the detector has given masks, a
+frame between its detections (landmarks interpolated, no mask) that is not lost leaves the try to the
+next frame with them. A
 try costs the time of many frames (the fit and the snap), so after a declined one, or one whose landmarks cannot
 place the body (which would otherwise be tried again in every frame), the recovery waits
 :data:`WINDOW` frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost
@@ -100,6 +102,7 @@ class Recovery:
     wait: int = 0  # frames to go before the next re-seed of a frame that is not lost
     recent: list = dataclasses.field(default_factory=list)  # the last frames' (pixels, confidence), newest first
     pending: bool = False  # the pose strayed, or was lost, in a frame before there were WINDOW frames to fit to
+    masked: bool = False  # the detector has given the person's masks: a frame without them waits for one with them
 
     def __post_init__(self) -> None:
         self.component, self.point = cue_points(self.model)
@@ -169,7 +172,9 @@ class Recovery:
         self.streak = np.where(each > LANDMARK_STRAYED + tracker.noise.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
         strayed = body > limit or bool((self.streak >= PERSISTENCE).any()) or self.pending
-        if result.status != LOST and (self.wait > 0 or not strayed):
+        unmasked = not (tracker.person_trust > 0).any()
+        self.masked |= not unmasked
+        if result.status != LOST and (self.wait > 0 or not strayed or (self.masked and unmasked)):
             self.wait = max(self.wait - 1, 0)
             return result
         if len(self.recent) < WINDOW and len(self.cameras) >= 2:
