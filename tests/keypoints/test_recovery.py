@@ -114,6 +114,21 @@ def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tr
     assert error.max() < 0.015  # measured: 4-9 mm in frames 5..8 (19-29 mm when it went on from the first pose fitted)
 
 
+def test_the_forward_pass_starts_from_the_settled_first_pose_only_where_it_lies_nearer_the_landmarks(true_landmarks):
+    """The settling before tracking back can stray: the first frame's landmarks then choose the fitted first pose.
+    With the demo's true landmarks, a settled pose with the right forearm and hand 80 cm off gives way to the truth
+    as fitted, and the truth as settled is kept against that pose as fitted."""
+    from tracker.apps.track import nearer_landmarks
+    from tracker.tracking.track import Tracker
+
+    model, truth, recovery = _at_truth()
+    keypoints = true_landmarks(recovery, truth)
+    strayed = _swung_arm(model, truth)
+    tracker = Tracker(model, recovery.cameras, truth)
+    assert nearer_landmarks(tracker, strayed, fitted=truth, keypoints=keypoints) is None
+    assert nearer_landmarks(tracker, truth, fitted=strayed, keypoints=keypoints) is truth
+
+
 @pytest.mark.parametrize(("at", "kept"), [(0, [2, 3, 4]), (5, [])])
 def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(at, kept, demo_pngs, tmp_path, capsys, monkeypatch):
     """Ctrl-C while the frames before the first pose (frame 5) are tracked back, two at a time: as the last two are

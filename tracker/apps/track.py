@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
     from tracker.evaluate import Report
     from tracker.io.recording import Recording
-    from tracker.tracking.track import Settings
+    from tracker.tracking.track import Settings, Tracker
     from tracker.viewer.review import Review
 
 Bar = Callable[..., Callable[..., Any]]
@@ -277,6 +277,18 @@ class TrackedBack:
     mended: np.ndarray | None = None
 
 
+def nearer_landmarks(
+    tracker: Tracker, mended: np.ndarray, *, fitted: np.ndarray, keypoints: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray | None:
+    """``mended``, the first pose as the settling before tracking back left it, unless the first frame's landmarks
+    ``keypoints`` (pixels, confidence) lie nearer the ``fitted`` first pose (:meth:`tracker.tracking.track.Tracker.
+    landmark_misfit`): then None, and the forward pass starts from the fitted pose.  The settling can stray, a limb
+    taken off to clutter while the trunk holds (docs/keypoints.md, "Automatic first pose")."""
+    if tracker.landmark_misfit(mended, keypoints) > tracker.landmark_misfit(fitted, keypoints):
+        return None
+    return mended
+
+
 def _tracked_back(
     rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, bar
 ) -> TrackedBack:
@@ -342,6 +354,7 @@ def _tracked_back(
             if not run.interrupted:
                 tracker.restart(tracker.poses)  # the motion so far points the other way
                 run = tracked(backwards(), Path(folder) / "poses.npz", settled - 1 - first)
+            judged = None if stream is None or run.interrupted else stream.get(begin)
         finally:
             if stream is not None:
                 stream.close()
@@ -352,6 +365,8 @@ def _tracked_back(
         return TrackedBack(None, declined, run.interrupted)
     at = np.flatnonzero(found["frame"] == begin)
     mended = found["poses"][at[0]] if len(at) else None
+    if mended is not None and judged is not None:
+        mended = nearer_landmarks(tracker, mended, fitted=init, keypoints=judged)
     kept = np.flatnonzero(found["frame"] < begin)
     kept = kept[np.argsort(found["frame"][kept])]
     rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}

@@ -925,15 +925,20 @@ class Tracker:
             misfit,
         )
 
-    def landmark_misfit(self, poses: np.ndarray) -> float:
-        """How far the frame's landmarks lie off ``poses`` (N, 4, 4): the mean over the usable landmarks of every
-        view of their image distance as a share of the body's size there
-        (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`), each counted up to :data:`MISFIT_CAP` (a wrong
-        detection weighs no more than a limb that far off); 0 without any."""
-        assert self.keypoints is not None  # the frame's (step)
+    def landmark_misfit(self, poses: np.ndarray, keypoints: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+        """How far the frame's landmarks (or ``keypoints``: pixels (C, 33, 2), confidence (C, 33)) lie off ``poses``
+        (N, 4, 4): the mean over the usable landmarks of every view of their image distance as a share of the
+        body's size there (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`), each counted up to
+        :data:`MISFIT_CAP` (a wrong detection weighs no more than a limb that far off); 0 without any."""
+        if keypoints is None:
+            assert self.keypoints is not None  # the frame's (step)
+            keypoints = self.keypoints
+        pixels, confidence = (np.ascontiguousarray(array, np.float64) for array in keypoints)
         work, misfit = self.work, np.empty_like(self.work.misfit)
         scratch = (np.zeros_like(work.information), np.zeros_like(work.eta))
-        self.pull(*self.keypoints, zone=self.floor, information=scratch[0], eta=scratch[1], misfit=misfit, poses=poses)
+        self.pull(
+            pixels, confidence, zone=self.floor, information=scratch[0], eta=scratch[1], misfit=misfit, poses=poses
+        )
         seen = np.isfinite(misfit)
         return float(np.minimum(misfit[seen], MISFIT_CAP).mean()) if seen.any() else 0.0
 
