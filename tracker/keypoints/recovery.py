@@ -18,19 +18,17 @@ detections), and snapped to the frame's edges as the first pose is
 (:func:`tracker.keypoints.first_pose.snap_to_edges`).
 
 The image then arbitrates: the tracker starts again from the snapped pose, its status saying so
-(:data:`tracker.status.RESEEDED`), unless the image backs it less than the tracked pose (a frame
-that is not lost): the share of its outline samples that found an edge plus the share of its body
-on the person's masks (:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the
-detector gave no mask). Landmarks that two views agree on can still be wrong, the detector following
-a bystander or reading an arm the other way round; a re-seed fitted to them lands off the body's
-outlines and off its masks, and the tracked pose is kept (``declined`` counts these). A pose strayed
-onto clutter finds edges there too, but not the person's mask. Once the detector has given masks, a
-frame between its detections (landmarks interpolated, no mask) that is not lost leaves the try to the
-next frame with them. A
-try costs the time of many frames (the fit and the snap), so after a declined one, or one whose landmarks cannot
-place the body (which would otherwise be tried again in every frame), the recovery waits
-:data:`WINDOW` frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost
-frame is always tried.
+(:data:`tracker.status.RESEEDED`), unless the image backs it less than the tracked pose (a frame that is not
+lost): the share of its outline samples that found an edge plus the share of its body on the person's masks
+(:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the detector gave no mask). Landmarks
+that two views agree on can still be wrong, the detector following a bystander or reading an arm the other way
+round; a re-seed fitted to them lands off the body's outlines and off its masks, and the tracked pose is kept
+(``declined`` counts these). A pose strayed onto clutter finds edges there too, but not the person's mask. Once
+the detector has given masks, a frame between its detections (landmarks interpolated, no mask) that is not lost
+leaves the try to the next frame with them. A try costs the time of many frames (the fit and the snap), so after
+a declined one, or one whose landmarks cannot place the body (which would otherwise be tried again in every
+frame), the recovery waits :data:`WINDOW` frames before the next, twice as long after two in a row, and so on
+(:data:`BACKOFF`); a lost frame is always tried.
 
 Image distances, not triangulated ones: two views triangulate a detector's few pixels of noise into
 centimetres of depth, while the share of the body's size reads the same in any view; the mean over
