@@ -359,6 +359,29 @@ def test_a_re_seed_on_the_persons_mask_is_taken_though_it_finds_fewer_edges(
     assert np.allclose(tracker.poses, truth if masked else moved, atol=1e-6)
 
 
+def test_a_snap_that_takes_the_re_seed_off_the_persons_mask_gives_way_to_the_seed(
+    monkeypatch, true_landmarks, person_masks
+):
+    """The re-seed fitted to the landmarks lies on the person (the truth), but its snap is dragged 30 cm off onto
+    clutter, where it finds many edges: the seed as fitted, judged by its own edges, replaces the tracked pose."""
+    import tracker.keypoints.recovery as recovery_module
+    from tracker.tracking.track import FrameResult, Tracker
+
+    model, truth, recovery = _at_truth()
+    keypoints = true_landmarks(recovery, truth)
+    moved = _moved(truth)
+    monkeypatch.setattr(recovery, "fitted", lambda start: truth)
+    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(moved, 0, 1.0, 0.9, 1000))
+    tracker = Tracker(model, recovery.cameras, _swung_arm(model, truth))
+    tracker.see_person(person_masks(model, recovery.cameras, truth))
+    images = [tracker.smooth(image) for image in next(iter(frames(open_recording(DEMO), 0, 1)))[1]]
+    tracked = FrameResult(_swung_arm(model, truth), 0, 1.0, 0.8, 1000)
+    for _ in range(PERSISTENCE):
+        result = recovery(tracker, images, keypoints, tracked)
+    assert recovery.reseeded == 1 and result.status == RESEEDED and result.share > 0.8
+    assert np.allclose(tracker.poses, truth, atol=1e-6)
+
+
 def test_a_frame_without_the_persons_mask_waits_for_one_with_it(monkeypatch, true_landmarks, person_masks):
     """Once the detector has given the person's masks, a strayed frame between its detections (landmarks
     interpolated, no mask) does not try a re-seed that the edges alone would judge: the next frame with masks does."""

@@ -537,6 +537,22 @@ def _expected_offsets(inspection, poses, cameras, move):
     return out
 
 
+def test_a_pose_is_judged_by_its_edges_without_moving():
+    """On the demo's frame 0, the true pose judged as it stands finds most of its outlines' edges (status tracked),
+    the pose moved 30 cm sideways far fewer; the judge moves neither the poses given nor the tracker's."""
+    recording = open_recording(DEMO)
+    model, truth = load_model(recording.model_path), load_poses(DEMO / "truth.npz")["poses"][0]
+    images = next(iter(frames(recording, 0, 1)))[1]
+    moved = truth.copy()
+    moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
+    tracker = Tracker(model, recording.cameras, moved)
+    before = tracker.poses.copy()
+    at_truth, at_moved = tracker.judged(images, poses=truth), tracker.judged(images, poses=moved)
+    assert at_truth.status == TRACKED and at_truth.share > 0.8 and at_truth.residual < 1.5
+    assert at_moved.share < at_truth.share - 0.2
+    assert np.array_equal(at_truth.poses, truth) and np.array_equal(tracker.poses, before)
+
+
 def test_the_share_of_the_body_on_the_persons_mask(person_masks):
     """On the demo's frame 0 with every camera's mask the true silhouette, the points along the true pose's bones
     all lie on it, and those of the pose moved 30 cm sideways mostly off it; without masks the share is 0."""

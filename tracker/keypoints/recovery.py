@@ -23,12 +23,14 @@ lost): the share of its outline samples that found an edge plus the share of its
 (:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the detector gave no mask). Landmarks
 that two views agree on can still be wrong, the detector following a bystander or reading an arm the other way
 round; a re-seed fitted to them lands off the body's outlines and off its masks, and the tracked pose is kept
-(``declined`` counts these). A pose strayed onto clutter finds edges there too, but not the person's mask. Once
-the detector has given masks, a frame between its detections (landmarks interpolated, no mask) that is not lost
-leaves the try to the next frame with them. A try costs the time of many frames (the fit and the snap), so after
-a declined one, or one whose landmarks cannot place the body (which would otherwise be tried again in every
-frame), the recovery waits :data:`WINDOW` frames before the next, twice as long after two in a row, and so on
-(:data:`BACKOFF`); a lost frame is always tried.
+(``declined`` counts these). A pose strayed onto clutter finds edges there too, but not the person's mask; and
+where the snap takes the seed off the mask (a table's edges drag it), the seed as fitted is judged by its own
+edges instead (:meth:`tracker.tracking.track.Tracker.judged`). Once the detector has given masks, a frame
+between its detections (landmarks interpolated, no mask) that is not lost leaves the try to the next frame with
+them. A try costs the time of many frames (the fit and the snap), so after a declined one, or one whose
+landmarks cannot place the body (which would otherwise be tried again in every frame), the recovery waits
+:data:`WINDOW` frames before the next, twice as long after two in a row, and so on (:data:`BACKOFF`); a lost
+frame is always tried.
 
 Image distances, not triangulated ones: two views triangulate a detector's few pixels of noise into
 centimetres of depth, while the share of the body's size reads the same in any view; the mean over
@@ -186,6 +188,8 @@ class Recovery:
         snapped = snap_to_edges(
             self.model, self.cameras, seed, images=images, keypoints=keypoints, settings=tracker.settings, smoothed=True
         )
+        if tracker.on_person(seed) > tracker.on_person(snapped.poses):  # the snap took it off the person
+            snapped = tracker.judged(images, poses=seed, smoothed=True)
         if result.status != LOST and _backing(tracker, snapped) < _backing(tracker, result):
             self.declined += 1
             self.back_off()

@@ -803,6 +803,19 @@ class Tracker:
         n = work.samples.count
         return self._inspection(work, work.offset[:n].copy(), work.weight[:n].copy())
 
+    def judged(self, images, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
+        """The frame's result at ``poses`` as they stand, without moving them: one measurement of their outlines in
+        ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
+        edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
+        work = self._inspected(images, smoothed, poses, None)
+        n = work.samples.count
+        offset, weight = work.offset[:n], work.weight[:n]
+        found = np.isfinite(offset)
+        share = float(found.mean()) if n else 0.0
+        total = float(weight[found].sum())
+        residual = float((weight[found] * np.abs(offset[found])).sum() / total) if total > 0 else float("inf")
+        return FrameResult(np.array(poses, copy=True), self.status(share, residual), residual, share, n)
+
     def inspect_cues(
         self, images, *, poses: np.ndarray, search_range: int | None = None
     ) -> tuple[Inspection, Inspection]:
