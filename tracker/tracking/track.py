@@ -573,7 +573,7 @@ class Tracker:
         else:
             twist = motion_since(self.sampled_poses, self.poses)
         started = time.perf_counter()
-        visible, found, sum_wm, sum_w = self.measure(work, search_range, twist)
+        stats = self.measure(work, search_range, twist)
         if self.keypoints is not None:
             self.add_keypoints(*self.keypoints)
         started = work.times.add("measure", started)
@@ -584,8 +584,7 @@ class Tracker:
             started = work.times.add("region", started)
         self.poses = self.update(self.poses)
         work.times.add("solve", started)
-        residual = sum_wm / sum_w if sum_w > 0 else float("nan")
-        return Statistics(visible, found, residual)
+        return stats
 
     def update(self, poses: np.ndarray) -> np.ndarray:
         """Prior, tree solve, step and coercion (:func:`update_kernel`) with the information gathered."""
@@ -757,11 +756,11 @@ class Tracker:
         )
         work.times.add("region", started)
 
-    def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> tuple[int, int, float, float]:
+    def measure(self, work: Workspace, search_range: int, twist: np.ndarray) -> Statistics:
         """Search the edge of every sample in ``work`` (moved by ``twist`` since sampling) in its images and fill
-        its C_i, eta_i (measure_kernel)."""
+        its C_i, eta_i (measure_kernel); the pass's counts and robust mean offset (NaN where nothing was found)."""
         s, st = work.samples, self.settings
-        return measure_kernel(
+        visible, found, sum_wm, sum_w = measure_kernel(
             work.images,
             self.search_size,
             self.reduction,
@@ -783,6 +782,7 @@ class Tracker:
             work.lo,
             work.hi,
         )
+        return Statistics(visible, found, sum_wm / sum_w if sum_w > 0 else float("nan"))
 
     def inspect(
         self,
@@ -799,7 +799,7 @@ class Tracker:
         A query: it searches in buffers of its own (:meth:`Workspace.spare`) and leaves the tracker as it was (its
         poses, the frame's images, its motion and learnt noise), so a viewer may inspect with the tracker it shows,
         also from a thread of its own while the tracker steps (given ``images`` and ``poses``)."""
-        work = self._inspected(images, smoothed, poses, search_range)
+        work, _ = self._inspected(images, smoothed, poses, search_range)
         n = work.samples.count
         return self._inspection(work, work.offset[:n].copy(), work.weight[:n].copy())
 
@@ -807,14 +807,9 @@ class Tracker:
         """The frame's result at ``poses`` as they stand, without moving them: one measurement of their outlines in
         ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
         edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
-        work = self._inspected(images, smoothed, poses, None)
-        n = work.samples.count
-        offset, weight = work.offset[:n], work.weight[:n]
-        found = np.isfinite(offset)
-        share = float(found.mean()) if n else 0.0
-        total = float(weight[found].sum())
-        residual = float((weight[found] * np.abs(offset[found])).sum() / total) if total > 0 else float("inf")
-        return FrameResult(np.array(poses, copy=True), self.status(share, residual), residual, share, n)
+        _, stats = self._inspected(images, smoothed, poses, None)
+        share, status = self.judge(stats)
+        return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible)
 
     def inspect_cues(
         self, images, *, poses: np.ndarray, search_range: int | None = None
@@ -825,7 +820,7 @@ class Tracker:
         ``weight`` (:func:`tracker.tracking.region_cue.region_kernel`); NaN and 0 where no line was read (between
         every ``region_every``-th sample, where the line's outside is another part, in a view of one colour) and
         everywhere until colours are learnt (:meth:`teach`).  Returns (edges, region lines)."""
-        work = self._inspected(images, False, poses, search_range)
+        work, _ = self._inspected(images, False, poses, search_range)
         s, n, st = work.samples, work.samples.count, self.settings
         offset, weight = np.full(n, np.nan), np.zeros(n)
         if st.region and work.coloured and self.histograms.ready:
@@ -854,9 +849,12 @@ class Tracker:
             self.add_regions(work, self.still, afresh=True)
         self.learn_colours(rate)
 
-    def _inspected(self, images, smoothed: bool, poses: np.ndarray | None, search_range: int | None) -> Workspace:
+    def _inspected(
+        self, images, smoothed: bool, poses: np.ndarray | None, search_range: int | None
+    ) -> tuple[Workspace, Statistics]:
         """A spare workspace in which the outlines at ``poses`` (else the current ones) are sampled and their edges
-        searched in ``images`` (else the frame just tracked) over ``search_range`` (else the last iteration's)."""
+        searched in ``images`` (else the frame just tracked) over ``search_range`` (else the last iteration's), and
+        that search's statistics."""
         frame = self.work.images
         work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
@@ -864,8 +862,7 @@ class Tracker:
         if search_range is None:
             search_range = self.search_range(self.settings.iterations - 1)
         self.sample(work, self.poses if poses is None else poses, search_range)
-        self.measure(work, search_range, self.still)
-        return work
+        return work, self.measure(work, search_range, self.still)
 
     @staticmethod
     def _inspection(work: Workspace, offset: np.ndarray, weight: np.ndarray) -> Inspection:
@@ -1139,8 +1136,7 @@ class Tracker:
         work = self.work
         edge_misfit = component_misfits(work.offset, work.samples.component, work.samples.count, self.model.size)
         self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
-        share = stats.found / stats.visible if stats.visible else 0.0
-        status = self.status(share, stats.residual)
+        share, status = self.judge(stats)
         if dragged and status == TRACKED:
             status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
         if st.region and work.coloured and status != LOST and not dragged:
@@ -1197,6 +1193,12 @@ class Tracker:
         information = motion_prior.block_information(data, self.poses) / noise_scale[:, None, None, None]
         kalman = motion_prior.correct(motion.kalman, self.poses, information, p_xx_inv=inverse)
         self.motion = dataclasses.replace(motion, kalman=kalman, noise_scale=noise_scale)
+
+    def judge(self, stats: Statistics) -> tuple[float, int]:
+        """The share of the samples that found an edge in the measurement ``stats`` and the frame status it and
+        their residual give (:meth:`status`)."""
+        share = stats.found / stats.visible if stats.visible else 0.0
+        return share, self.status(share, stats.residual)
 
     def status(self, share: float, residual: float) -> int:
         st = self.settings
