@@ -3,6 +3,7 @@ the left/right swap test, and one solve that pulls a far-off body back onto perf
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import pytest
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
-from tracker.model import load_model
+from tracker.model import load_model, model_from_dict
 from tracker.tracking.keypoint_cue import (
     LANDMARKS,
     anchors,
@@ -21,6 +22,7 @@ from tracker.tracking.keypoint_cue import (
     limbs,
     placers,
     project_point,
+    trunk,
 )
 from tracker.tracking.outline import Rig
 from tracker.tracking.track import Settings, Tracker
@@ -70,6 +72,26 @@ def test_landmarks_map_onto_the_human_model():
     assert component[LANDMARKS.index("right_shoulder")] == model.names.index("upperarm_r")
     assert (component >= 0).sum() == 12 and component[LANDMARKS.index("nose")] == -1
     assert len(pairs) == 15 and not point.any()  # every left_* with its right_* (the mouth corners are not)
+
+
+def test_the_trunk_is_the_joint_between_the_hips_and_the_shoulders():
+    """human.toml's torso joint (with the pelvis); a model whose shoulders hang from a chest on a waist gives both
+    of its joints; a model without shoulders none."""
+    model = load_model(ROOT / "models" / "human.toml")
+    component = landmark_points(model, LANDMARKS)[0]
+    assert [model.names[i] for i in trunk(model, component)] == ["torso"]
+    data = tomllib.loads((ROOT / "models" / "human.toml").read_text())
+    torso = next(c for c in data["component"] if c["name"] == "torso")
+    waist = dict(torso, name="waist", quadric=torso["quadric"][:1])
+    data["component"].insert(1, waist)
+    for c in data["component"]:
+        if c["name"] == "torso":
+            c["parent"] = "waist"
+    chest = model_from_dict(data)
+    assert [chest.names[i] for i in trunk(chest, landmark_points(chest, LANDMARKS)[0])] == ["waist", "torso"]
+    kept = [c for c in data["component"] if not c["name"].startswith(("upperarm", "forearm", "hand"))]
+    armless = model_from_dict({**data, "component": kept})
+    assert len(trunk(armless, landmark_points(armless, LANDMARKS)[0])) == 0
 
 
 @pytest.fixture(scope="module")
@@ -196,10 +218,10 @@ def test_landmarks_within_the_detector_noise_are_not_used_and_further_ones_pull_
 
 
 def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
-    """The demo from a first pose 15 cm and 20 degrees off (about the root): the edges alone stay lost
-    (measured: MPJPE 288 mm over frames 0-9), while the same tracker fed perfect landmarks (the true joint
-    centres' images, 12 per camera) in the same IRLS is back within millimetres by frame 10 (measured:
-    19 mm over frames 0-9, 3.3 mm after)."""
+    """The demo from a first pose 15 cm and 20 degrees off (about the root): the edges alone stay off (measured:
+    MPJPE 60-71 mm in every frame of 10-19 with the trunk held near rest, 288 mm over frames 0-9 without), while
+    the same tracker fed perfect landmarks (the true joint centres' images, 12 per camera) in the same IRLS is back
+    within millimetres by frame 10 (measured: 19 mm over frames 0-9, 5-6 mm after)."""
     import itertools
 
     from tracker.io.posefile import load_pose_file
@@ -233,7 +255,7 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
         return 1000 * np.linalg.norm(joint_centres(np.array(poses)) - truth["joints"][:count], axis=2).mean(axis=1)
 
     alone, fused = mpjpe(False), mpjpe(True)
-    assert alone[:10].mean() > 100.0
+    assert alone[10:].min() > 50.0
     assert fused[10:].max() < 10.0 and fused[:10].mean() < 50.0, fused.round(1)
 
 

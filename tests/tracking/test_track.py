@@ -18,7 +18,7 @@ from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synthetic.synth import Staging, synthesize
-from tracker.tracking.keypoint_cue import cue_points, landmark_world
+from tracker.tracking.keypoint_cue import TRUNK_TURN, cue_points, landmark_world
 from tracker.tracking.track import Settings, Tracker, motion_since, smoother
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -535,6 +535,42 @@ def _expected_offsets(inspection, poses, cameras, move):
         shift = camera.project(points[mine] - move) - camera.project(points[mine])
         out[mine] = np.einsum("si,si->s", shift, inspection.normal[mine])
     return out
+
+
+def test_the_trunk_hold_turns_the_pelvis_back_where_the_trunk_folds_and_the_image_says_nothing():
+    """The pelvis pitched 0.8 rad from the true pose (the torso's joint turned 0.94 rad from rest): the hold's term
+    alone solved (C alpha = eta) turns the pelvis exactly onto the rotation that leaves the joint turned TRUNK_TURN
+    the same way; the true pose (0.24 rad) gets no term.  In frames without a single edge the hold brings the joint
+    back to about TRUNK_TURN against the pelvis's motion prior, and without it the joint stays folded."""
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    true = load_poses(DEMO / "truth.npz")["poses"][0]
+    pitched = model.coerce(np.concatenate([[true[0] @ se3.exp(np.array([0.0, 0.0, 0.0, 0.8, 0.0, 0.0]))], true[1:]]))
+    torso = model.index("torso")
+    rest = model.rest[torso, :3, :3]
+
+    def bend(poses: np.ndarray) -> np.ndarray:
+        return se3.log_so3(np.ascontiguousarray(rest.T @ poses[0, :3, :3].T @ poses[torso, :3, :3]))
+
+    tracker = Tracker(model, rec.cameras, pitched, Settings(dynamics="none", trunk_hold=100.0))
+    for poses, held in ((true, False), (pitched, True)):
+        information, eta = np.zeros((model.size, 6, 6)), np.zeros((model.size, 6))
+        tracker.hold_trunk(information, eta, poses)
+        assert information.any() == held and eta.any() == held
+    turn = np.linalg.solve(information[0, 3:, 3:], eta[0, 3:])
+    held_back = pitched.copy()
+    held_back[0] = pitched[0] @ se3.exp(np.concatenate([np.zeros(3), turn]))
+    np.testing.assert_allclose(bend(held_back), bend(pitched) * TRUNK_TURN / np.linalg.norm(bend(pitched)), atol=1e-12)
+    blank = [np.zeros(camera.size[::-1], np.uint8) for camera in rec.cameras]
+
+    def folded(hold: float) -> float:
+        tracker = Tracker(model, rec.cameras, pitched, Settings(dynamics="none", trunk_hold=hold))
+        for _ in range(3):
+            tracker.step(blank)
+        return float(np.linalg.norm(bend(tracker.poses)))
+
+    assert np.linalg.norm(bend(true)) < TRUNK_TURN < 0.9 < np.linalg.norm(bend(pitched))
+    assert folded(0.0) > 0.9 and folded(100.0) < TRUNK_TURN + 0.05
 
 
 def test_a_pose_is_judged_by_its_edges_without_moving():

@@ -31,7 +31,7 @@ from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.keypoints.triangulation import middle
 from tracker.model import Model
-from tracker.tracking.keypoint_cue import LANDMARKS, anchors, landmark_world, left_right_pairs
+from tracker.tracking.keypoint_cue import LANDMARKS, TRUNK_TURN, anchors, landmark_world, left_right_pairs, trunk
 
 ROBUST = 0.03
 """Misfit (metres, per coordinate) beyond which a world point's pull grows linearly (soft L1)."""
@@ -81,8 +81,9 @@ def root_from_landmarks(model: Model, points: np.ndarray) -> np.ndarray:
 class Body:
     """A model's joint space, once: where each component's parameters start (N + 1,) (6 for the root and for a
     free joint, 3 for a ball, 1 for a hinge or slide, 0 when fixed), their ``lower`` and ``upper`` bounds (a
-    hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation, the landmarks'
-    ``component`` (33,) and ``anchor`` (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the
+    hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation and that rotation,
+    ``turns`` (B,) (:data:`TRUNK_TURN` at most for the trunk's), the landmarks' ``component`` (33,) and ``anchor``
+    (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the
     Jacobians ``drives`` (33, P), whether a parameter moves a landmark: it turns or slides the joint of the
     landmark's component or of one above it."""
 
@@ -94,6 +95,7 @@ class Body:
     component: np.ndarray
     anchor: np.ndarray
     drives: np.ndarray
+    turns: np.ndarray
 
     @staticmethod
     def of(model: Model) -> Body:
@@ -103,16 +105,18 @@ class Body:
         lower, upper = np.full(offsets[-1], -np.inf), np.full(offsets[-1], np.inf)
         for i in np.flatnonzero(np.isin(model.joint_type, (HINGE, SLIDE))):
             lower[offsets[i]], upper[offsets[i]] = model.lower[i], model.upper[i]
-        balls = np.flatnonzero((model.joint_type == BALL) & np.isfinite(model.upper))
+        component, anchor = anchors(model)
+        held = np.isin(np.arange(model.size), trunk(model, component))
+        balls = np.flatnonzero((model.joint_type == BALL) & (np.isfinite(model.upper) | held))
+        turns = np.where(held[balls], np.minimum(model.upper[balls], TRUNK_TURN), model.upper[balls])
         moves = np.eye(model.size, dtype=bool)  # moves[j, i]: component j's joint moves component i
         for below in range(model.size):
             j = int(model.parent[below])
             while j >= 0:
                 moves[j, below], j = True, int(model.parent[j])
-        component, anchor = anchors(model)
         owner = np.repeat(np.arange(model.size), counts)  # the component whose joint each parameter moves
         drives = moves[owner][:, np.maximum(component, 0)].T & (component >= 0)[:, None]
-        return Body(model, offsets, lower, upper, balls, component, anchor, drives)
+        return Body(model, offsets, lower, upper, balls, component, anchor, drives, turns)
 
     def posed(self, root: np.ndarray, parameters: np.ndarray) -> np.ndarray:
         """World poses (N, 4, 4) of joint-space ``parameters``: the root at ``root`` moved by (dt, dr),
@@ -158,10 +162,11 @@ class Body:
 
     def penalties(self, parameters: np.ndarray) -> np.ndarray:
         """The residuals (metres) that hold the joints: every joint parameter's pull to rest, :data:`REST_WEIGHT`
-        times it, and every ball's turn beyond its largest rotation, :data:`LIMIT_WEIGHT` times it."""
-        offsets, upper = self.offsets, self.model.upper
+        times it, and every ball's turn beyond its largest rotation (``turns``), :data:`LIMIT_WEIGHT` times it."""
+        offsets = self.offsets
         beyond = [
-            max(0.0, float(np.linalg.norm(parameters[offsets[i] : offsets[i + 1]])) - upper[i]) for i in self.balls
+            max(0.0, float(np.linalg.norm(parameters[offsets[i] : offsets[i + 1]])) - turn)
+            for i, turn in zip(self.balls, self.turns)
         ]
         return np.concatenate([REST_WEIGHT * parameters[6:], LIMIT_WEIGHT * np.array(beyond)])
 
@@ -212,14 +217,14 @@ class Body:
 
     def penalty_jacobian(self, parameters: np.ndarray) -> np.ndarray:
         """d(:meth:`penalties`)/d(parameters) (R, P)."""
-        offsets, upper = self.offsets, self.model.upper
+        offsets = self.offsets
         rest = np.zeros((offsets[-1] - 6, offsets[-1]))
         rest[:, 6:] = REST_WEIGHT * np.eye(offsets[-1] - 6)
         limits = np.zeros((len(self.balls), offsets[-1]))
-        for row, i in enumerate(self.balls):
+        for row, (i, turn) in enumerate(zip(self.balls, self.turns)):
             value = parameters[offsets[i] : offsets[i + 1]]
             size = float(np.linalg.norm(value))
-            if size > upper[i]:
+            if size > turn:
                 limits[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * value / size
         return np.concatenate([rest, limits])
 

@@ -194,6 +194,38 @@ def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarra
     return component, np.zeros((len(landmarks), 3)), left_right_pairs(landmarks)
 
 
+TRUNK_TURN = 0.35
+"""Radians the joints between the hips and the shoulders (:func:`trunk`) turn from rest before the fits of the
+first pose and the re-seeds (:mod:`tracker.keypoints.fit`) and the tracker (``Settings.trunk_hold``) pull them
+back: the pelvis turns about the line through the hips without moving them, so neither the landmarks nor the
+pelvis's round outline see its pitch well, and hips that the detector reads a few centimetres high (behind a table)
+would otherwise fold the trunk to its limit to reach them (docs/keypoints.md, "The trunk held near rest")."""
+
+
+def trunk(model: Model, component: np.ndarray) -> np.ndarray:
+    """The components (T,) whose joints lie on the path between the hips' parent and the shoulders' parent, from
+    the landmarks' components ``component`` (33,) (:func:`landmark_points`): the torso's joint with the pelvis in
+    models/human.toml; none when the model has no hips or shoulders."""
+    ends = [component[LANDMARKS.index(f"{side}_{part}")] for part in ("hip", "shoulder") for side in ("left", "right")]
+    if min(ends) < 0:
+        return np.zeros(0, np.int64)
+
+    def above(i: int) -> list[int]:  # i and its ancestors, up to the root
+        chain = []
+        while i >= 0:
+            chain.append(i)
+            i = int(model.parent[i])
+        return chain
+
+    joints: set[int] = set()
+    for low in {int(model.parent[i]) for i in ends[:2]}:
+        for high in {int(model.parent[i]) for i in ends[2:]}:
+            up, down = above(low), above(high)
+            common = next(c for c in down if c in up)
+            joints |= set(up[: up.index(common)]) | set(down[: down.index(common)])
+    return np.array(sorted(joints), np.int64)
+
+
 def left_right_pairs(landmarks: tuple[str, ...]) -> np.ndarray:
     """The (P, 2) indices of ``left_<part>`` and ``right_<part>`` for every part named both ways in ``landmarks``."""
     pairs = [

@@ -32,13 +32,22 @@ import numpy as np
 from numba import njit
 
 from tracker.chain import coerce_kernel, solve_kernel
-from tracker.geometry.se3 import between, exp, log
+from tracker.geometry.se3 import between, exp, exp_so3, log, log_so3
 from tracker.io.readers import WithChroma, reduced
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
 from tracker.tracking.guessed import bone_lengths, guessed, hidden_parts
-from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, keypoint_kernel, left_right_pairs, limbs, placers
+from tracker.tracking.keypoint_cue import (
+    LANDMARKS,
+    TRUNK_TURN,
+    cue_points,
+    keypoint_kernel,
+    left_right_pairs,
+    limbs,
+    placers,
+    trunk,
+)
 from tracker.tracking.landmark_noise import LandmarkNoise
 from tracker.tracking.measure import Statistics, component_misfits, measure_kernel, reduction, support
 from tracker.tracking.motion_prior import Motion
@@ -123,6 +132,9 @@ class Settings:
     # frame keeps those poses (Tracker.dragged); 0: never
     check_prediction: bool = True  # constant velocity: where the frame's landmarks lie nearer the last poses than
     # the moved ones, the last motion is not carried on (Tracker.carried); off live, whose landmarks moved with them
+    trunk_hold: float = 100.0  # per rad^2: the pelvis pulled
+    # back where the trunk's joint turns beyond keypoint_cue.TRUNK_TURN (Tracker.hold_trunk; docs/keypoints.md, "The
+    # trunk held near rest"); 0: never
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = True  # read the colours along the samples' lines too (--region off: edges alone)
@@ -240,6 +252,29 @@ def add_prior(information, eta, prior, poses, anchor):
         delta = log(between(poses[i], anchor[i]))
         information[i] += prior[i]
         eta[i] += prior[i] @ delta
+
+
+@njit(cache=True, nogil=True)
+def hold_kernel(information, eta, poses, trunk, parent, rest, turn, weight):
+    """For each joint j of ``trunk`` turned from its ``rest`` by more than ``turn`` radians (the rotation vector
+    ``bend`` of rest_j^T R_parent^T R_j), add ``weight`` I to its parent i's rotation block of C_i and ``weight``
+    times the rotation vector from R_i to the rotation that would leave j turned ``turn`` the same way,
+    R_j exp(bend turn / |bend|)^T rest_j^T, to eta_i (body frame, as :func:`add_prior`)."""
+    for j in trunk:
+        i = parent[j]
+        parent_rotation = np.ascontiguousarray(poses[i, :3, :3])
+        rotation = np.ascontiguousarray(poses[j, :3, :3])
+        rest_j = np.ascontiguousarray(rest[j, :3, :3])
+        bend = log_so3(np.ascontiguousarray(rest_j.T) @ np.ascontiguousarray(parent_rotation.T) @ rotation)
+        angle = np.sqrt(bend[0] ** 2 + bend[1] ** 2 + bend[2] ** 2)
+        if angle <= turn:
+            continue
+        back = np.ascontiguousarray(exp_so3(bend * (turn / angle)).T)
+        within = rotation @ back @ np.ascontiguousarray(rest_j.T)
+        pull = log_so3(np.ascontiguousarray(parent_rotation.T) @ within)
+        for a in range(3):
+            information[i, 3 + a, 3 + a] += weight
+            eta[i, 3 + a] += weight * pull[a]
 
 
 @njit(cache=True, nogil=True)
@@ -425,6 +460,7 @@ class Tracker:
         self.placer = placers(model, *self.landmarks[:2])
         self.bone_lengths = bone_lengths(self.poses, *self.landmarks[:2])  # the legs' (tracker.tracking.guessed)
         self.limbs = limbs(model, self.landmarks[0])
+        self.trunk = trunk(model, self.landmarks[0])
         top = np.where(self.limbs.any(axis=1), self.limbs.argmax(axis=1), -1)  # breadth-first: the limb's first part
         self.roots = (self.landmarks[0][None, :] == top[:, None]) & (top[:, None] >= 0)  # (K, K): each limb's root
         self.floor = (np.full(len(LANDMARKS), settings.keypoint_tolerance), np.full(len(LANDMARKS), np.inf))
@@ -593,6 +629,8 @@ class Tracker:
     def _update(self, information: np.ndarray, eta: np.ndarray, prior: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """:func:`update_kernel` with ``information``, ``eta`` and ``prior`` about the anchor."""
         m, st = self.model, self.settings
+        if st.trunk_hold > 0:
+            self.hold_trunk(information, eta, poses)
         return update_kernel(
             information,
             eta,
@@ -610,6 +648,16 @@ class Tracker:
             m.upper,
             st.max_turn,
         )
+
+    def hold_trunk(self, information: np.ndarray, eta: np.ndarray, poses: np.ndarray) -> None:
+        """Where a trunk joint (:func:`tracker.tracking.keypoint_cue.trunk`: the torso's on the pelvis) is turned more
+        than :data:`~tracker.tracking.keypoint_cue.TRUNK_TURN` from rest, pull its parent towards the turn that
+        brings it back to that, ``trunk_hold`` per rad^2, into the parent's C_i and eta_i (:func:`hold_kernel`): the
+        pelvis's pitch about the hips barely moves its outline (a round ellipsoid) or the landmarks (the hips lie on
+        its axis), and left to drift it folds the trunk to its limit (docs/keypoints.md, "The trunk held near
+        rest")."""
+        m = self.model
+        hold_kernel(information, eta, poses, self.trunk, m.parent, m.rest, TRUNK_TURN, self.settings.trunk_hold)
 
     def sample(self, work: Workspace, poses: np.ndarray, search_range: int) -> None:
         """Sample the visible outlines at ``poses`` into ``work`` and limit each one's search (ownership)."""
