@@ -83,9 +83,8 @@ class Body:
     free joint, 3 for a ball, 1 for a hinge or slide, 0 when fixed), their ``lower`` and ``upper`` bounds (a
     hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation and that rotation,
     ``turns`` (B,) (:data:`TRUNK_TURN` at most for the trunk's), the landmarks' ``component`` (33,) and ``anchor``
-    (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the
-    Jacobians ``drives`` (33, P), whether a parameter moves a landmark: it turns or slides the joint of the
-    landmark's component or of one above it."""
+    (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the Jacobians ``drives`` (33, P), whether a
+    parameter moves a landmark: it turns or slides the joint of the landmark's component or of one above it."""
 
     model: Model
     offsets: np.ndarray

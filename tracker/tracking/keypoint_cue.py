@@ -209,21 +209,13 @@ def trunk(model: Model, component: np.ndarray) -> np.ndarray:
     ends = [component[LANDMARKS.index(f"{side}_{part}")] for part in ("hip", "shoulder") for side in ("left", "right")]
     if min(ends) < 0:
         return np.zeros(0, np.int64)
-
-    def above(i: int) -> list[int]:  # i and its ancestors, up to the root
-        chain = []
-        while i >= 0:
-            chain.append(i)
-            i = int(model.parent[i])
-        return chain
-
-    joints: set[int] = set()
-    for low in {int(model.parent[i]) for i in ends[:2]}:
-        for high in {int(model.parent[i]) for i in ends[2:]}:
-            up, down = above(low), above(high)
-            common = next(c for c in down if c in up)
-            joints |= set(up[: up.index(common)]) | set(down[: down.index(common)])
-    return np.array(sorted(joints), np.int64)
+    n = model.size
+    under = np.array([with_descendants(model.parent, np.arange(n) == c) for c in range(n)])  # x is c or below it
+    on_path = np.zeros(n, bool)  # a joint lies on the path where one end is at or below its component, not both
+    for low in {model.parent[i] for i in ends[:2]}:
+        for high in {model.parent[i] for i in ends[2:]}:
+            on_path |= under[:, low] != under[:, high]
+    return np.flatnonzero(on_path)
 
 
 def left_right_pairs(landmarks: tuple[str, ...]) -> np.ndarray:

@@ -132,9 +132,8 @@ class Settings:
     # frame keeps those poses (Tracker.dragged); 0: never
     check_prediction: bool = True  # constant velocity: where the frame's landmarks lie nearer the last poses than
     # the moved ones, the last motion is not carried on (Tracker.carried); off live, whose landmarks moved with them
-    trunk_hold: float = 100.0  # per rad^2: the pelvis pulled
-    # back where the trunk's joint turns beyond keypoint_cue.TRUNK_TURN (Tracker.hold_trunk; docs/keypoints.md, "The
-    # trunk held near rest"); 0: never
+    trunk_hold: float = 100.0  # per rad^2: the pelvis pulled back where the trunk's joint turns beyond
+    # keypoint_cue.TRUNK_TURN (Tracker.hold_trunk; docs/keypoints.md, "The trunk held near rest"); 0: never
     max_turn: float = float("inf")  # largest rotation (rad) of a component's step in one iteration, before coercion
     # the region cue (tracker.tracking.region_cue), used where the frames come with their colour (WithChroma)
     region: bool = True  # read the colours along the samples' lines too (--region off: edges alone)
