@@ -232,11 +232,13 @@ def test_a_full_video_ends_the_recording_and_tracking_goes_on(tiny_recording, tm
 
 def test_the_keypoint_detector_runs_beside_the_live_tracker(tmp_path, capsys):
     """The demo replayed live with the detector offered every 2nd frame set: it takes those it is free for,
-    its detections are fused (each once, moved to the frame it arrives in), and the body is held."""
+    its detections are fused (each once, moved to the frame it arrives in), and the body is held.  The demo's
+    60 fps are played at 15, so that a slow machine with the detector beside the tracker has time for every
+    frame, and what is tested is the fusion, not how many frames the machine skips."""
     cameras = ["cam0", "cam1", "cam2"]
     files = [str(DEMO / f"{name}.avi") for name in cameras]
     out = tmp_path / "out"
-    assert run(_args(DEMO, files, "--out", str(out), "--keypoints", "2")) == 0
+    assert run(_args(DEMO, files, "--out", str(out), "--keypoints", "2", "--fps", "15")) == 0
     printed = capsys.readouterr().out
     fused, taken, offered = (
         int(word)
@@ -245,7 +247,7 @@ def test_the_keypoint_detector_runs_beside_the_live_tracker(tmp_path, capsys):
     assert 0 < fused <= taken <= offered
     live = load_poses(out / "poses.npz")
     truth = load_poses(DEMO / "truth.npz")
-    shown = np.clip(np.rint(live["time"] * 60.0).astype(int), 0, 159)  # the demo's frame at each capture time
+    shown = np.clip(np.rint(live["time"] * 15.0).astype(int), 0, 159)  # the demo's frame at each capture time
     error = np.linalg.norm(live["joints"] - truth["joints"][shown], axis=2).mean(axis=1)
     assert np.median(error) < 0.02 and not (live["status"] == 2).any()
 

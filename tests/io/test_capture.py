@@ -181,19 +181,22 @@ def test_frames_of_another_size_drop_the_camera(capsys):
     assert "camera cam1 (scripted) delivered a 16x16 frame, not 32x24" in capsys.readouterr().err
 
 
-def test_replay_sources_deliver_the_stored_jpegs_at_the_file_rate_on_one_clock(tiny_recording):
+@pytest.mark.parametrize("fps", [None, 240.0])
+def test_replay_sources_deliver_the_stored_jpegs_at_the_file_rate_on_one_clock(tiny_recording, fps):
+    """At the file's rate (60 fps), or at the rate given."""
     clock = ReplayClock()
-    sources = [ReplaySource(tiny_recording / f"cam{k}.avi", clock) for k in range(2)]
+    sources = [ReplaySource(tiny_recording / f"cam{k}.avi", clock, fps) for k in range(2)]
+    rate = fps or 60.0
     delivered = [[], []]
     for _ in range(6):
         for source, frames in zip(sources, delivered):
             frames.append(source.read())
     assert all(source.read() is None for source in sources)
     for camera, (source, frames) in enumerate(zip(sources, delivered)):
-        assert source.size == (320, 240) and source.fps == 60.0
+        assert source.size == (320, 240) and source.fps == rate
         expected = grey_frames(tiny_recording / f"cam{camera}.avi")
         for k, (jpeg, time) in enumerate(frames):
-            assert time == clock.start() + k / 60.0  # frame k of every source shares its capture time
+            assert time == clock.start() + k / rate  # frame k of every source shares its capture time
             np.testing.assert_array_equal(cv2.imdecode(jpeg, cv2.IMREAD_GRAYSCALE), next(expected))
         expected.close()
         source.close()

@@ -94,15 +94,15 @@ def assign_cameras(specs: list[str], calibration: list[Camera], path: Path) -> l
 def open_sources(
     devices: list[str], cameras: list[Camera], *, size: tuple[int, int] | None, fps: float | None, calibration: Path
 ) -> list[Source]:
-    """One source per camera: a video file is replayed (all files on one clock), anything else is opened as
-    a V4L2 device asked for ``size`` (default: the camera's) and ``fps``.  Each must give its camera's
-    calibrated size."""
+    """One source per camera: a video file is replayed (all files on one clock, at ``fps`` if given, else at
+    the file's rate), anything else is opened as a V4L2 device asked for ``size`` (default: the camera's) and
+    ``fps``.  Each must give its camera's calibrated size."""
     clock = ReplayClock()
     sources: list[Source] = []
     try:
         for device, camera in zip(devices, cameras):
             if Path(device).is_file():
-                source: Source = ReplaySource(device, clock)
+                source: Source = ReplaySource(device, clock, fps)
             elif Path(device).suffix.lower() in VIDEO_SUFFIXES:
                 raise TrackerInputError(f"{device}: no such video file; check the path")
             else:

@@ -49,7 +49,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="image size to ask the cameras for (default: each camera's calibrated size, which the camera must give)",
     )
     parser.add_argument(
-        "--fps", type=options.positive_float, help="frame rate to ask the cameras for (default: the driver's)"
+        "--fps",
+        type=options.positive_float,
+        help="frame rate to ask the cameras for (default: the driver's); a video file is played at this rate "
+        "(default: its own)",
     )
     parser.add_argument("--out", help="output folder for poses.npz (default out/live)")
     parser.add_argument(

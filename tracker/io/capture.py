@@ -4,7 +4,7 @@ Sources
     :class:`V4L2Source` opens a V4L2 device through OpenCV, asks for Motion-JPEG at a size and
     frame rate and keeps what the driver granted (``size``, ``fps``; it warns when the rate or the
     format is not the one asked for).  :class:`ReplaySource` plays a video file at its own frame
-    rate, as a camera would deliver it.  Both hand out each frame as JPEG bytes with its capture
+    rate (or one given), as a camera would deliver it.  Both hand out each frame as JPEG bytes with its capture
     time on the monotonic clock (``time.monotonic()``, seconds; for a device, the moment the
     driver handed the frame over, for a file the frame's due time): a camera's Motion-JPEG frame is
     kept as the driver gave it, so what the tracker decodes is exactly what a recording stores, and
@@ -177,21 +177,22 @@ class ReplayClock:
 
 
 class ReplaySource:
-    """A video file delivered as a camera would: frame k at ``clock.start() + k / fps``, stamped with that time.
+    """A video file delivered as a camera would: frame k at ``clock.start() + k / fps``, stamped with that time;
+    ``fps`` is the file's own rate unless one is given (a slower one gives a slow machine time for every frame).
 
     Reading ahead of time waits until the frame is due; reading late (a busy thread) gets the frame at
     once with its due time, as a camera's driver buffer would.  Motion-JPEG files are read without
     decoding (the JPEG of each frame as stored); other codecs are decoded and JPEG-encoded.
     """
 
-    def __init__(self, path: str | Path, clock: ReplayClock):
+    def __init__(self, path: str | Path, clock: ReplayClock, fps: float | None = None):
         self.name = str(path)
         capture, self.mjpeg = open_video(Path(path))
         if not capture.isOpened():
             raise TrackerInputError(f"{path}: not a readable video file; give a camera device or a video")
         self.size = (int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        fps = capture.get(cv2.CAP_PROP_FPS)
-        self.fps = fps if np.isfinite(fps) and fps > 0 else DEFAULT_FPS
+        own = capture.get(cv2.CAP_PROP_FPS)
+        self.fps = fps or (own if np.isfinite(own) and own > 0 else DEFAULT_FPS)
         self.capture, self.clock, self.count = capture, clock, 0
 
     def read(self) -> tuple[np.ndarray, float] | None:
