@@ -51,6 +51,7 @@ from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.readers import WithChroma
 from tracker.io.recording import VIDEO_SUFFIXES
+from tracker.keypoints.hips import lowered, proportions
 from tracker.keypoints.live import LiveDetector, transferred
 from tracker.tracking.track import Tracker
 
@@ -228,13 +229,17 @@ def drops(counts: Counts) -> str:
 def _landmarks_now(
     detector: LiveDetector, history: dict[int, np.ndarray], tracker: Tracker, cameras: list[Camera], rig
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The detector's newest landmarks (if any arrived, of a frame still in ``history``) moved to the frame
-    about to be tracked by the motion tracked since their capture, for the cameras of ``rig``."""
+    """The detector's newest landmarks (if any arrived, of a frame still in ``history``), their hips lowered where
+    they were read high (:func:`tracker.keypoints.hips.lowered`), moved to the frame about to be tracked by the
+    motion tracked since their capture, for the cameras of ``rig``."""
     newest = detector.newest()
     if newest is None or newest[0] not in history:
         return None
     number, pixels, confidence = newest
     component, point, _ = tracker.landmarks
+    pixels = lowered(
+        pixels, confidence, cameras=cameras, body=proportions(tracker.model)
+    )  # hips read high, in their own frame
     moved = transferred(pixels, history[number], tracker.poses, cameras=cameras, component=component, point=point)
     return moved[list(rig)], confidence[list(rig)]
 

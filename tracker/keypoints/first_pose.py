@@ -2,7 +2,8 @@
 the edges (docs/keypoints.md, "Automatic first pose").
 
 1. :func:`tracker.keypoints.triangulation.triangulated`: the landmarks' world points over the first few
-   frames, left and right told by the body.
+   frames, left and right told by the body, hips read high behind a table lowered first
+   (:func:`tracker.keypoints.hips.with_hips_lowered`).
 2. :func:`tracker.keypoints.fit.fit_pose`: the model's pose whose landmark points lie nearest those points.
 3. :func:`tracker.keypoints.fit.fit_to_views`: that pose refined against the detections of the same frames.
 4. :func:`snap_to_edges`: the tracker on the first frame's images, without a motion model, the frame's
@@ -24,6 +25,7 @@ from tracker.io.recording import Recording
 from tracker.io.recording import frames as frames_of
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.fit import fit_pose, fit_to_views
+from tracker.keypoints.hips import with_hips_lowered
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import Triangulated, middle, triangulated
 from tracker.model import Model
@@ -99,6 +101,7 @@ def fitted_to_frames(
     (in ``cameras``): their triangulated points, then their detections (steps 1-3 of the module docstring),
     unsnapped; a one-line error naming the frames of ``source`` when they show nobody or cannot place the body, or
     (``in_depth``) when the two views or more that agree on it do not place it in depth (:func:`placed_in_depth`)."""
+    keypoints = with_hips_lowered(keypoints, cameras, model)
     found = triangulated(keypoints, cameras, model, frames=frames)
     first, last = int(keypoints.frame[0]), int(keypoints.frame[:frames][-1])
     if len(found.frames) == 0:
@@ -153,7 +156,7 @@ def first_pose(
     if images is None:
         first = int(keypoints.frame[0])
         [images] = [grey for _, grey in frames_of(recording, first, first + 1)]
-    checked = consistent(keypoints.rows(slice(0, 1)), recording.cameras)[0]
+    checked = with_hips_lowered(consistent(keypoints.rows(slice(0, 1)), recording.cameras)[0], recording.cameras, model)
     snap = dataclasses.replace(settings, iterations=SNAP.iterations)
     landmarks = (checked.pixels[0], checked.confidence[0])
     return snap_to_edges(model, recording.cameras, poses, images=images, keypoints=landmarks, settings=snap).poses

@@ -41,6 +41,7 @@ from tracker.io.recording import Recording, frames
 from tracker.keypoints.consistency import CONFIDENT, consistent, sided_with
 from tracker.keypoints.detect import cached, detections, fingerprint, frame_keypoints, holding, merged, stacked
 from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
+from tracker.keypoints.hips import lowered, proportions
 from tracker.keypoints.store import Keypoints, save_keypoints
 from tracker.tracking.keypoint_cue import landmark_world
 
@@ -334,14 +335,19 @@ class KeypointStream:
 
 def beside(stream: KeypointStream, tracker: Tracker) -> Callable[[int], tuple[np.ndarray, np.ndarray] | None]:
     """``stream``'s landmarks for the frames ``tracker`` tracks, the views' unsettled disputes settled by the body it
-    tracks (:meth:`KeypointStream.get` with its landmark points at the last frame's pose); each call also hands
-    ``tracker`` the person's masks of the frame, or none for a frame the detector did not see
-    (:meth:`KeypointStream.person`, :meth:`Tracker.see_person <tracker.tracking.track.Tracker.see_person>`)."""
+    tracks (:meth:`KeypointStream.get` with its landmark points at the last frame's pose), hips read high lowered
+    (:func:`tracker.keypoints.hips.lowered`); each call also hands ``tracker`` the person's masks of the frame, or
+    none for a frame the detector did not see (:meth:`KeypointStream.person`,
+    :meth:`Tracker.see_person <tracker.tracking.track.Tracker.see_person>`)."""
     component, point = tracker.landmarks[:2]
+    body = proportions(tracker.model)
 
     def landmarks(frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         found = stream.get(frame, near=landmark_world(tracker.poses, component, point))
         tracker.see_person(stream.person(frame))
-        return found
+        if found is None:
+            return None
+        pixels, confidence = found
+        return lowered(pixels, confidence, cameras=tracker.cameras, body=body), confidence
 
     return landmarks
