@@ -16,7 +16,6 @@ reads the same midpoint.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,7 +35,7 @@ HIPS = np.array([LANDMARKS.index("left_hip"), LANDMARKS.index("right_hip")])
 SHOULDERS = np.array([LANDMARKS.index("left_shoulder"), LANDMARKS.index("right_shoulder")])
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class Proportions:
     """The model's ``trunk`` (metres from the midpoint of its shoulder joints, the upper arms' origins, to that of
     its hip joints, the thighs') and its ``legs``' bone lengths (:func:`tracker.tracking.guessed.bone_lengths`)."""
@@ -71,9 +70,8 @@ def lowered(
     ``min_confidence``."""
     seen = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
     views = np.flatnonzero(seen[:, HIPS].all(axis=1) & seen[:, SHOULDERS].all(axis=1))
-    if body is None or len(views) < 2 or not guessed(cameras, pixels, confidence, lengths=body.legs).any():
+    if body is None or len(views) < 2:
         return pixels
-    length = body.trunk
     middles = np.stack([pixels[:, HIPS].mean(axis=1), pixels[:, SHOULDERS].mean(axis=1)], axis=1)  # (C, 2, 2)
     normalised = undistorted(middles[None], cameras)[0].transpose(1, 0, 2)  # (2, C, 2)
     projections = np.array([camera.camera_from_world[:3] for camera in cameras])
@@ -81,9 +79,11 @@ def lowered(
     used[:, views] = True
     hips, shoulders = triangulate_many(projections, normalised, used)
     read = float(np.linalg.norm(hips - shoulders))
-    if not np.isfinite(read) or read >= HIPS_HIGH * length or read < 1e-6:
+    if not np.isfinite(read) or read >= HIPS_HIGH * body.trunk or read < 1e-6:
         return pixels
-    moved = shoulders + (hips - shoulders) * (length / read)
+    if not guessed(cameras, pixels, confidence, lengths=body.legs).any():  # the hips misread, not hidden
+        return pixels
+    moved = shoulders + (hips - shoulders) * (body.trunk / read)
     out = pixels.copy()
     for k in np.flatnonzero(seen[:, HIPS].all(axis=1)):
         out[k, HIPS] += cameras[k].project(moved[None])[0] - cameras[k].project(hips[None])[0]
