@@ -51,7 +51,7 @@ from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.readers import WithChroma
 from tracker.io.recording import VIDEO_SUFFIXES
-from tracker.keypoints.hips import lowered, proportions
+from tracker.keypoints.hips import Proportions, lowered, proportions
 from tracker.keypoints.live import LiveDetector, transferred
 from tracker.tracking.track import Tracker
 
@@ -227,19 +227,23 @@ def drops(counts: Counts) -> str:
 
 
 def _landmarks_now(
-    detector: LiveDetector, history: dict[int, np.ndarray], tracker: Tracker, cameras: list[Camera], rig
+    detector: LiveDetector,
+    history: dict[int, np.ndarray],
+    tracker: Tracker,
+    cameras: list[Camera],
+    rig,
+    *,
+    body: Proportions | None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The detector's newest landmarks (if any arrived, of a frame still in ``history``), their hips lowered where
-    they were read high (:func:`tracker.keypoints.hips.lowered`), moved to the frame about to be tracked by the
-    motion tracked since their capture, for the cameras of ``rig``."""
+    they were read high (:func:`tracker.keypoints.hips.lowered`, for a model of proportions ``body``), moved to the
+    frame about to be tracked by the motion tracked since their capture, for the cameras of ``rig``."""
     newest = detector.newest()
     if newest is None or newest[0] not in history:
         return None
     number, pixels, confidence = newest
     component, point, _ = tracker.landmarks
-    pixels = lowered(
-        pixels, confidence, cameras=cameras, body=proportions(tracker.model)
-    )  # hips read high, in their own frame
+    pixels = lowered(pixels, confidence, cameras=cameras, body=body)  # in the frame they were detected in
     moved = transferred(pixels, history[number], tracker.poses, cameras=cameras, component=component, point=point)
     return moved[list(rig)], confidence[list(rig)]
 
@@ -259,8 +263,10 @@ class _Session:
         recorder: Recorder | None,
         view,
         detector: LiveDetector | None,
+        body: Proportions | None,
     ):
         self.capture, self.cameras, self.stop = capture, cameras, stop
+        self.body = body  # the model's, for the detector's hips read high (tracker.keypoints.hips)
         self.recorder, self.view, self.detector = recorder, view, detector
         self.recording = recorder is not None
         self.rig = tuple(range(len(cameras)))  # the cameras of the set in hand
@@ -329,7 +335,7 @@ class _Session:
     def landmarks(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The detector's newest landmarks for frame ``frame`` (:func:`_landmarks_now`), for the cameras of the set."""
         assert self.detector is not None and self.tracker is not None  # with a detector; after retarget
-        return _landmarks_now(self.detector, self.history, self.tracker, self.cameras, self.rig)
+        return _landmarks_now(self.detector, self.history, self.tracker, self.cameras, self.rig, body=self.body)
 
     def tracked(self, frame: Tracked) -> None:
         """Keep the frame's poses for late landmarks, and show it (every camera, blank where one dropped)."""
@@ -368,7 +374,7 @@ def track_live(
         tracker.warm_up()
         with _StopRequest() as stop:
             capture.start(tracker.smooth, chroma=tracker.bin_colours if tracker.settings.region else False)
-            session = _Session(capture, cameras, stop, recorder, view, detector)
+            session = _Session(capture, cameras, stop, recorder, view, detector, proportions(tracker.model))
             run = track_frames(
                 tracker,
                 session.sets(),

@@ -49,7 +49,7 @@ def agreeing_views(
     """(V,) bool: the views whose landmarks ``pixels`` (V, K, 2) (full-image pixels, NaN where none) agree with
     at least one other view's (see the module); ``confidence`` (V, K)."""
     seen = (confidence >= CONFIDENT) & np.isfinite(pixels).all(axis=2)
-    projections, normalised = _rays(cameras, pixels, seen)
+    projections, normalised = rays(cameras, pixels, seen)
     agree = np.zeros(len(cameras), bool)
     for a, b in itertools.combinations(range(len(cameras)), 2):
         both = seen[a] & seen[b]
@@ -75,7 +75,7 @@ def placed_points(
     points' median (two views that agree on most landmarks may read a few differently, and two views close
     together place such a point anywhere along their rays: on the demo, metres behind the body)."""
     seen = (confidence >= CONFIDENT) & np.isfinite(pixels).all(axis=2) & among[:, None]
-    projections, normalised = _rays(cameras, pixels, seen)
+    projections, normalised = rays(cameras, pixels, seen)
     points = triangulate_many(projections, normalised, seen.T)
     for k in np.flatnonzero(among):
         missed = seen[k] & ~_reaches(cameras[k], points, pixels[k], gate * min(cameras[k].size))
@@ -113,7 +113,7 @@ def fits(camera: Camera, points: np.ndarray, pixels: np.ndarray, *, confidence: 
     return 2 * int(reach.sum()) > int(seen.sum())
 
 
-def _rays(cameras: list[Camera], pixels: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rays(cameras: list[Camera], pixels: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The cameras' [R | t] (V, 3, 4) and the ideal normalised coordinates (K, V, 2) of the landmarks ``pixels``
     (V, K, 2) that are ``seen`` (V, K) bool (NaN elsewhere), as :func:`tracker.geometry.dlt.triangulate_many` takes
     them."""

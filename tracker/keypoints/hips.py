@@ -21,7 +21,7 @@ import numpy as np
 
 from tracker.camera import Camera
 from tracker.geometry.dlt import triangulate_many
-from tracker.keypoints.guided import undistorted
+from tracker.keypoints.guided import rays
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model, rest_poses
 from tracker.tracking.guessed import bone_lengths, guessed
@@ -69,15 +69,13 @@ def lowered(
     (C, 33).  The midpoints are triangulated from the views that see both hips and both shoulders at
     ``min_confidence``."""
     seen = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
-    views = np.flatnonzero(seen[:, HIPS].all(axis=1) & seen[:, SHOULDERS].all(axis=1))
-    if body is None or len(views) < 2:
+    hips_seen = seen[:, HIPS].all(axis=1)
+    both = hips_seen & seen[:, SHOULDERS].all(axis=1)
+    if body is None or both.sum() < 2:
         return pixels
     middles = np.stack([pixels[:, HIPS].mean(axis=1), pixels[:, SHOULDERS].mean(axis=1)], axis=1)  # (C, 2, 2)
-    normalised = undistorted(middles[None], cameras)[0].transpose(1, 0, 2)  # (2, C, 2)
-    projections = np.array([camera.camera_from_world[:3] for camera in cameras])
-    used = np.zeros((2, len(cameras)), bool)
-    used[:, views] = True
-    hips, shoulders = triangulate_many(projections, normalised, used)
+    used = np.repeat(both[:, None], 2, axis=1)
+    hips, shoulders = triangulate_many(*rays(cameras, middles, used), used.T)
     read = float(np.linalg.norm(hips - shoulders))
     if not np.isfinite(read) or read >= HIPS_HIGH * body.trunk or read < 1e-6:
         return pixels
@@ -85,7 +83,7 @@ def lowered(
         return pixels
     moved = shoulders + (hips - shoulders) * (body.trunk / read)
     out = pixels.copy()
-    for k in np.flatnonzero(seen[:, HIPS].all(axis=1)):
+    for k in np.flatnonzero(hips_seen):
         out[k, HIPS] += cameras[k].project(moved[None])[0] - cameras[k].project(hips[None])[0]
     return out
 
