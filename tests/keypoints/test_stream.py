@@ -181,8 +181,8 @@ def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
 
 def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeypatch):
     """A cache of frames 0, 2 and 4 in which cam2 sees nobody and cam0 jumps 150 px (to someone else) from frame 2
-    on: asked in frame order with a tracked body half a metre off, the stream gives cam1's disputed landmarks of
-    frames 2-4 back, never cam0's; asked for frame 4 first, it has no last frame to go by and gives nothing back."""
+    on: asked in frame order, the stream gives cam1's disputed landmarks of frames 2-4 back, never cam0's; asked for
+    frame 4 first, it has no last frame to go by and gives nothing back, and neither does it unless asked to settle."""
     from tracker.keypoints.detector import DETECTOR
     from tracker.keypoints.store import Keypoints
     from tracker.model import load_model
@@ -205,15 +205,15 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     cache = tmp_path / "keypoints.npz"
     save_keypoints(cache, dataclasses.replace(held, recording=fingerprint(recording)))
     monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
-    off = np.full((len(LANDMARKS), 3), np.nan)
-    off[seen] = truth["poses"][0, component[seen], :3, 3] + [0.0, 0.0, 0.5]
     with KeypointStream(recording, 0, 5, 2, cache) as stream:
-        got = {frame: stream.get(frame, near=off) for frame in range(5)}
+        got = {frame: stream.get(frame, settle=True) for frame in range(5)}
     assert all((got[frame][1][1, seen] >= 0.5).all() for frame in range(5))
     assert not any((got[frame][1][0, seen] >= 0.5).any() for frame in (2, 3, 4))
     with KeypointStream(recording, 0, 5, 2, cache) as fresh:
-        first = fresh.get(4, near=off)
+        first = fresh.get(4, settle=True)
+        plain = [fresh.get(frame) for frame in range(5)]
     assert not (first[1][:2, seen] >= 0.5).any()
+    assert not (plain[4][1][:2, seen] >= 0.5).any()
 
 
 def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path, monkeypatch):

@@ -14,9 +14,10 @@ unchecked ones too.  Then a view whose left and right are swapped (the detector 
 person's back for their front) is put right when the other views, triangulated, place both
 landmarks of a left/right pair the other way round (three views or more).
 
-Two views that disagree, with no third to settle it, leave the landmark in neither.  The tracker can settle it:
-the body it tracks says which view shows it, and so does each view's own last frame: a detector that jumped to
-someone else jumped, while the body moved on a little (:func:`sided_with`).
+Two views that disagree, with no third to settle it, leave the landmark in neither.  Each view's own last frame
+can settle it: a detector that jumped to someone else jumped, while the body moved on a little (:func:`sided_with`).
+The tracked body does not: where it is wrong (an arm along a frontal view's ray), the view that agrees with it is the
+wrong one, and siding with it would hold the body where it is (docs/keypoints.md, "Two views that disagree").
 
 The same search (:func:`readings`) also takes a left/right pair of landmarks at once and lets each
 view read the pair either way round, for a detector that swaps left and right in some views: then a
@@ -39,14 +40,10 @@ from tracker.keypoints.silhouette import on_person
 from tracker.keypoints.store import Keypoints
 from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
 
-NEAR = 0.05
-"""Image distance, as a share of the tracked body's size in that view, within which a disputed detection sides with
-the tracked body (:func:`sided_with`): about twice a detector's scatter on a person, and well inside the fifth of
-the body's size by which it misreads a faceless mannequin's wrists."""
-
-SHOWS = 0.1
-"""The same share within which, in the median, a view's confident detections must lie for the view to show the
-tracked body (:func:`sided_with`): the recovery's :data:`tracker.keypoints.recovery.STRAYED`."""
+STEADY = 0.1
+"""The share of a view's landmarks' extent within which, in the median, its confident detections must lie from its
+own last ones for the view to have moved on steadily (:func:`sided_with`): the recovery's
+:data:`tracker.keypoints.recovery.STRAYED`."""
 
 CONFIDENT = 0.5
 """A detection's confidence from which :func:`sided_with` counts it as seen."""
@@ -256,63 +253,39 @@ def sided_with(
     detected: tuple[np.ndarray, np.ndarray],
     checked: tuple[np.ndarray, np.ndarray],
     *,
-    expected: np.ndarray,
-    cameras: list[Camera],
-    previous: np.ndarray | None = None,
+    previous: np.ndarray | None,
     min_confidence: float = CONFIDENT,
-    near: float = NEAR,
-    shows: float = SHOWS,
+    steady: float = STEADY,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A frame's ``checked`` landmarks (pixels (C, K, 2), confidence (C, K); :func:`consistent` of ``detected``) with
-    the disputes the views could not settle given to the views that show the tracked body.
+    the disputes the views could not settle given to the view that moved on steadily.
 
     Two views that disagree on a landmark, and no third, leave it in neither (:func:`consistent`): one of them may
     show someone else (a bystander, a photograph) where the other lost the body, and the views alone cannot tell
-    which.  The tracked body can: ``expected`` (K, 3) are its landmark points in the world (NaN where the model has
-    none), at the pose of the last frame.  A detection that ``checked`` dropped is given back when two views saw its
-    landmark and neither kept it (where three or more saw it, the check had a majority to go by), it lies within
-    ``near`` of the body's size of its expected image, and its view's confident detections lie within ``shows`` of
-    theirs in the median (the view shows the tracked body).  A body lost to clutter gets back nothing it did not
-    already lie near.
-
-    ``previous`` (C, K, 2), the landmarks the tracker was given at the last detected frame (NaN where none), settle
-    the disputes the tracked body cannot, once it is off or moves fast: where one of the two views' confident
-    detections lie within ``shows`` of that view's own previous landmarks in the median (its size taken from their
-    extent) and the other's do not, the steady view gets its disputed landmarks back.  A detector that jumps to a
-    bystander or a photograph for some frames leaves the body's view steady and its own not."""
+    which.  ``previous`` (C, K, 2), the landmarks the tracker was given at the last detected frame (NaN where none),
+    can: where one of the two views' confident detections lie within ``steady`` of that view's own previous landmarks
+    in the median (its size taken from their extent) and the other's do not, the steady view gets its disputed
+    landmarks back (where three or more saw a landmark, the check had a majority to go by).  A detector that jumps to a
+    bystander or a photograph for some frames leaves the body's view steady and its own not.  Both steady, or
+    neither, or no last frame, and the dispute stands."""
     pixels, confidence = checked[0].copy(), checked[1].copy()
     kept = (confidence >= min_confidence) & np.isfinite(pixels).all(axis=2)
     seen = (detected[1] >= min_confidence) & np.isfinite(detected[0]).all(axis=2)
     unsettled = (kept.sum(axis=0) < 2) & (seen.sum(axis=0) == 2)
-    if not unsettled.any():  # no dispute to settle: most frames
+    if previous is None or not unsettled.any():  # no dispute to settle: most frames
         return pixels, confidence
-    if previous is not None:
-        steady = np.array([_steady(detected[0][k], seen[k], previous[k], shows) for k in range(len(cameras))])
-        wins = unsettled & seen & steady[:, None] & ((seen & ~steady[:, None]).sum(axis=0) == 1)
-        pixels[wins] = detected[0][wins]
-        confidence[wins] = detected[1][wins]
-    for k, camera in enumerate(cameras):
-        usable = (detected[1][k] >= min_confidence) & np.isfinite(detected[0][k]).all(axis=1)
-        usable &= np.isfinite(expected).all(axis=1)
-        if usable.sum() < 2:
-            continue
-        projected = camera.project(expected[usable])
-        size = max(float(np.linalg.norm(np.ptp(projected, axis=0))), 1.0)
-        distance = np.full(len(expected), np.inf)
-        distance[usable] = np.linalg.norm(detected[0][k, usable] - projected, axis=1) / size
-        if not np.median(distance[usable]) < shows:
-            continue
-        back = usable & unsettled & ~kept[k] & (distance < near)
-        pixels[k, back] = detected[0][k, back]
-        confidence[k, back] = detected[1][k, back]
+    moved_on = np.array([_steady(detected[0][k], seen[k], previous[k], steady) for k in range(len(seen))])
+    wins = unsettled & seen & moved_on[:, None] & ((seen & ~moved_on[:, None]).sum(axis=0) == 1)
+    pixels[wins] = detected[0][wins]
+    confidence[wins] = detected[1][wins]
     return pixels, confidence
 
 
-def _steady(pixels: np.ndarray, seen: np.ndarray, previous: np.ndarray, shows: float) -> bool:
-    """Whether a view's ``seen`` detections ``pixels`` (K, 2) lie within ``shows`` of its ``previous`` landmarks in
+def _steady(pixels: np.ndarray, seen: np.ndarray, previous: np.ndarray, steady: float) -> bool:
+    """Whether a view's ``seen`` detections ``pixels`` (K, 2) lie within ``steady`` of its ``previous`` landmarks in
     the median, as a share of their extent; not with fewer than :data:`STEADY_COUNT` landmarks in both."""
     both = seen & np.isfinite(previous).all(axis=1)
     if both.sum() < STEADY_COUNT:
         return False
     size = max(float(np.linalg.norm(np.ptp(previous[both], axis=0))), 1.0)
-    return bool(np.median(np.linalg.norm(pixels[both] - previous[both], axis=1)) / size < shows)
+    return bool(np.median(np.linalg.norm(pixels[both] - previous[both], axis=1)) / size < steady)

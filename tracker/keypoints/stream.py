@@ -43,7 +43,6 @@ from tracker.keypoints.detect import cached, detections, fingerprint, frame_keyp
 from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.hips import lowered, proportions
 from tracker.keypoints.store import Keypoints, save_keypoints
-from tracker.tracking.keypoint_cue import landmark_world
 
 if TYPE_CHECKING:
     from tracker.tracking.track import Tracker
@@ -225,21 +224,20 @@ class KeypointStream:
         self.fed.put((index, images))
         self.sent.add(index)
 
-    def get(self, frame: int, near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    def get(self, frame: int, *, settle: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
         """The checked landmarks of ``frame`` (pixels (C, 33, 2), confidence (C, 33)), waiting for the
         worker if need be.  Between two detected frames the landmarks are interpolated linearly (each
-        where both frames hold it, at the lower confidence); None after the last detected frame.  With ``near``,
-        the tracked body's landmark points (33, 3) in the world, the disputes the views could not settle are given
-        to the views that show that body, or that moved on steadily from the landmarks given at the last other
-        detected frame asked for (:func:`tracker.keypoints.consistency.sided_with`; ask in frame order, or in reverse
-        order when tracking back)."""
+        where both frames hold it, at the lower confidence); None after the last detected frame.  With ``settle``,
+        the disputes the views could not settle are given to the view that moved on steadily from the landmarks given
+        at the last other detected frame asked for (:func:`tracker.keypoints.consistency.sided_with`; ask in frame
+        order, or in reverse order when tracking back)."""
         checked = self._between(frame, self._checked)
-        if checked is None or near is None:
+        if checked is None or not settle:
             return checked
         detected = self._between(frame, self._detected)
         assert detected is not None  # every checked frame was detected
         last = self.settled[1] if self.settled is not None and self.settled[0] != frame else None
-        pixels, confidence = sided_with(detected, checked, expected=near, cameras=self.recording.cameras, previous=last)
+        pixels, confidence = sided_with(detected, checked, previous=last)
         if frame in self.checked:  # a detected frame: the next ones' own last frame
             self.settled = (frame, np.where((confidence >= CONFIDENT)[..., None], pixels, np.nan))
         return pixels, confidence
@@ -334,16 +332,15 @@ class KeypointStream:
 
 
 def beside(stream: KeypointStream, tracker: Tracker) -> Callable[[int], tuple[np.ndarray, np.ndarray] | None]:
-    """``stream``'s landmarks for the frames ``tracker`` tracks, the views' unsettled disputes settled by the body it
-    tracks (:meth:`KeypointStream.get` with its landmark points at the last frame's pose), hips read high lowered
+    """``stream``'s landmarks for the frames ``tracker`` tracks, the views' unsettled disputes settled by their own last
+    frames (:meth:`KeypointStream.get`), hips read high lowered
     (:func:`tracker.keypoints.hips.lowered`); each call also hands ``tracker`` the person's masks of the frame, or
     none for a frame the detector did not see (:meth:`KeypointStream.person`,
     :meth:`Tracker.see_person <tracker.tracking.track.Tracker.see_person>`)."""
-    component, point = tracker.landmarks[:2]
     body = proportions(tracker.model)
 
     def landmarks(frame: int) -> tuple[np.ndarray, np.ndarray] | None:
-        found = stream.get(frame, near=landmark_world(tracker.poses, component, point))
+        found = stream.get(frame, settle=True)
         tracker.see_person(stream.person(frame))
         if found is None:
             return None
