@@ -18,9 +18,12 @@ detections), and snapped to the frame's edges as the first pose is
 (:func:`tracker.keypoints.first_pose.snap_to_edges`).
 
 The image then arbitrates: the tracker starts again from the snapped pose, its status saying so
-(:data:`tracker.status.RESEEDED`), unless the image backs it less than the tracked pose (a frame that is not
+(:data:`tracker.status.RESEEDED`), unless the image backs it no better than the tracked pose (a frame that is not
 lost): the share of its outline samples that found an edge plus the share of its body on the person's masks
-(:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the detector gave no mask). Landmarks
+(:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the detector gave no mask), which must
+exceed the tracked pose's by the standard error of the two shares of samples (:func:`_noise`, 3 % for 400 samples
+each): a re-seed throws away the motion the tracker has learnt, and a difference within the shares' own noise says
+nothing of which pose is right. Landmarks
 that two views agree on can still be wrong, the detector following a bystander or reading an arm the other way
 round; a re-seed fitted to them lands off the body's outlines and off its masks, and the tracked pose is kept
 (``declined`` counts these). A pose strayed onto clutter finds edges there too, but not the person's mask; and
@@ -190,7 +193,7 @@ class Recovery:
         )
         if tracker.on_person(seed) > tracker.on_person(snapped.poses):  # the snap took it off the person
             snapped = tracker.judged(images, poses=seed, smoothed=True)
-        if result.status != LOST and _backing(tracker, snapped) < _backing(tracker, result):
+        if result.status != LOST and _backing(tracker, snapped) < _backing(tracker, result) + _noise(snapped, result):
             self.declined += 1
             self.back_off()
             return result  # the image sides with the tracked pose (module docstring)
@@ -199,6 +202,12 @@ class Recovery:
         tracker.restart(snapped.poses)
         self.reseeded += 1
         return dataclasses.replace(snapped, status=RESEEDED)
+
+
+def _noise(one: FrameResult, other: FrameResult) -> float:
+    """The standard error of the difference between two results' shares of samples that found an edge, each over
+    its own samples: below it, one backs the frame no better than the other (module docstring)."""
+    return float(np.sqrt(sum(r.share * (1.0 - r.share) / max(r.samples, 1) for r in (one, other))))
 
 
 def _backing(tracker: Tracker, result: FrameResult) -> float:
