@@ -366,3 +366,63 @@ def test_coercion_limits_a_ball_joint_rotation():
         angle = np.linalg.norm(w)
         expected = w if angle <= 0.8 else w * 0.8 / angle
         np.testing.assert_allclose(relative, np.concatenate([np.zeros(3), expected]), atol=1e-12)
+
+
+def _swing_twist(rotation: np.ndarray) -> tuple[np.ndarray, float]:
+    """Brute force: the swing R exp(-tau z) and the turn tau about z whose removal leaves the smallest rotation,
+    found by a dense search over tau refined four times."""
+
+    def swing_angle(tau):
+        s = rotation @ se3.exp_so3(np.array([0.0, 0.0, -tau]))
+        return np.arccos(np.clip((np.trace(s) - 1) / 2, -1, 1))
+
+    taus = np.linspace(-np.pi, np.pi, 4001)
+    best = taus[np.argmin([swing_angle(t) for t in taus])]
+    for step in (2e-3, 2e-5, 2e-7, 2e-9):
+        around = best + np.linspace(-step, step, 401)
+        best = around[np.argmin([swing_angle(t) for t in around])]
+    return rotation @ se3.exp_so3(np.array([0.0, 0.0, -best])), (best + np.pi) % (2 * np.pi) - np.pi
+
+
+def test_a_twist_brought_within_its_limit_keeps_the_swing():
+    """within_twist against a brute-force swing-twist split (the swing is the smallest rotation left once the
+    turn about z is taken out, so it has none about z)."""
+    rng = np.random.default_rng(12)
+    for _ in range(40):
+        w = unit(rng) * rng.uniform(0.2, 3.0)
+        limit = rng.uniform(0.2, 2.0)
+        swing, tau = _swing_twist(se3.exp_so3(w))
+        out = chain.within_twist(w, limit)
+        kept_swing, kept_tau = _swing_twist(se3.exp_so3(out))
+        np.testing.assert_allclose(kept_swing, swing, atol=1e-6)
+        assert kept_tau == pytest.approx(np.clip(tau, -limit, limit), abs=1e-6)
+        if abs(tau) <= limit:
+            np.testing.assert_array_equal(out, w)
+
+
+def test_coercion_limits_a_ball_joint_twist_then_its_angle():
+    rng = np.random.default_rng(13)
+    parent, rest, D, rows = _single_joint(chain.BALL)
+    for _ in range(20):
+        w = unit(rng) * rng.uniform(0.5, 3.0)
+        poses = np.stack([np.eye(4), rest[1] @ se3.exp(np.concatenate([np.zeros(3), w]))])
+        options = dict(parent=parent, rest=rest, D=D, rows=rows, joint_type=[chain.FREE, chain.BALL])
+        options.update(axis=np.zeros((2, 3)), lower=[-np.inf, 0.0])
+        twisted = chain.coerce(poses, upper=[np.inf, np.inf], twist=[np.inf, 1.0], **options)
+        relative = se3.log(np.linalg.inv(rest[1]) @ twisted[1])
+        np.testing.assert_allclose(relative, np.concatenate([np.zeros(3), chain.within_twist(w, 1.0)]), atol=1e-12)
+        both = chain.coerce(poses, upper=[np.inf, 0.8], twist=[np.inf, 1.0], **options)
+        turn = chain.within_twist(w, 1.0)
+        expected = turn * min(1.0, 0.8 / np.linalg.norm(turn))
+        np.testing.assert_allclose(
+            se3.log(np.linalg.inv(rest[1]) @ both[1]), np.concatenate([np.zeros(3), expected]), atol=1e-12
+        )
+
+
+def test_the_twist_s_gradient_matches_finite_differences():
+    rng = np.random.default_rng(14)
+    h = 1e-6
+    for _ in range(40):
+        w = unit(rng) * rng.uniform(0.0, 3.0)
+        expected = [(chain.twist_angle(w + h * e) - chain.twist_angle(w - h * e)) / (2 * h) for e in np.eye(3)]
+        np.testing.assert_allclose(chain.twist_gradient(w), expected, atol=1e-6)

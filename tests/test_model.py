@@ -190,6 +190,8 @@ def test_non_table_entries_give_a_tracker_input_error(tmp_path, text):
         ("limits = [1.0, 0.0]", "hinge"),
         ("max_angle = 1.0", "hinge"),
         ("max_angle = -1.0", "ball"),
+        ("max_twist = 1.0", "hinge"),
+        ("max_twist = 0.0", "ball"),
     ],
 )
 def test_bad_joint_limits_name_the_file(tmp_path, extra, joint):
@@ -209,6 +211,8 @@ def test_human_model_has_joint_limits():
     assert model.lower[elbow] == 0.0 and model.upper[elbow] == pytest.approx(2.6)
     assert model.upper[model.index("foot_r")] == pytest.approx(1.3)
     assert np.isinf(model.upper[model.index("thigh_l")])
+    assert model.twist[model.index("upperarm_r")] == pytest.approx(2.0)
+    assert np.isinf(model.twist[model.index("thigh_l")]) and np.isinf(model.twist[model.index("torso")])
 
 
 def test_with_descendants_takes_every_part_below_the_chosen_ones():

@@ -307,7 +307,7 @@ def solve(information, eta, *, parent, D, rows, poses) -> np.ndarray:
 
 
 @njit(cache=True)
-def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower, upper):
+def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower, upper, twist):
     """Repair the joints parents first (section 5, eqs. 23-25 with T0), within the joint limits.
 
     For each constrained child i with p = parent(i): a = log(T0_i^-1 E_p^-1 E_i),
@@ -315,7 +315,9 @@ def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower,
     E_i <- E_p T0_i exp(a').  Roots and free
     children keep their poses.  A hinge's a' = theta (p x d, d) and a slide's
     a' = (s d, 0) are then scaled so that theta (or s) lies in [lower_i, upper_i];
-    a ball's a' = (p x w, w) so that its rotation from rest |w| <= upper_i.
+    a ball's turn about its child's z axis (along a limb's bone) is first brought within +-``twist_i``
+    (:func:`within_twist`; the joint lies at the child's origin, so a' = (0, w)), then its rotation from
+    rest so that |w| <= upper_i.
     """
     out = poses.copy()
     pi_a = np.empty(6)
@@ -333,6 +335,8 @@ def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower,
             pi_a[r] = value
         for r in range(6):
             a[r] -= pi_a[r]
+        if joint_type[i] == BALL and twist[i] < np.inf:
+            a[3:6] = within_twist(a[3:6], twist[i])
         if joint_type[i] == BALL and upper[i] < np.inf:
             angle = np.sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5])
             if angle > upper[i]:
@@ -352,7 +356,78 @@ def coerce_kernel(poses, parent, rest, projector, rows, joint_type, axis, lower,
     return out
 
 
-def coerce(poses, *, parent, rest, D, rows, joint_type=None, axis=None, lower=None, upper=None) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def _quaternion(w):
+    """The unit quaternion (x, y, z, w) of the rotation vector ``w``."""
+    angle = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    s = 0.5 if angle < 1e-12 else np.sin(angle / 2.0) / angle
+    return w[0] * s, w[1] * s, w[2] * s, np.cos(angle / 2.0)
+
+
+@njit(cache=True, nogil=True)
+def twist_angle(w):
+    """The turn tau in (-pi, pi] about z of the rotation vector ``w`` in the swing-twist split R = S T: T the turn
+    about z, applied first, S a swing with no turn about z.  0 where the swing is a half turn (tau undefined)."""
+    _, _, qz, qw = _quaternion(w)
+    if np.sqrt(qz * qz + qw * qw) < 1e-9:
+        return 0.0
+    tau = 2.0 * np.arctan2(qz, qw)
+    if tau > np.pi:
+        tau -= 2.0 * np.pi
+    elif tau < -np.pi:
+        tau += 2.0 * np.pi
+    return tau
+
+
+def twist_gradient(w: np.ndarray) -> np.ndarray:
+    """d :func:`twist_angle` / d ``w`` (3,): with q = (sin(theta/2) w/theta, cos(theta/2)), theta = |w|,
+    tau = 2 atan2(q_z, q_w) and d tau = 2 (q_w dq_z - q_z dq_w) / (q_z^2 + q_w^2)."""
+    w = np.asarray(w, dtype=np.float64)
+    angle = float(np.linalg.norm(w))
+    qz, qw = _quaternion(w)[2:]
+    if angle < 1e-8:
+        return np.array([0.0, 0.0, 1.0])
+    unit = w / angle
+    f = np.sin(angle / 2) / angle
+    slope = (angle / 2 * np.cos(angle / 2) - np.sin(angle / 2)) / angle**2  # df / d theta
+    d_qz = f * np.array([0.0, 0.0, 1.0]) + w[2] * slope * unit
+    d_qw = -0.5 * np.sin(angle / 2) * unit
+    return 2 * (qw * d_qz - qz * d_qw) / (qz * qz + qw * qw)
+
+
+@njit(cache=True, nogil=True)
+def within_twist(w, limit):
+    """The rotation vector ``w`` with its :func:`twist_angle` brought within +-``limit`` radians and its swing
+    kept; unchanged within it."""
+    tau = twist_angle(w)
+    if abs(tau) <= limit:
+        return w.copy()
+    qx, qy, qz, qw = _quaternion(w)
+    norm = np.sqrt(qz * qz + qw * qw)
+    tz, tw = qz / norm, qw / norm  # T, whose inverse (0, 0, -tz, tw) takes it out: S = q T^-1
+    sx = qx * tw - qy * tz
+    sy = qy * tw + qx * tz
+    sw = qw * tw + qz * tz
+    half = np.copysign(limit, tau) / 2.0
+    cz, cw = np.sin(half), np.cos(half)
+    nx = sx * cw + sy * cz  # S C with C = (0, 0, cz, cw), the turn at the limit
+    ny = sy * cw - sx * cz
+    nz = sw * cz
+    nw = sw * cw
+    if nw < 0.0:
+        nx, ny, nz, nw = -nx, -ny, -nz, -nw
+    vector = np.sqrt(nx * nx + ny * ny + nz * nz)
+    out = np.zeros(3)
+    if vector < 1e-15:
+        return out
+    turn = 2.0 * np.arctan2(vector, nw)
+    out[0], out[1], out[2] = nx * turn / vector, ny * turn / vector, nz * turn / vector
+    return out
+
+
+def coerce(
+    poses, *, parent, rest, D, rows, joint_type=None, axis=None, lower=None, upper=None, twist=None
+) -> np.ndarray:
     """Poses (N,4,4) that satisfy every joint exactly (section 5); see :func:`coerce_kernel`.
 
     ``rest`` (N,4,4) holds T0_i (parent from child at rest).  Also projects arbitrary
@@ -372,6 +447,7 @@ def coerce(poses, *, parent, rest, D, rows, joint_type=None, axis=None, lower=No
         np.zeros((n, 3)) if axis is None else np.ascontiguousarray(axis, dtype=np.float64),
         np.full(n, -np.inf) if lower is None else np.ascontiguousarray(lower, dtype=np.float64),
         np.full(n, np.inf) if upper is None else np.ascontiguousarray(upper, dtype=np.float64),
+        np.full(n, np.inf) if twist is None else np.ascontiguousarray(twist, dtype=np.float64),
     )
 
 

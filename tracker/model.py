@@ -36,7 +36,8 @@ class Model:
     zero-padded with ``constraint_rows`` (N,) rows each, their row-space projectors
     ``constraint_projector`` (N,6,6) (:func:`tracker.chain.row_projectors`, for coercion), and the joint limits
     ``lower``/``upper`` (N,) of hinges (radians) and slides (metres), the largest
-    rotation from rest of a ball joint in ``upper``; +-inf if none.
+    rotation from rest of a ball joint in ``upper``, and a ball's largest turn about its child's z axis (along
+    a limb's bone) in ``twist``; +-inf if none.
     Per quadric (Q): ``quadric`` (Q,4,4) surfaces and ``clip`` (Q,4,4) clipping
     quadrics in their component's frame, ``quadric_component`` (Q,), and
     ``quadric_shape`` names for drawing; ``quadric_params`` keeps the TOML keys.
@@ -53,6 +54,7 @@ class Model:
     constraint_projector: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    twist: np.ndarray
     quadric: np.ndarray
     clip: np.ndarray
     quadric_component: np.ndarray
@@ -76,6 +78,7 @@ class Model:
             self.axis,
             self.lower,
             self.upper,
+            self.twist,
         )
 
     def index(self, name: str) -> int:
@@ -198,7 +201,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
     parents = [str(c.get("parent", "")) for c in specs]
     order = _breadth_first(names, parents, path)
     ordered_names = tuple(names[i] for i in order)
-    parent, joint_type, rest, axis, rows, limits = [], [], [], [], [], []
+    parent, joint_type, rest, axis, rows, limits, twists = [], [], [], [], [], [], []
     quadrics, clips, bounds, owners, shapes, params = [], [], [], [], [], []
     for new_index, i in enumerate(order):
         spec = specs[i]
@@ -221,6 +224,11 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
                 if joint != "ball":
                     raise ValueError(f"{where}.max_angle applies to ball joints only")
                 limit = (0.0, _positive(spec["max_angle"], f"{where}.max_angle"))
+            twist = np.inf
+            if "max_twist" in spec:
+                if joint != "ball":
+                    raise ValueError(f"{where}.max_twist applies to ball joints only")
+                twist = _positive(spec["max_twist"], f"{where}.max_twist")
             if "limits" in spec:
                 if joint not in ("hinge", "slide"):
                     raise ValueError(f"{where}.limits apply to hinge and slide joints only")
@@ -245,6 +253,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
         rest.append(se3.from_rotvec(rest_rot, at))
         axis.append(direction)
         limits.append(limit)
+        twists.append(twist)
         rows.append(constraint_rows(JOINT_TYPES[joint], np.zeros(3), direction))
     if not quadrics:
         raise TrackerInputError(
@@ -263,6 +272,7 @@ def model_from_dict(data: dict, path: str | Path = "<model>") -> Model:
         constraint_projector=row_projectors(constraint, n_rows),
         lower=np.array([lo for lo, _ in limits]),
         upper=np.array([hi for _, hi in limits]),
+        twist=np.array(twists, dtype=float),
         quadric=np.asarray(quadrics),
         clip=np.asarray(clips),
         quadric_component=np.asarray(owners, dtype=np.int64),

@@ -120,14 +120,19 @@ def _every_joint_kind():
 @pytest.mark.parametrize("model", [load_model(ROOT / "models" / "pose2sim_man.toml"), _every_joint_kind()])
 def test_fit_jacobians_match_finite_differences(model):
     """The landmarks' and the penalties' analytic Jacobians (Body.landmark_jacobian, penalty_jacobian) against
-    central differences of posed, at random parameters with balls turned past their limits."""
+    central differences of posed, at random parameters with balls turned and twisted past their limits."""
     body = Body.of(model)
     rng = np.random.default_rng(5)
     parameters = np.clip(rng.normal(0.0, 1.0, body.offsets[-1]), body.lower, body.upper)
+    for i, limit in zip(body.twisted, body.twist_limits):  # each twisted beyond its limit
+        parameters[body.offsets[i] : body.offsets[i] + 3] = [0.2, -0.3, limit + 0.5]
     root = se3.from_rotvec([0.2, -0.4, 1.1], [0.3, -0.2, 0.9])
     landmarks = body.landmark_jacobian(parameters, body.posed(root, parameters))
     penalties = body.penalty_jacobian(parameters)
-    assert (np.abs(penalties[len(parameters) - 6 :]).sum(axis=1) > 0).any()  # some ball beyond its limit
+    limits = penalties[len(parameters) - 6 :]
+    assert (np.abs(limits[: len(body.balls)]).sum(axis=1) > 0).any()  # some ball beyond its limit
+    if len(body.twisted):
+        assert (np.abs(limits[len(body.balls) :]).sum(axis=1) > 0).any()  # and some twisted beyond its own
     h = 1e-6
     for q in range(len(parameters)):
         step = np.eye(len(parameters))[q] * h

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from tracker.camera import Camera
-from tracker.chain import BALL, FREE, HINGE, SLIDE
+from tracker.chain import BALL, FREE, HINGE, SLIDE, twist_angle, twist_gradient
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.keypoints.triangulation import middle
@@ -82,9 +82,11 @@ class Body:
     """A model's joint space, once: where each component's parameters start (N + 1,) (6 for the root and for a
     free joint, 3 for a ball, 1 for a hinge or slide, 0 when fixed), their ``lower`` and ``upper`` bounds (a
     hinge's or slide's limits, unbounded otherwise), the ``balls`` (B,) with a largest rotation and that rotation,
-    ``turns`` (B,) (:data:`TRUNK_TURN` at most for the trunk's), the landmarks' ``component`` (33,) and ``anchor``
-    (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the Jacobians ``drives`` (33, P), whether a
-    parameter moves a landmark: it turns or slides the joint of the landmark's component or of one above it."""
+    ``turns`` (B,) (:data:`TRUNK_TURN` at most for the trunk's), the balls ``twisted`` (T,) with a largest turn
+    about their bone, ``twist_limits`` (T,) (:func:`tracker.chain.twist_angle`), the landmarks' ``component`` (33,)
+    and ``anchor`` (33, 3) points (:func:`tracker.keypoints.anchors.anchors`), and for the Jacobians ``drives``
+    (33, P), whether a parameter moves a landmark: it turns or slides the joint of the landmark's component or of one
+    above it."""
 
     model: Model
     offsets: np.ndarray
@@ -95,6 +97,8 @@ class Body:
     anchor: np.ndarray
     drives: np.ndarray
     turns: np.ndarray
+    twisted: np.ndarray
+    twist_limits: np.ndarray
 
     @staticmethod
     def of(model: Model) -> Body:
@@ -115,7 +119,10 @@ class Body:
                 moves[j, below], j = True, int(model.parent[j])
         owner = np.repeat(np.arange(model.size), counts)  # the component whose joint each parameter moves
         drives = moves[owner][:, np.maximum(component, 0)].T & (component >= 0)[:, None]
-        return Body(model, offsets, lower, upper, balls, component, anchor, drives, turns)
+        twisted = np.flatnonzero((model.joint_type == BALL) & np.isfinite(model.twist))
+        return Body(
+            model, offsets, lower, upper, balls, component, anchor, drives, turns, twisted, model.twist[twisted]
+        )
 
     def posed(self, root: np.ndarray, parameters: np.ndarray) -> np.ndarray:
         """World poses (N, 4, 4) of joint-space ``parameters``: the root at ``root`` moved by (dt, dr),
@@ -161,13 +168,23 @@ class Body:
 
     def penalties(self, parameters: np.ndarray) -> np.ndarray:
         """The residuals (metres) that hold the joints: every joint parameter's pull to rest, :data:`REST_WEIGHT`
-        times it, and every ball's turn beyond its largest rotation (``turns``), :data:`LIMIT_WEIGHT` times it."""
+        times it, and every ball's turn beyond its largest rotation (``turns``) and its twist beyond its largest
+        (``twist_limits``), :data:`LIMIT_WEIGHT` times each."""
         offsets = self.offsets
         beyond = [
             max(0.0, float(np.linalg.norm(parameters[offsets[i] : offsets[i + 1]])) - turn)
             for i, turn in zip(self.balls, self.turns)
         ]
-        return np.concatenate([REST_WEIGHT * parameters[6:], LIMIT_WEIGHT * np.array(beyond)])
+        twisted = [
+            self._twisted(parameters[offsets[i] : offsets[i + 1]], limit)
+            for i, limit in zip(self.twisted, self.twist_limits)
+        ]
+        return np.concatenate([REST_WEIGHT * parameters[6:], LIMIT_WEIGHT * np.array(beyond + twisted)])
+
+    @staticmethod
+    def _twisted(w: np.ndarray, limit: float) -> float:
+        """How far (rad) the ball's rotation ``w`` twists beyond ``limit``."""
+        return max(0.0, abs(twist_angle(np.ascontiguousarray(w, dtype=np.float64))) - limit)
 
     def landmark_points(self, poses: np.ndarray) -> np.ndarray:
         """World points (33, 3) of the landmarks' model points at ``poses`` (NaN where the model has none)."""
@@ -225,7 +242,13 @@ class Body:
             size = float(np.linalg.norm(value))
             if size > turn:
                 limits[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * value / size
-        return np.concatenate([rest, limits])
+        twisted = np.zeros((len(self.twisted), offsets[-1]))
+        for row, (i, limit) in enumerate(zip(self.twisted, self.twist_limits)):
+            value = np.ascontiguousarray(parameters[offsets[i] : offsets[i + 1]], dtype=np.float64)
+            if self._twisted(value, limit) > 0.0:
+                sign = np.sign(twist_angle(value))
+                twisted[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * sign * twist_gradient(value)
+        return np.concatenate([rest, limits, twisted])
 
 
 def _nearer(observed: np.ndarray, model_points: np.ndarray) -> np.ndarray:

@@ -278,7 +278,22 @@ def hold_kernel(information, eta, poses, trunk, parent, rest, turn, weight):
 
 @njit(cache=True, nogil=True)
 def update_kernel(
-    information, eta, prior, poses, anchor, parent, D, projector, rows, rest, joint_type, axis, lower, upper, max_turn
+    information,
+    eta,
+    prior,
+    poses,
+    anchor,
+    parent,
+    D,
+    projector,
+    rows,
+    rest,
+    joint_type,
+    axis,
+    lower,
+    upper,
+    twist_limit,
+    max_turn,
 ):
     """Prior, tree solve, E_i <- E_i exp(s alpha_i) and coercion in one call (sections 3-5).
 
@@ -296,7 +311,7 @@ def update_kernel(
     moved = np.empty_like(poses)
     for i in range(poses.shape[0]):
         moved[i] = poses[i] @ exp(alpha[i])
-    return coerce_kernel(moved, parent, rest, projector, rows, joint_type, axis, lower, upper)
+    return coerce_kernel(moved, parent, rest, projector, rows, joint_type, axis, lower, upper, twist_limit)
 
 
 def narrowing(first: int, last: int, *, step: int, steps: int) -> int:
@@ -645,6 +660,7 @@ class Tracker:
             m.axis,
             m.lower,
             m.upper,
+            m.twist,
             st.max_turn,
         )
 
