@@ -219,9 +219,10 @@ def test_landmarks_within_the_detector_noise_are_not_used_and_further_ones_pull_
 
 def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
     """The demo from a first pose 15 cm and 20 degrees off (about the root): the edges alone stay off (measured:
-    MPJPE 60-71 mm in every frame of 10-19 with the trunk held near rest, 288 mm over frames 0-9 without), while
-    the same tracker fed perfect landmarks (the true joint centres' images, 12 per camera) in the same IRLS is back
-    within millimetres by frame 10 (measured: 19 mm over frames 0-9, 5-6 mm after)."""
+    MPJPE 28-31 mm in every frame of 10-19 with the shoulders' twist limited, 57-67 mm without, 288 mm over frames
+    0-9 without the trunk held near rest), while the same tracker fed perfect landmarks (the true joint centres'
+    images, 12 per camera) in the same IRLS is back within millimetres by frame 10 (measured: 9 mm over frames
+    0-9, 4-6 mm after)."""
     import itertools
 
     from tracker.io.posefile import load_pose_file
@@ -255,7 +256,7 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
         return 1000 * np.linalg.norm(joint_centres(np.array(poses)) - truth["joints"][:count], axis=2).mean(axis=1)
 
     alone, fused = mpjpe(False), mpjpe(True)
-    assert alone[10:].min() > 50.0
+    assert alone[10:].min() > 20.0
     assert fused[10:].max() < 10.0 and fused[:10].mean() < 50.0, fused.round(1)
 
 
