@@ -384,9 +384,9 @@ def twist_gradient(w: np.ndarray) -> np.ndarray:
     tau = 2 atan2(q_z, q_w) and d tau = 2 (q_w dq_z - q_z dq_w) / (q_z^2 + q_w^2)."""
     w = np.asarray(w, dtype=np.float64)
     angle = float(np.linalg.norm(w))
-    qz, qw = _quaternion(w)[2:]
     if angle < 1e-8:
         return np.array([0.0, 0.0, 1.0])
+    qz, qw = _quaternion(w)[2:]
     unit = w / angle
     f = np.sin(angle / 2) / angle
     slope = (angle / 2 * np.cos(angle / 2) - np.sin(angle / 2)) / angle**2  # df / d theta

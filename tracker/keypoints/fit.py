@@ -119,7 +119,7 @@ class Body:
                 moves[j, below], j = True, int(model.parent[j])
         owner = np.repeat(np.arange(model.size), counts)  # the component whose joint each parameter moves
         drives = moves[owner][:, np.maximum(component, 0)].T & (component >= 0)[:, None]
-        twisted = np.flatnonzero((model.joint_type == BALL) & np.isfinite(model.twist))
+        twisted = np.flatnonzero(np.isfinite(model.twist))  # balls only (tracker.model)
         return Body(
             model, offsets, lower, upper, balls, component, anchor, drives, turns, twisted, model.twist[twisted]
         )
@@ -176,15 +176,10 @@ class Body:
             for i, turn in zip(self.balls, self.turns)
         ]
         twisted = [
-            self._twisted(parameters[offsets[i] : offsets[i + 1]], limit)
+            max(0.0, abs(twist_angle(parameters[offsets[i] : offsets[i + 1]])) - limit)
             for i, limit in zip(self.twisted, self.twist_limits)
         ]
         return np.concatenate([REST_WEIGHT * parameters[6:], LIMIT_WEIGHT * np.array(beyond + twisted)])
-
-    @staticmethod
-    def _twisted(w: np.ndarray, limit: float) -> float:
-        """How far (rad) the ball's rotation ``w`` twists beyond ``limit``."""
-        return max(0.0, abs(twist_angle(np.ascontiguousarray(w, dtype=np.float64))) - limit)
 
     def landmark_points(self, poses: np.ndarray) -> np.ndarray:
         """World points (33, 3) of the landmarks' model points at ``poses`` (NaN where the model has none)."""
@@ -244,10 +239,10 @@ class Body:
                 limits[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * value / size
         twisted = np.zeros((len(self.twisted), offsets[-1]))
         for row, (i, limit) in enumerate(zip(self.twisted, self.twist_limits)):
-            value = np.ascontiguousarray(parameters[offsets[i] : offsets[i + 1]], dtype=np.float64)
-            if self._twisted(value, limit) > 0.0:
-                sign = np.sign(twist_angle(value))
-                twisted[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * sign * twist_gradient(value)
+            value = parameters[offsets[i] : offsets[i + 1]]
+            tau = twist_angle(value)
+            if abs(tau) > limit:
+                twisted[row, offsets[i] : offsets[i + 1]] = LIMIT_WEIGHT * np.sign(tau) * twist_gradient(value)
         return np.concatenate([rest, limits, twisted])
 
 
