@@ -9,7 +9,7 @@ import pytest
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import load_model
-from tracker.tracking.guessed import BONES, SHORT, bone_lengths, guessed, hidden_parts
+from tracker.tracking.guessed import BONES, SHORT, axis_points, bone_lengths, guessed, hidden_parts, leg_landmarks
 from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, landmark_world
 from tracker.tracking.track import Settings, Tracker
 
@@ -118,3 +118,32 @@ def test_a_leg_whose_knee_the_detector_is_unsure_of_is_not_judged(demo, perfect_
     confidence[:, _index("left", ("knee",))] = 0.4
     lengths = bone_lengths(poses, *cue_points(model))
     assert set(np.flatnonzero(guessed(cameras, pixels, confidence, lengths=lengths))) == set(_index("right", LEGS))
+
+
+def test_every_landmark_below_a_hip_hides_both_legs_and_nothing_else(demo):
+    _, model, _, _, _ = demo
+    chosen = leg_landmarks()
+    assert {LANDMARKS[j] for j in np.flatnonzero(chosen)} == {
+        f"{side}_{name}" for side in ("left", "right") for name in LEGS
+    }
+    names = np.array(model.names)
+    legs = {f"{part}_{side}" for part in ("thigh", "shin", "foot") for side in "lr"}
+    assert set(names[hidden_parts(model, cue_points(model)[0], chosen)]) == legs
+
+
+def test_axis_points_run_along_each_quadric(demo):
+    """A cone's ends and middle; an ellipsoid's centre and 0.6 of its longest semi-axis either way along it."""
+    _, model, _, _, _ = demo
+    component, points = axis_points(model)
+    assert len(component) == 3 * len(model.quadric_params)
+    for q, spec in enumerate(model.quadric_params):
+        assert (component[3 * q : 3 * q + 3] == model.quadric_component[q]).all()
+        three = points[3 * q : 3 * q + 3]
+        if spec["shape"] == "cone":
+            np.testing.assert_allclose(three[[0, 2]], [spec["from"], spec["to"]])
+            np.testing.assert_allclose(three[1], 0.5 * (three[0] + three[2]))
+        else:
+            radii = np.asarray(spec["radii"])
+            np.testing.assert_allclose(three[1], spec.get("center", (0.0, 0.0, 0.0)))
+            np.testing.assert_allclose(three[2] - three[1], 0.6 * radii.max() * np.eye(3)[np.argmax(radii)])
+            np.testing.assert_allclose(three[0] + three[2], 2.0 * three[1])

@@ -11,6 +11,9 @@ leg, is a guess; the parts it ends are hidden from the views, where their outlin
 not their own.  The tracker gives those parts no edge, colour or landmark weight in that frame
 (:meth:`tracker.tracking.track.Tracker.step`), so the motion prior and the joints carry them.
 
+:func:`leg_landmarks` and :func:`axis_points` serve the legs hidden from one view, which the person's mask tells
+(:meth:`tracker.tracking.track.Tracker.see_person`).
+
 The legs only: a forearm is short and a wrist the detector's noisiest landmark, and forearms triangulate
 under half their length in up to 14 % of the frames of renders whose arms are all seen.  docs/keypoints.md,
 "Guessed legs", has the measurements.
@@ -85,3 +88,31 @@ def hidden_parts(model: Model, component: np.ndarray, landmarks: np.ndarray) -> 
         if top >= 0:
             tops[top] = True
     return with_descendants(model.parent, tops)
+
+
+def leg_landmarks() -> np.ndarray:
+    """The landmarks (K,) bool whose guess hides a leg: every one below a hip."""
+    chosen = np.zeros(len(LANDMARKS), bool)
+    for below in BELOW.values():
+        chosen[below] = True
+    return chosen
+
+
+def axis_points(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """Three points along the axis of every quadric of ``model``, in its component's frame: component (P,) and
+    point (P, 3); a cone's or cylinder's ends and middle, an ellipsoid's centre and 0.6 of its longest semi-axis
+    either way."""
+    component, points = [], []
+    for c, spec in zip(model.quadric_component, model.quadric_params):
+        if spec["shape"] in ("cone", "cylinder"):
+            start, end = np.asarray(spec["from"], float), np.asarray(spec["to"], float)
+            chosen = [start, 0.5 * (start + end), end]
+        else:
+            centre = np.asarray(spec.get("center", (0.0, 0.0, 0.0)), float)
+            semi = np.full(3, spec["radius"]) if spec["shape"] == "sphere" else np.asarray(spec["radii"], float)
+            half = np.zeros(3)
+            half[int(np.argmax(semi))] = 0.6 * semi.max()
+            chosen = [centre - half, centre, centre + half]
+        component += [int(c)] * 3
+        points += chosen
+    return np.asarray(component, np.int64), np.asarray(points)

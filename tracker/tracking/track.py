@@ -37,7 +37,7 @@ from tracker.io.readers import WithChroma, reduced
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
 from tracker.tracking import motion_prior
-from tracker.tracking.guessed import bone_lengths, guessed, hidden_parts
+from tracker.tracking.guessed import axis_points, bone_lengths, guessed, hidden_parts, leg_landmarks
 from tracker.tracking.keypoint_cue import (
     LANDMARKS,
     TRUNK_TURN,
@@ -126,7 +126,8 @@ class Settings:
     # again from there, kept if the limb's edges fit better (Tracker.lead); 0: never
     hide_guessed: bool = True  # legs whose landmarks triangulate to bones under half the model's are guessed by
     # the detector, hidden (a table): their landmarks are dropped and the parts get no edge or colour weight
-    # in that frame (tracker.tracking.guessed)
+    # in that frame (tracker.tracking.guessed); and a leg off the person's mask in a view but on it in another is
+    # hidden in that view (Tracker.see_person)
     keypoint_drag: float = 0.05  # share of the body's image size: where the frame's landmarks lie off its tracked
     # poses by this much more than off the poses it was tracked from, the edges dragged the body off them, and the
     # frame keeps those poses (Tracker.dragged); 0: never
@@ -494,6 +495,10 @@ class Tracker:
         height, width = int(self.grid[:, 1].max()), int(self.grid[:, 0].max())
         self.person = np.zeros((len(cameras), height, width), np.uint8)  # the person's mask per camera (see_person)
         self.person_trust = np.zeros(len(cameras))  # how far the region cue trusts it: 0 where there is none
+        self.legs = hidden_parts(model, self.landmarks[0], leg_landmarks())  # the parts a guessed leg hides
+        self.axis = axis_points(model)  # three points along each quadric (mask_shares)
+        self.off_mask = np.zeros((len(cameras), n), bool)  # the legs off the person's mask in each view (see_person)
+        self.square = np.full((len(cameras), 3), np.nan)  # where each view's last mask lies (see_person)
 
     def with_cameras(self, cameras) -> Tracker:
         """A tracker for the rig ``cameras`` that goes on from this one: the same model and (pixel-scaled)
@@ -562,7 +567,13 @@ class Tracker:
     def see_person(self, masks: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Take each camera's person mask for the frame to track, ``masks``: (C, S, S) uint8 over squares (C, 3:
         centre x, y and side, full-size pixels; NaN for a camera without one) (:func:`tracker.tracking.person.
-        person_grid`), or None: none in any camera."""
+        person_grid`), or None: none in any camera.
+
+        With ``hide_guessed``, a leg part (a thigh and every part below it) that lies off the mask of a view at the
+        current poses (under half of its axis points on it, of those within the image and the mask's square), where
+        some other part lies on it, while another view's mask has it on, is hidden in that view until the view's
+        next mask: a table before that camera, whose edges would hold it (docs/keypoints.md, "Legs hidden from one
+        view").  Off every view's mask, a leg has strayed rather than hidden, and its edges may bring it back."""
         self.person_trust[:] = 0.0
         if masks is None:
             return
@@ -571,6 +582,35 @@ class Tracker:
                 self.person_trust[k] = self.settings.region_person
                 w, h, f, _ = self.grid[k]
                 self.person[k, :h, :w] = person_grid(view, placed, self.grid[k, :2], factor=f)
+                self.square[k] = placed
+        masked = np.flatnonzero(self.person_trust > 0).tolist()
+        if not self.settings.hide_guessed or not masked:
+            return
+        shares = np.array([self.mask_shares(camera, self.poses) for camera in masked])
+        on = shares >= 0.5
+        body = np.asarray(on[:, ~self.legs].any(axis=1))
+        for row, camera in enumerate(masked):
+            others = np.delete(on, row, axis=0)
+            self.off_mask[camera] = self.legs & (shares[row] < 0.5) & body[row] & others.any(axis=0)
+
+    def mask_shares(self, camera: int, poses: np.ndarray) -> np.ndarray:
+        """Each component's share (N,) of its axis points (:func:`axis_points`) at ``poses`` that lie on the person's
+        mask of view ``camera``, over those within the image and the mask's square; NaN where none is."""
+        component, points = self.axis
+        world = np.einsum("kij,kj->ki", poses[component, :3, :3], points) + poses[component, :3, 3]
+        pixels = self.cameras[camera].project(world)
+        w, h, f, _ = self.grid[camera]
+        grid = np.rint((pixels - (f - 1) / 2.0) / f)
+        inside = np.isfinite(grid).all(axis=1) & (grid >= 0).all(axis=1) & (grid[:, 0] < w) & (grid[:, 1] < h)
+        centre_x, centre_y, side = self.square[camera]
+        with np.errstate(invalid="ignore"):
+            inside &= (np.abs(pixels[:, 0] - centre_x) <= side / 2) & (np.abs(pixels[:, 1] - centre_y) <= side / 2)
+        on = np.zeros(len(points), bool)
+        u, v = grid[inside].astype(np.int64).T
+        on[inside] = self.person[camera, v, u] >= 128
+        count = np.bincount(component, weights=inside, minlength=self.model.size)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.bincount(component, weights=on, minlength=self.model.size) / count
 
     def load_images(self, images, smoothed: bool = False) -> None:
         """Copy one grey image per camera into the frame buffer, reduced and smoothed (:meth:`smooth`) unless
@@ -691,8 +731,9 @@ class Tracker:
             work.ownership.depth[: s.count] = search_range + 1
         work.outside = work.ownership.outside[: s.count]
         work.depth = work.ownership.depth[: s.count]
-        if self.hidden.any():  # no edge or colour weight: an empty search, no region line
-            hid = self.hidden[s.component[: s.count]]
+        hidden = self.hidden[None, :] | self.off_mask
+        if hidden.any():  # no edge or colour weight: an empty search, no region line
+            hid = hidden[s.camera[: s.count], s.component[: s.count]]
             work.lo[hid] = 1
             work.hi[hid] = 0
             work.outside[hid] = -2
