@@ -598,16 +598,12 @@ class Tracker:
         mask of view ``camera``, over those within the image and the mask's square; NaN where none is."""
         component, points = self.axis
         world = np.einsum("kij,kj->ki", poses[component, :3, :3], points) + poses[component, :3, 3]
+        inside, on = self._on_mask(camera, world)
         pixels = self.cameras[camera].project(world)
-        w, h, f, _ = self.grid[camera]
-        grid = np.rint((pixels - (f - 1) / 2.0) / f)
-        inside = np.isfinite(grid).all(axis=1) & (grid >= 0).all(axis=1) & (grid[:, 0] < w) & (grid[:, 1] < h)
         centre_x, centre_y, side = self.square[camera]
         with np.errstate(invalid="ignore"):
             inside &= (np.abs(pixels[:, 0] - centre_x) <= side / 2) & (np.abs(pixels[:, 1] - centre_y) <= side / 2)
-        on = np.zeros(len(points), bool)
-        u, v = grid[inside].astype(np.int64).T
-        on[inside] = self.person[camera, v, u] >= 128
+        on &= inside
         count = np.bincount(component, weights=inside, minlength=self.model.size)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.bincount(component, weights=on, minlength=self.model.size) / count
@@ -1066,14 +1062,21 @@ class Tracker:
         joints = poses[:, :3, 3]
         ends = joints[self.model.parent[child]], joints[child]
         points = np.concatenate([(1.0 - s) * ends[0] + s * ends[1] for s in BONE_POINTS])
-        shares = []
-        for k in np.flatnonzero(self.person_trust > 0):
-            w, h, f, _ = self.grid[k]
-            grid = np.rint((self.cameras[k].project(points) - (f - 1) / 2.0) / f)
-            inside = np.isfinite(grid).all(axis=1) & (grid >= 0).all(axis=1) & (grid[:, 0] < w) & (grid[:, 1] < h)
-            u, v = grid[inside].astype(np.int64).T
-            shares.append(np.count_nonzero(self.person[k, v, u] >= 128) / len(points))
+        shares = [
+            self._on_mask(k, points)[1].sum() / len(points) for k in np.flatnonzero(self.person_trust > 0).tolist()
+        ]
         return float(np.mean(shares)) if shares else 0.0
+
+    def _on_mask(self, camera: int, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Which of the points ``world`` (P, 3) project within view ``camera``'s colour grid, and which lie on its
+        person mask there (two (P,) bool)."""
+        w, h, f, _ = self.grid[camera]
+        grid = np.rint((self.cameras[camera].project(world) - (f - 1) / 2.0) / f)
+        inside = np.isfinite(grid).all(axis=1) & (grid >= 0).all(axis=1) & (grid[:, 0] < w) & (grid[:, 1] < h)
+        on = np.zeros(len(world), bool)
+        u, v = grid[inside].astype(np.int64).T
+        on[inside] = self.person[camera, v, u] >= 128
+        return inside, on
 
     def carried(self, current: np.ndarray) -> np.ndarray:
         """The frame's prediction under ``constant-velocity`` dynamics: the last frame's poses ``current`` moved on
