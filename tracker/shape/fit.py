@@ -140,7 +140,7 @@ def fit_shape(
     model = model_from_dict(document)
     layout = Layout.of(model, tie_sides=tie_sides)
     step = max(1, recording.frame_count // max(frames, 1))
-    say(f"keypoints: detecting the body in every {step}th frame" if step > 1 else "keypoints: detecting the body")
+    say(f"keypoints: detecting the body in one frame of every {step}" if step > 1 else "keypoints: detecting the body")
     keypoints, _ = detect_recording(recording, 0, recording.frame_count, step=step, cache=cache, progress=progress)
     say("silhouettes: which landmarks lie on the person")
     keypoints, coloured, masks = _on_person(recording, keypoints, step, progress)
