@@ -339,12 +339,13 @@ def test_a_landmark_at_a_limbs_end_leads_its_whole_limb_and_no_other():
         assert not led[LANDMARKS.index(landmark)].any(), landmark
 
 
-def _arm_turned(model, poses, degrees):
-    """``poses`` with the left arm turned ``degrees`` about its shoulder (the upper arm's frame's x axis)."""
+def _arm_turned(model, poses, degrees, parts=("upperarm_l", "forearm_l", "hand_l")):
+    """``poses`` with the left arm (or the limb of ``parts``, from its top) turned ``degrees`` about its top joint
+    (the top part's frame's x axis)."""
     turned = poses.copy()
-    shoulder = poses[model.index("upperarm_l")]
+    shoulder = poses[model.index(parts[0])]
     turn = shoulder @ se3.exp(np.r_[0.0, 0.0, 0.0, np.radians(degrees), 0.0, 0.0]) @ np.linalg.inv(shoulder)
-    for part in ("upperarm_l", "forearm_l", "hand_l"):
+    for part in parts:
         turned[model.index(part)] = turn @ poses[model.index(part)]
     return turned
 
@@ -384,6 +385,55 @@ def test_a_limb_far_off_its_landmarks_is_led_to_them_and_the_rest_stays(demo_fra
     np.testing.assert_array_equal(tracker.anchor, tracker.poses)  # the prediction the edges start from
     rest = np.setdiff1d(np.arange(model.size), arm)
     np.testing.assert_allclose(tracker.poses[rest], start[rest], atol=1e-4)
+
+
+def test_a_limb_off_the_persons_mask_is_led_however_near_its_landmarks(demo_frame, person_masks):
+    """The demo's frame 0 with the lead's margin too wide for any landmark's misfit to lead a limb, and the person's
+    masks of the true pose.  An arm turned 25 degrees off them, where the trunk lies on them, is led; a leg turned 40
+    degrees off every view's mask is led; and a step from the arm turned 90 degrees brings the wrist back (not
+    without the masks).  Nothing is led without masks, in place, where the masks show the person elsewhere (the
+    trunk off them too), for a leg off one view's mask and on the others' (hidden in that view by a table), or with
+    ``lead_off_mask`` off."""
+    import itertools
+
+    from tracker.io.recording import frames
+    from tracker.model import joint_centres
+    from tracker.tracking.track import Tracker
+
+    model, _, _, _, _, poses, pixels = demo_frame
+    cameras = open_recording(DEMO).cameras
+    confidence = np.ones(pixels.shape[:2])
+    arm = [model.index(part) for part in ("upperarm_l", "forearm_l", "hand_l")]
+    leg = ("thigh_l", "shin_l", "foot_l")
+    wide = replace(Settings(), keypoint_lead=10.0)
+    masks = person_masks(model, cameras, poses)
+    elsewhere = poses.copy()
+    elsewhere[:, :3, 3] += 1.5
+    arm_turned = _arm_turned(model, poses, 25.0)
+    leg_turned = _arm_turned(model, poses, 40.0, parts=leg)
+    leg_seen = person_masks(model, cameras, leg_turned)
+    one_view_off = (np.concatenate([masks[0][:1], leg_seen[0][1:]]), masks[1])  # the turned leg off cam0's only
+    for start, seen, settings, led in (
+        (arm_turned, masks, wide, arm),
+        (leg_turned, masks, wide, sorted(model.index(part) for part in leg)),
+        (arm_turned, None, wide, []),
+        (poses, masks, wide, []),
+        (arm_turned, person_masks(model, cameras, elsewhere), wide, []),
+        (leg_turned, one_view_off, wide, []),
+        (arm_turned, masks, replace(wide, lead_off_mask=False), []),
+    ):
+        tracker = Tracker(model, cameras, start, settings)
+        tracker.see_person(seen)
+        chosen, _ = tracker.led_limbs(pixels, confidence)
+        assert np.flatnonzero(chosen).tolist() == led
+    images = next(itertools.islice(frames(open_recording(DEMO)), 1))[1]
+    wrist = model.index("hand_l")
+    for mask, far in ((None, True), (masks, False)):
+        tracker = Tracker(model, cameras, _arm_turned(model, poses, 90.0), wide)
+        tracker.see_person(mask)
+        result = tracker.step(images, keypoints=(pixels, confidence))
+        miss = 1000 * np.linalg.norm(joint_centres(result.poses)[wrist] - joint_centres(poses)[wrist])
+        assert (miss > 100.0) == far, miss
 
 
 def test_legs_whose_landmarks_fit_better_swapped_in_every_view_are_led_to_them_as_detected(demo_frame):

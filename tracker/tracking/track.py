@@ -124,6 +124,8 @@ class Settings:
     keypoint_lead: float = 0.06  # share of the body's image size: where the landmarks at a limb's end lie this far
     # beyond their learnt zone off the tracked limb, the landmarks alone move it to them and the frame is tracked
     # again from there, kept if the limb's edges fit better (Tracker.lead); 0: never
+    lead_off_mask: bool = True  # an arm off a view's person mask where the trunk is on it, or a leg off every view's,
+    # is led too, however near its landmarks (Tracker.limbs_off_mask)
     hide_guessed: bool = True  # legs whose landmarks triangulate to bones under half the model's are guessed by
     # the detector, hidden (a table): their landmarks are dropped and the parts get no edge or colour weight
     # in that frame (tracker.tracking.guessed); and a leg off the person's mask in a view but on it in another is
@@ -1141,7 +1143,40 @@ class Tracker:
         off = judged & ((far > st.keypoint_lead + self.noise.tolerance) | crossed)
         placed = judged & ~off
         rooted = self.roots.any(axis=1) & ~(self.roots & ~placed).any(axis=1)
-        return self.limbs[off & rooted].any(axis=0), bool((off & rooted & crossed).any())
+        led = off & rooted
+        if st.lead_off_mask:
+            somewhere, everywhere = self.limbs_off_mask()
+            seen = (confidence >= st.keypoint_confidence).any(axis=0)
+            legged = (self.limbs & self.legs[None]).any(axis=1)
+            astray = (self.limbs & somewhere[None]).any(axis=1)
+            led |= seen & astray & (~legged | (self.limbs & everywhere[None]).any(axis=1))
+        return self.limbs[led].any(axis=0), bool((off & rooted & crossed).any())
+
+    def limbs_off_mask(self) -> tuple[np.ndarray, np.ndarray]:
+        """The parts (N,) bool that lie off the person's mask of some view at the current poses, and those off it in
+        every view that judges them: off a view's mask is under half of a part's axis points on it, of those within
+        the image and the mask's square (:meth:`mask_shares`), in a view whose mask has the trunk (the parts of no
+        limb) on it (half of its points or more, over its parts on average).  A part hidden in that view
+        (:meth:`see_person`), or hidden as guessed, is not off it.
+
+        A segmenter's mask covers the limbs that the edges lose: in blur, at a low frame rate, or along one view's ray,
+        where the other views' edges are weak and the landmarks within their learnt zones do not pull.  Such a limb is
+        led by its landmarks (:meth:`led_limbs`), and the edges arbitrate as for any lead: an arm off the mask of any
+        view, a leg only off every view's (a leg off one view's mask and on another's is hidden by a table in that
+        view, :meth:`see_person`; docs/keypoints.md, "A limb beyond the edges' reach")."""
+        masked = np.flatnonzero(self.person_trust > 0)
+        none = np.zeros(self.model.size, bool)
+        if not len(masked):
+            return none, none
+        shares = np.array([self.mask_shares(camera, self.poses) for camera in masked])
+        trunk = shares[:, ~self.limbs.any(axis=0)]
+        counted = np.isfinite(trunk)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            on = np.where(counted, trunk, 0.0).sum(axis=1) / counted.sum(axis=1) >= 0.5
+            away = shares < 0.5
+        judged = np.isfinite(shares) & on[:, None]
+        off = away & on[:, None] & ~self.hidden[None] & ~self.off_mask[masked]
+        return off.any(axis=0), (away | ~judged).all(axis=0) & judged.any(axis=0)
 
     def move_limbs(self, led: np.ndarray, pixels: np.ndarray, confidence: np.ndarray, *, swaps: bool = True) -> None:
         """Move the components ``led`` (N,) bool to the landmarks ``pixels`` at ``confidence``, landmarks alone:
