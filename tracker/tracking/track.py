@@ -1146,10 +1146,10 @@ class Tracker:
         led = off & rooted
         if st.lead_off_mask:
             somewhere, everywhere = self.limbs_off_mask()
-            seen = (confidence >= st.keypoint_confidence).any(axis=0)
+            sure = (confidence >= st.keypoint_confidence).any(axis=0)
             legged = (self.limbs & self.legs[None]).any(axis=1)
             astray = (self.limbs & somewhere[None]).any(axis=1)
-            led |= seen & astray & (~legged | (self.limbs & everywhere[None]).any(axis=1))
+            led |= sure & astray & (~legged | (self.limbs & everywhere[None]).any(axis=1))
         return self.limbs[led].any(axis=0), bool((off & rooted & crossed).any())
 
     def limbs_off_mask(self) -> tuple[np.ndarray, np.ndarray]:
@@ -1164,10 +1164,9 @@ class Tracker:
         led by its landmarks (:meth:`led_limbs`), and the edges arbitrate as for any lead: an arm off the mask of any
         view, a leg only off every view's (a leg off one view's mask and on another's is hidden by a table in that
         view, :meth:`see_person`; docs/keypoints.md, "A limb beyond the edges' reach")."""
-        masked = np.flatnonzero(self.person_trust > 0)
-        none = np.zeros(self.model.size, bool)
-        if not len(masked):
-            return none, none
+        masked = np.flatnonzero(self.person_trust > 0).tolist()
+        if not masked:
+            return np.zeros(self.model.size, bool), np.zeros(self.model.size, bool)
         shares = np.array([self.mask_shares(camera, self.poses) for camera in masked])
         trunk = shares[:, ~self.limbs.any(axis=0)]
         counted = np.isfinite(trunk)
