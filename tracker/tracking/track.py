@@ -498,6 +498,7 @@ class Tracker:
         self.person = np.zeros((len(cameras), height, width), np.uint8)  # the person's mask per camera (see_person)
         self.person_trust = np.zeros(len(cameras))  # how far the region cue trusts it: 0 where there is none
         self.legs = hidden_parts(model, self.landmarks[0], leg_landmarks())  # the parts a guessed leg hides
+        self.leads_leg = (self.limbs & self.legs[None]).any(axis=1)  # the landmarks that lead a leg (led_limbs)
         self.axis = axis_points(model)  # three points along each quadric (mask_shares)
         self.off_mask = np.zeros((len(cameras), n), bool)  # the legs off the person's mask in each view (see_person)
         self.square = np.full((len(cameras), 3), np.nan)  # where each view's last mask lies (see_person)
@@ -1147,9 +1148,8 @@ class Tracker:
         if st.lead_off_mask:
             somewhere, everywhere = self.limbs_off_mask()
             sure = (confidence >= st.keypoint_confidence).any(axis=0)
-            legged = (self.limbs & self.legs[None]).any(axis=1)
             astray = (self.limbs & somewhere[None]).any(axis=1)
-            led |= sure & astray & (~legged | (self.limbs & everywhere[None]).any(axis=1))
+            led |= sure & astray & (~self.leads_leg | (self.limbs & everywhere[None]).any(axis=1))
         return self.limbs[led].any(axis=0), bool((off & rooted & crossed).any())
 
     def limbs_off_mask(self) -> tuple[np.ndarray, np.ndarray]:
