@@ -17,6 +17,13 @@ is fitted to those frames' landmarks, their triangulated points and then their d
 detections), and snapped to the frame's edges as the first pose is
 (:func:`tracker.keypoints.first_pose.snap_to_edges`).
 
+A re-seed that the frame's own landmarks called for (not a ``pending`` one), of a frame that is not lost, must
+first answer them: the snapped pose must lie nearer them than the tracked pose, in the body's misfit or in that of
+the landmarks that strayed for :data:`PERSISTENCE` frames (:meth:`Recovery.nearer`).  A seed fitted to three
+frames of wrong landmarks (a view that reads the body's left for its right) can land farther from the frame's
+landmarks than the tracked pose, turned about, and a body turned about its vertical axis shows much the same
+outline and mask (docs/keypoints.md, "Recovery").
+
 The image then arbitrates: the tracker starts again from the snapped pose, its status saying so
 (:data:`tracker.status.RESEEDED`), unless the image backs it no better than the tracked pose (a frame that is not
 lost): the share of its outline samples that found an edge plus the share of its body on the person's masks
@@ -133,6 +140,16 @@ class Recovery:
         each[seen_twice] = np.nanmean(distances[:, seen_twice], axis=0)
         return body, each
 
+    def nearer(self, seed: np.ndarray, tracked: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> bool:
+        """Whether the poses ``seed`` lie nearer the frame's landmarks than ``tracked`` (:meth:`misfit`): the body's
+        misfit, or that of the landmarks that have strayed for :data:`PERSISTENCE` frames, is lower."""
+        body_seed, each_seed = self.misfit(seed, pixels, confidence)
+        body, each = self.misfit(tracked, pixels, confidence)
+        if body_seed < body:
+            return True
+        strayed = (self.streak >= PERSISTENCE) & np.isfinite(each_seed) & np.isfinite(each)
+        return bool(strayed.any() and each_seed[strayed].mean() < each[strayed].mean())
+
     def fitted(self, start: np.ndarray) -> np.ndarray | None:
         """The model fitted to the landmarks of the :data:`WINDOW` recent frames (to their triangulated points,
         then to the detections, :func:`tracker.keypoints.first_pose.fitted_to_frames`), or None when they cannot
@@ -174,7 +191,8 @@ class Recovery:
         body, each = self.misfit(result.poses, pixels, confidence)
         self.streak = np.where(each > LANDMARK_STRAYED + tracker.noise.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
-        strayed = body > limit or bool((self.streak >= PERSISTENCE).any()) or self.pending
+        called = body > limit or bool((self.streak >= PERSISTENCE).any())  # by this frame's landmarks
+        strayed = called or self.pending
         unmasked = not (tracker.person_trust > 0).any()
         self.masked |= not unmasked
         if result.status != LOST and (self.wait > 0 or not strayed or (self.masked and unmasked)):
@@ -193,6 +211,10 @@ class Recovery:
         )
         if tracker.on_person(seed) > tracker.on_person(snapped.poses):  # the snap took it off the person
             snapped = tracker.judged(images, poses=seed, smoothed=True)
+        if result.status != LOST and called and not self.nearer(snapped.poses, result.poses, pixels, confidence):
+            self.declined += 1
+            self.back_off()
+            return result  # the landmarks that called for it say the seed is no better
         if result.status != LOST and _backing(tracker, snapped) < _backing(tracker, result) + _noise(snapped, result):
             self.declined += 1
             self.back_off()
