@@ -140,9 +140,10 @@ class Recovery:
         each[seen_twice] = np.nanmean(distances[:, seen_twice], axis=0)
         return body, each
 
-    def nearer(self, seed: np.ndarray, tracked: np.ndarray, pixels: np.ndarray, confidence: np.ndarray) -> bool:
-        """Whether the poses ``seed`` lie nearer the frame's landmarks than ``tracked`` (:meth:`misfit`): the body's
-        misfit, or that of the landmarks that have strayed for :data:`PERSISTENCE` frames, is lower."""
+    def nearer(self, seed: np.ndarray, tracked: np.ndarray, *, pixels: np.ndarray, confidence: np.ndarray) -> bool:
+        """Whether the poses ``seed`` lie nearer the frame's landmarks ``pixels`` at ``confidence`` than ``tracked``
+        (:meth:`misfit`): the body's misfit, or that of the landmarks that have strayed for :data:`PERSISTENCE`
+        frames, is lower."""
         body_seed, each_seed = self.misfit(seed, pixels, confidence)
         body, each = self.misfit(tracked, pixels, confidence)
         if body_seed < body:
@@ -211,7 +212,8 @@ class Recovery:
         )
         if tracker.on_person(seed) > tracker.on_person(snapped.poses):  # the snap took it off the person
             snapped = tracker.judged(images, poses=seed, smoothed=True)
-        if result.status != LOST and called and not self.nearer(snapped.poses, result.poses, pixels, confidence):
+        answered = self.nearer(snapped.poses, result.poses, pixels=pixels, confidence=confidence)
+        if result.status != LOST and called and not answered:
             self.declined += 1
             self.back_off()
             return result  # the landmarks that called for it say the seed is no better
