@@ -78,7 +78,8 @@ def print_summary(outcome: Outcome) -> None:
     counts = outcome.counts
     reseeded = ""
     if outcome.declined is not None:
-        reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({outcome.declined} declined by the image)"
+        declined = f"{outcome.declined} declined by the image or the landmarks"
+        reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({declined})"
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
     if outcome.report is not None:
         print(format_report(outcome.report))
