@@ -267,6 +267,20 @@ def _swung_arm(model, truth: np.ndarray) -> np.ndarray:
     return swung
 
 
+def _tried(monkeypatch, recovery: Recovery, keypoints, start: np.ndarray, snapped):
+    """``recovery`` called for WINDOW frames on a tracked pose ``start`` (0.8 of 1000 samples found an edge), its
+    snap giving the FrameResult ``snapped``: the last call's result, the tracked result and the tracker."""
+    import tracker.keypoints.recovery as recovery_module
+    from tracker.tracking.track import FrameResult, Tracker
+
+    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
+    tracker = Tracker(recovery.model, recovery.cameras, start)
+    tracked = FrameResult(start, 0, 1.0, 0.8, 1000)
+    for _ in range(WINDOW):
+        result = recovery(tracker, None, keypoints, tracked)
+    return result, tracked, tracker
+
+
 def test_a_pose_is_judged_strayed_by_its_landmarks_image_distance(true_landmarks):
     """At the demo's true pose with perfect landmarks nothing strays; moved 30 cm, it has."""
     _, truth, recovery = _at_truth()
@@ -319,18 +333,14 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     """A strayed frame's re-seed is taken only when its outlines find more of their edges than the tracked pose's,
     by more than the two shares' noise (1000 samples each: 1.8 %): the tracked pose (share 0.8) stays against a
     re-seed finding 0.5 or 0.81, and gives way to one finding 0.83 or 0.9."""
-    import tracker.keypoints.recovery as recovery_module
-    from tracker.tracking.track import FrameResult, Tracker
+    from tracker.tracking.track import FrameResult
 
-    model, truth, recovery = _at_truth()
+    _, truth, recovery = _at_truth()
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
-    snapped = FrameResult(truth, 0, 1.0, snapped_share, 1000)
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
-    tracker = Tracker(model, recovery.cameras, moved)
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
-    for _ in range(WINDOW):
-        result = recovery(tracker, None, keypoints, tracked)
+    result, tracked, tracker = _tried(
+        monkeypatch, recovery, keypoints, moved, FrameResult(truth, 0, 1.0, snapped_share, 1000)
+    )
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
@@ -343,18 +353,13 @@ def test_a_re_seed_no_nearer_the_landmarks_than_the_tracked_pose_is_declined(
     """The tracked pose has strayed 30 cm from the landmarks.  A re-seed that lies on them is taken; one that lies
     farther from them (60 cm: fitted to landmarks of other frames that were wrong) is declined, though its outlines
     find more of their edges (0.95 against 0.8): the landmarks called for it, and it does not answer them."""
-    import tracker.keypoints.recovery as recovery_module
-    from tracker.tracking.track import FrameResult, Tracker
+    from tracker.tracking.track import FrameResult
 
-    model, truth, recovery = _at_truth()
+    _, truth, recovery = _at_truth()
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     seed = _moved(moved) if farther else truth
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(seed, 0, 1.0, 0.95, 1000))
-    tracker = Tracker(model, recovery.cameras, moved)
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
-    for _ in range(WINDOW):
-        result = recovery(tracker, None, keypoints, tracked)
+    result, tracked, tracker = _tried(monkeypatch, recovery, keypoints, moved, FrameResult(seed, 0, 1.0, 0.95, 1000))
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
@@ -364,19 +369,13 @@ def test_a_pending_re_seed_is_judged_by_the_image_alone(monkeypatch, true_landma
     """A try pending from the frames before the window filled (the body strayed then) is not held to the frame's
     own landmarks, which the body has since come near: at the true pose, a seed 30 cm off that the image backs
     better (0.95 against 0.8) is taken."""
-    import tracker.keypoints.recovery as recovery_module
-    from tracker.tracking.track import FrameResult, Tracker
+    from tracker.tracking.track import FrameResult
 
-    model, truth, recovery = _at_truth()
+    _, truth, recovery = _at_truth()
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
-    snapped = FrameResult(moved, 0, 1.0, 0.95, 1000)
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
-    tracker = Tracker(model, recovery.cameras, truth)
-    tracked = FrameResult(truth, 0, 1.0, 0.8, 1000)
     recovery.pending = True
-    for _ in range(WINDOW):
-        recovery(tracker, None, keypoints, tracked)
+    _, _, tracker = _tried(monkeypatch, recovery, keypoints, truth, FrameResult(moved, 0, 1.0, 0.95, 1000))
     assert (recovery.declined, recovery.reseeded) == (0, 1)
     assert np.allclose(tracker.poses, moved, atol=1e-6)
 

@@ -212,15 +212,12 @@ class Recovery:
         )
         if tracker.on_person(seed) > tracker.on_person(snapped.poses):  # the snap took it off the person
             snapped = tracker.judged(images, poses=seed, smoothed=True)
-        answered = self.nearer(snapped.poses, result.poses, pixels=pixels, confidence=confidence)
-        if result.status != LOST and called and not answered:
+        unanswered = called and not self.nearer(snapped.poses, result.poses, pixels=pixels, confidence=confidence)
+        unbacked = _backing(tracker, snapped) < _backing(tracker, result) + _noise(snapped, result)
+        if result.status != LOST and (unanswered or unbacked):
             self.declined += 1
             self.back_off()
-            return result  # the landmarks that called for it say the seed is no better
-        if result.status != LOST and _backing(tracker, snapped) < _backing(tracker, result) + _noise(snapped, result):
-            self.declined += 1
-            self.back_off()
-            return result  # the image sides with the tracked pose (module docstring)
+            return result  # its landmarks, or the image, side with the tracked pose (module docstring)
         self.refusals = 0
         self.streak[:] = 0
         tracker.restart(snapped.poses)
