@@ -6,9 +6,12 @@ import shutil
 
 import pytest
 
-from tracker.apps.bench import HUMAN, _copies, _side_by_side
+import tracker.apps.bench as bench
+from tracker.apps.bench import HUMAN, _copies, _side_by_side, detector_ms
 from tracker.cli import main
+from tracker.io.recording import open_recording
 from tracker.model import model_from_dict
+from tracker.tracking.track import Settings
 
 KEYS = {
     "fps_one_view",
@@ -35,6 +38,27 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0  # the default at the recording's 60 fps
     assert result["fps_all_views_with_keypoints"] > 0
     assert set(result["stage_ms_per_frame_with_keypoints"]) >= {"outline", "measure", "region", "solve", "output"}
+
+
+def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording, monkeypatch):
+    """The tracker's readers feed its worker each view reduced as the edge search reduces it; the detector's time is
+    taken on those images, not the full-size ones (a 1080x1920 view costs it a third more at full size)."""
+    shapes = []
+
+    class Seen:
+        def whole(self, image):
+            shapes.append(image.shape)
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(bench, "Detector", Seen)
+    recording = open_recording(tiny_recording)
+    assert detector_ms(recording, Settings(work_side=120), count=2) >= 0
+    assert shapes == [(120, 160, 3)] * 4
+    shapes.clear()
+    detector_ms(recording, Settings(), count=2)
+    assert shapes == [(240, 320, 3)] * 4
 
 
 def test_bench_without_the_cue_times_the_edges_only(tiny_recording, capsys):

@@ -12,9 +12,9 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * decode only: frames per second of the same reader threads with no tracking,
   the floor that tracking is compared with (``ratio_all_views``);
 * the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
-  in this process), and frames per second end to end with the detector beside the tracker at its
-  default rate (a worker process started afresh in each pass, as ``tracker track`` does, so its
-  start-up counts);
+  in this process, reduced as the tracker feeds them to its worker), and frames per second end to
+  end with the detector beside the tracker at its default rate (a worker process started afresh in
+  each pass, as ``tracker track`` does, so its start-up counts);
 * a long run (:func:`long_run`): thousands of frames, the recording read in a loop, and the resident
   memory before, after the first :data:`SETTLED` frames and at the end (a live session must not grow).
 """
@@ -41,7 +41,7 @@ from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
-from tracker.io.readers import grey_frames
+from tracker.io.readers import grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.keypoints.detector import Detector
 from tracker.keypoints.stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
@@ -81,15 +81,17 @@ def decode_only_fps(recording: Recording) -> float:
     return count / (time.perf_counter() - started)
 
 
-def detector_ms(recording: Recording, count: int = 40) -> float:
+def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> float:
     """Median milliseconds per image of the keypoint detector's pass on the whole image, which every view gets,
     over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the tracker's
-    worker runs them)."""
+    worker runs them), each image reduced as the tracker's readers reduce what they feed the worker
+    (:func:`tracker.tracking.track.reductions`: a 1080x1920 view at half size)."""
     seconds = []
-    for source in recording.sources:
+    for source, factor in zip(recording.sources, reductions(settings, recording.cameras)):
         detector, images = Detector(), grey_frames(source, colour=True)
         try:
             for image in itertools.islice(images, min(count, recording.frame_count)):
+                image = reduced(image, int(factor))
                 started = time.perf_counter()
                 detector.whole(image)
                 seconds.append(time.perf_counter() - started)
@@ -188,7 +190,7 @@ def run(
             track_run(every, model, start, settings=settings, out=out, keypoint_step=keypoint_step)
             for _ in range(repeats if keypoint_step else 0)
         ]
-        detector = detector_ms(every) if keypoint_step else float("nan")
+        detector = detector_ms(every, settings) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
