@@ -420,6 +420,67 @@ def test_exposure_poses_interpolate_between_frames(human):
     assert np.linalg.norm(middle - 0.5 * (joint_centres(poses[3]) + joint_centres(poses[4])), axis=1).max() < 0.01
 
 
+def test_poses_at_fractional_times(human):
+    """Whole frames give the clip's poses exactly; between them the joints move on between the two frames; before
+    the first and after the last the motion is carried on; every pose keeps its joints together."""
+    poses = clips.procedural_motion(human, 6, fps=30.0, seed=1)
+    np.testing.assert_array_equal(clips.poses_at(human, poses, np.array([0.0, 3.0, 5.0])), poses[[0, 3, 5]])
+    between = clips.poses_at(human, poses, np.array([2.25, -0.5, 5.5]))
+    assert joint_gap(human, between) < 1e-9
+    quarter = joint_centres(between[0])
+    expected = 0.75 * joint_centres(poses[2]) + 0.25 * joint_centres(poses[3])
+    assert np.linalg.norm(quarter - expected, axis=1).max() < 0.01
+    root = human.index("pelvis")
+    np.testing.assert_allclose(between[1, root, :3, 3], 1.5 * poses[0, root, :3, 3] - 0.5 * poses[1, root, :3, 3])
+    np.testing.assert_allclose(between[2, root, :3, 3], 1.5 * poses[5, root, :3, 3] - 0.5 * poses[4, root, :3, 3])
+
+
+def _frames(video: Path) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(video))
+    frames = []
+    while (read := capture.read())[0]:
+        frames.append(read[1])
+    return frames
+
+
+def test_a_camera_rendered_late_shows_the_later_frames(tmp_path, human):
+    """``--time-offsets b=T``: camera b's frame n shows the body at frame n + T fps of the clip; camera a and the
+    truth are those of the render without offsets, and the recording does not name the offsets."""
+    rig = _rig(tmp_path)
+    render_args = dict(motion="procedural", frames=5, fps=30.0, seed=1, noise=0.0, progress=False)
+    synth.synthesize(MODEL, rig, tmp_path / "on_time", **render_args)
+    synth.synthesize(MODEL, rig, tmp_path / "late", staging=synth.Staging(time_offsets=(("b", 1 / 30),)), **render_args)
+    on_time, late = tmp_path / "on_time", tmp_path / "late"
+    for a, b in zip(_frames(on_time / "a.avi"), _frames(late / "a.avi"), strict=True):
+        np.testing.assert_array_equal(a, b)
+    ahead, shown = _frames(on_time / "b.avi"), _frames(late / "b.avi")
+    for f in range(4):
+        assert np.abs(shown[f].astype(int) - ahead[f + 1]).max() <= 2  # the same pose to the last bits
+    assert np.abs(shown[0].astype(int) - ahead[0]).max() > 20  # and not the frame on time
+    with np.load(on_time / "truth.npz") as one, np.load(late / "truth.npz") as other:
+        np.testing.assert_array_equal(one["joints"], other["joints"])
+    assert "offset" not in (late / "README.md").read_text()
+
+
+def test_time_offsets_are_checked(tmp_path):
+    rig = _rig(tmp_path)
+    for offsets, message in [
+        ((("c", 0.01),), "time offset of 'c': the rig has a, b"),
+        ((("b", float("nan")),), "time offset of 'b': nan is not a number"),
+        ((("b", 0.2),), "each must be shorter than the recording"),
+    ]:
+        with pytest.raises(TrackerInputError, match=message):
+            synth.synthesize(
+                MODEL,
+                rig,
+                tmp_path / "x",
+                frames=5,
+                fps=30.0,
+                progress=False,
+                staging=synth.Staging(time_offsets=offsets),
+            )
+
+
 def test_motion_blur_changes_only_near_moving_edges(human):
     camera = _tiny_camera()
     poses = clips.athletic_motion(human, 40, fps=30.0, seed=7)
@@ -516,6 +577,10 @@ def test_synth_options_on_the_command_line(tmp_path, capsys):
     assert depth[:2] == pytest.approx([1.5 * d for d in depth[2:]])
     with np.load(out / "truth.npz") as truth:
         assert truth["joints"].shape == (2, 15, 3)
+    assert main(args + ["--frames", "3", "--time-offsets", "b=0.01, a=-0.02", "--quiet"]) == 0
+    with pytest.raises(SystemExit):  # argparse's usage error, exit code 2
+        main(args + ["--time-offsets", "b=soon"])
+    assert "CAMERA=SECONDS" in capsys.readouterr().err
     assert main(args + ["--frames", "1", "--table", "cam9", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cam9" in err[0]

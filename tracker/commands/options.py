@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import os
 import sys
 from pathlib import Path
@@ -56,6 +57,21 @@ def positive_float(text: str) -> float:
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return value
+
+
+def camera_seconds(text: str) -> tuple[tuple[str, float], ...]:
+    """Argument type: ``cam1=0.021,cam2=-0.05``, seconds per camera name, as (name, seconds) pairs."""
+    pairs = []
+    for item in (part.strip() for part in text.split(",") if part.strip()):
+        name, _, value = item.partition("=")
+        try:
+            seconds = float(value)
+        except ValueError:
+            seconds = float("nan")
+        if not name.strip() or not math.isfinite(seconds):
+            raise argparse.ArgumentTypeError(f"must be CAMERA=SECONDS[,CAMERA=SECONDS...], got {item!r}")
+        pairs.append((name.strip(), seconds))
+    return tuple(pairs)
 
 
 def on_off(text: str) -> bool:

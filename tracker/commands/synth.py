@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from tracker.commands.options import camera_names, positive_float, positive_int
+from tracker.commands.options import camera_names, camera_seconds, positive_float, positive_int
 
 HELP = "render a recording with ground truth from a model, a rig and a motion"
 
@@ -74,6 +74,14 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="write the first true pose as truth_init.toml, not init.toml, so that tracking needs --init",
     )
+    parser.add_argument(
+        "--time-offsets",
+        type=camera_seconds,
+        default=(),
+        metavar="CAM=SECONDS,...",
+        help="render these cameras late (or early, negative) by so many seconds, as a rig that is not frame-locked "
+        "records; the truth keeps the frames' times and the recording does not say (tracker sync finds them)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -92,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         shutter=args.shutter,
         backdrop=args.backdrop,
         face=args.face,
+        time_offsets=args.time_offsets,
     )
     synthesize(
         args.model,

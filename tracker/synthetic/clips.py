@@ -464,27 +464,36 @@ def seated_motion(model: Model, frames: int, *, fps: float = 60.0, seed: int = 0
     return out
 
 
-def exposure_poses(model: Model, poses: np.ndarray, *, samples: int, shutter: float) -> np.ndarray:
-    """Sub-frame poses (F, S, N, 4, 4) of an exposure of ``shutter`` frame intervals centred on each frame.
+def exposure_poses(model: Model, poses: np.ndarray, *, samples: int, shutter: float, shift: float = 0.0) -> np.ndarray:
+    """Sub-frame poses (F, S, N, 4, 4) of an exposure of ``shutter`` frame intervals centred on each frame, each
+    exposure ``shift`` frames late (a camera whose clock runs behind).
 
-    Sub-frame k of frame f is at time f + shutter (k / (S - 1) - 1/2) (f alone when S = 1), between the
-    frame and its neighbour on that side (extrapolated past the first and last frames): with s the
-    fraction of the way from pose a to pose b, every component turns by R_a exp(s log(R_a^T R_b)), the
-    root moves along the straight line, and the others hang on their parents' joints.
-    """
-    frames = len(poses)
+    Sub-frame k of frame f is at time f + shift + shutter (k / (S - 1) - 1/2) (f + shift alone when S = 1)
+    (:func:`poses_at`)."""
     offsets = np.zeros(1) if samples == 1 else shutter * (np.arange(samples) / (samples - 1) - 0.5)
-    out = np.empty((frames, len(offsets), *poses.shape[1:]))
-    for f in range(frames):
-        for k, offset in enumerate(offsets):
-            if frames == 1 or offset == 0.0:
-                out[f, k] = poses[f]
-                continue
-            a = min(max(f - 1 if offset < 0 else f, 0), frames - 2)
-            s = f + offset - a
-            relative = np.einsum("nba,nbc->nac", poses[a, :, 0:3, 0:3], poses[a + 1, :, 0:3, 0:3])
-            turn = se3.exp_so3_many(s * se3.log_so3_many(np.ascontiguousarray(relative)))
-            rotations = np.einsum("nab,nbc->nac", poses[a, :, 0:3, 0:3], turn)
-            root = (1.0 - s) * poses[a, 0, 0:3, 3] + s * poses[a + 1, 0, 0:3, 3]
-            out[f, k] = poses_from_rotations(model, root, rotations)
+    times = np.arange(len(poses))[:, None] + shift + offsets[None]
+    return poses_at(model, poses, times.ravel()).reshape(*times.shape, *poses.shape[1:])
+
+
+def poses_at(model: Model, poses: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The poses (T, N, 4, 4) of the clip ``poses`` (F, N, 4, 4) at the times ``times`` (T,), in frames.
+
+    A whole frame's time gives that frame's poses.  Otherwise, with a and a + 1 the frames about the time t
+    (extrapolated past the first and last frames) and s = t - a the fraction of the way from pose a to pose b
+    = a + 1, every component turns by R_a exp(s log(R_a^T R_b)), the root moves along the straight line, and the
+    others hang on their parents' joints."""
+    frames = len(poses)
+    out = np.empty((len(times), *poses.shape[1:]))
+    for k, time in enumerate(np.asarray(times, float)):
+        whole = round(time)
+        if frames == 1 or (time == whole and 0 <= whole < frames):
+            out[k] = poses[min(max(whole, 0), frames - 1)]
+            continue
+        a = min(max(int(np.floor(time)), 0), frames - 2)
+        s = time - a
+        relative = np.einsum("nba,nbc->nac", poses[a, :, 0:3, 0:3], poses[a + 1, :, 0:3, 0:3])
+        turn = se3.exp_so3_many(s * se3.log_so3_many(np.ascontiguousarray(relative)))
+        rotations = np.einsum("nab,nbc->nac", poses[a, :, 0:3, 0:3], turn)
+        root = (1.0 - s) * poses[a, 0, 0:3, 3] + s * poses[a + 1, 0, 0:3, 3]
+        out[k] = poses_from_rotations(model, root, rotations)
     return out

@@ -38,6 +38,7 @@ from tracker.synthetic.actor import actor_poses, capsule_body, stretched_body
 from tracker.synthetic.clips import (
     athletic_motion,
     exposure_poses,
+    poses_at,
     procedural_motion,
     retarget,
     seated_motion,
@@ -156,7 +157,8 @@ class Staging:
     averaged per frame over an exposure of ``shutter`` frame intervals (:func:`tracker.synthetic.clips.exposure_poses`);
     ``backdrop``: ``photos`` (the background photos, people in them) or ``room`` (an empty furnished room
     rendered from the rig, :func:`room_backdrops`); ``face``: paint a face and hair on the head
-    (:func:`head_face`).
+    (:func:`head_face`); ``time_offsets``: (camera name, seconds) pairs, each such camera's frame n captured that
+    much later than frame n's time, the truth's (a rig that is not frame-locked; the recording does not say so).
     """
 
     texture: str = "none"
@@ -169,6 +171,7 @@ class Staging:
     shutter: float = 0.5
     backdrop: str = "photos"
     face: bool = False
+    time_offsets: tuple[tuple[str, float], ...] = ()
 
     def check(self, cameras: list[Camera]) -> None:
         """Raise TrackerInputError naming the first value out of range, or a table's unknown camera."""
@@ -186,6 +189,14 @@ class Staging:
         problems += [
             (name != "all" and name not in names, f"table before {name!r}: the rig has {', '.join(names)} (or all)")
             for name in self.tables
+        ]
+        problems += [
+            (name not in names, f"time offset of {name!r}: the rig has {', '.join(names)}")
+            for name, _ in self.time_offsets
+        ]
+        problems += [
+            (not np.isfinite(seconds), f"time offset of {name!r}: {seconds} is not a number of seconds")
+            for name, seconds in self.time_offsets
         ]
         for bad, message in problems:
             if bad:
@@ -374,6 +385,14 @@ def _staging_lines(staging: Staging, cameras: list[Camera], seed: int) -> list[s
     return lines
 
 
+def _captured(body: Model, poses: np.ndarray, staging: Staging, late: float) -> np.ndarray:
+    """What a camera ``late`` frames behind the clip's clock records of ``poses`` (F, N, 4, 4): the poses at its
+    capture times (F, N, 4, 4), or with motion blur each exposure's sub-frame poses (F, S, N, 4, 4)."""
+    if staging.motion_blur > 1:
+        return exposure_poses(body, poses, samples=staging.motion_blur, shutter=staging.shutter, shift=late)
+    return poses_at(body, poses, np.arange(len(poses)) + late) if late else poses
+
+
 def synthesize(
     model_path: str | os.PathLike,
     calib_path: str | os.PathLike,
@@ -443,11 +462,13 @@ def synthesize(
         else textures.make_texture(staging.texture, body.names, albedos(body), seed=seed)
     )
     face = head_face(body) if staging.face else None
-    exposures = (
-        exposure_poses(body, shown, samples=staging.motion_blur, shutter=staging.shutter)
-        if staging.motion_blur > 1
-        else None
-    )
+    late = dict(staging.time_offsets)
+    if any(abs(seconds) * rate >= frames for seconds in late.values()):
+        raise TrackerInputError(
+            f"time offsets {late} (seconds): each must be shorter than the recording ({frames} frames at "
+            f"{rate:g} fps); fix the synth option"
+        )
+    views = [_captured(body, shown, staging, late.get(cam.name, 0.0) * rate) for cam in cameras]
     if staging.backdrop == "room" and backgrounds is not None:
         raise TrackerInputError("background photos and the room backdrop exclude each other; give only one")
     ensure_writable_folder(out)
@@ -487,9 +508,9 @@ def synthesize(
     done = False
     try:
         for f in tqdm(range(frames), desc=f"synth {out.name}", unit="frame", disable=not progress):
-            for renderer, writer in zip(renderers, writers):
+            for renderer, writer, view in zip(renderers, writers, views):
                 tick = time.perf_counter()
-                image = renderer.render(shown[f] if exposures is None else exposures[f], rng)
+                image = renderer.render(view[f], rng)
                 render_seconds += time.perf_counter() - tick
                 if codec == "png":
                     assert isinstance(writer, Path)
