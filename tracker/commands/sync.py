@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         rec, 0, rec.frame_count, cache=out / "keypoints.npz", progress=options.bar(args, "detecting", "frame")
     )
     found = camera_offsets(
-        keypoints.pixels, keypoints.confidence, rec.cameras, rec.fps, reach=min(args.reach, duration / 2)
+        keypoints.pixels, keypoints.confidence, rec.cameras, fps=rec.fps, reach=min(args.reach, duration / 2)
     )
     if not found.decided.all():
         raise TrackerInputError(

@@ -76,7 +76,7 @@ def essential(first: Camera, second: Camera) -> np.ndarray:
 
 
 def epipolar_pixels(
-    first: np.ndarray, second: np.ndarray, matrix: np.ndarray, focal: tuple[float, float]
+    first: np.ndarray, second: np.ndarray, *, matrix: np.ndarray, focal: tuple[float, float]
 ) -> np.ndarray:
     """The symmetric epipolar distance (...) in pixels of ideal normalised points ``first`` and ``second`` (..., 2)
     under the essential matrix ``matrix``: the mean of each point's distance to the other's epipolar line, each in
@@ -116,7 +116,7 @@ def _per_frame(
     points, seen = first
     other, other_seen = _at(*second, np.arange(len(points)) - shift)
     both = seen & other_seen
-    distance = np.minimum(epipolar_pixels(points, other, matrix, focal), cap)
+    distance = np.minimum(epipolar_pixels(points, other, matrix=matrix, focal=focal), cap)
     return np.where(both, distance, 0.0).sum(axis=1), both.sum(axis=1)
 
 
@@ -182,7 +182,7 @@ def _minimum(shifts: np.ndarray, table: np.ndarray, weights: np.ndarray) -> floa
 
 
 def camera_offsets(
-    pixels: np.ndarray, confidence: np.ndarray, cameras: list[Camera], fps: float, *, reach: float
+    pixels: np.ndarray, confidence: np.ndarray, cameras: list[Camera], *, fps: float, reach: float
 ) -> Offsets:
     """Each camera's capture-time offset from the first camera's (module docstring), from landmarks detected in
     every frame: ``pixels`` (F, C, K, 2) recorded pixels, ``confidence`` (F, C, K); offsets searched within

@@ -1,4 +1,5 @@
-"""sync.toml: the cameras' capture-time offsets written and read back, and the one-line errors for bad files."""
+"""sync.toml (tracker.io.sync): the cameras' capture-time offsets written and read back, and the one-line errors for bad
+files."""
 
 import pytest
 
