@@ -33,8 +33,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Detect the landmarks in every frame (or reuse OUT/keypoints.npz), estimate the offsets, print one line per
-    camera and write REC/sync.toml; a camera whose offset the motion does not decide is a one-line error, and nothing
-    is written."""
+    camera and write REC/sync.toml; a camera whose offset the motion does not decide is a one-line error after the
+    others' lines, and nothing is written."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording
     from tracker.io.sync import FILE, load_offsets, save_offsets
@@ -53,6 +53,11 @@ def run(args: argparse.Namespace) -> int:
     found = camera_offsets(
         keypoints.pixels, keypoints.confidence, rec.cameras, fps=rec.fps, reach=min(args.reach, duration / 2)
     )
+    for name, seconds, sigma, decided in zip(names, found.seconds, found.sigma, found.decided):
+        was = f"  (was {before[name]:+.4f})" if before is not None else ""
+        spread = "reference" if name == names[0] else f"+-{sigma:.4f}"
+        if decided:
+            print(f"{name}  {seconds:+.4f} s  {spread}{was}")
     if not found.decided.all():
         raise TrackerInputError(
             f"{rec.path}: the landmarks' motion does not pin down the time offset of {_guesses(found, names)}, but the "
@@ -60,10 +65,6 @@ def run(args: argparse.Namespace) -> int:
             "few frames show it in two views; record brisk movement that every camera sees, or write the offsets in "
             f"{target} by hand"
         )
-    for name, seconds, sigma in zip(names, found.seconds, found.sigma):
-        was = f"  (was {before[name]:+.4f})" if before is not None else ""
-        spread = "reference" if name == names[0] else f"+-{sigma:.4f}"
-        print(f"{name}  {seconds:+.4f} s  {spread}{was}")
     save_offsets(target, dict(zip(names, found.seconds)), dict(zip(names, found.sigma)))
     print(f"wrote {target}")
     return 0
