@@ -27,6 +27,7 @@ import numpy as np
 from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.readers import ColourCopies, image_files, read_frames, read_image
+from tracker.io.timestamps import camera_times
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
 DEFAULT_FPS = 30.0  # for image folders, videos and camera devices that do not state a frame rate
@@ -158,22 +159,22 @@ def frames(
 
 
 def capture_times(recording: Recording) -> np.ndarray | None:
-    """Each frame's capture time in seconds (the first camera's column of timestamps.csv, as ``tracker live``
-    wrote it), or None when the recording has no timestamps.csv."""
+    """Each frame's capture time in seconds, the first camera's (:func:`tracker.io.timestamps.camera_times`; where it
+    has none, the median of the other cameras'), or None when the recording has no timestamps.csv."""
     path = recording.timestamps_path
     if path is None:
         return None
-    try:
-        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    except (OSError, ValueError) as error:
-        raise TrackerInputError(
-            f"{path}: not a readable table of frame,time,... rows ({error}); fix it or remove it"
-        ) from None
-    if table.shape[1] < 2 or len(table) != recording.frame_count or not np.isfinite(table[:, 1]).all():
-        raise TrackerInputError(
-            f"{path}: needs one row of finite times per frame ({recording.frame_count}); fix it or remove it"
-        )
-    return table[:, 1]
+    rig = [camera.name for camera in load_calibration(recording.calibration_path)] if recording.calibration_path else []
+    names = [camera.name for camera in recording.cameras]
+    times = camera_times(path, names, rig=rig or names, frames=recording.frame_count)
+    reference = times[:, 0].copy()
+    missing = ~np.isfinite(reference)
+    if missing.any():
+        if not np.isfinite(times[missing]).any(axis=1).all():
+            frame = int(np.flatnonzero(missing & ~np.isfinite(times).any(axis=1))[0])
+            raise TrackerInputError(f"{path}: no camera has a time for frame {frame}; fix it or remove it")
+        reference[missing] = np.nanmedian(times[missing], axis=1)
+    return reference
 
 
 def _find_source(folder: Path, name: str) -> Path | None:
