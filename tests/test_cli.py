@@ -3,6 +3,8 @@
 import argparse
 import re
 import shutil
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -229,3 +231,20 @@ def test_work_side_sets_the_search_reduction():
     options.add_tuning_options(parser)
     assert options.settings_from(parser.parse_args(["--work-side", "0"])).work_side == 0
     assert options.settings_from(parser.parse_args([])).work_side == Settings().work_side == 480
+
+
+def test_output_cut_short_ends_quietly(tiny_recording):
+    """``tracker ... | head``: the reader goes away mid-output; exit 141 as a shell reports it, no traceback."""
+    code = (
+        "import sys; from tracker.cli import main\n"
+        "import tracker.commands.evaluate as e\n"
+        "def run(args):\n"
+        "    while True: print('row ' * 100)\n"
+        "e.run = run\n"
+        f"sys.exit(main(['eval', {str(tiny_recording / 'truth.npz')!r}, {str(tiny_recording / 'truth.npz')!r}]))\n"
+    )
+    process = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert process.stdout is not None and process.stdout.readline().startswith(b"row")
+    process.stdout.close()  # as head does after its lines
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 141 and b"Traceback" not in err and b"Exception ignored" not in err, err

@@ -1,13 +1,16 @@
 """The ``tracker`` command line (formats.md): parse, call, report; no algorithm here.
 
 Bad input raises :class:`TrackerInputError` and exits with code 2 and one line;
-an interrupted run (Ctrl-C) keeps the frames already written and exits 130.
+an interrupted run (Ctrl-C) keeps the frames already written and exits 130; output whose reader
+stopped early (``| head``) ends the command quietly with 141, as a shell reports a broken pipe.
 Each subcommand's options and body are in its module under :mod:`tracker.commands`.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import sys
 import warnings
@@ -93,6 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("tracker: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # whatever read the output stopped early (tracker ... | head): no traceback
+        with contextlib.suppress(OSError, ValueError, io.UnsupportedOperation):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor one when Python flushes it at exit
+        return 141
 
 
 if __name__ == "__main__":
