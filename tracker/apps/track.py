@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -107,6 +108,7 @@ def track(
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
+    from tracker.io.sync import FILE as SYNC
     from tracker.keypoints.stream import beside, tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.tracking.track import Tracker, reductions
@@ -126,6 +128,12 @@ def track(
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
+    if (rec.path / SYNC).is_file():
+        warnings.warn(
+            f"{rec.path / SYNC}: tracking does not use the cameras' time offsets yet; each view is tracked at its "
+            "frame's time (docs/sync.md)",
+            stacklevel=2,
+        )
     times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
     timed = None if times is None else lambda index: float(times[index])
     back = TrackedBack(None, 0, False)
