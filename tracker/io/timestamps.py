@@ -101,13 +101,14 @@ def _camera_of(path: Path, number: str, rig: list[str]) -> str:
 
 def _by_sets(path: Path, body: list[list[str]], rig: list[str], frames: int) -> dict:
     """caliscope's rows: camera name -> times (F,), one frame per sync index in order."""
-    sets = sorted({int(_number(path, row[0], "a sync_index")) for row in body})
-    if len(sets) != frames:
-        raise TrackerInputError(f"{path}: has {len(sets)} frame sets for {frames} frames; give one set per frame")
-    frame_of = {index: frame for frame, index in enumerate(sets)}
+    indices = [int(_number(path, row[0], "a sync_index")) for row in body]
+    frame_of = {index: frame for frame, index in enumerate(sorted(set(indices)))}
+    if len(frame_of) != frames:
+        raise TrackerInputError(f"{path}: has {len(frame_of)} frame sets for {frames} frames; give one set per frame")
     table: dict[str, np.ndarray] = {}
-    for row in body:
+    for index, row in zip(indices, body):
         name = _camera_of(path, row[1], rig)
-        column = table.setdefault(name, np.full(frames, np.nan))
-        column[frame_of[int(_number(path, row[0], "a sync_index"))]] = _number(path, row[-1], f"{name}'s frame_time")
+        table.setdefault(name, np.full(frames, np.nan))[frame_of[index]] = _number(
+            path, row[-1], f"{name}'s frame_time"
+        )
     return table

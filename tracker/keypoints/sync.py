@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.camera import Camera
+from tracker.geometry.se3 import skew
 from tracker.keypoints.guided import undistorted
 
 CONFIDENT = 0.5
@@ -70,9 +71,7 @@ def essential(first: Camera, second: Camera) -> np.ndarray:
     """The essential matrix E (3, 3) with ``x2' E x1 = 0`` for the ideal normalised image points x1, x2 of one world
     point in ``first`` and ``second``."""
     relative = second.camera_from_world @ np.linalg.inv(first.camera_from_world)
-    t = relative[:3, 3]
-    cross = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
-    return cross @ relative[:3, :3]
+    return skew(np.ascontiguousarray(relative[:3, 3])) @ relative[:3, :3]
 
 
 def epipolar_pixels(
@@ -96,11 +95,11 @@ def _at(points: np.ndarray, seen: np.ndarray, times: np.ndarray) -> tuple[np.nda
     cubic through the four frames about each time (a landmark's path bends within a frame at 30 frames a second),
     and where all four frames saw the landmark (F, K) (False where they are not all in the recording)."""
     frames = len(points)
-    below = np.floor(times).astype(int)
-    inside = (below >= 1) & (below < frames - 2)
-    low = np.clip(below, 1, max(frames - 3, 1))
     if frames < 4:
         return np.full(points.shape, np.nan), np.zeros(seen.shape, bool)
+    below = np.floor(times).astype(int)
+    inside = (below >= 1) & (below < frames - 2)
+    low = np.clip(below, 1, frames - 3)
     s = (times - low)[:, None, None]
     p0, p1, p2, p3 = (points[low + k] for k in (-1, 0, 1, 2))
     moved = p1 + 0.5 * s * (p2 - p0 + s * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + s * (3.0 * (p1 - p2) + p3 - p0)))
