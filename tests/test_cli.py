@@ -44,13 +44,6 @@ def test_track_writes_poses_and_summary(tiny_recording, tmp_path, capsys):
     assert _number(r"PCK@50mm ([\d.]+)%", out) == f"{100 * report.pck:.1f}"
 
 
-def test_track_says_it_does_not_use_the_cameras_time_offsets_yet(tiny_recording, tmp_path, capsys):
-    rec = _copy(tiny_recording, tmp_path)
-    (rec / "sync.toml").write_text("[offsets]\ncam0 = 0.0\ncam1 = 0.02\n")
-    assert main(["track", str(rec), "--out", str(tmp_path / "out"), "--frames", "2", "--quiet"]) == 0
-    assert "sync.toml: tracking does not use the cameras' time offsets yet" in capsys.readouterr().err
-
-
 def test_eval_prints_report(tiny_recording, capsys):
     truth = str(tiny_recording / "truth.npz")
     assert main(["eval", truth, truth]) == 0

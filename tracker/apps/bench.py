@@ -22,7 +22,6 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 from __future__ import annotations
 
 import contextlib
-import itertools
 import os
 import statistics
 import tempfile
@@ -69,7 +68,7 @@ def decode_cpu_ms(recording: Recording) -> float:
     """Milliseconds per frame to decode every camera's frame to grey in one thread."""
     started = time.perf_counter()
     for source in recording.sources:
-        for _ in zip(range(recording.frame_count), grey_frames(source)):
+        for _ in grey_frames(source, range(recording.frame_count)):
             pass
     return (time.perf_counter() - started) * 1e3 / recording.frame_count
 
@@ -88,9 +87,9 @@ def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> fl
     (:func:`tracker.tracking.track.reductions`: a 1080x1920 view at half size)."""
     seconds = []
     for source, factor in zip(recording.sources, reductions(settings, recording.cameras)):
-        detector, images = Detector(), grey_frames(source, colour=True)
+        detector, images = Detector(), grey_frames(source, range(min(count, recording.frame_count)), colour=True)
         try:
-            for image in itertools.islice(images, min(count, recording.frame_count)):
+            for image in images:
                 image = reduced(image, int(factor))
                 started = time.perf_counter()
                 detector.whole(image)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import sys
-import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -108,7 +107,6 @@ def track(
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
-    from tracker.io.sync import FILE as SYNC
     from tracker.keypoints.stream import beside, tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.tracking.track import Tracker, reductions
@@ -128,12 +126,6 @@ def track(
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
         file=sys.stderr,
     )
-    if (rec.path / SYNC).is_file():
-        warnings.warn(
-            f"{rec.path / SYNC}: tracking does not use the cameras' time offsets yet; each view is tracked at its "
-            "frame's time (docs/sync.md)",
-            stacklevel=2,
-        )
     times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
     timed = None if times is None else lambda index: float(times[index])
     back = TrackedBack(None, 0, False)
@@ -406,6 +398,7 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
     if given or rec.model_path is not None:
         return load_model(given or rec.model_path)
     from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detect import cache_file
     from tracker.keypoints.detector import missing
     from tracker.shape.fit import GENERIC, fit_and_save
     from tracker.tomlfile import read_toml
@@ -423,7 +416,7 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
         read_toml(GENERIC, "model", "reinstall the tracker: models/human.toml is part of it"),
         path,
         source=str(GENERIC),
-        cache=path.parent / "keypoints.npz",
+        cache=cache_file(path.parent, rec),
         progress=bar("fitting the model", "step"),
         say=lambda line: print(line, file=sys.stderr),
     )
@@ -450,10 +443,10 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
             "keypoint detector find the first pose (--keypoints every or N)"
         )
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import detect_recording
+    from tracker.keypoints.detect import cache_file, detect_recording
     from tracker.keypoints.first_pose import FRAMES, first_pose
 
-    cache = ensure_writable_folder(out) / "keypoints.npz"
+    cache = cache_file(ensure_writable_folder(out), rec)
     last_begin = max(start, stop - FRAMES)
     begin, back_to = start, None  # back_to: the first frame someone was seen in, try after try up to now
     while True:
@@ -485,9 +478,10 @@ def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):
     if not step:
         return None
     from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detect import cache_file
     from tracker.keypoints.stream import KeypointStream, schedule_words
 
-    stream = KeypointStream(rec, begin, stop, step, ensure_writable_folder(out) / "keypoints.npz", reduction)
+    stream = KeypointStream(rec, begin, stop, step, cache_file(ensure_writable_folder(out), rec), reduction)
     every = schedule_words(step)
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
     print(f"keypoints: {every}, {source}", file=sys.stderr)

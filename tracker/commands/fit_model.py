@@ -37,6 +37,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, write ``--out`` and print what changed (docs/fit-model.md)."""
     from tracker.atomic import ensure_writable_folder
+    from tracker.keypoints.detect import cache_file
     from tracker.keypoints.detector import require_detector
     from tracker.model import model_from_dict
     from tracker.shape.fit import GENERIC, fit_and_save
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     document = read_toml(start, "model", "pass --model with an existing models/*.toml")
     model_from_dict(document, start)  # a bad model is a one-line error before any detection
     require_detector()
-    cache = ensure_writable_folder(options.output_folder(None, rec)) / "keypoints.npz"
+    cache = cache_file(ensure_writable_folder(options.output_folder(None, rec)), rec)
     fit_and_save(
         rec,
         document,

@@ -51,7 +51,7 @@ def keypoint_pose(rec, model, start: int) -> np.ndarray:
     their detections cached in out/<recording name>/keypoints.npz; the rest pose where the cameras look when
     the detector is not installed."""
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import detect_recording
+    from tracker.keypoints.detect import cache_file, detect_recording
     from tracker.keypoints.detector import missing
     from tracker.keypoints.first_pose import FRAMES, first_pose
     from tracker.model import rest_poses
@@ -62,7 +62,7 @@ def keypoint_pose(rec, model, start: int) -> np.ndarray:
         print(f"starting from the rest pose: {reason}")
         return rest_poses(model, in_view(rec.cameras))
     stop = min(rec.frame_count, start + FRAMES)
-    cache = ensure_writable_folder(options.output_folder(None, rec)) / "keypoints.npz"
+    cache = cache_file(ensure_writable_folder(options.output_folder(None, rec)), rec)
     keypoints, _ = detect_recording(rec, start, stop, cache=cache)
     print(f"starting from the pose fitted to the keypoints of frames {start}..{stop - 1} ({cache})")
     return first_pose(rec, model, keypoints)

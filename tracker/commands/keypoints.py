@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     the time it took per view and how often a person was found per camera."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording
-    from tracker.keypoints.detect import detect_recording
+    from tracker.keypoints.detect import cache_file, detect_recording
 
     rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib)
     if not 0 <= args.start < rec.frame_count:
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
         )
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     out = ensure_writable_folder(options.output_folder(args.out, rec))
-    path = out / "keypoints.npz"
+    path = cache_file(out, rec)
     started = time.perf_counter()
     keypoints, reused = detect_recording(
         rec, args.start, stop, cache=path, progress=options.bar(args, "detecting", "frame")

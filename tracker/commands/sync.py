@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.keypoints.detect import detect_recording
     from tracker.keypoints.sync import camera_offsets
 
-    rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib)
+    rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib, paired=False)
     names = [camera.name for camera in rec.cameras]
     duration = rec.frame_count / rec.fps
     target = rec.path / FILE

@@ -25,7 +25,7 @@ import itertools
 import queue
 import re
 import threading
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -142,22 +142,23 @@ def split_kept(frame) -> tuple[np.ndarray, Any]:
 
 def grey_frames(
     source: Path,
-    start: int = 0,
+    indices: Iterable[int] | None = None,
     *,
     colour: bool = False,
-    step: int = 1,
     copies: ColourCopies | None = None,
     chroma: bool = False,
 ) -> Generator[Any, None, None]:
-    """Grey (or, with ``colour``, BGR) frames start, start + step, ... of one video file or image folder (the
-    caller stops); the frames between are skipped undecoded where the container allows.  With ``chroma`` each
-    comes as :class:`WithChroma`.  The frames ``copies`` names come as :class:`WithColour`, their colour image
-    decoded from the same frame (around the :class:`WithChroma` with ``chroma``)."""
+    """Grey (or, with ``colour``, BGR) frames ``indices`` (default 0, 1, ... until the caller stops) of one video file
+    or image folder, in that order, which never goes back: a frame named again is given again, the frames passed over
+    are skipped undecoded where the container allows.  With ``chroma`` each comes as :class:`WithChroma`.  The frames
+    ``copies`` names come as :class:`WithColour`, their colour image decoded from the same frame (around the
+    :class:`WithChroma` with ``chroma``)."""
     copies = copies or ColourCopies(frozenset())
+    indices = itertools.count() if indices is None else indices
     if source.is_dir():
         flags = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
         files = image_files(source)
-        for index in itertools.count(start, step):
+        for index in indices:
             if index >= len(files):
                 raise TrackerInputError(
                     f"{source}: image folder ended before the recording's last frame; add the missing images"
@@ -166,20 +167,28 @@ def grey_frames(
             bgr = read_image(files[index], index) if chroma or index in copies.frames else image
             frame = WithChroma(image, half_size(bgr, bgr.shape)) if chroma else image
             yield WithColour(frame, reduced(bgr, copies.factor)) if index in copies.frames else frame
+        return
     video = open_frames(source, colour)
+    position = 0  # the frame the video gives next
+    last: Any = None  # the frame given last
     try:
-        for index in range(start):
-            video.skip(index)
-        for index in itertools.count(start, step):
+        for index in indices:
+            if index == position - 1 and last is not None:
+                yield last
+                continue
+            if index < position:
+                raise ValueError(f"{source}: frame {index} asked for after frame {position - 1}; frames go forward")
+            for skipped in range(position, index):
+                video.skip(skipped)
             if index in copies.frames:
                 image, bgr, half = video.read_with_colour(index)
-                yield WithColour(WithChroma(image, half) if chroma else image, reduced(bgr, copies.factor))
+                last = WithColour(WithChroma(image, half) if chroma else image, reduced(bgr, copies.factor))
             elif chroma:
-                yield WithChroma(*video.read_with_chroma(index))
+                last = WithChroma(*video.read_with_chroma(index))
             else:
-                yield video.read(index)
-            for skipped in range(index + 1, index + step):
-                video.skip(skipped)
+                last = video.read(index)
+            position = index + 1
+            yield last
     finally:
         video.close()
 
@@ -338,22 +347,20 @@ def open_frames(source: Path, colour: bool = False) -> _MotionJpeg | _Decoded:
 
 
 class _Reader:
-    """A thread that decodes ``count`` frames of one source into a bounded queue (errors travel along)."""
+    """A thread that decodes the frames ``indices`` of one source into a bounded queue (errors travel along)."""
 
     def __init__(
         self,
         source: Path,
-        start: int,
-        count: int,
+        indices: Sequence[int],
         queue_size: int,
         prepare=None,
         colour: bool = False,
-        step: int = 1,
         copies: ColourCopies | None = None,
         chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
     ):
-        self.source, self.start, self.count, self.prepare, self.colour = source, start, count, prepare, colour
-        self.step, self.copies, self.chroma = step, copies, chroma
+        self.source, self.indices, self.prepare, self.colour = source, indices, prepare, colour
+        self.copies, self.chroma = copies, chroma
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self._run, name=f"reader {source.name}", daemon=True)
@@ -361,10 +368,10 @@ class _Reader:
 
     def _run(self) -> None:
         frames = grey_frames(
-            self.source, self.start, colour=self.colour, step=self.step, copies=self.copies, chroma=bool(self.chroma)
+            self.source, self.indices, colour=self.colour, copies=self.copies, chroma=bool(self.chroma)
         )
         try:
-            for image in itertools.islice(frames, self.count):
+            for image in frames:
                 if not self._put(self._prepared(image)):
                     return
         except BaseException as error:  # handed to the consumer, raised there
@@ -411,19 +418,26 @@ def read_frames(
     step: int = 1,
     copies: list[ColourCopies] | None = None,
     chroma: bool | Callable[[np.ndarray], np.ndarray] = False,
+    pairing: np.ndarray | None = None,
 ) -> Iterator[tuple[int, list]]:
     """(index, one grey image per source) for frames start, start + step, ... before stop, each source decoded
-    by its own thread (BGR images with ``colour``); ``prepare`` (image -> anything), if given, runs in that
+    by its own thread (BGR images with ``colour``), source k's frame ``pairing[index, k]`` (F, C) int for frame
+    ``index`` when given (:class:`tracker.io.pairing.Pairing`); ``prepare`` (image -> anything), if given, runs in that
     thread too (e.g. the tracker's smoothing); a list of them gives each source its own.  With ``copies`` (one
     per source) the frames they name come as :class:`WithColour` (``prepare`` applied to the image); with
     ``chroma`` every frame comes as :class:`WithChroma` (``prepare`` applied to its grey image; a callable
-    ``chroma`` applied to its half-size colour image, in the reader's thread too)."""
+    ``chroma`` applied to its half-size colour image, in the reader's thread too).  The frames ``copies`` names are
+    the recording's, not the sources'."""
     preparers = prepare if isinstance(prepare, (list, tuple)) else [prepare] * len(sources)
     indices = range(start, stop, step)
-    readers = [
-        _Reader(source, start, len(indices), queue_size, each, colour, step, copy, chroma)
-        for source, each, copy in zip(sources, preparers, copies or [ColourCopies(frozenset())] * len(sources))
-    ]
+    copies = copies or [ColourCopies(frozenset())] * len(sources)
+    readers = []
+    for camera, (source, each, copy) in enumerate(zip(sources, preparers, copies)):
+        read = list(indices) if pairing is None else [int(frame) for frame in pairing[indices, camera]]
+        if pairing is not None:
+            named = [index for index in copy.frames if start <= index < stop]
+            copy = ColourCopies(frozenset(int(pairing[index, camera]) for index in named), copy.factor)
+        readers.append(_Reader(source, read, queue_size, each, colour, copy, chroma))
     try:
         for index in indices:
             yield index, [reader.get() for reader in readers]

@@ -4,11 +4,14 @@
     NAME/<camera name>.mp4|.avi|.mkv      a video per camera ...
     NAME/<camera name>/000000.png ...     ... or a folder of numbered .png/.jpg images
     NAME/model.toml, init.toml, truth.npz optional
-    NAME/timestamps.csv                   optional: capture times (``tracker live --record``)
+    NAME/timestamps.csv                   optional: capture times (``tracker live --record``, caliscope)
+    NAME/sync.toml                        optional: the cameras' time offsets (``tracker sync``)
 
 Every camera of the calibration that has a video is tracked, unless a list of
 camera names picks some. All videos must have the same number of frames and
-the image size the calibration gives.
+the image size the calibration gives.  A recording whose cameras are not
+frame-locked (sync.toml, else timestamps.csv) is read with each camera's frame
+nearest in time to each frame of the first camera (:mod:`tracker.io.pairing`).
 """
 
 from __future__ import annotations
@@ -26,7 +29,10 @@ import numpy as np
 
 from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
+from tracker.io.pairing import Pairing, by_offsets, by_times
 from tracker.io.readers import ColourCopies, image_files, read_frames, read_image
+from tracker.io.sync import FILE as SYNC
+from tracker.io.sync import load_offsets
 from tracker.io.timestamps import camera_times
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")
@@ -47,10 +53,15 @@ class Recording:
     sources: list[Path]
     timestamps_path: Path | None = None
     calibration_path: Path | None = None
+    pairing: Pairing | None = None  # each camera's frame read for each frame, when the cameras are not frame-locked
 
 
 def open_recording(
-    path: str | os.PathLike, cameras: list[str] | None = None, calibration: str | os.PathLike | None = None
+    path: str | os.PathLike,
+    cameras: list[str] | None = None,
+    calibration: str | os.PathLike | None = None,
+    *,
+    paired: bool = True,
 ) -> Recording:
     """Open a recording folder, checking that its videos decode and agree with the calibration.
 
@@ -58,7 +69,9 @@ def open_recording(
     in calibration.toml that has a video, in calibration order. The first frame
     of every video is decoded here, so a corrupt file fails now rather than
     mid-run. ``calibration`` replaces the folder's calibration.toml (e.g. a rig
-    refined by ``tracker refine``). Problems raise TrackerInputError naming the file.
+    refined by ``tracker refine``). With ``paired`` (default) each camera's frames are paired with the first
+    camera's by the folder's sync.toml, else by its timestamps.csv (:func:`pairing`); ``tracker sync``, which
+    finds the offsets, reads them as recorded. Problems raise TrackerInputError naming the file.
     """
     folder = Path(path)
     if not folder.is_dir():
@@ -112,7 +125,7 @@ def open_recording(
     def optional(name: str) -> Path | None:
         return folder / name if (folder / name).is_file() else None
 
-    return Recording(
+    recording = Recording(
         path=folder,
         calibration_path=calibration,
         cameras=[camera for _, _, camera in probes],
@@ -124,6 +137,24 @@ def open_recording(
         sources=chosen_sources,
         timestamps_path=optional("timestamps.csv"),
     )
+    return dataclasses.replace(recording, pairing=pairing(recording)) if paired else recording
+
+
+def pairing(recording: Recording) -> Pairing | None:
+    """Which frame of each camera shows each frame of ``recording`` (:mod:`tracker.io.pairing`): by the offsets of
+    its sync.toml, else by the capture times of its timestamps.csv; None when it has neither, or when every
+    camera's frame n is read for frame n, captured at frame n's time."""
+    names = [camera.name for camera in recording.cameras]
+    if (recording.path / SYNC).is_file():
+        duration = recording.frame_count / recording.fps
+        offsets = load_offsets(recording.path / SYNC, names, duration)
+        found = by_offsets(np.array([offsets[name] for name in names]), count=recording.frame_count, fps=recording.fps)
+    elif recording.timestamps_path is not None:
+        times = _camera_times(recording)
+        found = by_times(times, _reference(times, recording.timestamps_path))
+    else:
+        return None
+    return None if found.identity and not np.any(found.late) else found
 
 
 def frames(
@@ -154,19 +185,45 @@ def frames(
             "pick a range inside it"
         )
     return read_frames(
-        recording.sources, start, stop, prepare=prepare, colour=colour, step=step, copies=copies, chroma=chroma
+        recording.sources,
+        start,
+        stop,
+        prepare=prepare,
+        colour=colour,
+        step=step,
+        copies=copies,
+        chroma=chroma,
+        pairing=None if recording.pairing is None else recording.pairing.frames,
     )
+
+
+def camera_frames(recording: Recording, index: int) -> list[int]:
+    """Each camera's frame that shows the recording's frame ``index`` (its own frame ``index``, unless the cameras'
+    frames are paired by time: :attr:`Recording.pairing`)."""
+    if recording.pairing is None:
+        return [index] * len(recording.cameras)
+    return [int(frame) for frame in recording.pairing.frames[index]]
 
 
 def capture_times(recording: Recording) -> np.ndarray | None:
     """Each frame's capture time in seconds, the first camera's (:func:`tracker.io.timestamps.camera_times`; where it
     has none, the median of the other cameras'), or None when the recording has no timestamps.csv."""
-    path = recording.timestamps_path
-    if path is None:
+    if recording.timestamps_path is None:
         return None
+    return _reference(_camera_times(recording), recording.timestamps_path)
+
+
+def _camera_times(recording: Recording) -> np.ndarray:
+    """Each camera's capture time (F, C) of each frame, from the recording's timestamps.csv."""
+    assert recording.timestamps_path is not None  # asked for by recordings that have one
     rig = [camera.name for camera in load_calibration(recording.calibration_path)] if recording.calibration_path else []
     names = [camera.name for camera in recording.cameras]
-    times = camera_times(path, names, rig=rig or names, frames=recording.frame_count)
+    return camera_times(recording.timestamps_path, names, rig=rig or names, frames=recording.frame_count)
+
+
+def _reference(times: np.ndarray, path: Path) -> np.ndarray:
+    """The frames' times (F,): the first camera's, where it has none the median of the others' (``times`` (F, C) from
+    the file at ``path``)."""
     reference = times[:, 0].copy()
     missing = ~np.isfinite(reference)
     if missing.any():

@@ -1,9 +1,11 @@
 """The detector over frames of a recording, one landmarker per camera, and the cache that keeps its output.
 
 A cache (``keypoints.npz``) belongs to one recording: its fingerprint names each camera's video by
-size and a hash of its first bytes.  A cache of another recording, or made by another detector, is
-an error rather than something to overwrite silently; one that lacks some of the wanted frames is
-completed and written back with every frame it held.
+size and a hash of its first bytes.  A recording whose cameras' frames are paired by time (docs/sync.md)
+keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, its fingerprint naming the
+pairing too.  A cache of another recording, or made by another detector, is an error rather than
+something to overwrite silently; one that lacks some of the wanted frames is completed and written back
+with every frame it held.
 """
 
 from __future__ import annotations
@@ -26,15 +28,29 @@ _HASHED = 1 << 16
 """Bytes of each video (or first image) hashed into a recording's fingerprint."""
 
 
+def cache_file(folder: Path, recording: Recording) -> Path:
+    """Where the detections of ``recording`` are kept in the output ``folder``: keypoints.npz, or keypoints-paired.npz
+    when its cameras' frames are paired by time (module docstring), so that either set is kept."""
+    return folder / ("keypoints.npz" if not _paired(recording) else "keypoints-paired.npz")
+
+
+def _paired(recording: Recording) -> bool:
+    return recording.pairing is not None and not recording.pairing.identity
+
+
 def fingerprint(recording: Recording) -> str:
     """The recording's identity for caches: per camera its name, its video's size and a hash of its start
-    (an image folder: its first image's)."""
+    (an image folder: its first image's), and a hash of the frames paired when its cameras' are paired by time."""
     parts = []
     for camera, source in zip(recording.cameras, recording.sources):
         file = min(path for path in source.iterdir() if path.is_file()) if source.is_dir() else source
         with open(file, "rb") as handle:
             digest = hashlib.sha1(handle.read(_HASHED)).hexdigest()[:12]
         parts.append(f"{camera.name}={file.stat().st_size}:{digest}")
+    if _paired(recording):
+        assert recording.pairing is not None  # paired
+        frames = np.ascontiguousarray(recording.pairing.frames, np.int64)
+        parts.append(f"paired={hashlib.sha1(frames.tobytes()).hexdigest()[:12]}")
     return " ".join(parts)
 
 

@@ -143,9 +143,10 @@ def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Ite
     window: deque[tuple[int, list]] = deque()
     try:
         for index, images in items:
-            if any(isinstance(image, WithColour) for image in images):
-                stream.feed(index, [image.colour for image in images])
-                images = [image.image for image in images]
+            if any(isinstance(image, WithColour) for image in images):  # a paired camera may repeat a fed frame
+                if index in stream.to_feed:
+                    stream.feed(index, [image.colour for image in images])
+                images = [image.image if isinstance(image, WithColour) else image for image in images]
             window.append((index, images))
             if len(window) > stream.lead:
                 yield window.popleft()
@@ -178,6 +179,7 @@ class KeypointStream:
         self.lead = step + LAG
         self.reduction = reduction
         self.fed = None
+        self.to_feed: frozenset[int] = frozenset()  # the frames the readers give a fed worker (:meth:`copies`)
         self.sent: set[int] = set()
         self.old = cached(cache, recording) if cache is not None else None
         self.raw: list[Keypoints] = []
@@ -214,8 +216,8 @@ class KeypointStream:
         if self.fed is None:
             return None
         assert self.reduction is not None  # fed streams have one
-        wanted = frozenset(int(frame) for frame in self.wanted if frame not in self.checked)
-        return [ColourCopies(wanted, int(factor)) for factor in self.reduction]
+        self.to_feed = frozenset(int(frame) for frame in self.wanted if frame not in self.checked)
+        return [ColourCopies(self.to_feed, int(factor)) for factor in self.reduction]
 
     def feed(self, index: int, images: list[np.ndarray]) -> None:
         """Hand a fed worker frame ``index``'s colour images (BGR, one per camera, reduced by the stream's

@@ -21,7 +21,7 @@ import viser.transforms as vtf
 from tracker.geometry.se3 import inverse
 from tracker.io.posefile import save_pose_file
 from tracker.io.readers import FrameSeeker
-from tracker.io.recording import Recording
+from tracker.io.recording import Recording, camera_frames
 from tracker.keypoints.first_pose import snap_to_edges
 from tracker.model import Model, with_descendants
 from tracker.tracking.track import Settings, Tracker
@@ -64,7 +64,7 @@ class Placement:
     ):
         self.scene, self.recording, self.model, self.out, self.frame = scene, recording, model, Path(out), frame
         seekers = [FrameSeeker(source) for source in recording.sources]
-        self.images = [seeker.read(frame) for seeker in seekers]
+        self.images = [seeker.read(shown) for seeker, shown in zip(seekers, camera_frames(recording, frame))]
         for seeker in seekers:
             seeker.close()
         self.settings = Settings(dynamics="none", iterations=snap_iterations)

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from tracker.io.readers import FrameSeeker
-from tracker.io.recording import Recording
+from tracker.io.recording import Recording, camera_frames
 from tracker.status import NAMES
 from tracker.tracking.foreground import Background
 from tracker.tracking.track import Tracker
@@ -98,7 +98,7 @@ class Review(Timeline):
     def draw(self, row: int) -> None:
         """Draw row ``row`` of the poses file: its poses, truth and camera images with the edge search redone."""
         index = int(self.frames[row])
-        images = [seeker.read(index) for seeker in self.seekers]
+        images = [seeker.read(frame) for seeker, frame in zip(self.seekers, camera_frames(self.recording, index))]
         if self.background is not None:
             images = [self.background.difference(k, image) for k, image in enumerate(images)]
         poses = self.results["poses"][row]
