@@ -1,17 +1,24 @@
 """Cameras that are not frame-locked, end to end: a render whose cameras were captured late or early, tracked with
-its offsets in sync.toml, comes out as well as the same render with every camera on time, and worse without them."""
+its offsets in sync.toml, comes out as well as the same render with every camera on time, and worse without them;
+replayed live by cameras whose clocks carry their lateness, its views are paired by capture time."""
 
 import shutil
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 from conftest import HUMAN
 
-from tracker.camera import look_at_camera, save_calibration
+from tracker.apps.live import Recorder, track_live
+from tracker.camera import load_calibration, look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.evaluate import evaluate
+from tracker.io.capture import Capture, ReplayClock, ReplaySource
 from tracker.io.poses import load_poses
+from tracker.model import load_model
 from tracker.synthetic.synth import Staging, synthesize
+from tracker.tracking.track import Settings, Tracker
 
 FPS = 30.0
 OFFSETS = (("cam1", 2 / FPS), ("cam2", -3 / FPS))  # whole frames: the pairing leaves nothing to carry
@@ -50,3 +57,68 @@ def test_views_paired_by_their_offsets_track_as_well_as_views_on_time(renders, t
     # the first two and last three frames of a shifted camera repeat its first or last one: a little worse there
     assert synced < 1.3 * on_time + 5.0
     assert offset > 1.5 * synced
+
+
+class Late:
+    """A replayed camera whose capture times are ``frames`` of its frame periods later than its frames' numbers
+    say: its clock carries its lateness, as a free-running camera's does."""
+
+    def __init__(self, source: ReplaySource, frames: float):
+        self.source, self.delay = source, frames / source.fps
+        self.name, self.size, self.fps = source.name, source.size, source.fps
+
+    def read(self):
+        delivered = self.source.read()
+        return None if delivered is None else (delivered[0], delivered[1] + self.delay)
+
+    def close(self):
+        self.source.close()
+
+
+def _video(path: Path) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(path))
+    images = []
+    while (image := capture.read()[1]) is not None:
+        images.append(image)
+    return images
+
+
+def test_live_pairs_each_camera_by_its_capture_time(renders, tmp_path):
+    """The offset render replayed live (at 15 fps, time for any machine), each camera's clock carrying its offset:
+    every recorded set holds cam0's frame n, cam1's n - 2 and cam2's n + 3, the frames captured together, and the
+    tracking is as good as `tracker track` with the render's sync.toml (from the true pose of the first set)."""
+    rec = renders["offset"]
+    shifts = dict(OFFSETS)
+    cameras = load_calibration(rec / "calibration.toml")
+    clock = ReplayClock()
+    sources = [
+        Late(ReplaySource(rec / f"{camera.name}.avi", clock, 15.0), shifts.get(camera.name, 0.0) * FPS)
+        for camera in cameras
+    ]
+    model = load_model(rec / "model.toml")
+    truth = load_poses(rec / "truth.npz")
+    first = 2  # cam1 is 2 frames late: cam0's frames 0-1 have no partner
+    tracker = Tracker(model, cameras, truth["poses"][first], Settings())
+    copies = {name: rec / name for name in ("calibration.toml", "model.toml")}
+    with Recorder(tmp_path / "rec", cameras, FPS, copies) as recorder:
+        summary = track_live(
+            Capture(sources, [camera.name for camera in cameras]),
+            tracker,
+            cameras=cameras,
+            out=tmp_path / "out",
+            recorder=recorder,
+        )
+    rendered = {camera.name: _video(rec / f"{camera.name}.avi") for camera in cameras}
+    recorded = {camera.name: _video(tmp_path / "rec" / f"{camera.name}.avi") for camera in cameras}
+    numbers = {
+        name: [next(n for n, image in enumerate(rendered[name]) if np.array_equal(image, frame)) for frame in frames]
+        for name, frames in recorded.items()
+    }
+    assert summary.counts.paired == (27 - first,) * 3  # sets for cam0's frames 2..26 (cam2 is 3 early)
+    assert len(numbers["cam0"]) == summary.recorded >= 1 and numbers["cam0"][0] >= first
+    for name in ("cam1", "cam2"):
+        np.testing.assert_array_equal(numbers[name], np.array(numbers["cam0"]) - round(shifts[name] * FPS))
+    live = load_poses(tmp_path / "out" / "poses.npz")
+    tracked = dict(live, frame=np.array(numbers["cam0"])[: len(live["frame"])])
+    synced = _mpjpe(renders["synced"], tmp_path / "synced")
+    assert evaluate(tracked, truth).mpjpe_mm < 1.3 * synced + 5.0
