@@ -113,6 +113,19 @@ def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
         document["cam_0"]["distortions"] = [0.0] * 6  # OpenCV has no such model
         (rec / "calibration.toml").write_text(tomli_w.dumps(document))
         return [], "calibration.toml"
+    if name == "sync offset not a number":
+        (rec / "sync.toml").write_text('[offsets]\ncam1 = "late"\n')
+        return [], "sync.toml"
+    if name == "sync offset longer than the recording":
+        (rec / "sync.toml").write_text("[offsets]\ncam1 = 60.0\n")
+        return [], "sync.toml"
+    if name == "timestamps of an unknown camera":
+        (rec / "timestamps.csv").write_text("frame,cam0,cam7\n" + "".join(f"{k},{k / 30},{k / 30}\n" for k in range(6)))
+        return [], "timestamps.csv"
+    if name == "timestamps going backwards":
+        rows = "".join(f"{k},{k / 30},{(5 - k) / 30}\n" for k in range(6))
+        (rec / "timestamps.csv").write_text("frame,cam0,cam1\n" + rows)
+        return [], "timestamps.csv"
     if name == "corrupt video":
         (rec / "cam0.avi").write_bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8).tobytes())
         return [], "cam0.avi"
@@ -130,6 +143,10 @@ def _bad_case(name: str, rec: Path) -> tuple[list[str], str]:
         "init names an unknown component",
         "corrupt video",
         "lens model with six coefficients",
+        "sync offset not a number",
+        "sync offset longer than the recording",
+        "timestamps of an unknown camera",
+        "timestamps going backwards",
     ],
 )
 def test_bad_input_is_one_line_exit_2(case, tiny_recording, tmp_path, capsys):
