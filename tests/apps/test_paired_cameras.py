@@ -16,6 +16,7 @@ from tracker.cli import main
 from tracker.evaluate import evaluate
 from tracker.io.capture import Capture, ReplayClock, ReplaySource
 from tracker.io.poses import load_poses
+from tracker.io.recording import open_recording
 from tracker.model import load_model
 from tracker.synthetic.synth import Staging, synthesize
 from tracker.tracking.track import Settings, Tracker
@@ -57,6 +58,30 @@ def test_views_paired_by_their_offsets_track_as_well_as_views_on_time(renders, t
     # the first two and last three frames of a shifted camera repeat its first or last one: a little worse there
     assert synced < 1.3 * on_time + 5.0
     assert offset > 1.5 * synced
+
+
+def test_caliscopes_capture_times_pair_the_views(renders, tmp_path):
+    """The offset render beside a caliscope-style timestamps.csv (one row per camera and set, each time 3 ms of
+    jitter off the camera's true capture time) and no sync.toml: each camera is read at its frame captured nearest
+    cam0's, cam1's frame n - 2 and cam2's n + 3, and tracks as the render with its sync.toml does."""
+    rec = tmp_path / "caliscope"
+    shutil.copytree(renders["offset"], rec)
+    rng = np.random.default_rng(5)
+    late = dict(OFFSETS)
+    rows = ["sync_index,cam_id,frame_index,frame_time"]
+    for n in range(30):
+        for k, name in enumerate(("cam0", "cam1", "cam2")):
+            rows.append(f"{n},{k},{n},{10.0 + n / FPS + late.get(name, 0.0) + rng.uniform(-0.003, 0.003):.6f}")
+    (rec / "timestamps.csv").write_text("\n".join(rows) + "\n")
+    pairing = open_recording(rec).pairing
+    frames = np.arange(30)
+    np.testing.assert_array_equal(pairing.frames[3:27, 1], frames[3:27] - 2)
+    np.testing.assert_array_equal(pairing.frames[3:27, 2], frames[3:27] + 3)
+    assert np.abs(pairing.late[3:27]).max() < 0.007  # each view within its jitter of cam0's time
+    synced = _mpjpe(renders["synced"], tmp_path / "synced")
+    assert _mpjpe(rec, tmp_path / "out") < 1.3 * synced + 5.0
+    times = load_poses(tmp_path / "out" / "poses.npz")["time"]
+    np.testing.assert_allclose(np.diff(times), 1 / FPS, atol=0.007)  # cam0's capture times, written with the poses
 
 
 class Late:
