@@ -114,7 +114,8 @@ def _add(model, rig, component, point, pairs, poses, pixels, confidence, toleran
     information = np.zeros((model.size, 6, 6))
     eta = np.zeros((model.size, 6))
     counts = keypoint_kernel(
-        poses,
+        np.ascontiguousarray(np.broadcast_to(poses, (len(rig.names), *poses.shape))),
+        np.ones(len(rig.names)),
         rig.camera_from_world,
         rig.matrix,
         rig.lens,

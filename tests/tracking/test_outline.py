@@ -655,16 +655,17 @@ def test_camera_project_agrees_with_the_outline_for_a_skewed_camera():
 
 
 def test_place_matches_the_matrix_formula():
-    """place(): E = P W, Q' = E^-T Q E^-1, clip likewise, bounding sphere centre E c."""
+    """place(): E = P_k W_kc (each camera's own poses, each view at its capture time), Q' = E^-T Q E^-1, clip
+    likewise, bounding sphere centre E c."""
     rng = np.random.default_rng(23)
     model = load_model(Path(__file__).resolve().parents[2] / "models" / "human.toml")
-    poses = np.stack([se3.exp(rng.normal(size=6)) for _ in range(model.size)])
+    poses = np.stack([[se3.exp(rng.normal(size=6)) for _ in range(model.size)] for _ in range(2)])
     cams = random_cameras(rng, 2, distorted=False)
     rig = Rig.from_cameras(cams)
     placed = placed_at(model, poses, rig)
     for k in range(2):
         for j, c in enumerate(model.quadric_component):
-            e = rig.camera_from_world[k] @ poses[c]
+            e = rig.camera_from_world[k] @ poses[k, c]
             e_inv = np.linalg.inv(e)
             np.testing.assert_allclose(placed.camera_from[k, j], e, atol=1e-12)
             np.testing.assert_allclose(placed.quadric[k, j], e_inv.T @ model.quadric[j] @ e_inv, rtol=1e-10, atol=1e-9)

@@ -25,14 +25,16 @@ HUMAN = Path(__file__).resolve().parents[2] / "models" / "human.toml"
 
 
 def placed_at(model, poses, rig) -> Placed:
-    """The camera-frame quadrics that the outline stage hands to the ownership stage."""
-    placed = Placed.allocate(len(rig.names), model.quadric.shape[0])
+    """The camera-frame quadrics that the outline stage hands to the ownership stage, at ``poses`` (N, 4, 4) in
+    every camera or (C, N, 4, 4) each camera's own."""
+    cameras = len(rig.names)
+    placed = Placed.allocate(cameras, model.quadric.shape[0])
     place(
         model.quadric,
         model.clip,
         model.quadric_bound,
         model.quadric_component,
-        poses,
+        np.ascontiguousarray(np.broadcast_to(poses, (cameras, *poses.shape[-3:]))),
         rig.camera_from_world,
         placed.camera_from,
         placed.quadric,

@@ -19,7 +19,7 @@ from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synthetic.synth import Staging, synthesize
 from tracker.tracking.keypoint_cue import TRUNK_TURN, cue_points, landmark_world
-from tracker.tracking.track import Settings, Tracker, motion_since, smoother
+from tracker.tracking.track import Settings, Tracker, constant_velocity, motion_since, smoother, views_at
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
@@ -232,6 +232,44 @@ def test_motion_since_is_the_body_twist_between_poses():
     twist = rng.normal(size=(4, 6)) * 0.3
     current = np.stack([sampled[i] @ se3.exp(twist[i]) for i in range(4)])
     np.testing.assert_allclose(motion_since(sampled, current), twist, atol=1e-12)
+
+
+def test_views_at_moves_each_view_on_by_its_share_of_the_velocity():
+    """E_k = E exp(l_k v): on time it is E, a whole frame late it is the constant-velocity prediction."""
+    rng = np.random.default_rng(8)
+    previous = np.stack([se3.exp(rng.normal(size=6)) for _ in range(5)])
+    current = np.stack([previous[i] @ se3.exp(0.1 * rng.normal(size=6)) for i in range(5)])
+    views = views_at(current, motion_since(previous, current), np.array([0.0, 1.0, -0.5]))
+    np.testing.assert_allclose(views[0], current, atol=1e-12)
+    np.testing.assert_allclose(views[1], constant_velocity(previous, current, 1.0), atol=1e-12)
+    np.testing.assert_allclose(
+        views_at(views[2], motion_since(previous, current), np.array([0.5]))[0], current, atol=1e-9
+    )
+
+
+def test_a_late_view_moves_with_the_poses_by_its_gain():
+    """Each camera's view of the poses (Tracker.seen) is the body at its capture time, the poses moved on by the
+    view's lateness times their motion since the frame's start; moving the poses by a small twist moves a view
+    l frames late by 1 + l times it (Tracker.gains, the Jacobians' scale), checked by finite differences."""
+    rec = open_recording(DEMO)
+    model = load_model(rec.model_path)
+    truth = load_poses(rec.truth_path)["poses"]
+    tracker = Tracker(model, rec.cameras, truth[0])
+    tracker.start, tracker.lateness = truth[0], np.array([0.0, 0.5, -0.4])
+    seen = tracker.seen(truth[1])
+    np.testing.assert_allclose(seen[0], truth[1], atol=1e-12)
+    motion = motion_since(truth[0], truth[1])
+    np.testing.assert_allclose(seen[1], views_at(truth[1], motion, np.array([0.5]))[0], atol=1e-12)
+    rng = np.random.default_rng(2)
+    twist = rng.normal(size=(model.size, 6))
+    step = 1e-6
+    moved = tracker.seen(np.stack([pose @ se3.exp(step * t) for pose, t in zip(truth[1], twist)]))
+    for k, (late, gain) in enumerate(zip(tracker.lateness, tracker.gains)):
+        error = np.linalg.norm(motion_since(seen[k], moved[k]) / step - gain * twist, axis=1)
+        # second order: the motion's own size times the lateness
+        assert (error <= abs(late) * np.linalg.norm(motion, axis=1) * np.linalg.norm(twist, axis=1) + 1e-4).all()
+    tracker.lateness = np.zeros(3)
+    np.testing.assert_array_equal(tracker.seen(truth[1]), np.broadcast_to(truth[1], (3, *truth[1].shape)))
 
 
 def _shifted(poses: np.ndarray, metres: float) -> np.ndarray:

@@ -332,6 +332,12 @@ class _Session:
         """The capture time of the set in hand, frame ``frame``, in seconds since capture started."""
         return self.at
 
+    def late(self, frame: int) -> np.ndarray:
+        """Seconds each camera's image of the set in hand, frame ``frame``, was captured after the set's time (its first
+        camera's): each view is tracked at its own capture time (docs/sync.md)."""
+        assert self.taken is not None  # set by sets() before the frame is tracked
+        return np.array([image.time - self.taken.frames[0].time for image in self.taken.frames])
+
     def landmarks(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The detector's newest landmarks for frame ``frame`` (:func:`_landmarks_now`), for the cameras of the set."""
         assert self.detector is not None and self.tracker is not None  # with a detector; after retarget
@@ -382,6 +388,7 @@ def track_live(
                 fps=capture.fps,
                 keypoints=None if detector is None else session.landmarks,
                 times=session.time,
+                late=session.late,
                 retarget=session.retarget,
                 each=session.tracked,
             )

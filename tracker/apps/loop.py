@@ -70,6 +70,7 @@ def track_frames(
     keypoints: KeypointSource | None = None,
     check: Check | None = None,
     times: Callable[[int], float] | None = None,
+    late: Callable[[int], np.ndarray] | None = None,
     retarget: Callable[[Tracker], Tracker] | None = None,
     each: Callable[[Tracked], None] | None = None,
     before: dict[str, np.ndarray] | None = None,
@@ -81,7 +82,8 @@ def track_frames(
     ``frames`` yields (index, images), one image per camera of the tracker's rig, already :meth:`Tracker.smooth
     <tracker.tracking.track.Tracker.smooth>`-ed.  ``keypoints(index)``: the frame's landmarks, fused with the edges.
     ``check``: sees each result before it is written (:data:`Check`).  ``times(index)``: the frame's capture time in
-    seconds (live capture), written in its row; the step's ``dt`` is the time since the frame before.
+    seconds (live capture), written in its row; the step's ``dt`` is the time since the frame before.  ``late(index)``:
+    seconds (C,) each camera's image of the frame was captured after the frame's time (cameras not frame-locked).
     ``retarget(tracker)``: before each frame, the tracker to track it with (``tracker live`` rebuilds it for the
     cameras still delivering).  ``each``: called with every frame once its row is written.  ``before``: rows of a
     poses.npz (its arrays: frame, poses, joints, status, residual, elapsed, time) written first, in their order, as the
@@ -109,7 +111,8 @@ def track_frames(
                 landmarks = None if keypoints is None else keypoints(index)
                 begun = time.perf_counter()
                 dt = None if at is None or last is None else at - last
-                result = tracker.step(images, smoothed=True, dt=dt, keypoints=landmarks)
+                lateness = None if late is None else late(index)
+                result = tracker.step(images, smoothed=True, dt=dt, keypoints=landmarks, late=lateness)
                 if check is not None:
                     result = check(tracker, images, landmarks, result)
                 spent = time.perf_counter() - begun

@@ -128,6 +128,8 @@ def track(
     )
     times = capture_times(rec)  # a live recording's capture times: its frames' time and time steps
     timed = None if times is None else lambda index: float(times[index])
+    pairing = rec.pairing  # cameras not frame-locked: each view's frame and how late it was captured
+    late = None if pairing is None else lambda index: pairing.late[index]
     back = TrackedBack(None, 0, False)
     if back_to < begin:
         from tracker.keypoints.first_pose import FRAMES
@@ -141,6 +143,7 @@ def track(
             out=out,
             background=background,
             times=timed,
+            late=late,
             bar=bar,
         )
     before = back.rows
@@ -221,6 +224,7 @@ def track(
             keypoints=None if stream is None else beside(stream, tracker),
             check=recovery,
             times=timed,
+            late=late,
             each=counted_and_shown,
             before=before,
         )
@@ -291,7 +295,7 @@ def nearer_landmarks(
 
 
 def _tracked_back(
-    rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, bar
+    rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, late, bar
 ) -> TrackedBack:
     """The frames ``span`` = (first, begin, settled) before the first pose ``init`` (at frame ``begin``) tracked
     backwards: the tracker settles on the first pose over the frames from ``begin`` to ``settled`` - 1 (the first
@@ -299,7 +303,8 @@ def _tracked_back(
     is mended), turns round, its motion dropped, and tracks back to ``first``, the last frame first, with its own
     detections and recovery, reading :data:`BACK_CHUNK` frames at a time.  Time runs backwards there: the loop is
     given the capture times ``times(index)`` (a live recording's) negated, so that its steps are forward in that
-    time, and the rows get them back.  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on
+    time, and the rows get them back; so is each view's lateness ``late(index)`` there (a camera late is early in
+    that time).  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on
     keeps them."""
     import tempfile
 
@@ -327,7 +332,7 @@ def _tracked_back(
         for stop in range(settled - 1, first, -BACK_CHUNK):
             yield from reversed(read(max(first, stop - BACK_CHUNK), stop))
 
-    def tracked(frames, path: Path, total: int):
+    def tracked(frames, path: Path, total: int, way: int):
         return track_frames(
             tracker,
             bar(f"back to frame {first}", "frame")(frames, total=total),
@@ -336,6 +341,7 @@ def _tracked_back(
             keypoints=None if stream is None else beside(stream, tracker),
             check=recovery,
             times=None if times is None else lambda index: -times(index),
+            late=None if late is None else lambda index: way * late(index),
         )
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
@@ -351,10 +357,10 @@ def _tracked_back(
             tracker.warm_up()
             prepare = _preparer(tracker, background, keep=False)
             chroma = tracker.bin_colours if settings.region and background is None else False
-            run = tracked(settling(), Path(folder) / "settled.npz", settled - begin)
+            run = tracked(settling(), Path(folder) / "settled.npz", settled - begin, 1)
             if not run.interrupted:
                 tracker.restart(tracker.poses)  # the motion so far points the other way
-                run = tracked(backwards(), Path(folder) / "poses.npz", settled - 1 - first)
+                run = tracked(backwards(), Path(folder) / "poses.npz", settled - 1 - first, -1)
             judged = None if stream is None or run.interrupted else stream.get(begin)
         finally:
             if stream is not None:

@@ -262,6 +262,7 @@ def project_point(k_mat, lens, dist, camera_from_component, point):
 @njit(cache=True, nogil=True)
 def keypoint_kernel(
     poses,
+    gains,
     camera_from_world,
     matrix,
     lens,
@@ -280,7 +281,9 @@ def keypoint_kernel(
     eta,
     misfit,
 ):
-    """Add every usable landmark's w J^T J and w J^T r to ``information`` (N, 6, 6) and ``eta`` (N, 6).
+    """Add every usable landmark's w J^T J and w J^T r to ``information`` (N, 6, 6) and ``eta`` (N, 6), each view's
+    landmarks placed by the ``poses`` (C, N, 4, 4) of that camera's capture time and its Jacobians scaled by its
+    ``gains`` (C,), how far its view moves as the poses move (docs/sync.md).
 
     ``camera_from_world``, ``matrix``, ``lens`` and ``distortion`` are the rig's
     (:class:`tracker.tracking.outline.Rig`); ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's
@@ -311,8 +314,9 @@ def keypoint_kernel(
             predicted[j] = np.nan
             if i >= 0:
                 predicted[j], jacobians[j] = project_point(
-                    matrix[k], lens[k], distortion[k], camera_from_world[k] @ poses[i], point[j]
+                    matrix[k], lens[k], distortion[k], camera_from_world[k] @ poses[k, i], point[j]
                 )
+                jacobians[j] *= gains[k]
                 if np.isfinite(predicted[j, 0]):
                     low = np.minimum(low, predicted[j])
                     high = np.maximum(high, predicted[j])

@@ -342,7 +342,8 @@ def _emit(
 def place(
     quadric, clip, bound, quadric_component, poses, camera_from_world, o_from, o_quadric, o_clip, o_sphere, o_cone
 ):
-    """Every quadric in every camera's frame: with E = P_k W_c (camera from component), ``o_from`` = E,
+    """Every quadric in every camera's frame: with E = P_k W_kc (camera from component, ``poses`` (C, N, 4, 4) each
+    camera's own, :func:`sample_outlines`), ``o_from`` = E,
     ``o_quadric`` = E^-T Q E^-1 and ``o_clip`` = E^-T Q2 E^-1 (C, Q, 4, 4), ``o_sphere`` (C, Q, 4)
     the bounding sphere (centre in the camera frame, radius) and ``o_cone`` (C, Q, 6) the cone of
     rays through it (see :func:`_cones`).  No allocation."""
@@ -352,7 +353,7 @@ def place(
     for k in range(camera_from_world.shape[0]):
         p = camera_from_world[k]
         for j in range(quadric.shape[0]):
-            w = poses[quadric_component[j]]
+            w = poses[k, quadric_component[j]]
             e = o_from[k, j]
             for a in range(3):
                 for b in range(4):
@@ -623,15 +624,19 @@ class Placed:
 def sample_outlines(
     model, poses: np.ndarray, rig: Rig, *, spacing: float, samples: Samples, placed: Placed | None = None
 ) -> Samples:
-    """Fill ``samples`` with the visible outline of ``model`` at ``poses`` (N,4,4) seen by ``rig``
-    (and ``placed``, if given, with the camera-frame quadrics)."""
-    placed = Placed.allocate(len(rig.names), model.quadric.shape[0]) if placed is None else placed
+    """Fill ``samples`` with the visible outline of ``model`` at ``poses`` (N,4,4) seen by ``rig``, or (C, N, 4, 4)
+    each camera's own (each view at its capture time, docs/sync.md), and ``placed``, if given, with the
+    camera-frame quadrics."""
+    cameras = len(rig.names)
+    placed = Placed.allocate(cameras, model.quadric.shape[0]) if placed is None else placed
+    if poses.ndim == 3:
+        poses = np.broadcast_to(poses, (cameras, *poses.shape))
     samples.count = outline_kernel(
         model.quadric,
         model.clip,
         model.quadric_bound,
         model.quadric_component,
-        poses,
+        np.ascontiguousarray(poses),
         rig.matrix,
         rig.camera_from_world,
         rig.lens,

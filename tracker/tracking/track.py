@@ -15,7 +15,8 @@ predicted outline that can account for it, and the search range shrinks from
 iteration to iteration (coarse to fine).  With landmarks, a limb they place far from where the
 edges left it is moved to them and the frame tracked again, kept if that limb's edges fit better
 (:meth:`Tracker.lead`, docs/keypoints.md).  The frame's status comes from the share of samples
-that found an edge and the robust mean residual.
+that found an edge and the robust mean residual.  Where the cameras are not frame-locked, each view sees the poses
+moved on to its own capture time, to first order (:meth:`Tracker.seen`, docs/sync.md).
 """
 
 from __future__ import annotations
@@ -344,6 +345,24 @@ def constant_velocity(previous, current, damping):
     return out
 
 
+@njit(cache=True, nogil=True)
+def views_at(poses, velocity, lateness):
+    """Each camera's poses (C, N, 4, 4): ``poses`` (N, 4, 4) moved on by ``lateness`` (C,) frames of the body
+    ``velocity`` (N, 6), the twist of each component per frame, E_k = E exp(l_k v): the body at each view's capture
+    time, to first order (docs/sync.md, "Each view at its own time")."""
+    out = np.empty((lateness.shape[0], poses.shape[0], 4, 4))
+    for k in range(lateness.shape[0]):
+        for i in range(poses.shape[0]):
+            out[k, i] = poses[i] @ exp(lateness[k] * velocity[i])
+    return out
+
+
+LATENESS = 0.5
+"""Frames a view is moved on by at most (:meth:`Tracker.seen`): pairing leaves each view within half a frame of the
+frame's time, where the motion is near enough first order; a view further off (a camera with no nearer frame, at
+the ends of a recording) is moved half a frame, since a body carried on for frames at its velocity lands as far
+off as the offset put it (docs/sync.md)."""
+
 STAGES = ("grey", "outline", "ownership", "measure", "region", "solve")
 
 
@@ -473,6 +492,7 @@ class Tracker:
         self.restart(initial_poses)
         self.sampled_poses = self.poses
         self.still = np.zeros((n, 6))
+        self.lateness = np.zeros(len(cameras))  # frames each view of this frame was captured after it (step)
         self.landmarks = (*cue_points(model), left_right_pairs(LANDMARKS))
         self.placer = placers(model, *self.landmarks[:2])
         self.bone_lengths = bone_lengths(self.poses, *self.landmarks[:2])  # the legs' (tracker.tracking.guessed)
@@ -530,6 +550,7 @@ class Tracker:
                 self.poses, position_variance=(s / st.prior_translation, s / st.prior_rotation)
             )
         self.motion = Motion(None, kalman, np.full(self.model.size, float(s)))
+        self.start = self.poses  # the poses the frame in hand started from: the last frame's (step)
 
     def warm_up(self) -> None:
         """Run every kernel once on a blank frame (compiles them, or loads numba's cache) and restore the state."""
@@ -713,11 +734,28 @@ class Tracker:
         m = self.model
         hold_kernel(information, eta, poses, self.trunk, m.parent, m.rest, TRUNK_TURN, self.settings.trunk_hold)
 
+    def seen(self, poses: np.ndarray) -> np.ndarray:
+        """Each camera's view of ``poses`` (C, N, 4, 4): the body at that view's capture time, ``poses`` moved on by
+        its :attr:`lateness` in frames of their motion since the last frame's (:attr:`start`, :func:`views_at`);
+        the same poses in every view when the views are on time."""
+        if not self.lateness.any():
+            return np.ascontiguousarray(np.broadcast_to(poses, (len(self.lateness), *poses.shape)))
+        return views_at(np.ascontiguousarray(poses), motion_since(self.start, poses), self.lateness)
+
+    @property
+    def gains(self) -> np.ndarray:
+        """How far each camera's view moves (C,) as the frame's poses move: 1 + its :attr:`lateness`, since a view
+        l frames late moves with the poses and with their motion since the last frame, l times it (:meth:`seen`);
+        its Jacobians are scaled by it."""
+        return 1.0 + self.lateness
+
     def sample(self, work: Workspace, poses: np.ndarray, search_range: int) -> None:
         """Sample the visible outlines at ``poses`` into ``work`` and limit each one's search (ownership)."""
         s, m, st = work.samples, self.model, self.settings
         started = time.perf_counter()
-        sample_outlines(m, poses, self.rig, spacing=st.spacing, samples=s, placed=work.placed)
+        sample_outlines(m, self.seen(poses), self.rig, spacing=st.spacing, samples=s, placed=work.placed)
+        if self.lateness.any():
+            s.jacobian[: s.count] *= self.gains[s.camera[: s.count], None]
         started = work.times.add("outline", started)
         if st.ownership:
             work.lo, work.hi = work.ownership.limits(work.placed, s, search_range, depths=st.region and work.coloured)
@@ -1018,7 +1056,8 @@ class Tracker:
         if not swaps:
             pairs = pairs[:0]
         return keypoint_kernel(
-            self.poses if poses is None else poses,
+            self.seen(self.poses if poses is None else poses),
+            self.gains,
             self.rig.camera_from_world,
             self.rig.matrix,
             self.rig.lens,
@@ -1239,12 +1278,17 @@ class Tracker:
         smoothed: bool = False,
         dt: float | None = None,
         keypoints: tuple[np.ndarray, np.ndarray] | None = None,
+        late: np.ndarray | None = None,
     ) -> FrameResult:
         """Track one frame given one grey image per camera (rig order), already :meth:`smooth`-ed or not.
 
         ``dt``: seconds since the previous frame (dynamics "kalman" only; default ``1 / frame_rate``).
         ``keypoints``: the frame's landmarks, (pixels (C, 33, 2), confidence (C, 33)), fused with the edges
-        in every iteration (:meth:`add_keypoints`).
+        in every iteration (:meth:`add_keypoints`).  ``late``: seconds (C,) each camera's image was captured after
+        the frame's time (a rig that is not frame-locked, :class:`tracker.io.pairing.Pairing`): each view's outlines
+        and landmarks are then placed at the poses moved on by that many frames (of ``dt``, at most
+        :data:`LATENESS`) of their motion since the last frame, and its Jacobians scaled to match (:meth:`seen`,
+        :attr:`gains`, docs/sync.md).
         """
         st = self.settings
         self.keypoints = None
@@ -1259,6 +1303,10 @@ class Tracker:
                 self.hidden = hidden_parts(self.model, self.landmarks[0], legs)
         self.load_images(images, smoothed)
         current = self.poses
+        step = dt if dt is not None and dt > 0 else 1.0 / st.frame_rate  # seconds between the frames
+        self.start = current
+        late = np.zeros(len(self.rig.names)) if late is None else np.asarray(late, float) / step
+        self.lateness = np.clip(late, -LATENESS, LATENESS)
         if st.dynamics == "constant-velocity" and self.motion.previous is not None:
             self.poses = self.carried(current)
         elif st.dynamics == "kalman":
