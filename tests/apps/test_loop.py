@@ -73,9 +73,9 @@ def test_capture_times_reach_the_rows_and_the_steps(tiny, tmp_path, monkeypatch)
     steps = []
     step = Tracker.step
 
-    def timed(self, images, *, smoothed=False, dt=None, keypoints=None):
+    def timed(self, images, *, smoothed=False, dt=None, keypoints=None, late=None):
         steps.append(dt)
-        return step(self, images, smoothed=smoothed, dt=dt, keypoints=keypoints)
+        return step(self, images, smoothed=smoothed, dt=dt, keypoints=keypoints, late=late)
 
     monkeypatch.setattr(Tracker, "step", timed)
     tracker = Tracker(model, rec.cameras, init)

@@ -198,13 +198,13 @@ def test_ctrl_c_keeps_the_frames_done(tiny_recording, tmp_path, monkeypatch, cap
     calls = {"n": 0}
     step = Tracker.step
 
-    def interrupted_step(self, images, *, smoothed=False, dt=None, keypoints=None):
+    def interrupted_step(self, images, *, smoothed=False, dt=None, keypoints=None, late=None):
         """Ctrl-C in the fourth frame of the run's tracker (a re-seed's edge snap steps trackers of its own)."""
         if calls.setdefault("tracker", self) is self:
             calls["n"] += 1
             if calls["n"] == 4:
                 raise KeyboardInterrupt
-        return step(self, images, smoothed=smoothed, dt=dt, keypoints=keypoints)
+        return step(self, images, smoothed=smoothed, dt=dt, keypoints=keypoints, late=late)
 
     monkeypatch.setattr(Tracker, "step", interrupted_step)
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--quiet"]) == 130
