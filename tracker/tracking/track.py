@@ -336,16 +336,6 @@ def motion_since(sampled, current):
 
 
 @njit(cache=True, nogil=True)
-def constant_velocity(previous, current, damping):
-    """Predict E_{t+1} = E_t exp(d log(E_{t-1}^-1 E_t)) for every component (d = damping)."""
-    twist = motion_since(previous, current)
-    out = np.empty_like(current)
-    for i in range(current.shape[0]):
-        out[i] = current[i] @ exp(damping * twist[i])
-    return out
-
-
-@njit(cache=True, nogil=True)
 def views_at(poses, velocity, lateness):
     """Each camera's poses (C, N, 4, 4): ``poses`` (N, 4, 4) moved on by ``lateness`` (C,) frames of the body
     ``velocity`` (N, 6), the twist of each component per frame, E_k = E exp(l_k v): the body at each view's capture
@@ -355,6 +345,13 @@ def views_at(poses, velocity, lateness):
         for i in range(poses.shape[0]):
             out[k, i] = poses[i] @ exp(lateness[k] * velocity[i])
     return out
+
+
+@njit(cache=True, nogil=True)
+def constant_velocity(previous, current, damping):
+    """Predict E_{t+1} = E_t exp(d log(E_{t-1}^-1 E_t)) for every component (d = damping): :func:`views_at` of a
+    single view ``damping`` frames on."""
+    return views_at(current, motion_since(previous, current), np.array([damping]))[0]
 
 
 LATENESS = 0.5
@@ -1303,9 +1300,9 @@ class Tracker:
                 self.hidden = hidden_parts(self.model, self.landmarks[0], legs)
         self.load_images(images, smoothed)
         current = self.poses
-        step = dt if dt is not None and dt > 0 else 1.0 / st.frame_rate  # seconds between the frames
+        interval = dt if dt is not None and dt > 0 else 1.0 / st.frame_rate  # seconds between the frames
         self.start = current
-        late = np.zeros(len(self.rig.names)) if late is None else np.asarray(late, float) / step
+        late = np.zeros(len(self.rig.names)) if late is None else np.asarray(late, float) / interval
         self.lateness = np.clip(late, -LATENESS, LATENESS)
         if st.dynamics == "constant-velocity" and self.motion.previous is not None:
             self.poses = self.carried(current)
