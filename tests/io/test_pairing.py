@@ -85,6 +85,14 @@ def test_a_recording_with_sync_toml_reads_each_camera_at_its_time(recording):
             np.testing.assert_array_equal(image, _sources_read(raw, frame)[camera])
 
 
+def test_cameras_picked_from_a_recording_keep_their_offsets(recording):
+    fps = open_recording(recording).fps
+    (recording / "sync.toml").write_text(f"[offsets]\ncam0 = 0.0\ncam1 = {2 / fps}\n")
+    picked = open_recording(recording, ["cam1"])  # the file names cam0 too, a camera of the rig not picked
+    np.testing.assert_array_equal(picked.pairing.frames[:, 0], [0, 0, 0, 1, 2, 3])
+    np.testing.assert_allclose(picked.pairing.late[3:, 0], 0.0, atol=1e-12)
+
+
 def test_a_recording_with_timestamps_reads_the_nearest_frames(recording):
     fps = open_recording(recording).fps
     times = np.arange(6) / fps
