@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from conftest import HUMAN, ROOT
 
+from tracker.apps.sync import Refined
 from tracker.camera import look_at_camera
 from tracker.cli import main
 from tracker.io.recording import open_recording
@@ -140,8 +141,9 @@ def test_tracker_sync_finds_the_offsets_of_a_render(tmp_path, capsys):
 
 
 def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_path, monkeypatch, capsys):
-    """A body standing still: one line naming the cameras and the fix, exit 2, no sync.toml; a bad sync.toml already
-    there is named before anything is detected."""
+    """A body standing still: one line naming the cameras and the fix, exit 2, no sync.toml (with --refine, also
+    what the edges said; a camera the edges decide is written); a bad sync.toml already there is named before
+    anything is detected."""
     rec = tmp_path / "rec"
     shutil.copytree(tiny_recording, rec)
     cameras = open_recording(rec).cameras
@@ -155,6 +157,16 @@ def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "does not pin down the time offset of cam1" in err[0] and "by hand" in err[0]
     assert not (rec / "sync.toml").exists()
+    edges = [np.array([0.0, -0.07]), np.array([0.0, 0.015]), np.array([True, False])]  # the edges: no rise either
+    monkeypatch.setattr("tracker.apps.sync.refine_offsets", lambda *args, **kwargs: Refined(*edges))
+    assert main(["sync", str(rec), "--refine", "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the edges and the landmarks' motion does not pin down" in err[0]
+    assert "its edges: -0.070 +- 0.015 s" in err[0] and not (rec / "sync.toml").exists()
+    edges[2] = np.array([True, True])  # the edges decide what the landmarks did not
+    assert main(["sync", str(rec), "--refine", "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert "cam1  -0.0700 s  +-0.0150  by the edges (landmarks undecided)" in capsys.readouterr().out
+    assert load_offsets(rec / "sync.toml", ["cam0", "cam1"], 1.0)["cam1"] == -0.07
     (rec / "sync.toml").write_text("[offsets]\ncam1 = 'late'\n")
     assert main(["sync", str(rec), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert "the offset of cam1 is not a number" in capsys.readouterr().err

@@ -11,6 +11,7 @@ from tracker.commands import options
 from tracker.errors import TrackerInputError
 
 if TYPE_CHECKING:
+    from tracker.apps.sync import Refined
     from tracker.keypoints.sync import Offsets
 
 HELP = "find each camera's capture-time offset from the body's motion, write REC/sync.toml"
@@ -28,6 +29,18 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="largest offset searched, either way (default 0.5 s)",
     )
+    parser.add_argument(
+        "--refine",
+        action="store_true",
+        help="then refine each camera's offset by its edges against the body tracked in the other cameras (tracks "
+        "the recording once per camera but the first, in OUT/sync/without-<camera>/)",
+    )
+    parser.add_argument("--model", help="--refine: body model TOML (default: the recording's model.toml, else fitted)")
+    parser.add_argument(
+        "--init",
+        help="--refine: pose at the first frame (default: the recording's init.toml, else fitted to the keypoints)",
+    )
+    parser.add_argument("--frames", type=options.positive_int, help="--refine: frames to track (default: all)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -53,34 +66,73 @@ def run(args: argparse.Namespace) -> int:
     found = camera_offsets(
         keypoints.pixels, keypoints.confidence, rec.cameras, fps=rec.fps, reach=min(args.reach, duration / 2)
     )
-    for name, seconds, sigma, decided in zip(names, found.seconds, found.sigma, found.decided):
+    seconds, sigma, decided = found.seconds, found.sigma, found.decided
+    notes = [""] * len(names)
+    refined = None
+    if args.refine:
+        refined = _refined(args, rec, found, out)
+        seconds = np.where(refined.decided, refined.seconds, seconds)
+        sigma = np.where(refined.decided, refined.sigma, sigma)
+        decided = refined.decided | decided
+        notes = [_source(found, refined, camera) for camera in range(len(names))]
+    for camera, name in enumerate(names):
         was = f"  (was {before[name]:+.4f})" if before is not None else ""
-        spread = "reference" if name == names[0] else f"+-{sigma:.4f}"
-        if decided:
-            print(f"{name}  {seconds:+.4f} s  {spread}{was}")
-    if not found.decided.all():
+        spread = "reference" if camera == 0 else f"+-{sigma[camera]:.4f}"
+        if decided[camera]:
+            print(f"{name}  {seconds[camera]:+.4f} s  {spread}{notes[camera]}{was}")
+    if not decided.all():
         raise TrackerInputError(
-            f"{rec.path}: the landmarks' motion does not pin down the time offset of {_guesses(found, names)}, but the "
-            "views agree nearly as well at other offsets: the body moves too slowly for the detector's noise, or too "
-            "few frames show it in two views; record brisk movement that every camera sees, or write the offsets in "
-            f"{target} by hand"
+            f"{rec.path}: the {'edges and the ' if refined is not None else ''}landmarks' motion does not pin down "
+            f"the time offset of {_guesses(found, refined, names)}, but the views agree nearly as well at other "
+            "offsets: the body moves too slowly for the detector's noise, or too few frames show it in two views; "
+            f"record brisk movement that every camera sees, or write the offsets in {target} by hand"
         )
-    save_offsets(target, dict(zip(names, found.seconds)), dict(zip(names, found.sigma)))
+    save_offsets(target, dict(zip(names, seconds)), dict(zip(names, sigma)))
     print(f"wrote {target}")
     return 0
 
 
-def _guesses(found: Offsets, names: list[str]) -> str:
+def _refined(args: argparse.Namespace, rec, found: Offsets, out):
+    """The offsets refined by the edges (:func:`tracker.apps.sync.refine_offsets`), the tracks in OUT/sync/."""
+    import functools
+
+    from tracker.apps.sync import refine_offsets
+    from tracker.apps.track import Tracking
+    from tracker.keypoints.stream import default_step
+    from tracker.tracking.track import Settings
+
+    tracking = Tracking(
+        Settings(frame_rate=rec.fps), default_step(rec.fps), frames=args.frames, model=args.model, init=args.init
+    )
+    return refine_offsets(rec, found, tracking, out=out / "sync", bar=functools.partial(options.bar, args))
+
+
+def _source(found: Offsets, refined: Refined, camera: int) -> str:
+    """What a camera's line says of where its offset comes from: the edges (and what the landmarks said), or the
+    landmarks (and what the edges said)."""
+    if camera == 0:
+        return ""
+    landmarks = f"{found.seconds[camera]:+.4f}" if found.decided[camera] else "undecided"
+    edges = f"{refined.seconds[camera]:+.4f}" if np.isfinite(refined.seconds[camera]) else "no track"
+    if refined.decided[camera]:
+        return f"  by the edges (landmarks {landmarks})"
+    return f"  by the landmarks (edges {edges}, undecided)"
+
+
+def _guesses(found: Offsets, refined: Refined | None, names: list[str]) -> str:
     """The cameras whose offset the motion does not decide, each with what its pairs with a decided camera suggest
-    (that camera's offset plus the pair's shift), e.g. ``cam3 (its pairs: -0.052, -0.033 s)``."""
+    (that camera's offset plus the pair's shift), e.g. ``cam3 (its pairs: -0.052, -0.033 s)``, and the edges' least
+    when refined (``; its edges: -0.071 +- 0.031 s``)."""
     told = []
-    for camera in np.flatnonzero(~found.decided):
+    undecided = ~found.decided if refined is None else ~(found.decided | refined.decided)
+    for camera in np.flatnonzero(undecided):
         guesses = [
             found.seconds[i] + shift if j == camera else found.seconds[j] - shift
             for (i, j), (shift, _, _) in found.pairs.items()
             if camera in (i, j) and found.decided[j if i == camera else i] and np.isfinite(shift)
         ]
-        told.append(
-            f"{names[camera]} (its pairs: {', '.join(f'{g:+.3f}' for g in guesses)} s)" if guesses else names[camera]
-        )
+        said = [f"its pairs: {', '.join(f'{g:+.3f}' for g in guesses)} s"] if guesses else []
+        if refined is not None and np.isfinite(refined.seconds[camera]):
+            said.append(f"its edges: {refined.seconds[camera]:+.3f} +- {refined.sigma[camera]:.3f} s")
+        told.append(f"{names[camera]} ({'; '.join(said)})" if said else names[camera])
     return ", ".join(told)

@@ -152,18 +152,31 @@ def pair_shift(
     if not usable.any():
         return float("nan"), float("inf"), False
     cost = np.where(usable, sums[:, 0].sum(axis=1) / np.maximum(counts, 1), np.inf)
-    least = int(np.argmin(cost))
-    best = coarse[least]
-    step = round(rise / 0.1)
-    sides = cost[[max(least - step, 0), min(least + step, len(coarse) - 1)]]
-    steep = bool(step <= least < len(coarse) - step and (sides >= RISE * cost[least]).all())
+    best = coarse[int(np.argmin(cost))]
+    steep = rises(coarse, cost, rise=rise, ratio=RISE)
     fine = best + np.arange(-0.2, 0.2 + 1e-9, 0.01)
     table = np.array([_per_frame(first, second, shift, matrix=matrix, focal=focal, cap=cap) for shift in fine])
+    shift, sigma = resampled_least(fine, table, block=block, seed=seed)
+    return shift, sigma, steep and sigma <= UNDECIDED
+
+
+def rises(shifts: np.ndarray, cost: np.ndarray, *, rise: float, ratio: float) -> bool:
+    """Whether the ``cost`` (S,) over evenly spaced ``shifts`` (S,) is at least ``ratio`` times its least ``rise``
+    (in the shifts' unit) either side of it, both sides within the shifts searched."""
+    least = int(np.argmin(cost))
+    step = round(rise / (shifts[1] - shifts[0]))
+    if not step <= least < len(shifts) - step:
+        return False
+    return bool((cost[[least - step, least + step]] >= ratio * cost[least]).all())
+
+
+def resampled_least(shifts: np.ndarray, table: np.ndarray, *, block: int, seed: int = 0) -> tuple[float, float]:
+    """The shift of least mean cost over ``table`` (S, 2, F) (per shift and frame: summed costs, counts), refined by
+    a parabola, and its spread over :data:`RESAMPLES` resamples of the frames in blocks of ``block`` (a block
+    bootstrap: the errors are correlated from frame to frame)."""
     rng = np.random.default_rng(seed)
-    minima = [_minimum(fine, table, np.ones(table.shape[2]))]
-    minima += [_minimum(fine, table, _blocks(table.shape[2], block, rng)) for _ in range(RESAMPLES)]
-    sigma = float(np.std(minima[1:]))
-    return float(minima[0]), sigma, steep and sigma <= UNDECIDED
+    minima = [_minimum(shifts, table, _blocks(table.shape[2], block, rng)) for _ in range(RESAMPLES)]
+    return _minimum(shifts, table, np.ones(table.shape[2])), float(np.std(minima))
 
 
 def _minimum(shifts: np.ndarray, table: np.ndarray, weights: np.ndarray) -> float:

@@ -1,0 +1,129 @@
+"""The library form of ``tracker sync --refine``: the landmarks' offsets refined by the tracker's own edge residuals
+(docs/sync.md, "Refined by the edges").
+
+Each camera but the first is timed against the body tracked in the others (:func:`tracker.apps.track.track`, each
+at its offset from the landmarks; a camera they leave undecided takes no part): its edges' summed distance to that
+track at trial offsets a quarter of a frame apart, :data:`REACH` frames either side of where the landmarks put it
+(:func:`tracker.tracking.view_time.edge_costs`).  The least, refined by a parabola, is its offset; the spread of
+that least over the frames resampled in blocks of a quarter of a second is its uncertainty.  It decides only where
+the distance rises by :data:`RISE` either side of the least within 0.05 s (at least a frame): a camera that sees
+the body's motion mostly along its line of sight sees its outline barely move, and its least lies wherever the
+track's own errors put it.  Leaving the camera out of its track keeps the track from bending to the camera's
+frames at the offset they were tracked at.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from tracker.apps.track import Bar, Tracking, track
+from tracker.errors import TrackerInputError
+from tracker.io.pairing import by_offsets
+from tracker.io.recording import Recording, frames, open_recording
+from tracker.keypoints.sync import RISE_SECONDS, UNDECIDED, Offsets, resampled_least, rises
+
+REACH = 4.0
+"""Frames either side of the landmarks' offset (0 where they leave it undecided) searched."""
+
+STEP = 0.25
+"""Frames between trial offsets."""
+
+RISE = 1.10
+"""A camera's offset is decided where its edges' mean distance 0.05 s (at least a frame) either side of the least is
+this many times the least: on the balancing trial the two cameras that see the sway across their view rise 14-18 %,
+the two that see it along their line of sight 1-2 % (docs/sync.md)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Refined:
+    """Each camera's offset from the edges, ``seconds`` (C,), with its standard deviation ``sigma`` (C,) and
+    whether the edges decide it, ``decided`` (C,) (the first camera: 0, 0, True; a camera no track could time:
+    NaN, inf, False)."""
+
+    seconds: np.ndarray
+    sigma: np.ndarray
+    decided: np.ndarray
+
+
+def refine_offsets(rec: Recording, found: Offsets, tracking: Tracking, *, out: Path, bar: Bar) -> Refined:
+    """Refine the landmarks' offsets ``found`` of ``rec`` (read as recorded, unpaired) by the edges (module
+    docstring), each camera's track written to OUT/without-<camera>/ (``out``) as ``tracking`` says; the body
+    model, when neither ``tracking`` nor the recording gives one, fitted once, in the first track."""
+    names = [camera.name for camera in rec.cameras]
+    count = len(names)
+    if count < 2:
+        raise TrackerInputError(f"{rec.path}: one camera has no offset to refine; pick two cameras or more")
+    seconds, sigma = np.full(count, np.nan), np.full(count, np.inf)
+    seconds[0], sigma[0] = 0.0, 0.0
+    decided = np.zeros(count, bool)
+    decided[0] = True
+    start = np.where(found.decided, found.seconds, 0.0)
+    for camera in range(1, count):
+        others = [k for k in range(count) if k != camera and found.decided[k]]
+        folder = out / f"without-{names[camera]}"
+        print(f"refining {names[camera]}: tracking the body in {', '.join(names[k] for k in others)}", file=sys.stderr)
+        outcome = track(_picked(rec, others, start), tracking, out=folder, bar=bar)
+        if outcome.interrupted:
+            raise KeyboardInterrupt
+        if tracking.model is None and rec.model_path is None:
+            tracking = dataclasses.replace(tracking, model=str(folder / "model.toml"))
+        poses = _track(outcome.poses, rec.frame_count)
+        if poses is None:
+            continue
+        seconds[camera], sigma[camera], decided[camera] = _timed(rec, camera, poses, start[camera], tracking, bar)
+    return Refined(seconds, sigma, decided)
+
+
+def _picked(rec: Recording, cameras: list[int], offsets: np.ndarray) -> Recording:
+    """``rec`` with only ``cameras``, their frames paired by ``offsets`` (C,) seconds."""
+    picked = open_recording(rec.path, [rec.cameras[k].name for k in cameras], rec.calibration_path, paired=False)
+    pairing = by_offsets(offsets[cameras], count=rec.frame_count, fps=rec.fps)
+    return dataclasses.replace(picked, pairing=None if pairing.identity and not pairing.late.any() else pairing)
+
+
+def _track(path: Path, count: int) -> np.ndarray | None:
+    """The poses (F, N, 4, 4) of the frames 0..F-1 tracked without a loss into the poses.npz at ``path``, up to the
+    first frame not so tracked; None when fewer than two."""
+    from tracker.io.poses import load_poses
+    from tracker.status import LOST
+
+    tracked = load_poses(path)
+    poses = np.full((count, *tracked["poses"].shape[1:]), np.nan)
+    kept = tracked["status"] != LOST
+    poses[tracked["frame"][kept]] = tracked["poses"][kept]
+    missing = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2, 3)))
+    first = int(missing[0]) if len(missing) else count
+    return np.ascontiguousarray(poses[:first]) if first >= 2 else None
+
+
+def _timed(
+    rec: Recording, camera: int, poses: np.ndarray, start: float, tracking: Tracking, bar: Bar
+) -> tuple[float, float, bool]:
+    """Camera ``camera``'s offset (seconds), its standard deviation and whether it is decided, from its edges
+    against ``poses`` tracked without it (module docstring), trial offsets about ``start`` seconds."""
+    from tracker.model import load_model
+    from tracker.tracking.track import Tracker
+    from tracker.tracking.view_time import edge_costs
+
+    model = load_model(tracking.model or rec.model_path)
+    alone = open_recording(rec.path, [rec.cameras[camera].name], rec.calibration_path, paired=False)
+    tracker = Tracker(model, alone.cameras, poses[0], tracking.settings)
+    shifts = start * rec.fps + np.arange(-REACH, REACH + 1e-9, STEP)
+    first = max(0, int(np.ceil(-shifts[0])))  # the camera's frames that every trial offset places within the track
+    stop = min(alone.frame_count, int(np.floor(len(poses) - 1 - shifts[-1])) + 1)
+    if stop - first < 2:
+        return float("nan"), float("inf"), False
+    read = frames(alone, first, stop, prepare=tracker.smooth)
+    table = edge_costs(
+        tracker, bar(f"timing {alone.cameras[0].name}", "frame")(read, total=stop - first), poses, shifts
+    )
+    table = table[:, :, first:]
+    cost = table[:, 0].sum(axis=1) / table[:, 1].sum(axis=1)
+    rise = max(1.0, RISE_SECONDS * rec.fps)
+    least, sigma = resampled_least(shifts, table, block=max(2, round(rec.fps / 4)))
+    decided = rises(shifts, cost, rise=rise, ratio=RISE) and sigma <= UNDECIDED
+    return least / rec.fps, sigma / rec.fps, decided
