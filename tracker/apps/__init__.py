@@ -2,6 +2,7 @@
 
 track.py      the library form of ``tracker track``: a recording tracked, poses.npz written (``tracker batch`` too)
 live.py       live tracking from cameras (``tracker live``)
+sync.py       ``tracker sync --refine``: each camera's offset refined by its edges against a track of the others
 bench.py      stage timings, fps, decode floor, scaling (``tracker bench``)
 loop.py       the frame loop that each of them runs: every frame tracked, checked, written to poses.npz, handed on
 """

@@ -69,8 +69,8 @@ def refine_offsets(rec: Recording, found: Offsets, tracking: Tracking, *, out: P
         outcome = track(_picked(rec, others, start), tracking, out=folder, bar=bar)
         if outcome.interrupted:
             raise KeyboardInterrupt
-        if tracking.model is None and rec.model_path is None:
-            tracking = dataclasses.replace(tracking, model=str(folder / "model.toml"))
+        if tracking.model is None:  # the model given, the recording's, or the one the first track fitted
+            tracking = dataclasses.replace(tracking, model=str(rec.model_path or folder / "model.toml"))
         poses = _track(outcome.poses, rec.frame_count)
         if poses is None:
             continue
@@ -109,7 +109,8 @@ def _timed(
     from tracker.tracking.track import Tracker
     from tracker.tracking.view_time import edge_costs
 
-    model = load_model(tracking.model or rec.model_path)
+    assert tracking.model is not None  # set by refine_offsets after the first track
+    model = load_model(tracking.model)
     alone = open_recording(rec.path, [rec.cameras[camera].name], rec.calibration_path, paired=False)
     tracker = Tracker(model, alone.cameras, poses[0], tracking.settings)
     shifts = start * rec.fps + np.arange(-REACH, REACH + 1e-9, STEP)

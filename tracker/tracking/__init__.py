@@ -10,6 +10,7 @@ landmark_noise.py  the keypoints' learnt noise: each landmark's zone, and how fi
 motion_prior.py    the Kalman motion prior (``--dynamics kalman``) and the motion a tracker carries between frames
 track.py           the frame loop (:class:`~tracker.tracking.track.Tracker`) and its settings; section 6
 foreground.py      the empty scene: median and cleared backgrounds, the difference image the edges are searched in
+view_time.py       when a view was captured, from its edges against a track of the other views (``tracker sync``)
 
 The rendered-data generator (:mod:`tracker.synthetic`) exists to test this method and is never imported by it.
 """
