@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from tracker.cli import main
+from tracker.io.pairing import by_offsets
 from tracker.io.recording import frames, open_recording
 from tracker.keypoints import stream as stream_module
-from tracker.keypoints.detect import detect_recording, fingerprint
+from tracker.keypoints.detect import cached, detect_recording, fingerprint
 from tracker.keypoints.store import load_keypoints, save_keypoints
 from tracker.keypoints.stream import KeypointStream, beside, default_step
 from tracker.tracking.track import Settings, Tracker
@@ -61,6 +62,22 @@ def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
     save_keypoints(cache, other)
     message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache))
     assert "made by another detector (mediapipe 0.9 pose_landmark_lite" in message and "delete it" in message
+
+
+def test_a_cache_of_the_same_videos_paired_otherwise_is_detected_again(tmp_path):
+    recording = open_recording(DEMO)
+    count, fps = recording.frame_count, recording.fps
+    paired = dataclasses.replace(recording, pairing=by_offsets(np.array([0.0, 2 / fps, 0.0]), count=count, fps=fps))
+    repaired = dataclasses.replace(recording, pairing=by_offsets(np.array([0.0, 3 / fps, 0.0]), count=count, fps=fps))
+    cache = tmp_path / "keypoints-paired.npz"
+    keypoints = detect_recording(paired, 0, 1)[0]
+    save_keypoints(cache, dataclasses.replace(keypoints, recording=fingerprint(paired)))
+    assert cached(cache, paired) is not None
+    assert cached(cache, repaired) is None  # a new sync.toml: detected again
+    with KeypointStream(repaired, 0, 4, 2, cache) as stream:
+        assert stream.reused is None
+        assert all(stream.get(frame) is not None for frame in (0, 2))
+    assert load_keypoints(cache).recording == fingerprint(repaired)
 
 
 def test_the_default_step_keeps_the_detector_near_fifteen_frames_a_second():

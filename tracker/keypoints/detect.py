@@ -3,8 +3,9 @@
 A cache (``keypoints.npz``) belongs to one recording: its fingerprint names each camera's video by
 size and a hash of its first bytes.  A recording whose cameras' frames are paired by time (docs/sync.md)
 keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, its fingerprint naming the
-pairing too.  A cache of another recording, or made by another detector, is an error rather than
-something to overwrite silently; one that lacks some of the wanted frames is completed and written back
+pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A cache of
+another recording, or made by another detector, is an error rather than something to overwrite silently; one that
+lacks some of the wanted frames is completed and written back
 with every frame it held.
 """
 
@@ -54,9 +55,15 @@ def fingerprint(recording: Recording) -> str:
     return " ".join(parts)
 
 
+def _videos(fingerprint: str) -> str:
+    """The part of a :func:`fingerprint` that names the videos, without their pairing."""
+    return " ".join(part for part in fingerprint.split() if not part.startswith("paired="))
+
+
 def cached(path: Path, recording: Recording) -> Keypoints | None:
-    """The keypoints of ``recording`` held in ``path`` (None when there is no file, or an unreadable one);
-    a file of another recording or another detector is a one-line error naming the fix."""
+    """The keypoints of ``recording`` held in ``path`` (None when there is no file, an unreadable one, or one of
+    the same videos paired otherwise); a file of another recording or another detector is a one-line error naming
+    the fix."""
     if not path.is_file():
         return None
     try:
@@ -64,7 +71,10 @@ def cached(path: Path, recording: Recording) -> Keypoints | None:
     except TrackerInputError:
         return None
     names = tuple(camera.name for camera in recording.cameras)
-    if found.camera_names != names or (found.recording and found.recording != fingerprint(recording)):
+    now = fingerprint(recording)
+    if found.camera_names == names and found.recording not in ("", now) and _videos(found.recording) == _videos(now):
+        return None  # the same videos paired otherwise (a new sync.toml): detected again, the file replaced
+    if found.camera_names != names or (found.recording and found.recording != now):
         raise TrackerInputError(
             f"{path}: holds the keypoints of another recording (cameras {', '.join(found.camera_names)}); "
             "delete it or choose another output folder"
