@@ -4,9 +4,11 @@ tracked in the other cameras."""
 import numpy as np
 from conftest import HUMAN, ROOT
 
+from tracker.apps.sync import _track
 from tracker.cli import main
 from tracker.io.poses import load_poses
 from tracker.io.sync import load_offsets
+from tracker.status import LOST, TRACKED
 
 
 def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(tmp_path, capsys):
@@ -29,3 +31,18 @@ def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(tmp_path, cap
         poses = load_poses(out / "sync" / f"without-{left_out}" / "poses.npz")
         assert len(poses["frame"]) == 45 and np.isfinite(poses["poses"]).all()
     assert (out / "keypoints.npz").is_file()
+
+
+def test_a_camera_is_timed_against_the_longest_run_of_frames_held(tmp_path):
+    """The track of the other cameras may start late, lose the body and pick it up again: the camera is timed
+    against its longest run of frames held, from that run's first frame; a track that held none gives nothing."""
+    rows = np.array([2, 3, 4, 6, 7, 8, 9, 10, 11])
+    poses = np.tile(np.eye(4), (len(rows), 2, 1, 1))
+    poses[:, 0, 0, 3] = rows  # each frame's pose names its frame
+    for status, name in ((np.where(rows == 7, LOST, TRACKED), "held"), (np.full(len(rows), LOST), "lost")):
+        names = {"component_names": np.array(["a", "b"]), "joint_names": np.array(["j"])}
+        joints = np.zeros((len(rows), 1, 3))
+        np.savez(tmp_path / f"{name}.npz", frame=rows, status=status, poses=poses, joints=joints, **names)
+    begin, held = _track(tmp_path / "held.npz", 14)
+    assert begin == 8 and held.shape == (4, 2, 4, 4) and list(held[:, 0, 0, 3]) == [8, 9, 10, 11]
+    assert _track(tmp_path / "lost.npz", 14) is None

@@ -71,10 +71,10 @@ def refine_offsets(rec: Recording, found: Offsets, tracking: Tracking, *, out: P
             raise KeyboardInterrupt
         if tracking.model is None:  # the model given, the recording's, or the one the first track fitted
             tracking = dataclasses.replace(tracking, model=str(rec.model_path or folder / "model.toml"))
-        poses = _track(outcome.poses, rec.frame_count)
-        if poses is None:
+        held = _track(outcome.poses, rec.frame_count)
+        if held is None:
             continue
-        seconds[camera], sigma[camera], decided[camera] = _timed(rec, camera, poses, start[camera], tracking, bar)
+        seconds[camera], sigma[camera], decided[camera] = _timed(rec, camera, held, start[camera], tracking, bar)
     return Refined(seconds, sigma, decided)
 
 
@@ -85,9 +85,9 @@ def _picked(rec: Recording, cameras: list[int], offsets: np.ndarray) -> Recordin
     return dataclasses.replace(picked, pairing=None if pairing.identity and not pairing.late.any() else pairing)
 
 
-def _track(path: Path, count: int) -> np.ndarray | None:
-    """The poses (F, N, 4, 4) of the frames 0..F-1 tracked without a loss into the poses.npz at ``path``, up to the
-    first frame not so tracked; None when fewer than two."""
+def _track(path: Path, count: int) -> tuple[int, np.ndarray] | None:
+    """The longest run of frames tracked without a loss into the poses.npz at ``path``: its first frame and its
+    poses (F, N, 4, 4); None when it is shorter than two frames."""
     from tracker.io.poses import load_poses
     from tracker.status import LOST
 
@@ -95,16 +95,21 @@ def _track(path: Path, count: int) -> np.ndarray | None:
     poses = np.full((count, *tracked["poses"].shape[1:]), np.nan)
     kept = tracked["status"] != LOST
     poses[tracked["frame"][kept]] = tracked["poses"][kept]
-    missing = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2, 3)))
-    first = int(missing[0]) if len(missing) else count
-    return np.ascontiguousarray(poses[:first]) if first >= 2 else None
+    held = np.concatenate([[False], np.isfinite(poses).all(axis=(1, 2, 3)), [False]])
+    edges = np.flatnonzero(np.diff(held.astype(int)))  # starts and stops of the runs of frames held, in turn
+    starts, stops = edges[::2], edges[1::2]
+    if not len(starts) or (stops - starts).max() < 2:
+        return None
+    longest = int(np.argmax(stops - starts))
+    return int(starts[longest]), np.ascontiguousarray(poses[starts[longest] : stops[longest]])
 
 
 def _timed(
-    rec: Recording, camera: int, poses: np.ndarray, start: float, tracking: Tracking, bar: Bar
+    rec: Recording, camera: int, held: tuple[int, np.ndarray], start: float, tracking: Tracking, bar: Bar
 ) -> tuple[float, float, bool]:
     """Camera ``camera``'s offset (seconds), its standard deviation and whether it is decided, from its edges
-    against ``poses`` tracked without it (module docstring), trial offsets about ``start`` seconds."""
+    against the poses tracked without it (``held``: the first frame of the run and its poses, :func:`_track`;
+    module docstring), trial offsets about ``start`` seconds."""
     from tracker.model import load_model
     from tracker.tracking.track import Tracker
     from tracker.tracking.view_time import edge_costs
@@ -112,16 +117,16 @@ def _timed(
     assert tracking.model is not None  # set by refine_offsets after the first track
     model = load_model(tracking.model)
     alone = open_recording(rec.path, [rec.cameras[camera].name], rec.calibration_path, paired=False)
+    begin, poses = held
     tracker = Tracker(model, alone.cameras, poses[0], tracking.settings)
     shifts = start * rec.fps + np.arange(-REACH, REACH + 1e-9, STEP)
-    first = max(0, int(np.ceil(-shifts[0])))  # the camera's frames that every trial offset places within the track
-    stop = min(alone.frame_count, int(np.floor(len(poses) - 1 - shifts[-1])) + 1)
+    along = shifts - begin  # the camera's frame m shows the run's frame m + shift - begin
+    first = max(0, int(np.ceil(-along[0])))  # the camera's frames that every trial offset places within the run
+    stop = min(alone.frame_count, int(np.floor(len(poses) - 1 - along[-1])) + 1)
     if stop - first < 2:
         return float("nan"), float("inf"), False
     read = frames(alone, first, stop, prepare=tracker.smooth)
-    table = edge_costs(
-        tracker, bar(f"timing {alone.cameras[0].name}", "frame")(read, total=stop - first), poses, shifts
-    )
+    table = edge_costs(tracker, bar(f"timing {alone.cameras[0].name}", "frame")(read, total=stop - first), poses, along)
     table = table[:, :, first:]
     cost = table[:, 0].sum(axis=1) / table[:, 1].sum(axis=1)
     rise = max(1.0, RISE_SECONDS * rec.fps)
