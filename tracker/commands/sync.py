@@ -54,6 +54,11 @@ def run(args: argparse.Namespace) -> int:
     from tracker.keypoints.detect import detect_recording
     from tracker.keypoints.sync import camera_offsets
 
+    given = [option for option in ("model", "init", "frames") if getattr(args, option) is not None]
+    if given and not args.refine:
+        raise TrackerInputError(
+            f"{args.recording}: --{given[0]} is for the tracks of --refine; add --refine or drop it"
+        )
     rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib, paired=False)
     names = [camera.name for camera in rec.cameras]
     duration = rec.frame_count / rec.fps
