@@ -50,12 +50,12 @@ def test_the_edges_lie_nearest_the_true_track_at_the_cameras_offset(late_render,
     alone = open_recording(late_render, [camera], paired=False)
     tracker = Tracker(load_model(late_render / "model.toml"), alone.cameras, truth[0], Settings(frame_rate=30.0))
     shifts = round(offset * 30.0) + np.arange(-2.0, 2.0 + 1e-9, 0.25)
-    table = edge_costs(tracker, frames(alone, 4, 26, prepare=tracker.smooth), truth, shifts)[:, :, 4:]
+    table = edge_costs(tracker, frames(alone, 4, 26, prepare=tracker.smooth), truth, shifts=shifts)[:, :, 4:]
     assert table.shape == (len(shifts), 2, 22) and (table[:, 1] > 0).all()
     least, sigma = resampled_least(shifts, table, block=8)
     assert least == pytest.approx(offset * 30.0, abs=0.1)  # a tenth of a frame: 3 ms
     assert sigma < 0.1
     cost = table[:, 0].sum(axis=1) / table[:, 1].sum(axis=1)
     assert rises(shifts, cost, rise=1.0, ratio=1.1)  # a frame off, the edges lie 10 % further or more
-    outside = edge_costs(tracker, frames(alone, 28, 30, prepare=tracker.smooth), truth, np.array([3.0]))
+    outside = edge_costs(tracker, frames(alone, 28, 30, prepare=tracker.smooth), truth, shifts=np.array([3.0]))
     assert outside.shape == (1, 2, 30) and not outside.any()  # beyond the track: nothing counted

@@ -126,7 +126,9 @@ def _timed(
     if stop - first < 2:
         return float("nan"), float("inf"), False
     read = frames(alone, first, stop, prepare=tracker.smooth)
-    table = edge_costs(tracker, bar(f"timing {alone.cameras[0].name}", "frame")(read, total=stop - first), poses, along)
+    table = edge_costs(
+        tracker, bar(f"timing {alone.cameras[0].name}", "frame")(read, total=stop - first), poses, shifts=along
+    )
     table = table[:, :, first:]
     cost = table[:, 0].sum(axis=1) / table[:, 1].sum(axis=1)
     rise = max(1.0, RISE_SECONDS * rec.fps)

@@ -33,7 +33,7 @@ def poses_at(poses: np.ndarray, time: float) -> np.ndarray:
     return out
 
 
-def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, *, shifts: np.ndarray) -> np.ndarray:
     """Per trial shift and per frame of one camera, its edges' summed distance to the track and their count: a table
     (S, 2, M) over ``shifts`` (S,) (frames: the camera's frame m shows the track's frame m + shift) and the camera's
     frames 0..M-1 (module docstring); zeros where the shifted time lies outside the track.
