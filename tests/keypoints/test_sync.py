@@ -169,6 +169,8 @@ def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_pat
     assert load_offsets(rec / "sync.toml", ["cam0", "cam1"], 1.0)["cam1"] == -0.07
     assert main(["sync", str(rec), "--model", "m.toml", "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert "--model is for the tracks of --refine; add --refine" in capsys.readouterr().err
+    assert main(["sync", str(rec), "--cameras", "cam0", "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert "also holds the offset of cam1, which --cameras leaves out" in capsys.readouterr().err
     (rec / "sync.toml").write_text("[offsets]\ncam1 = 'late'\n")
     assert main(["sync", str(rec), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert "the offset of cam1 is not a number" in capsys.readouterr().err

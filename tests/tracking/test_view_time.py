@@ -56,6 +56,6 @@ def test_the_edges_lie_nearest_the_true_track_at_the_cameras_offset(late_render,
     assert least == pytest.approx(offset * 30.0, abs=0.1)  # a tenth of a frame: 3 ms
     assert sigma < 0.1
     cost = table[:, 0].sum(axis=1) / table[:, 1].sum(axis=1)
-    assert rises(shifts, cost, rise=1.0, ratio=1.1)  # a frame off, the edges lie 10 % further or more
+    assert rises(cost, steps=4, ratio=1.1)  # a frame off, the edges lie 10 % further or more
     outside = edge_costs(tracker, frames(alone, 28, 30, prepare=tracker.smooth), truth, shifts=np.array([3.0]))
     assert outside.shape == (1, 2, 30) and not outside.any()  # beyond the track: nothing counted

@@ -130,8 +130,11 @@ def _timed(
         tracker, bar(f"timing {alone.cameras[0].name}", "frame")(read, total=stop - first), poses, shifts=along
     )
     table = table[:, :, first:]
-    cost = table[:, 0].sum(axis=1) / table[:, 1].sum(axis=1)
+    counts = table[:, 1].sum(axis=1)
+    if counts.min() == 0:  # the body outside the camera's view at some trial offset all along: nothing to compare
+        return float("nan"), float("inf"), False
+    cost = table[:, 0].sum(axis=1) / counts
     rise = max(1.0, RISE_SECONDS * rec.fps)
     least, sigma = resampled_least(shifts, table, block=max(2, round(rec.fps / 4)))
-    decided = rises(shifts, cost, rise=rise, ratio=RISE) and sigma <= UNDECIDED
+    decided = rises(cost, steps=round(rise / STEP), ratio=RISE) and sigma <= UNDECIDED
     return least / rec.fps, sigma / rec.fps, decided

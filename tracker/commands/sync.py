@@ -49,10 +49,11 @@ def run(args: argparse.Namespace) -> int:
     camera and write REC/sync.toml; a camera whose offset the motion does not decide is a one-line error after the
     others' lines, and nothing is written."""
     from tracker.atomic import ensure_writable_folder
-    from tracker.io.recording import open_recording
+    from tracker.io.recording import open_recording, rig_names
     from tracker.io.sync import FILE, load_offsets, save_offsets
     from tracker.keypoints.detect import detect_recording
     from tracker.keypoints.sync import camera_offsets
+    from tracker.tomlfile import read_toml
 
     given = [option for option in ("model", "init", "frames") if getattr(args, option) is not None]
     if given and not args.refine:
@@ -63,7 +64,15 @@ def run(args: argparse.Namespace) -> int:
     names = [camera.name for camera in rec.cameras]
     duration = rec.frame_count / rec.fps
     target = rec.path / FILE
-    before = load_offsets(target, names, duration) if target.is_file() else None
+    before = None
+    if target.is_file():
+        before = load_offsets(target, rig_names(rec), duration)
+        left_out = [name for name in read_toml(target, "sync", "")["offsets"] if name not in names]
+        if left_out:
+            raise TrackerInputError(
+                f"{target}: also holds the offset of {', '.join(left_out)}, which --cameras leaves out and this run "
+                "would drop; sync every camera, or move the file away to start afresh"
+            )
     out = ensure_writable_folder(options.output_folder(args.out, rec))
     keypoints, _ = detect_recording(
         rec, 0, rec.frame_count, cache=out / "keypoints.npz", progress=options.bar(args, "detecting", "frame")

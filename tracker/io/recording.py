@@ -147,7 +147,7 @@ def pairing(recording: Recording) -> Pairing | None:
     names = [camera.name for camera in recording.cameras]
     if (recording.path / SYNC).is_file():
         duration = recording.frame_count / recording.fps
-        offsets = load_offsets(recording.path / SYNC, _rig_names(recording), duration)
+        offsets = load_offsets(recording.path / SYNC, rig_names(recording), duration)
         found = by_offsets(np.array([offsets[name] for name in names]), count=recording.frame_count, fps=recording.fps)
     elif recording.timestamps_path is not None:
         times = _camera_times(recording)
@@ -217,10 +217,10 @@ def _camera_times(recording: Recording) -> np.ndarray:
     """Each camera's capture time (F, C) of each frame, from the recording's timestamps.csv."""
     assert recording.timestamps_path is not None  # asked for by recordings that have one
     names = [camera.name for camera in recording.cameras]
-    return camera_times(recording.timestamps_path, names, rig=_rig_names(recording), frames=recording.frame_count)
+    return camera_times(recording.timestamps_path, names, rig=rig_names(recording), frames=recording.frame_count)
 
 
-def _rig_names(recording: Recording) -> list[str]:
+def rig_names(recording: Recording) -> list[str]:
     """The names of every camera of the recording's calibration, also those not picked (``--cameras``): a file
     naming one of them is not wrong."""
     if recording.calibration_path is None:

@@ -72,9 +72,7 @@ def cached(path: Path, recording: Recording) -> Keypoints | None:
         return None
     names = tuple(camera.name for camera in recording.cameras)
     now = fingerprint(recording)
-    if found.camera_names == names and found.recording not in ("", now) and _videos(found.recording) == _videos(now):
-        return None  # the same videos paired otherwise (a new sync.toml): detected again, the file replaced
-    if found.camera_names != names or (found.recording and found.recording != now):
+    if found.camera_names != names or (found.recording and _videos(found.recording) != _videos(now)):
         raise TrackerInputError(
             f"{path}: holds the keypoints of another recording (cameras {', '.join(found.camera_names)}); "
             "delete it or choose another output folder"
@@ -83,6 +81,8 @@ def cached(path: Path, recording: Recording) -> Keypoints | None:
         raise TrackerInputError(
             f"{path}: made by another detector ({found.detector}, this is {DETECTOR}); delete it to detect again"
         )
+    if found.recording and found.recording != now:
+        return None  # the same videos paired otherwise (a new sync.toml): detected again, the file replaced
     return found
 
 

@@ -153,21 +153,20 @@ def pair_shift(
         return float("nan"), float("inf"), False
     cost = np.where(usable, sums[:, 0].sum(axis=1) / np.maximum(counts, 1), np.inf)
     best = coarse[int(np.argmin(cost))]
-    steep = rises(coarse, cost, rise=rise, ratio=RISE)
+    steep = rises(cost, steps=round(rise / 0.1), ratio=RISE)
     fine = best + np.arange(-0.2, 0.2 + 1e-9, 0.01)
     table = np.array([_per_frame(first, second, shift, matrix=matrix, focal=focal, cap=cap) for shift in fine])
     shift, sigma = resampled_least(fine, table, block=block, seed=seed)
     return shift, sigma, steep and sigma <= UNDECIDED
 
 
-def rises(shifts: np.ndarray, cost: np.ndarray, *, rise: float, ratio: float) -> bool:
-    """Whether the ``cost`` (S,) over evenly spaced ``shifts`` (S,) is at least ``ratio`` times its least ``rise``
-    (in the shifts' unit) either side of it, both sides within the shifts searched."""
+def rises(cost: np.ndarray, *, steps: int, ratio: float) -> bool:
+    """Whether the ``cost`` (S,) over evenly spaced shifts is at least ``ratio`` times its least ``steps`` shifts
+    either side of it, both sides within the shifts searched."""
     least = int(np.argmin(cost))
-    step = round(rise / (shifts[1] - shifts[0]))
-    if not step <= least < len(shifts) - step:
+    if not steps <= least < len(cost) - steps:
         return False
-    return bool((cost[[least - step, least + step]] >= ratio * cost[least]).all())
+    return bool((cost[[least - steps, least + steps]] >= ratio * cost[least]).all())
 
 
 def resampled_least(shifts: np.ndarray, table: np.ndarray, *, block: int, seed: int = 0) -> tuple[float, float]:
