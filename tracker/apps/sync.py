@@ -82,7 +82,7 @@ def _picked(rec: Recording, cameras: list[int], offsets: np.ndarray) -> Recordin
     """``rec`` with only ``cameras``, their frames paired by ``offsets`` (C,) seconds."""
     picked = open_recording(rec.path, [rec.cameras[k].name for k in cameras], rec.calibration_path, paired=False)
     pairing = by_offsets(offsets[cameras], count=rec.frame_count, fps=rec.fps)
-    return dataclasses.replace(picked, pairing=None if pairing.identity and not pairing.late.any() else pairing)
+    return dataclasses.replace(picked, pairing=None if pairing.frame_locked else pairing)
 
 
 def _track(path: Path, count: int) -> tuple[int, np.ndarray] | None:

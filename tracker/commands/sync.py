@@ -53,7 +53,6 @@ def run(args: argparse.Namespace) -> int:
     from tracker.io.sync import FILE, load_offsets, save_offsets
     from tracker.keypoints.detect import detect_recording
     from tracker.keypoints.sync import camera_offsets
-    from tracker.tomlfile import read_toml
 
     given = [option for option in ("model", "init", "frames") if getattr(args, option) is not None]
     if given and not args.refine:
@@ -67,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     before = None
     if target.is_file():
         before = load_offsets(target, rig_names(rec), duration)
-        left_out = [name for name in read_toml(target, "sync", "")["offsets"] if name not in names]
+        left_out = [name for name, offset in before.items() if offset != 0.0 and name not in names]
         if left_out:
             raise TrackerInputError(
                 f"{target}: also holds the offset of {', '.join(left_out)}, which --cameras leaves out and this run "

@@ -29,6 +29,11 @@ class Pairing:
         """Every camera's frame n read for frame n."""
         return bool((self.frames == np.arange(len(self.frames))[:, None]).all())
 
+    @property
+    def frame_locked(self) -> bool:
+        """Every camera's frame n read for frame n and captured at its time: no pairing needed."""
+        return self.identity and not np.any(self.late)
+
 
 def by_offsets(offsets: np.ndarray, *, count: int, fps: float) -> Pairing:
     """The pairing of ``count`` frames at ``fps`` whose cameras' frame m was captured at ``m / fps + offsets[k]``

@@ -154,7 +154,7 @@ def pairing(recording: Recording) -> Pairing | None:
         found = by_times(times, _reference(times, recording.timestamps_path))
     else:
         return None
-    return None if found.identity and not np.any(found.late) else found
+    return None if found.frame_locked else found
 
 
 def frames(

@@ -17,20 +17,17 @@ from collections.abc import Iterable
 import numpy as np
 from numba import njit
 
-from tracker.geometry.se3 import between, exp, log
+from tracker.tracking.track import motion_since, views_at
 
 
 @njit(cache=True)
 def poses_at(poses: np.ndarray, time: float) -> np.ndarray:
     """The poses (N, 4, 4) at the fractional frame ``time`` of a track ``poses`` (F, N, 4, 4): each component moved
-    from the frame before along the geodesic to the frame after, E = E_i exp(f log(E_i^-1 E_i+1)), f = time - i;
-    ``time`` within 0..F-1."""
+    from the frame before along the geodesic to the frame after, E = E_i exp(f log(E_i^-1 E_i+1)), f = time - i
+    (:func:`~tracker.tracking.track.views_at` of the motion between them); ``time`` within 0..F-1."""
     first = min(int(np.floor(time)), poses.shape[0] - 2)
-    share = time - first
-    out = np.empty(poses.shape[1:])
-    for i in range(poses.shape[1]):
-        out[i] = poses[first, i] @ exp(share * log(between(poses[first, i], poses[first + 1, i])))
-    return out
+    velocity = motion_since(poses[first], poses[first + 1])
+    return views_at(np.ascontiguousarray(poses[first]), velocity, np.array([time - first]))[0]
 
 
 def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, *, shifts: np.ndarray) -> np.ndarray:
@@ -38,22 +35,25 @@ def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, *
     (S, 2, M) over ``shifts`` (S,) (frames: the camera's frame m shows the track's frame m + shift) and the camera's
     frames 0..M-1 (module docstring); zeros where the shifted time lies outside the track.
 
-    ``tracker``: a :class:`tracker.tracking.track.Tracker` of the one camera; ``frames``: its frames (index, [image]),
-    already smoothed by the tracker; ``poses`` (F, N, 4, 4): the body tracked in the other cameras at frames 0..F-1,
-    contiguous."""
+    ``tracker``: a :class:`tracker.tracking.track.Tracker` of the one camera, used up: each frame is loaded into its
+    buffers once and searched there at every shift; ``frames``: its frames (index, [image]), already smoothed by the
+    tracker; ``poses`` (F, N, 4, 4): the body tracked in the other cameras at frames 0..F-1, contiguous."""
     search = tracker.search_range(tracker.settings.iterations - 1)
-    table: dict[int, np.ndarray] = {}
+    work = tracker.work
+    columns = {}
     for index, images in frames:
+        tracker.load_images(images, smoothed=True)
         column = np.zeros((len(shifts), 2))
         for row, shift in enumerate(shifts):
             time = index + shift
             if not 0.0 <= time <= len(poses) - 1:
                 continue
-            seen = tracker.inspect(images, smoothed=True, poses=poses_at(poses, time), search_range=search)
-            distance = np.abs(seen.offset)
+            tracker.sample(work, poses_at(poses, time), search)
+            tracker.measure(work, search, tracker.still)
+            distance = np.abs(work.offset[: work.samples.count])
             column[row] = np.where(np.isfinite(distance), np.minimum(distance, search), search).sum(), len(distance)
-        table[index] = column
-    out = np.zeros((len(shifts), 2, max(table, default=-1) + 1))
-    for index, column in table.items():
+        columns[index] = column
+    out = np.zeros((len(shifts), 2, max(columns, default=-1) + 1))
+    for index, column in columns.items():
         out[:, :, index] = column
     return out
