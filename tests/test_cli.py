@@ -246,8 +246,8 @@ def test_work_side_sets_the_search_reduction():
 
     parser = argparse.ArgumentParser()
     options.add_tuning_options(parser)
-    assert options.settings_from(parser.parse_args(["--work-side", "0"])).work_side == 0
-    assert options.settings_from(parser.parse_args([])).work_side == Settings().work_side == 480
+    assert options.settings_from(parser.parse_args(["--work-side", "0"])).images.work_side == 0
+    assert options.settings_from(parser.parse_args([])).images.work_side == Settings().images.work_side == 480
 
 
 def test_output_cut_short_ends_quietly(tiny_recording):

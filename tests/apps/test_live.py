@@ -254,7 +254,7 @@ def test_the_keypoint_detector_runs_beside_the_live_tracker(tmp_path, capsys):
 
 def test_late_landmarks_move_with_the_tracked_body():
     from tracker.keypoints.live import transferred
-    from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+    from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
     recording = open_recording(DEMO)
     model = load_model(recording.model_path)

@@ -45,7 +45,7 @@ def test_the_rows_are_those_of_a_tracker_stepped_by_hand(tiny, tmp_path):
 def test_a_wrapped_keypoint_source_is_asked_for_every_frame_and_fused(tiny, tmp_path):
     """A source of landmarks at the true poses' joints, moved by 0.1 px of seeded noise as an ensemble test would:
     each frame asks for its own, and they pull the solve (the rows differ from the edges' alone)."""
-    from tracker.tracking.keypoint_cue import cue_points, landmark_world
+    from tracker.tracking.body_landmarks import cue_points, landmark_world
 
     rec, model, init = tiny
     truth = load_poses(rec.truth_path)["poses"]

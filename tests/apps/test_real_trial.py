@@ -82,7 +82,11 @@ def test_real_man_head_held_from_every_nudged_first_pose():
     recording = open_recording(BALANCING)
     model = load_model(MAN)
     first = load_pose_file(MAN.with_suffix(".init.toml"), model)
-    settings = Settings(dynamics="kalman", search_range=40, iterations=16, frame_rate=recording.fps)
+    settings = Settings().but(
+        motion=dict(dynamics="kalman", frame_rate=recording.fps),
+        outline=dict(search_range=40),
+        solve=dict(iterations=16),
+    )
     prepare = preparers(median_background(recording), Tracker(model, recording.cameras, first, settings).smooth)
     images = [images for _, images in frames(recording, 0, HELD, prepare=prepare, colour=True)]
     caps = cap_centres(recording, HELD)

@@ -16,7 +16,7 @@ from tracker.io.recording import open_recording
 from tracker.keypoints.consistency import consistent, sided_with, triangulate, unswapped
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 

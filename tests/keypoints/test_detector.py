@@ -19,7 +19,7 @@ from tracker.keypoints import detect
 from tracker.keypoints.detect import detect_recording
 from tracker.keypoints.detector import Detection, Detector, detect_views
 from tracker.keypoints.store import Keypoints, load_keypoints, save_keypoints
-from tracker.tracking.keypoint_cue import LANDMARKS
+from tracker.tracking.body_landmarks import LANDMARKS
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 PAIRS = (("shoulder", "upperarm"), ("elbow", "forearm"), ("wrist", "hand"), ("hip", "thigh"), ("knee", "shin"))

@@ -25,7 +25,7 @@ from tracker.keypoints.fit import Body, fit_pose, fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import triangulated
 from tracker.model import joint_centres, load_model, model_from_dict, rest_poses
-from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
+from tracker.tracking.body_landmarks import LANDMARKS, left_right_pairs
 from tracker.viewer.placement import in_view
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,7 +17,7 @@ from tracker.keypoints.first_pose import fitted_to_frames
 from tracker.keypoints.hips import HIPS, HIPS_HIGH, SHOULDERS, lowered, proportions, with_hips_lowered
 from tracker.keypoints.store import Keypoints
 from tracker.model import load_model, model_from_dict
-from tracker.tracking.keypoint_cue import LANDMARKS
+from tracker.tracking.body_landmarks import LANDMARKS
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 

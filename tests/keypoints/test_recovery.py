@@ -22,7 +22,7 @@ from tracker.keypoints.recovery import LANDMARK_STRAYED, PERSISTENCE, STRAYED, W
 from tracker.keypoints.store import save_keypoints
 from tracker.model import load_model
 from tracker.status import RESEEDED
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_world
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 COUNT = 70

@@ -203,7 +203,7 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     from tracker.keypoints.detector import DETECTOR
     from tracker.keypoints.store import Keypoints
     from tracker.model import load_model
-    from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+    from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
     recording = open_recording(DEMO)
     model = load_model(recording.model_path)
@@ -240,7 +240,7 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
     from tracker.keypoints.region import CROP
     from tracker.keypoints.store import Keypoints
     from tracker.model import load_model
-    from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+    from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
     recording = open_recording(DEMO)
     model = load_model(recording.model_path)
@@ -273,7 +273,7 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
         assert (masks == 255).all() and np.isfinite(squares[:2]).all() and np.isnan(squares[2]).all()
         assert (stream.person(0)[0] == 200).all() and np.isfinite(stream.person(0)[1]).all()
     tracker = Tracker(model, recording.cameras, truth["poses"][0])
-    trust = Settings().region_person
+    trust = Settings().region.person
     with KeypointStream(recording, 0, 5, 4, cache) as stream:
         landmarks = beside(stream, tracker)
         for frame, trusted in ((0, [trust] * 3), (1, [0.0] * 3), (4, [trust, trust, 0.0])):

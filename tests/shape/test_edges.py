@@ -171,7 +171,9 @@ def test_the_rows_predict_how_the_edges_move_in_a_render_of_the_body_reshaped():
             cv2.cvtColor(Renderer(other, camera, noise=0.0).render(other.coerce(poses)), cv2.COLOR_BGR2GRAY)
             for camera in cameras
         ]
-        tracker = Tracker(model, cameras, poses, Settings(dynamics="none", ownership=False))
+        tracker = Tracker(
+            model, cameras, poses, Settings().but(motion=dict(dynamics="none"), outline=dict(ownership=False))
+        )
         return tracker.inspect(images, poses=poses, search_range=10)
 
     base = seen(np.zeros(layout.width))

@@ -170,7 +170,7 @@ def test_a_limb_whose_joints_the_detector_does_not_see_is_left_out_of_that_view(
     trunk always is, and every part in the other view."""
     from tracker.model import model_from_dict
     from tracker.shape.fit import unseen_parts
-    from tracker.tracking.keypoint_cue import LANDMARKS
+    from tracker.tracking.body_landmarks import LANDMARKS
 
     model = model_from_dict(read_toml(HUMAN, "model", ""))
     confidence = np.ones((2, len(LANDMARKS)))
@@ -185,7 +185,7 @@ def test_a_limb_whose_joints_the_detector_does_not_see_is_left_out_of_that_view(
 def test_a_joint_the_detector_rarely_sees_is_held():
     from tracker.model import model_from_dict
     from tracker.shape.fit import unseen_joints
-    from tracker.tracking.keypoint_cue import LANDMARKS
+    from tracker.tracking.body_landmarks import LANDMARKS
 
     model = model_from_dict(read_toml(HUMAN, "model", ""))
     confidence = np.ones((10, 3, len(LANDMARKS)))

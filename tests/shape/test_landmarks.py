@@ -12,7 +12,7 @@ from tracker.proportions import sizes, stretched
 from tracker.shape.landmarks import PRIOR, design, fit_landmarks, solve
 from tracker.shape.layout import Layout
 from tracker.tomlfile import read_toml
-from tracker.tracking.keypoint_cue import LANDMARKS, anchors, landmark_world
+from tracker.tracking.body_landmarks import LANDMARKS, anchors, landmark_world
 
 
 def posed_landmarks(model, rng, frames):

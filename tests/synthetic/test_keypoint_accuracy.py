@@ -15,7 +15,7 @@ from tracker.keypoints.store import Keypoints
 from tracker.model import load_model
 from tracker.synthetic.keypoint_accuracy import accuracy
 from tracker.synthetic.synth import table_before
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import pytest
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import load_model
+from tracker.tracking.body_landmarks import LANDMARKS, cue_points, landmark_world
 from tracker.tracking.guessed import BONES, SHORT, axis_points, bone_lengths, guessed, hidden_parts, leg_landmarks
-from tracker.tracking.keypoint_cue import LANDMARKS, cue_points, landmark_world
 from tracker.tracking.track import Settings, Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
@@ -101,7 +101,7 @@ def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo, 
 
     for keypoints, settings in (
         (perfect_detections(cameras, world), Settings()),
-        (folded, Settings(hide_guessed=False)),
+        (folded, Settings().but(keypoints=dict(hide_guessed=False))),
     ):
         tracker = Tracker(model, cameras, poses, settings)
         tracker.step(images, keypoints=keypoints)

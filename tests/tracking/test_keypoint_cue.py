@@ -14,16 +14,8 @@ from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model, model_from_dict
-from tracker.tracking.keypoint_cue import (
-    LANDMARKS,
-    anchors,
-    keypoint_kernel,
-    landmark_points,
-    limbs,
-    placers,
-    project_point,
-    trunk,
-)
+from tracker.tracking.body_landmarks import LANDMARKS, anchors, landmark_points, limbs, placers, trunk
+from tracker.tracking.keypoint_cue import keypoint_kernel, project_point
 from tracker.tracking.outline import Rig
 from tracker.tracking.track import Settings, Tracker
 
@@ -276,7 +268,7 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     tracker.step(images)  # the demo's frame 0 from its true pose: every visible component's edges fit
     forearm, hand, wrist = model.index("forearm_l"), model.index("hand_l"), LANDMARKS.index("left_wrist")
     assert (
-        0.0 < tracker.noise.edge_misfit[forearm] < tracker.settings.keypoint_edge_misfit
+        0.0 < tracker.noise.edge_misfit[forearm] < tracker.settings.keypoints.edge_misfit
     )  # measured, not the start's 0
 
     def fitted(misfit: float) -> None:
@@ -298,13 +290,13 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
         return float(np.linalg.norm(tracker.work.eta[hand]))
 
     held = pull()
-    fitted(2.0 * tracker.settings.keypoint_edge_misfit)
+    fitted(2.0 * tracker.settings.keypoints.edge_misfit)
     loose = pull()
     st = tracker.settings
-    assert tracker.noise.tolerance[wrist] == st.keypoint_tolerance  # nothing learnt yet: both at the floor zone
-    excess = tracker.work.misfit[0, wrist] - st.keypoint_tolerance  # in body sizes (the misfit is |r| / size)
-    assert excess > 2 * st.keypoint_reach
-    np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoint_reach) ** 2) * held, rtol=1e-9)  # no fade
+    assert tracker.noise.tolerance[wrist] == st.keypoints.tolerance  # nothing learnt yet: both at the floor zone
+    excess = tracker.work.misfit[0, wrist] - st.keypoints.tolerance  # in body sizes (the misfit is |r| / size)
+    assert excess > 2 * st.keypoints.reach
+    np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoints.reach) ** 2) * held, rtol=1e-9)  # no fade
     tolerance = tracker.noise.tolerance.copy()
     tolerance[wrist] = 2.0 * tracker.work.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
     tracker.noise = replace(tracker.noise, tolerance=tolerance)
@@ -315,11 +307,15 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     tracker.add_keypoints(far, confidence)
     assert not tracker.work.eta.any()  # held: the learnt zone stands
     # and a limb the edges do not hold does not teach its landmark's zone
-    for fit, learnt in ((0.0, True), (2.0 * st.keypoint_edge_misfit, False)):
+    for fit, learnt in ((0.0, True), (2.0 * st.keypoints.edge_misfit, False)):
         fitted(fit)
-        held_now = tracker.noise.held(tracker.placer, st.keypoint_edge_misfit)
+        held_now = tracker.noise.held(tracker.placer, st.keypoints.edge_misfit)
         taught = tracker.noise.learnt(
-            tracker.work.misfit, held_now, floor=st.keypoint_tolerance, multiple=1.5, ceiling=st.keypoint_tolerance_max
+            tracker.work.misfit,
+            held_now,
+            floor=st.keypoints.tolerance,
+            multiple=1.5,
+            ceiling=st.keypoints.tolerance_max,
         )
         assert taught.row == tracker.noise.row + 1
         assert np.isfinite(taught.misfits[tracker.noise.row % len(taught.misfits), wrist]) == learnt
@@ -406,7 +402,7 @@ def test_a_limb_off_the_persons_mask_is_led_however_near_its_landmarks(demo_fram
     confidence = np.ones(pixels.shape[:2])
     arm = [model.index(part) for part in ("upperarm_l", "forearm_l", "hand_l")]
     leg = ("thigh_l", "shin_l", "foot_l")
-    wide = replace(Settings(), keypoint_lead=10.0)
+    wide = Settings().but(keypoints=dict(lead=10.0))
     masks = person_masks(model, cameras, poses)
     elsewhere = poses.copy()
     elsewhere[:, :3, 3] += 1.5
@@ -421,7 +417,7 @@ def test_a_limb_off_the_persons_mask_is_led_however_near_its_landmarks(demo_fram
         (poses, masks, wide, []),
         (arm_turned, person_masks(model, cameras, elsewhere), wide, []),
         (leg_turned, one_view_off, wide, []),
-        (arm_turned, masks, replace(wide, lead_off_mask=False), []),
+        (arm_turned, masks, wide.but(keypoints=dict(lead_off_mask=False)), []),
     ):
         tracker = Tracker(model, cameras, start, settings)
         tracker.see_person(seen)
@@ -491,7 +487,7 @@ def test_the_edges_keep_a_led_limb_where_the_landmarks_are_right_and_refuse_it_w
     wrist = model.index("hand_l")
 
     def tracked(start, landmarks, lead):
-        tracker = Tracker(model, recording.cameras, start, replace(Settings(), keypoint_lead=lead))
+        tracker = Tracker(model, recording.cameras, start, Settings().but(keypoints=dict(lead=lead)))
         result = tracker.step(images, keypoints=(landmarks, confidence))
         return 1000 * np.linalg.norm(joint_centres(result.poses)[wrist] - joint_centres(poses)[wrist])
 

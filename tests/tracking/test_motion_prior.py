@@ -321,7 +321,7 @@ def _track(settings, count, blank=()):
 
 
 def test_demo_first_frames_with_the_kalman_prior_meet_the_accuracy_bar():
-    model, rec, results, _, _ = _track(Settings(dynamics="kalman"), 40)
+    model, rec, results, _, _ = _track(Settings().but(motion=dict(dynamics="kalman")), 40)
     poses = np.stack([r.poses for r in results])
     tracked = {
         "frame": np.arange(40),
@@ -339,7 +339,9 @@ def test_demo_first_frames_with_the_kalman_prior_meet_the_accuracy_bar():
 def test_tracker_without_images_keeps_the_body_moving_and_weakens_its_prior():
     """Frames 20-22 blank in every camera: the poses follow the filter's constant-velocity prediction and
     the prior about it weakens frame by frame; afterwards the images take over again."""
-    model, rec, results, priors, predicted = _track(Settings(dynamics="kalman"), 30, blank={20, 21, 22})
+    model, rec, results, priors, predicted = _track(
+        Settings().but(motion=dict(dynamics="kalman")), 30, blank={20, 21, 22}
+    )
     for k in (20, 21, 22):
         np.testing.assert_allclose(results[k].poses, predicted[k], atol=1e-6)
     root = results[19].poses[0, :3, 3]
@@ -347,7 +349,7 @@ def test_tracker_without_images_keeps_the_body_moving_and_weakens_its_prior():
     translation = [np.trace(p[:, :3, :3], axis1=-2, axis2=-1).sum() for p in priors]
     rotation = [np.trace(p[:, 3:, 3:], axis1=-2, axis2=-1).sum() for p in priors]
     assert rotation[20] > rotation[21] > rotation[22] > rotation[23]
-    floor = 3 * model.size * Settings().prior_translation  # the weakest it may get
+    floor = 3 * model.size * Settings().solve.prior_translation  # the weakest it may get
     assert translation[20] > translation[21] > translation[22] >= translation[23] >= floor * (1 - 1e-9)
     assert translation[25] > 2 * floor  # data again: firm again
     truth = load_poses(rec.truth_path)["joints"]

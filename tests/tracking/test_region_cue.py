@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.tracking.region_cue import (
+from tracker.tracking.colours import (
     BINS,
     COLOURS,
     FACTOR,
@@ -15,15 +15,12 @@ from tracker.tracking.region_cue import (
     colour_bins,
     colour_grids,
     colour_reduction,
-    learn_kernel,
-    line_profiles,
-    log_table,
     part_table,
-    region_kernel,
 )
+from tracker.tracking.region_cue import learn_kernel, line_profiles, log_table, region_kernel
 from tracker.tracking.track import Settings
 
-MARGIN = Settings().region_margin
+MARGIN = Settings().region.margin
 PART = (200, 40, 40)  # a colour of the part, as the chroma image holds it
 ROOM = (40, 200, 40)
 

@@ -18,7 +18,7 @@ from tracker.keypoints.store import load_keypoints
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synthetic.synth import Staging, synthesize
-from tracker.tracking.keypoint_cue import TRUNK_TURN, cue_points, landmark_world
+from tracker.tracking.body_landmarks import TRUNK_TURN, cue_points, landmark_world
 from tracker.tracking.track import Settings, Tracker, constant_velocity, motion_since, smoother, views_at
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -158,8 +158,8 @@ def _track_in_colour(recording: Path, settings: Settings):
 def test_the_region_cue_holds_striped_clothes_in_a_room_better_than_the_edges_alone(striped_room):
     """The colours along the outline hold what the stripes' and the room's edges pull off (measured: 7.9 mm with the
     edges alone, 5.1-5.3 mm with the region cue), and the tracker learnt every part's colours in every camera."""
-    edges, _ = _track_in_colour(striped_room, Settings(region=False))
-    region, tracker = _track_in_colour(striped_room, Settings(region=True))
+    edges, _ = _track_in_colour(striped_room, Settings().but(region=dict(on=False)))
+    region, tracker = _track_in_colour(striped_room, Settings().but(region=dict(on=True)))
     assert region.lost_frames == 0 and region.mpjpe_mm < 0.8 * edges.mpjpe_mm, (region.mpjpe_mm, edges.mpjpe_mm)
     assert tracker.histograms.seen.all() and (tracker.distinct > 0.5).mean() > 0.8
 
@@ -172,7 +172,9 @@ def test_converges_from_a_displaced_start():
     start = truth.copy()
     start[0] = truth[0] @ se3.exp(np.array([0.04, -0.03, 0.02, 0.05, 0.1, -0.05]))
     start = model.coerce(np.concatenate([start[:1], truth[1:]]))
-    tracker = Tracker(model, rec.cameras, start, Settings(dynamics="none", iterations=10))
+    tracker = Tracker(
+        model, rec.cameras, start, Settings().but(motion=dict(dynamics="none"), solve=dict(iterations=10))
+    )
     _, images = next(frames(rec))
     before = np.linalg.norm(joint_centres(start) - joint_centres(truth), axis=1).mean()
     after = np.linalg.norm(joint_centres(tracker.step(images).poses) - joint_centres(truth), axis=1).mean()
@@ -216,13 +218,13 @@ def test_ctrl_c_keeps_the_frames_done(tiny_recording, tmp_path, monkeypatch, cap
 
 def test_plain_search_without_ownership_still_tracks():
     """Settings(ownership=False, final_search_range=0): the paper's plain nearest-edge search at a fixed range."""
-    report, _ = _track(DEMO, 20, settings=Settings(ownership=False, final_search_range=0))
+    report, _ = _track(DEMO, 20, settings=Settings().but(outline=dict(ownership=False, final_search_range=0)))
     assert report.mpjpe_mm <= 20.0 and report.lost_frames == 0
 
 
 def test_resampling_every_iteration_still_tracks():
     """Settings(resample_every=1): outlines sampled afresh in every iteration, no first-order moves."""
-    report, _ = _track(DEMO, 20, settings=Settings(resample_every=1))
+    report, _ = _track(DEMO, 20, settings=Settings().but(outline=dict(resample_every=1)))
     assert report.mpjpe_mm <= 20.0 and report.pck >= 0.98 and report.lost_frames == 0
 
 
@@ -304,7 +306,7 @@ def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_
         np.testing.assert_allclose(tracker.carried(current), model.coerce(expected), atol=1e-9)
     tracker.keypoints = landmarks(current)
     assert tracker.landmark_misfit(current) < 1e-6 < tracker.landmark_misfit(_shifted(current, 0.15))
-    tracker.settings = replace(tracker.settings, check_prediction=False)  # as live sets it
+    tracker.settings = tracker.settings.but(motion=dict(check_prediction=False))  # as live sets it
     tracker.motion = replace(tracker.motion, previous=_shifted(current, 0.15))
     np.testing.assert_allclose(tracker.carried(current), model.coerce(_shifted(current, -0.15)), atol=1e-9)
 
@@ -319,9 +321,9 @@ def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_
     start = load_poses(DEMO / "truth.npz")["poses"][0]
     images = [np.roll(image, 60, axis=1) for image in next(iter(frames(rec, 0, 1)))[1]]
     keypoints = perfect_detections(rec.cameras, landmark_world(start, *cue_points(model)))
-    settings = Settings(dynamics="none", keypoint_weight=0.01, trunk_hold=0.0)
+    settings = Settings().but(motion=dict(dynamics="none"), keypoints=dict(weight=0.01), solve=dict(trunk_hold=0.0))
 
-    free = Tracker(model, rec.cameras, start, replace(settings, keypoint_drag=0.0))
+    free = Tracker(model, rec.cameras, start, settings.but(keypoints=dict(drag=0.0)))
     free.step(images, keypoints=keypoints)
     assert free.landmark_misfit(free.poses) > 0.1
 
@@ -335,7 +337,9 @@ def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_
 def test_a_tracker_for_other_cameras_carries_the_motion_and_the_learnt_noise_whole():
     rec = open_recording(DEMO)
     model = load_model(rec.model_path)
-    tracker = Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), Settings(dynamics="kalman"))
+    tracker = Tracker(
+        model, rec.cameras, load_pose_file(rec.init_path, model), Settings().but(motion=dict(dynamics="kalman"))
+    )
     for _, images in itertools.islice(frames(rec), 3):
         tracker.step(images)
     other = tracker.with_cameras(rec.cameras[:2])
@@ -353,7 +357,10 @@ def test_inspect_leaves_the_tracker_as_it_was():
     model = load_model(rec.model_path)
     read = [images for _, images in itertools.islice(frames(rec), 3)]
     plain, inspected = (
-        Tracker(model, rec.cameras, load_pose_file(rec.init_path, model), Settings(dynamics="kalman")) for _ in range(2)
+        Tracker(
+            model, rec.cameras, load_pose_file(rec.init_path, model), Settings().but(motion=dict(dynamics="kalman"))
+        )
+        for _ in range(2)
     )
     plain.step(read[0])
     inspected.step(read[0])
@@ -378,18 +385,6 @@ def test_inspect_leaves_the_tracker_as_it_was():
     assert (after.status, after.residual, after.samples) == (expected.status, expected.residual, expected.samples)
 
 
-def test_pixel_settings_grow_with_the_image_and_stay_for_small_ones():
-    from tracker.tracking.track import scaled_to
-
-    base = Settings()
-    assert scaled_to(base, 480) == base and scaled_to(base, 240) == base
-    hd = scaled_to(base, 1080)
-    assert hd.spacing == pytest.approx(9.0) and hd.search_range == 45 and hd.final_search_range == 14
-    assert hd.blur_sigma == pytest.approx(2.25) and hd.threshold == pytest.approx(6.0 / 2.25)
-    assert hd.region_margin == 4  # the parts move as many more pixels between iterations
-    assert scaled_to(hd, 1080) == hd  # already scaled: unchanged
-
-
 def _largest_turn(before: np.ndarray, after: np.ndarray) -> float:
     return max(
         np.linalg.norm(se3.log_so3(np.ascontiguousarray(a[:3, :3] @ b[:3, :3].T))) for a, b in zip(after, before)
@@ -407,7 +402,9 @@ def test_max_turn_scales_the_whole_step():
     images = next(iter(frames(rec)))[1]
     turns = []
     for max_turn in (float("inf"), 0.03):
-        tracker = Tracker(model, rec.cameras, turned, Settings(dynamics="none", max_turn=max_turn))
+        tracker = Tracker(
+            model, rec.cameras, turned, Settings().but(motion=dict(dynamics="none"), solve=dict(max_turn=max_turn))
+        )
         tracker.load_images(images)
         before = tracker.poses
         tracker.iterate(0)
@@ -427,7 +424,7 @@ def test_smoother_blurs_as_the_tracker_does(size):
     image = np.random.default_rng(4).integers(0, 256, size[::-1], dtype=np.uint8)
     tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
     np.testing.assert_array_equal(smoother(Settings(), cameras)(image), tracker.smooth(image))
-    assert tracker.settings.blur_sigma == pytest.approx(max(1.0, min(size) / 480))
+    assert tracker.settings.edges.blur_sigma == pytest.approx(max(1.0, min(size) / 480))
 
 
 def test_large_images_are_searched_reduced_by_a_whole_factor():
@@ -450,16 +447,20 @@ def test_large_images_are_searched_reduced_by_a_whole_factor():
     np.testing.assert_array_equal(tracker.reduction, [2, 1])
     np.testing.assert_array_equal(tracker.search_size, [[960, 540], [640, 480]])
     assert tracker.work.images.shape == (2, 540, 960)
-    assert Tracker(model, cameras, tracker.poses, Settings(work_side=0)).work.images.shape == (2, 1080, 1920)
+    assert Tracker(model, cameras, tracker.poses, Settings().but(images=dict(work_side=0))).work.images.shape == (
+        2,
+        1080,
+        1920,
+    )
 
 
 def test_the_region_cue_reads_large_views_colour_reduced_as_their_grey():
-    """A view the edge search reads at half size has its colour read at a quarter (region_cue.colour_grids): the
+    """A view the edge search reads at half size has its colour read at a quarter (colours.colour_grids): the
     reader threads' bins are those of the half-size colour image's block means; smaller views keep theirs."""
     from dataclasses import replace
 
     from tracker.io.readers import reduced
-    from tracker.tracking.region_cue import colour_bins
+    from tracker.tracking.colours import colour_bins
 
     model = load_model(ROOT / "models" / "human.toml")
     demo = load_calibration(DEMO / "calibration.toml")
@@ -467,7 +468,7 @@ def test_the_region_cue_reads_large_views_colour_reduced_as_their_grey():
     tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
     np.testing.assert_array_equal(tracker.grid, [[480, 270, 4, 1], [320, 240, 2, 0]])  # and each one's logs row
     assert tracker.logs.shape[0] == 2
-    full = Tracker(model, cameras, tracker.poses, Settings(work_side=0))
+    full = Tracker(model, cameras, tracker.poses, Settings().but(images=dict(work_side=0)))
     np.testing.assert_array_equal(full.grid, [[960, 540, 2, 0], [320, 240, 2, 0]])
     assert full.logs.shape[0] == 1  # one table for both: the same pixel size
     chroma = np.random.default_rng(4).integers(0, 256, (540, 960, 3), dtype=np.uint8)
@@ -500,7 +501,7 @@ def test_hd_views_searched_at_half_size_track_as_at_full_size(hd_recording):
     """The half-size search (the default at a 960-pixel short side) tracks the rendered views as closely as the
     full-size one: both within the accuracy bar, and within 2 mm of each other."""
     reduced, _ = _track(hd_recording, 12)
-    full, _ = _track(hd_recording, 12, settings=Settings(work_side=0))
+    full, _ = _track(hd_recording, 12, settings=Settings().but(images=dict(work_side=0)))
     assert reduced.mpjpe_mm <= 20.0 and full.mpjpe_mm <= 20.0, (reduced.mpjpe_mm, full.mpjpe_mm)
     assert abs(reduced.mpjpe_mm - full.mpjpe_mm) < 2.0, (reduced.mpjpe_mm, full.mpjpe_mm)
 
@@ -590,7 +591,9 @@ def test_the_trunk_hold_turns_the_pelvis_back_where_the_trunk_folds_and_the_imag
     def bend(poses: np.ndarray) -> np.ndarray:
         return se3.log_so3(np.ascontiguousarray(rest.T @ poses[0, :3, :3].T @ poses[torso, :3, :3]))
 
-    tracker = Tracker(model, rec.cameras, pitched, Settings(dynamics="none", trunk_hold=100.0))
+    tracker = Tracker(
+        model, rec.cameras, pitched, Settings().but(motion=dict(dynamics="none"), solve=dict(trunk_hold=100.0))
+    )
     for poses, held in ((true, False), (pitched, True)):
         information, eta = np.zeros((model.size, 6, 6)), np.zeros((model.size, 6))
         tracker.hold_trunk(information, eta, poses)
@@ -602,7 +605,9 @@ def test_the_trunk_hold_turns_the_pelvis_back_where_the_trunk_folds_and_the_imag
     blank = [np.zeros(camera.size[::-1], np.uint8) for camera in rec.cameras]
 
     def folded(hold: float) -> float:
-        tracker = Tracker(model, rec.cameras, pitched, Settings(dynamics="none", trunk_hold=hold))
+        tracker = Tracker(
+            model, rec.cameras, pitched, Settings().but(motion=dict(dynamics="none"), solve=dict(trunk_hold=hold))
+        )
         for _ in range(3):
             tracker.step(blank)
         return float(np.linalg.norm(bend(tracker.poses)))

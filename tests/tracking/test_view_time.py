@@ -48,7 +48,9 @@ def late_render(tmp_path_factory):
 def test_the_edges_lie_nearest_the_true_track_at_the_cameras_offset(late_render, camera, offset):
     truth = np.ascontiguousarray(load_poses(late_render / "truth.npz")["poses"])
     alone = open_recording(late_render, [camera], paired=False)
-    tracker = Tracker(load_model(late_render / "model.toml"), alone.cameras, truth[0], Settings(frame_rate=30.0))
+    tracker = Tracker(
+        load_model(late_render / "model.toml"), alone.cameras, truth[0], Settings().but(motion=dict(frame_rate=30.0))
+    )
     shifts = round(offset * 30.0) + np.arange(-2.0, 2.0 + 1e-9, 0.25)
     table = edge_costs(tracker, frames(alone, 4, 26, prepare=tracker.smooth), truth, shifts=shifts)[:, :, 4:]
     assert table.shape == (len(shifts), 2, 22) and (table[:, 1] > 0).all()

@@ -46,7 +46,9 @@ from tracker.keypoints.detector import Detector
 from tracker.keypoints.stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
-from tracker.tracking.track import STAGES, Settings, StageTimes, Tracker, reductions
+from tracker.tracking.edge_cue import reductions
+from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.workspace import STAGES, StageTimes
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 HUMAN = Path(__file__).resolve().parents[2] / "models" / "human.toml"
@@ -128,7 +130,7 @@ def track_run(
                 start=0,
                 stop=recording.frame_count,
                 prepare=tracker.smooth,
-                chroma=tracker.bin_colours if settings.region else False,
+                chroma=tracker.bin_colours if settings.region.on else False,
             ),
             out / "poses.npz",
             fps=recording.fps,
@@ -143,7 +145,7 @@ def track_run(
     count = recording.frame_count
     stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.work.times.seconds.items()}
     stage_ms["output"] = run.writing * 1e3 / count
-    return TrackRun(count / elapsed, stage_ms, settings.iterations, len(recording.cameras))
+    return TrackRun(count / elapsed, stage_ms, settings.solve.iterations, len(recording.cameras))
 
 
 def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tuple[Recording, Model, np.ndarray]:
@@ -201,12 +203,12 @@ def run(
         "recording": str(path),
         "views": len(every.cameras),
         "frames": every.frame_count,
-        "iterations": settings.iterations,
-        "spacing_px": settings.spacing,
+        "iterations": settings.solve.iterations,
+        "spacing_px": settings.outline.spacing,
         "repeats": repeats,
         "stage_ms_per_frame_all_views": stage_ms,
         "stage_ms_per_frame_with_keypoints": stage_cue,
-        "core_ms_per_view_iteration": core / (len(every.cameras) * settings.iterations),
+        "core_ms_per_view_iteration": core / (len(every.cameras) * settings.solve.iterations),
         "fps_one_view": _median([r.fps for r in runs_one]),
         "fps_all_views": fps_all,
         "decode_only_fps_one_view": _median(floor_one),
@@ -311,7 +313,7 @@ class _Passes:
                     start=0,
                     stop=stop,
                     prepare=tracker.smooth,
-                    chroma=tracker.bin_colours if tracker.settings.region else False,
+                    chroma=tracker.bin_colours if tracker.settings.region.on else False,
                 ):
                     yield done, images
                     done += 1

@@ -242,7 +242,7 @@ def _landmarks_now(
     if newest is None or newest[0] not in history:
         return None
     number, pixels, confidence = newest
-    component, point, _ = tracker.landmarks
+    component, point = tracker.landmarks.component, tracker.landmarks.point
     pixels = lowered(pixels, confidence, cameras=cameras, body=body)  # in the frame they were detected in
     moved = transferred(pixels, history[number], tracker.poses, cameras=cameras, component=component, point=point)
     return moved[list(rig)], confidence[list(rig)]
@@ -379,7 +379,7 @@ def track_live(
         print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
         tracker.warm_up()
         with _StopRequest() as stop:
-            capture.start(tracker.smooth, chroma=tracker.bin_colours if tracker.settings.region else False)
+            capture.start(tracker.smooth, chroma=tracker.bin_colours if tracker.settings.region.on else False)
             session = _Session(capture, cameras, stop, recorder, view, detector, proportions(tracker.model))
             run = track_frames(
                 tracker,

@@ -174,7 +174,7 @@ def track(
     if overlay:
         from tracker.viewer.overlay import OverlayVideo
 
-        video = OverlayVideo(Path(overlay), rec.cameras, rec.fps, model.size, settings.robust_c)
+        video = OverlayVideo(Path(overlay), rec.cameras, rec.fps, model.size, settings.solve.robust_c)
     # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
     # reduced at HD, or colour differences)
     shows = video is not None or live is not None
@@ -214,7 +214,7 @@ def track(
             stop=stop,
             prepare=prepare,
             colour=background is not None,
-            chroma=tracker.bin_colours if settings.region and background is None else False,
+            chroma=tracker.bin_colours if settings.region.on and background is None else False,
         )
         run = track_frames(
             tracker,
@@ -254,7 +254,7 @@ def track(
         poses=poses,
         frames=done,
         views=len(rec.cameras),
-        iterations=settings.iterations,
+        iterations=settings.solve.iterations,
         fps=run.frames / run.seconds if run.seconds > 0 else float("inf"),
         residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
         counts=counts,
@@ -286,10 +286,11 @@ def nearer_landmarks(
     tracker: Tracker, mended: np.ndarray, *, fitted: np.ndarray, keypoints: tuple[np.ndarray, np.ndarray]
 ) -> np.ndarray | None:
     """``mended``, the first pose as the settling before tracking back left it, unless the first frame's landmarks
-    ``keypoints`` (pixels, confidence) lie nearer the ``fitted`` first pose (:meth:`tracker.tracking.track.Tracker.
-    landmark_misfit`): then None, and the forward pass starts from the fitted pose.  The settling can stray, a limb
+    ``keypoints`` (pixels, confidence) lie nearer the ``fitted`` first pose (:meth:`tracker.tracking.keypoint_cue.
+    KeypointCue.misfit`): then None, and the forward pass starts from the fitted pose.  The settling can stray, a limb
     taken off to clutter while the trunk holds (docs/keypoints.md, "Automatic first pose")."""
-    if tracker.landmark_misfit(mended, keypoints) > tracker.landmark_misfit(fitted, keypoints):
+    misfit = tracker.landmarks.misfit
+    if misfit(tracker, mended, keypoints) > misfit(tracker, fitted, keypoints):
         return None
     return mended
 
@@ -356,7 +357,7 @@ def _tracked_back(
             tracker = Tracker(model, rec.cameras, init, settings)
             tracker.warm_up()
             prepare = _preparer(tracker, background, keep=False)
-            chroma = tracker.bin_colours if settings.region and background is None else False
+            chroma = tracker.bin_colours if settings.region.on and background is None else False
             run = tracked(settling(), Path(folder) / "settled.npz", settled - begin, 1)
             if not run.interrupted:
                 tracker.restart(tracker.poses)  # the motion so far points the other way
@@ -525,7 +526,7 @@ def _live_view(view: Viewing, rec, tracker, truth):
 
     names = None if truth is None else list(truth["joint_names"])
     return LiveView(
-        Scene(start_server(view.host, view.port), tracker.model, rec.cameras, tracker.settings.robust_c, names),
+        Scene(start_server(view.host, view.port), tracker.model, rec.cameras, tracker.settings.solve.robust_c, names),
         tracker,
         rate=view.rate,
         truth=truth_rows(truth, np.arange(rec.frame_count)),

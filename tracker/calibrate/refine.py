@@ -22,7 +22,7 @@ compromised between them.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -98,10 +98,13 @@ def refine_rig(
     start, cameras = tuple(cameras), list(cameras)
     fixed = set(fixed)
     poses = np.array(poses)
-    settings = replace(settings, dynamics="none")  # each frame's fit starts from its own body, as tracked
+    settings = settings.but(motion=dict(dynamics="none"))  # each frame's fit starts from its own body, as tracked
     tracker = Tracker(model, cameras, poses[0], settings)
     prior = tracker.prior[0]  # the tracker's P = diag(lt I3, lr I3), the same for every component
-    first, last = tracker.settings.search_range, tracker.settings.final_search_range or tracker.settings.search_range
+    first, last = (
+        tracker.settings.outline.search_range,
+        tracker.settings.outline.final_search_range or tracker.settings.outline.search_range,
+    )
     before = _residuals(tracker, poses, frames, len(cameras), last)
     for round_ in progress(range(rounds)):
         search_range = narrowing(first, last, step=round_, steps=rounds)

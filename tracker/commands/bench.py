@@ -31,7 +31,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar (--long)")
     options.add_keypoint_options(parser, "time the keypoint cue at this rate")
-    options.add_tuning_options(parser, ("iterations", "spacing", "resample_every", "work_side", "region"))
+    options.add_tuning_options(parser, ("--iterations", "--spacing", "--resample-every", "--work-side", "--region"))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -9,7 +9,6 @@ How cameras are matched, captured, dropped and recorded: :mod:`tracker.apps.live
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from contextlib import ExitStack
 from pathlib import Path
@@ -94,8 +93,8 @@ def run(args: argparse.Namespace) -> int:
         # live landmarks are an earlier frame set's, moved by the motion tracked since: they cannot lead a limb
         # the edges lost (Tracker.lead), which would take it to where it was then, nor judge the predicted motion
         # or the frame's (Tracker.carried, Tracker.dragged), having moved with the last poses
-        settings = dataclasses.replace(
-            options.settings_from(args, capture.fps), keypoint_lead=0.0, check_prediction=False, keypoint_drag=0.0
+        settings = options.settings_from(args, capture.fps).but(
+            keypoints=dict(lead=0.0, drag=0.0), motion=dict(check_prediction=False)
         )
         tracker = Tracker(model, cameras, init, settings)
         print(
@@ -121,7 +120,9 @@ def run(args: argparse.Namespace) -> int:
 
             server = start_server(args.host, args.port)
             stack.callback(server.stop)
-            view = LiveView(Scene(server, model, cameras, tracker.settings.robust_c), tracker, rate=args.view_rate)
+            view = LiveView(
+                Scene(server, model, cameras, tracker.settings.solve.robust_c), tracker, rate=args.view_rate
+            )
             stack.callback(view.close)
         detector = None
         step = options.keypoint_step_at(args, capture.fps)

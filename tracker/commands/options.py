@@ -7,10 +7,12 @@ Only the command modules import this one.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -19,20 +21,6 @@ from tracker.errors import TrackerInputError
 if TYPE_CHECKING:
     from tracker.apps.track import Tracking
     from tracker.io.recording import Recording
-
-TUNING = (
-    "iterations",
-    "spacing",
-    "resample_every",
-    "search_range",
-    "dynamics",
-    "damping",
-    "max_turn",
-    "work_side",
-    "region",
-    "region_weight",
-    "region_person",
-)
 
 
 def positive_int(text: str) -> int:
@@ -161,93 +149,65 @@ def add_recording_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] = TUNING) -> None:
-    """The tracker's tuning options (Settings fields) that a command offers."""
-    options: dict[str, tuple[list[str], dict[str, Any]]] = {
-        "iterations": (["--iterations"], dict(type=positive_int, help="IRLS iterations per frame (default 6)")),
-        "spacing": (["--spacing"], dict(type=positive_float, help="pixels between outline samples (default 4)")),
-        "resample_every": (
-            ["--resample-every"],
-            dict(
-                type=positive_int,
-                help="sample the outlines afresh every N-th iteration, moving them to first order "
-                "between (default 3; 1 = every iteration)",
-            ),
-        ),
-        "search_range": (
-            ["--search-range"],
-            dict(
-                type=positive_int,
-                help="edge search in the first iteration, pixels either side (default 20; the last uses 6)",
-            ),
-        ),
-        "dynamics": (
-            ["--dynamics"],
-            dict(
-                dest="dynamics",
-                choices=("none", "constant-velocity", "kalman"),
-                help="motion model that predicts each frame's pose: none, constant-velocity (default) or kalman "
-                "(a second-order Kalman filter per component whose prediction and covariance set the prior)",
-            ),
-        ),
-        "max_turn": (
-            ["--max-turn"],
-            dict(
-                type=positive_float,
-                metavar="RAD",
-                help="largest rotation of any component in one iteration; a larger step is scaled down whole, which "
-                "keeps a body from flipping on clutter but slows it in fast motion (default: no limit)",
-            ),
-        ),
-        "work_side": (
-            ["--work-side"],
-            dict(
-                type=whole_number,
-                metavar="PIXELS",
-                help="search larger images reduced by the largest whole factor that keeps their short side at least "
-                "this long (default 480: 1080p is searched at half size; 0: always at full size)",
-            ),
-        ),
-        "region": (
-            ["--region"],
-            dict(
-                type=on_off,
-                metavar="on|off",
-                help="read the colours along the outline too, learnt as the run goes, to tell the body from the room "
-                "(default on; it needs the frames' colour, so --background goes without it; docs/region.md)",
-            ),
-        ),
-        "region_weight": (
-            ["--region-weight"],
-            dict(
-                type=positive_float,
-                metavar="W",
-                help="the colour cue's weight beside the edges', per line read (every second sample's; default 0.6)",
-            ),
-        ),
-        "region_person": (
-            ["--region-person"],
-            dict(
-                type=share,
-                metavar="T",
-                help="how far the colour cue trusts the detector's mask of the person, 0..1 (default 0.6; 0 ignores "
-                "it; docs/region.md)",
-            ),
-        ),
-        "damping": (
-            ["--damping"],
-            dict(
-                type=share,
-                help="share of the last frame's motion carried into the "
-                "prediction (default 1; 0.5 steadies a single camera)",
-            ),
-        ),
-    }
-    for key in which:
-        flags, kwargs = options[key]
-        parser.add_argument(*flags, **kwargs)
-    if "dynamics" in which:  # --motion names the rendered clip in `tracker synth`
-        parser.add_argument("--motion", **options["dynamics"][1] | renamed("--dynamics"))
+def tuning_fields() -> dict[str, tuple[str, dataclasses.Field]]:
+    """The settings fields that have a flag (:func:`tracker.tracking.settings.setting`), by flag: the group's name and
+    the field, in the order the groups and their fields are declared."""
+    from tracker.tracking.settings import Settings
+
+    found = {}
+    for name, group in vars(Settings()).items():
+        for spec in dataclasses.fields(group):
+            if spec.metadata["flag"]:
+                found[spec.metadata["flag"]] = (name, spec)
+    return found
+
+
+KINDS: dict[str | None, Callable[[str], Any]] = {
+    "positive": positive_float,
+    "whole": whole_number,
+    "share": share,
+    "on-off": on_off,
+}
+
+
+def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] | None = None) -> None:
+    """The tracker's tuning options that a command offers (their flags, ``which``; default all), one argument group
+    per settings group, each with the field's help, kind, choices and default (:mod:`tracker.tracking.settings`)."""
+    from tracker.tracking.settings import Settings
+
+    defaults, groups = Settings(), {}
+    for flag, (group, spec) in tuning_fields().items():
+        if which is not None and flag not in which:
+            continue
+        if group not in groups:
+            title = (type(getattr(defaults, group)).__doc__ or group).strip()
+            groups[group] = parser.add_argument_group(f"tuning: {title}")
+        default = getattr(getattr(defaults, group), spec.name)
+        kind = spec.metadata["kind"]
+        kwargs: dict[str, Any] = dict(
+            dest=f"{group}.{spec.name}", default=None, help=f"{spec.metadata['help']} (default {_shown(default)})"
+        )
+        if spec.metadata["choices"]:
+            kwargs["choices"] = spec.metadata["choices"]
+        else:
+            kwargs["type"] = (
+                positive_int
+                if kind == "positive" and isinstance(default, int) and not isinstance(default, bool)
+                else KINDS[kind]
+            )
+            kwargs["metavar"] = {"on-off": "on|off"}.get(kind, spec.name.upper())
+        groups[group].add_argument(flag, **kwargs)
+        if flag == "--dynamics":  # --motion names the rendered clip in `tracker synth`
+            groups[group].add_argument("--motion", **kwargs | renamed("--dynamics"))
+
+
+def _shown(default: Any) -> str:
+    """A setting's default as its help shows it."""
+    if isinstance(default, bool):
+        return "on" if default else "off"
+    if isinstance(default, float) and math.isinf(default):
+        return "none"
+    return f"{default:g}" if isinstance(default, float) else str(default)
 
 
 class _Renamed(argparse.Action):
@@ -271,11 +231,14 @@ def renamed(new: str) -> dict[str, Any]:
 def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
     """Settings with the tuning options the user gave (the others at their defaults) and the frame rate
     of the images (the Kalman filter's time step)."""
-    from tracker.tracking.track import Settings
+    from tracker.tracking.settings import Settings
 
-    given = {key: getattr(args, key, None) for key in TUNING}
-    given["frame_rate"] = frame_rate
-    return Settings(**{key: value for key, value in given.items() if value is not None})
+    given: dict[str, dict[str, Any]] = {"motion": {"frame_rate": frame_rate}} if frame_rate is not None else {}
+    for group, spec in tuning_fields().values():
+        value = getattr(args, f"{group}.{spec.name}", None)
+        if value is not None:
+            given.setdefault(group, {})[spec.name] = value
+    return Settings().but(**given)
 
 
 def add_tracking_options(parser: argparse.ArgumentParser) -> None:

@@ -45,7 +45,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="take the poses as right (e.g. ground truth, motion capture) and move only the "
         "cameras; by default each frame's body is fitted again after every round",
     )
-    options.add_tuning_options(parser, ("spacing", "search_range", "iterations", "max_turn"))
+    options.add_tuning_options(parser, ("--spacing", "--search-range", "--iterations", "--max-turn"))
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -57,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
     from tracker.io.readers import grey
+    from tracker.tracking.edge_cue import smoother
     from tracker.tracking.foreground import camera_stacks, sample_indices
-    from tracker.tracking.track import smoother
 
     rec, model = options.opened(args)
     poses_path, results = options.tracked(args.poses, rec, model)

@@ -115,7 +115,11 @@ def _refined(args: argparse.Namespace, rec, found: Offsets, out):
     from tracker.tracking.track import Settings
 
     tracking = Tracking(
-        Settings(frame_rate=rec.fps), default_step(rec.fps), frames=args.frames, model=args.model, init=args.init
+        Settings().but(motion=dict(frame_rate=rec.fps)),
+        default_step(rec.fps),
+        frames=args.frames,
+        model=args.model,
+        init=args.init,
     )
     return refine_offsets(rec, found, tracking, out=out / "sync", bar=functools.partial(options.bar, args))
 

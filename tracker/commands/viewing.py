@@ -14,7 +14,7 @@ def scene(args: argparse.Namespace, rec, model, *, settings, truth=None):
 
     server = start_server(args.host, args.port)
     names = None if truth is None else list(truth["joint_names"])
-    return Scene(server, model, rec.cameras, settings.robust_c, names)
+    return Scene(server, model, rec.cameras, settings.solve.robust_c, names)
 
 
 def serve(message: str, *closing) -> int:

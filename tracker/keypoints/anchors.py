@@ -1,6 +1,6 @@
 """The distances between BlazePose's landmarks that no pose of a body model changes, and how far apart a
 pose can put them (docs/keypoints.md, "Automatic first pose"); the landmarks sit on the model where
-:func:`tracker.tracking.keypoint_cue.anchors` puts them.
+:func:`tracker.tracking.body_landmarks.anchors` puts them.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 
 from tracker.chain import BALL, FIXED, HINGE
 from tracker.model import Model
-from tracker.tracking.keypoint_cue import LANDMARKS, anchors
+from tracker.tracking.body_landmarks import LANDMARKS, anchors
 
 
 def _fixed_points(model: Model) -> list[list[tuple[int, np.ndarray]]]:

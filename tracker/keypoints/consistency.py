@@ -38,7 +38,7 @@ from tracker.geometry.dlt import triangulate_many
 from tracker.keypoints.guided import GATE, undistorted
 from tracker.keypoints.silhouette import on_person
 from tracker.keypoints.store import Keypoints
-from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
+from tracker.tracking.body_landmarks import LANDMARKS, left_right_pairs
 
 STEADY = 0.1
 """The share of a view's landmarks' extent within which, in the median, its confident detections must lie from its

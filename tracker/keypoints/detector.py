@@ -8,7 +8,7 @@ Makefile installs without its declared dependencies so that OpenCV stays the hea
 
 Each camera gets its own landmarker in video mode: after a first detection it follows the person
 from frame to frame by its own region of interest, which is how it reaches a few milliseconds a
-frame.  Per image it gives, for the 33 landmarks of :data:`tracker.tracking.keypoint_cue.LANDMARKS`,
+frame.  Per image it gives, for the 33 landmarks of :data:`tracker.tracking.body_landmarks.LANDMARKS`,
 
     pixels (33, 2)      image position (x = normalised x * width, y likewise; OpenCV's axes)
     confidence (33,)    the landmark's visibility, 0..1

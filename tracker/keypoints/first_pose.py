@@ -14,7 +14,6 @@ Poses are world_from_component (N, 4, 4).
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 
 import numpy as np
@@ -41,7 +40,7 @@ depth (30 to 150 degrees: its depth then as sure as half its breadth): two views
 other, leave it free along their common line of sight, where a few pixels of the detector's error become
 decimetres (:func:`placed_in_depth`)."""
 
-SNAP = Settings(dynamics="none", iterations=10)
+SNAP = Settings().but(motion=dict(dynamics="none"), solve=dict(iterations=10))
 """The edge snap's tracker settings: no motion model, ten IRLS iterations a round."""
 
 SNAP_ROUNDS = 10
@@ -61,11 +60,11 @@ def snap_to_edges(
     smoothed: bool = False,
 ) -> FrameResult:
     """The tracker's result on one frame, ``images`` (one grey (H, W) uint8 per camera, :meth:`Tracker.smooth`-ed
-    when ``smoothed``), from ``poses``: ``rounds`` tracking steps of ``settings.iterations`` IRLS iterations
+    when ``smoothed``), from ``poses``: ``rounds`` tracking steps of ``settings.solve.iterations`` IRLS iterations
     on the same frame without a motion model, each round's prior centred where the last ended, the frame's
     ``keypoints`` (pixels (C, 33, 2), confidence (C, 33)) fused with the edges (docs/method-tracking.md,
     section 6)."""
-    tracker = Tracker(model, cameras, poses, dataclasses.replace(settings, dynamics="none"))
+    tracker = Tracker(model, cameras, poses, settings.but(motion=dict(dynamics="none")))
     result = tracker.step(images, smoothed=smoothed, keypoints=keypoints)
     for _ in range(rounds - 1):
         result = tracker.step(images, smoothed=smoothed, keypoints=keypoints)
@@ -157,6 +156,6 @@ def first_pose(
         first = int(keypoints.frame[0])
         [images] = [grey for _, grey in frames_of(recording, first, first + 1)]
     checked = with_hips_lowered(consistent(keypoints.rows(slice(0, 1)), recording.cameras)[0], recording.cameras, model)
-    snap = dataclasses.replace(settings, iterations=SNAP.iterations)
+    snap = settings.but(solve=dict(iterations=SNAP.solve.iterations))
     landmarks = (checked.pixels[0], checked.confidence[0])
     return snap_to_edges(model, recording.cameras, poses, images=images, keypoints=landmarks, settings=snap).poses

@@ -31,7 +31,7 @@ from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.keypoints.triangulation import middle
 from tracker.model import Model
-from tracker.tracking.keypoint_cue import LANDMARKS, TRUNK_TURN, anchors, landmark_world, left_right_pairs, trunk
+from tracker.tracking.body_landmarks import LANDMARKS, TRUNK_TURN, anchors, landmark_world, left_right_pairs, trunk
 
 ROBUST = 0.03
 """Misfit (metres, per coordinate) beyond which a world point's pull grows linearly (soft L1)."""

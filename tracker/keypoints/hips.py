@@ -24,8 +24,8 @@ from tracker.geometry.dlt import triangulate_many
 from tracker.keypoints.guided import rays
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model, rest_poses
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 from tracker.tracking.guessed import bone_lengths, guessed
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
 
 HIPS_HIGH = 0.75
 """The share of the model's trunk below which the hips' and the shoulders' midpoints lie too near each other: the

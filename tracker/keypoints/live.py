@@ -23,7 +23,7 @@ from tracker.errors import TrackerInputError
 from tracker.keypoints.consistency import consistent
 from tracker.keypoints.detector import Detector, detect_views, native_logs_muted, require_detector
 from tracker.keypoints.store import Keypoints
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_world
 
 _CLOSE_WAIT = 2.0
 """Seconds the worker gets to finish its frame set when the run ends, before it is stopped."""

@@ -2,7 +2,7 @@
 
 After each frame tracked with landmarks (checked across the views,
 :mod:`tracker.keypoints.consistency`), the tracked pose's landmark points
-(:func:`tracker.tracking.keypoint_cue.cue_points`) are projected into every view that has six or more of
+(:func:`tracker.tracking.body_landmarks.cue_points`) are projected into every view that has six or more of
 them, and their image distances to the detections are taken as shares of the body's size there.
 The pose has strayed when the mean over the views of the median distance exceeds :data:`STRAYED`
 (:data:`DOUBTED` when the edges too found the frame uncertain), or when a single landmark seen in
@@ -27,7 +27,7 @@ outline and mask (docs/keypoints.md, "Recovery").
 The image then arbitrates: the tracker starts again from the snapped pose, its status saying so
 (:data:`tracker.status.RESEEDED`), unless the image backs it no better than the tracked pose (a frame that is not
 lost): the share of its outline samples that found an edge plus the share of its body on the person's masks
-(:meth:`tracker.tracking.track.Tracker.on_person`; the edges alone where the detector gave no mask), which must
+(:meth:`tracker.tracking.person.PersonMasks.on_person`; the edges alone where the detector gave no mask), which must
 exceed the tracked pose's by the standard error of the two shares of samples (:func:`_noise`, 3 % for 400 samples
 each): a re-seed throws away the motion the tracker has learnt, and a difference within the shares' own noise says
 nothing of which pose is right. Landmarks
@@ -62,7 +62,7 @@ from tracker.keypoints.fit import fit_to_views
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model
 from tracker.status import LOST, RESEEDED, UNCERTAIN
-from tracker.tracking.keypoint_cue import cue_points, landmark_world
+from tracker.tracking.body_landmarks import cue_points, landmark_world
 from tracker.tracking.track import FrameResult, Tracker
 
 STRAYED = 0.10
@@ -190,11 +190,11 @@ class Recovery:
         pixels, confidence = keypoints
         self.recent = [keypoints, *self.recent[: WINDOW - 1]]
         body, each = self.misfit(result.poses, pixels, confidence)
-        self.streak = np.where(each > LANDMARK_STRAYED + tracker.noise.tolerance, self.streak + 1, 0)
+        self.streak = np.where(each > LANDMARK_STRAYED + tracker.landmarks.noise.tolerance, self.streak + 1, 0)
         limit = DOUBTED if result.status == UNCERTAIN else STRAYED
         called = body > limit or bool((self.streak >= PERSISTENCE).any())  # by this frame's landmarks
         strayed = called or self.pending
-        unmasked = not (tracker.person_trust > 0).any()
+        unmasked = not (tracker.person.trust > 0).any()
         self.masked |= not unmasked
         if result.status != LOST and (self.wait > 0 or not strayed or (self.masked and unmasked)):
             self.wait = max(self.wait - 1, 0)
@@ -210,7 +210,7 @@ class Recovery:
         snapped = snap_to_edges(
             self.model, self.cameras, seed, images=images, keypoints=keypoints, settings=tracker.settings, smoothed=True
         )
-        if tracker.on_person(seed) > tracker.on_person(snapped.poses):  # the snap took it off the person
+        if tracker.person.on_person(seed) > tracker.person.on_person(snapped.poses):  # the snap took it off the person
             snapped = tracker.judged(images, poses=seed, smoothed=True)
         unanswered = called and not self.nearer(snapped.poses, result.poses, pixels=pixels, confidence=confidence)
         unbacked = _backing(tracker, snapped) < _backing(tracker, result) + _noise(snapped, result)
@@ -234,4 +234,4 @@ def _noise(one: FrameResult, other: FrameResult) -> float:
 def _backing(tracker: Tracker, result: FrameResult) -> float:
     """How well the frame's image backs ``result``: the share of its samples that found an edge, plus the share of
     its body on the person's masks (:meth:`tracker.tracking.track.Tracker.on_person`; 0 without masks)."""
-    return result.share + tracker.on_person(result.poses)
+    return result.share + tracker.person.on_person(result.poses)

@@ -30,7 +30,7 @@ from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
 from tracker.keypoints.detector import DETECTOR
 from tracker.keypoints.region import CROP
-from tracker.tracking.keypoint_cue import LANDMARKS
+from tracker.tracking.body_landmarks import LANDMARKS
 
 
 @dataclass(frozen=True)

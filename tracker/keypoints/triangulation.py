@@ -28,7 +28,7 @@ from tracker.keypoints.consistency import Reading, readings
 from tracker.keypoints.guided import GATE, undistorted
 from tracker.keypoints.store import Keypoints
 from tracker.model import Model
-from tracker.tracking.keypoint_cue import LANDMARKS, left_right_pairs
+from tracker.tracking.body_landmarks import LANDMARKS, left_right_pairs
 
 LATERAL = ("hip", "shoulder", "ear", "eye_inner", "eye", "eye_outer")
 """Pairs that lie across the body, labelled by the side they lie on."""

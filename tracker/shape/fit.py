@@ -45,7 +45,8 @@ from tracker.shape.edges import FrameRows, bundle_step, frame_rows, moved
 from tracker.shape.landmarks import fit_landmarks
 from tracker.shape.layout import Layout
 from tracker.status import LOST
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
+from tracker.tracking.region_cue import RegionCue
 from tracker.tracking.track import Inspection, Tracker
 
 FRAMES = 40
@@ -212,14 +213,19 @@ def _edge_rounds(
     detector does not see in each view: those are left out, and so are those off the masks (:func:`off_person`)."""
     damping, best, now, residuals = DAMPING[0], start, start, []
     for search in progress(RANGES, total=len(RANGES)):
-        tracker = Tracker(now.model, cameras, now.poses[0], dataclasses.replace(SNAP, search_range=search))
-        scaled = tracker.settings.search_range  # for the image size
+        tracker = Tracker(now.model, cameras, now.poses[0], SNAP.but(outline=dict(search_range=search)))
+        scaled = tracker.settings.outline.search_range  # for the image size
+        colours = tracker.cue(RegionCue)
+        assert isinstance(colours, RegionCue)
         for k, (pose, (images, _, _)) in enumerate(zip(now.poses, views)):
-            tracker.teach(images, poses=pose, rate=1.0 / (k + 1), search_range=scaled)  # the mean over the frames
+            colours.teach(
+                tracker, images, poses=pose, rate=1.0 / (k + 1), search_range=scaled
+            )  # the mean over the frames
         factors = layout.factors(now.x)
         measured, edged = [], []
         for pose, (images, masks, unseen) in zip(now.poses, views):
-            seen_here, lines = tracker.inspect_cues(images, poses=pose, search_range=scaled)
+            read = tracker.inspect_cues(images, poses=pose, search_range=scaled)
+            seen_here, lines = read["edges"], read["region"]
             hidden = unseen | off_person(seen_here, masks, now.model.size)
             edges = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=seen_here).without(hidden)
             regions = frame_rows(layout, now.model, factors=factors, poses=pose, inspection=lines).without(hidden)

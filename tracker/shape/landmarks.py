@@ -1,7 +1,7 @@
 """The body's joints fitted to the landmarks of many frames (docs/fit-model.md, "From the keypoints").
 
 The detector's shoulders, elbows, wrists, hips, knees and ankles mark joint centres: the origins of the
-components of :data:`tracker.tracking.keypoint_cue.SIDES`.  With every frame's rotations held, such a landmark's world
+components of :data:`tracker.tracking.body_landmarks.SIDES`.  With every frame's rotations held, such a landmark's world
 point is linear in the joints' places and the root's position:
 
     X_fk = t_f + sum over the joints i from the root down to c_k of R_f,p(i) at_i
@@ -32,7 +32,7 @@ from tracker.errors import TrackerInputError
 from tracker.keypoints.fit import fit_pose
 from tracker.model import Model, model_from_dict
 from tracker.shape.layout import Layout
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 ROBUST = 0.04
 """Metres of a landmark's misfit at which its weight has halved (Cauchy)."""

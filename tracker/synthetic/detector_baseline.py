@@ -2,7 +2,7 @@
 
 The tracker fuses the detector's landmarks with the image cues; it should never do worse than those landmarks
 alone.  Per frame, each of the twelve joint landmarks (shoulders, elbows, wrists, hips, knees, ankles: the joint
-centres of :data:`tracker.tracking.keypoint_cue.SIDES`) is triangulated from the views that agree on it, left and
+centres of :data:`tracker.tracking.body_landmarks.SIDES`) is triangulated from the views that agree on it, left and
 right told by the body (:func:`tracker.keypoints.triangulation.frame_by_frame`), with no tracking and no model
 fit.  Its error is the distance to the true joint centre where the truth has one (the camera sees the joint);
 the tracker is scored over the same joints and frames, so the two numbers compare.
@@ -19,7 +19,7 @@ from tracker.camera import Camera
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import frame_by_frame
 from tracker.model import Model
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_points
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 
 @dataclass(frozen=True)

@@ -205,7 +205,7 @@ def cleared_background(
         B(x) = median over all samples       elsewhere (the plain median, right where he is absent
                                              from most samples; a poor track there cannot spoil it).
 
-    ``margin`` is in pixels at the tracker's reference short side (``Settings.reference_size``) and grows
+    ``margin`` is in pixels at the tracker's reference short side (``Settings().images.reference_size``) and grows
     with the image like the tracker's pixel settings.  ``progress`` wraps the list of (camera, frame) reads.
     """
     chosen = sample_indices(len(frames), samples)
@@ -218,7 +218,7 @@ def cleared_background(
             RayCaster(model, reduced_camera(camera, factor)),
             camera.size,
             factor=factor,
-            margin=round(margin * max(1.0, short / Settings.reference_size)),
+            margin=round(margin * max(1.0, short / Settings().images.reference_size)),
         )
         masks = np.stack([silhouette(poses[i]) for i in chosen])
         covered = masks.sum(axis=0)

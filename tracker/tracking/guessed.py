@@ -26,7 +26,7 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.geometry.dlt import triangulate_many
 from tracker.model import Model, with_descendants
-from tracker.tracking.keypoint_cue import LANDMARKS, landmark_world
+from tracker.tracking.body_landmarks import LANDMARKS, landmark_world
 
 SHORT = 0.5
 """A bone triangulated shorter than this share of the model's is a guess."""
@@ -52,7 +52,7 @@ MIN_CONFIDENCE = 0.5
 def bone_lengths(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
     """The legs' bones' lengths (len(BONES),) at ``poses`` (N, 4, 4), any pose of the model (its joints hold
     them): the distances between the model points ``point`` in ``component`` of their landmarks
-    (:func:`tracker.tracking.keypoint_cue.landmark_world`)."""
+    (:func:`tracker.tracking.body_landmarks.landmark_world`)."""
     world = landmark_world(poses, component, point)
     return np.array([np.linalg.norm(world[upper] - world[lower]) for upper, lower in BONES])
 

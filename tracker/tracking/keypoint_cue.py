@@ -18,7 +18,7 @@ detector's scatter and bias never pull against the edges, while a body that has 
 pulled back by the excess.  So one tree solve fuses both cues.  The noise is learnt per landmark
 (:mod:`tracker.tracking.landmark_noise`): how far the detector's landmark lies from the tracked body's while the
 edges hold it, for this detector on this subject.  Where the edges do not hold a limb (the component that places a
-joint landmark, :func:`placers`, fitted its outline's edges worse than ``Settings.keypoint_edge_misfit`` in the last
+joint landmark, :func:`placers`, fitted its outline's edges worse than ``KeypointSettings.edge_misfit`` in the last
 frame's last iteration, :func:`tracker.tracking.measure.component_misfits`: it follows clutter, or nothing), the
 landmarks it places pull from the floor zone with no fade (``reach`` inf) until they bring it back (docs/keypoints.md,
 "Fusion with the edges"); near that limit the zone and the fade pass from one to the other over a span
@@ -31,202 +31,24 @@ changes the solve by about as much (docs/keypoints.md, "The same result on every
 
 from __future__ import annotations
 
+import dataclasses
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
 from tracker.geometry.lens import distort
-from tracker.model import Model, with_descendants
+from tracker.status import TRACKED
+from tracker.tracking.body_landmarks import LANDMARKS, cue_points, left_right_pairs, placers
+from tracker.tracking.cue import Frame, Iteration
+from tracker.tracking.guessed import bone_lengths, guessed, hidden_parts
+from tracker.tracking.landmark_noise import LandmarkNoise
+from tracker.tracking.measure import component_misfits
 from tracker.tracking.outline import component_row
 
-LANDMARKS = (
-    "nose",
-    "left_eye_inner",
-    "left_eye",
-    "left_eye_outer",
-    "right_eye_inner",
-    "right_eye",
-    "right_eye_outer",
-    "left_ear",
-    "right_ear",
-    "mouth_left",
-    "mouth_right",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_pinky",
-    "right_pinky",
-    "left_index",
-    "right_index",
-    "left_thumb",
-    "right_thumb",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-    "left_heel",
-    "right_heel",
-    "left_foot_index",
-    "right_foot_index",
-)
-"""BlazePose's landmarks, in its order; 'left' is the person's left."""
-
-SIDES = {
-    "shoulder": "upperarm",
-    "elbow": "forearm",
-    "wrist": "hand",
-    "hip": "thigh",
-    "knee": "shin",
-    "ankle": "foot",
-}
-"""BlazePose landmark -> the component whose origin (its joint with its parent) it marks, in the naming
-of models/human.toml (``<part>_l`` / ``<part>_r`` for the person's left and right)."""
-
-
-SURFACE = {
-    "nose": ("head", (0.0, -1.0, 0.0)),
-    "left_ear": ("head", (1.0, 0.0, 0.0)),
-    "right_ear": ("head", (-1.0, 0.0, 0.0)),
-    "left_index": ("hand_l", (0.0, -1.0, 0.0)),
-    "right_index": ("hand_r", (0.0, -1.0, 0.0)),
-    "left_pinky": ("hand_l", (0.0, 1.0, 0.0)),
-    "right_pinky": ("hand_r", (0.0, 1.0, 0.0)),
-    "left_heel": ("foot_l", (0.0, 1.0, 0.0)),
-    "right_heel": ("foot_r", (0.0, 1.0, 0.0)),
-    "left_foot_index": ("foot_l", (0.0, -1.0, 0.0)),
-    "right_foot_index": ("foot_r", (0.0, -1.0, 0.0)),
-}
-"""Landmark -> (component, direction d): the nose in front of the head, the ears at its sides, the index
-knuckle at the front of the hand and the little finger's at its back (the palm faces the thigh at rest),
-the heel behind the foot and the toes in front."""
-
-
-def anchors(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """Each landmark's component (33,) int (-1 when the model has none) and its point (33, 3) in that
-    component's frame: the joint centres of :data:`tracker.tracking.keypoint_cue.SIDES` and the :data:`SURFACE`
-    points (where the component's first quadric is an ellipsoid or a sphere).
-
-    A shoulder, elbow, wrist, hip, knee or ankle marks the joint centre of a :data:`SIDES` component (its
-    origin).  The nose and ears, the index and little-finger knuckles, the heel and the toes mark points on
-    the surface of the head, hand and foot: ``c + d * r`` on the component's first ellipsoid (centre c,
-    radii r) in the direction d of :data:`SURFACE`, with the component frames of models/human.toml (x to
-    the body's left, y backwards, z up at rest)."""
-    component, point, _ = landmark_points(model, LANDMARKS)
-    for name, (part, direction) in SURFACE.items():
-        if part not in model.names:
-            continue
-        index = model.index(part)
-        owned = np.flatnonzero(model.quadric_component == index)
-        if len(owned) == 0 or model.quadric_shape[owned[0]] not in ("ellipsoid", "sphere"):
-            continue
-        params = model.quadric_params[owned[0]]
-        radii = np.asarray(params["radii"] if "radii" in params else [params["radius"]] * 3, float)
-        centre = np.asarray(params.get("center", [0.0, 0.0, 0.0]), float)
-        component[LANDMARKS.index(name)] = index
-        point[LANDMARKS.index(name)] = centre + np.multiply(direction, radii)
-    return component, point
-
-
-KNUCKLES = ("left_pinky", "right_pinky", "left_index", "right_index")
-"""Landmarks the tracker's cue leaves out: BlazePose places the knuckles from the body's image alone, and
-they stray far more than the wrist that already marks the hand (docs/history.md); the first pose's fit still
-uses them to turn the hand."""
-
-
-def cue_points(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`anchors` without the :data:`KNUCKLES` (component -1): the landmarks the tracker fuses."""
-    component, point = anchors(model)
-    component[[LANDMARKS.index(name) for name in KNUCKLES]] = -1
-    return component, point
-
-
-def placers(model: Model, component: np.ndarray, point: np.ndarray) -> np.ndarray:
-    """The component (K,) whose pose places each joint landmark: the parent of ``component`` for a landmark at
-    its joint centre (``point`` zero; a wrist is where the forearm ends); -1 for the others, on the surface of
-    the head, hands and feet (small parts whose outlines fit the edges worse even where tracked right, the
-    feet against the floor's), and for a landmark without a component."""
-    parent = model.parent[np.maximum(component, 0)]
-    centre = (component >= 0) & ~np.any(point, axis=1) & (parent >= 0)
-    return np.where(centre, parent, -1)
-
-
-def limbs(model: Model, component: np.ndarray) -> np.ndarray:
-    """The limb each landmark can lead (K, N) bool (:meth:`tracker.tracking.track.Tracker.lead`): for a landmark
-    on a component whose parent has no other child (an elbow, wrist, knee or ankle, or a point on a hand or foot),
-    the whole chain of such components above it, up to the one that hangs from a branching component (the upper arm
-    below the torso, the thigh below the pelvis), with everything below; none for the others (a shoulder, a hip, a
-    face point: moving them moves the trunk) and for a landmark without a component."""
-    parent = model.parent
-    children = np.bincount(parent[parent >= 0], minlength=model.size)
-    out = np.zeros((len(component), model.size), bool)
-    for j, i in enumerate(component):
-        if i < 0 or parent[i] < 0 or children[parent[i]] != 1:
-            continue
-        top = parent[i]
-        while parent[top] >= 0 and children[parent[top]] == 1:
-            top = parent[top]
-        out[j] = with_descendants(parent, np.arange(model.size) == top)
-    return out
-
-
-def landmark_world(poses: np.ndarray, component: np.ndarray, point: np.ndarray) -> np.ndarray:
-    """World points (K, 3) of the landmarks' model points ``point`` (K, 3), fixed in components ``component``
-    (K,), at ``poses`` (N, 4, 4); NaN for landmarks without a component (-1)."""
-    out = np.full((len(component), 3), np.nan)
-    marked = component >= 0
-    out[marked] = np.einsum("kij,kj->ki", poses[component[marked], :3, :3], point[marked])
-    out[marked] += poses[component[marked], :3, 3]
-    return out
-
-
-def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For each of ``landmarks``: its component (K,) int (-1 when the model has none) and its point (K, 3)
-    in that component's frame (the joint centre), and the left/right pairs (P, 2) of landmark indices."""
-    component = np.full(len(landmarks), -1, np.int64)
-    for index, name in enumerate(landmarks):
-        side, _, part = name.partition("_")
-        if side in ("left", "right") and part in SIDES and f"{SIDES[part]}_{side[0]}" in model.names:
-            component[index] = model.names.index(f"{SIDES[part]}_{side[0]}")
-    return component, np.zeros((len(landmarks), 3)), left_right_pairs(landmarks)
-
-
-TRUNK_TURN = 0.35
-"""Radians the joints between the hips and the shoulders (:func:`trunk`) turn from rest before the fits of the
-first pose and the re-seeds (:mod:`tracker.keypoints.fit`) and the tracker (``Settings.trunk_hold``) pull them
-back: the pelvis turns about the line through the hips without moving them, so neither the landmarks nor the
-pelvis's round outline see its pitch well, and hips that the detector reads a few centimetres high (behind a table)
-would otherwise fold the trunk to its limit to reach them (docs/keypoints.md, "The trunk held near rest")."""
-
-
-def trunk(model: Model, component: np.ndarray) -> np.ndarray:
-    """The components (T,) whose joints lie on the path between the hips' parent and the shoulders' parent, from
-    the landmarks' components ``component`` (33,) (:func:`landmark_points`): the torso's joint with the pelvis in
-    models/human.toml; none when the model has no hips or shoulders."""
-    ends = [component[LANDMARKS.index(f"{side}_{part}")] for part in ("hip", "shoulder") for side in ("left", "right")]
-    if min(ends) < 0:
-        return np.zeros(0, np.int64)
-    n = model.size
-    under = np.array([with_descendants(model.parent, np.arange(n) == c) for c in range(n)])  # x is c or below it
-    on_path = np.zeros(n, bool)  # a joint lies on the path where one end is at or below its component, not both
-    for low in {model.parent[i] for i in ends[:2]}:
-        for high in {model.parent[i] for i in ends[2:]}:
-            on_path |= under[:, low] != under[:, high]
-    return np.flatnonzero(on_path)
-
-
-def left_right_pairs(landmarks: tuple[str, ...]) -> np.ndarray:
-    """The (P, 2) indices of ``left_<part>`` and ``right_<part>`` for every part named both ways in ``landmarks``."""
-    pairs = [
-        (index, landmarks.index("right_" + name[5:]))
-        for index, name in enumerate(landmarks)
-        if name.startswith("left_") and "right_" + name[5:] in landmarks
-    ]
-    return np.array(pairs, np.int64).reshape(-1, 2)
-
+if TYPE_CHECKING:
+    from tracker.tracking.track import Tracker
+    from tracker.tracking.workspace import Workspace
 
 SWAP_MARGIN = 0.02
 """Share of the body's image size by which a left/right pair must fit better as detected than swapped to count
@@ -357,3 +179,165 @@ def keypoint_kernel(
             eta[component[j]] += w * (jac.T @ r)
             used += 1
     return used, rejected
+
+
+MISFIT_CAP = 0.3  # share of the body's size beyond which a landmark's misfit counts no more (KeypointCue.misfit)
+
+
+class KeypointCue:
+    """The detector's landmarks as a cue of the solve (:class:`~tracker.tracking.cue.Cue`): their pull on the model
+    points they mark (:func:`keypoint_kernel`), from each landmark's zone of learnt noise
+    (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`, :attr:`noise`, carried whole to a tracker for other
+    cameras); and the frame's checks against them, by the tracker's motion model (:meth:`misfit`), its lead
+    (:mod:`tracker.tracking.lead`) and its drag check (:meth:`dragged`)."""
+
+    name = "keypoints"
+    stage = "measure"
+
+    def __init__(self, tracker: Tracker):
+        model, settings, poses = tracker.model, tracker.settings, tracker.poses
+        self.settings = settings.keypoints
+        self.robust_c = settings.solve.robust_c
+        self.model = model
+        self.component, self.point = cue_points(model)
+        self.pairs = left_right_pairs(LANDMARKS)
+        self.placer = placers(model, self.component, self.point)
+        self.bone_lengths = bone_lengths(poses, self.component, self.point)  # the legs' (tracker.tracking.guessed)
+        self.floor = (np.full(len(LANDMARKS), self.settings.tolerance), np.full(len(LANDMARKS), np.inf))
+        self.noise = LandmarkNoise.start(len(LANDMARKS), model.size, self.settings.tolerance)
+        self.frame: tuple[np.ndarray, np.ndarray] | None = None  # the frame's landmarks: pixels, confidence
+
+    def restart(self) -> None:
+        return None
+
+    def warm_up(self, tracker: Tracker) -> None:
+        work = tracker.work
+        component_misfits(work.offset, work.samples.component, work.samples.count, self.model.size)
+
+    def prepare(self, tracker: Tracker, frame: Frame) -> np.ndarray | None:
+        """Take the frame's landmarks; with ``hide_guessed`` and two views or more, the legs the detector guessed
+        (:func:`tracker.tracking.guessed.guessed`) lose their landmarks, and their parts are hidden."""
+        self.frame = None
+        if frame.keypoints is None:
+            return None
+        pixels, confidence = (np.ascontiguousarray(array, np.float64) for array in frame.keypoints)
+        self.frame = (pixels, confidence)
+        if not self.settings.hide_guessed or len(tracker.cameras) < 2:
+            return None
+        legs = guessed(tracker.cameras, pixels, confidence, lengths=self.bone_lengths)
+        if not legs.any():
+            return None
+        self.frame = (pixels, np.where(legs[None], 0.0, confidence))
+        return hidden_parts(self.model, self.component, legs)
+
+    def add(self, tracker: Tracker, work: Workspace, iteration: Iteration) -> None:
+        """Add the landmarks' pull to the edges' information.  A landmark whose placing component the edges did not
+        hold in the last frame (:meth:`LandmarkNoise.held <tracker.tracking.landmark_noise.LandmarkNoise.held>`)
+        pulls from the floor zone with no fade."""
+        if self.frame is not None:
+            self.add_landmarks(tracker, work, *self.frame)
+
+    def add_landmarks(self, tracker: Tracker, work: Workspace, pixels, confidence) -> tuple[int, int]:
+        """:meth:`add` of the landmarks ``pixels`` (C, 33, 2) at ``confidence`` (C, 33) float64 into ``work``;
+        returns (landmarks used, left/right pairs rejected)."""
+        st = self.settings
+        held = self.noise.held(self.placer, st.edge_misfit)
+        with np.errstate(divide="ignore"):
+            reach = st.reach / held
+        zone = held * self.noise.tolerance + (1.0 - held) * st.tolerance
+        return self.pull(
+            tracker,
+            pixels,
+            confidence,
+            zone=(zone, reach),
+            information=work.information,
+            eta=work.eta,
+            misfit=work.misfit,
+        )
+
+    def learn(self, tracker: Tracker, status: int, *, kept: bool) -> None:
+        """Note how closely each component's outline fitted its edges in the frame's last search (how firmly the edges
+        hold each landmark's limb), and in a tracked frame learn the landmarks' noise from their misfits."""
+        work, st = tracker.work, self.settings
+        edge_misfit = component_misfits(work.offset, work.samples.component, work.samples.count, self.model.size)
+        self.noise = dataclasses.replace(self.noise, edge_misfit=edge_misfit)
+        if self.frame is not None and status == TRACKED:
+            self.noise = self.noise.learnt(
+                work.misfit,
+                self.noise.held(self.placer, st.edge_misfit),
+                floor=st.tolerance,
+                multiple=st.noise_multiple,
+                ceiling=st.tolerance_max,
+            )
+
+    def inspect(self, tracker: Tracker, work: Workspace) -> None:
+        return None
+
+    def pull(
+        self, tracker: Tracker, pixels, confidence, *, zone, information, eta, misfit, poses=None, swaps: bool = True
+    ) -> tuple[int, int]:
+        """Add the pull of the landmarks ``pixels`` (C, K, 2) at ``confidence`` (C, K) at ``poses`` (default: the
+        tracker's current ones) (:func:`keypoint_kernel`) to ``information`` and ``eta``, and their misfits to
+        ``misfit``, each from its noise zone with its fade, ``zone`` = (zone (K,), reach (K,)); a left/right pair
+        that fits better swapped is left out unless ``swaps`` is False."""
+        pairs = self.pairs if swaps else self.pairs[:0]
+        rig = tracker.rig
+        return keypoint_kernel(
+            tracker.seen(tracker.poses if poses is None else poses),
+            tracker.gains,
+            rig.camera_from_world,
+            rig.matrix,
+            rig.lens,
+            rig.distortion,
+            self.component,
+            self.point,
+            pairs,
+            pixels,
+            confidence,
+            self.settings.confidence,
+            self.robust_c,
+            self.settings.weight,
+            zone[0],
+            zone[1],
+            information,
+            eta,
+            misfit,
+        )
+
+    def misfit(
+        self, tracker: Tracker, poses: np.ndarray, keypoints: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> float:
+        """How far the frame's landmarks (or ``keypoints``: pixels (C, 33, 2), confidence (C, 33)) lie off ``poses``
+        (N, 4, 4): the mean over the usable landmarks of every view of their image distance as a share of the
+        body's size there (:func:`keypoint_kernel`), each counted up to :data:`MISFIT_CAP` (a wrong detection weighs
+        no more than a limb that far off); 0 without any."""
+        if keypoints is None:
+            assert self.frame is not None  # the frame's (prepare)
+            keypoints = self.frame
+        pixels, confidence = (np.ascontiguousarray(array, np.float64) for array in keypoints)
+        work = tracker.work
+        misfit = np.empty_like(work.misfit)
+        scratch = (np.zeros_like(work.information), np.zeros_like(work.eta))
+        self.pull(
+            tracker,
+            pixels,
+            confidence,
+            zone=self.floor,
+            information=scratch[0],
+            eta=scratch[1],
+            misfit=misfit,
+            poses=poses,
+        )
+        seen = np.isfinite(misfit)
+        return float(np.minimum(misfit[seen], MISFIT_CAP).mean()) if seen.any() else 0.0
+
+    def dragged(self, tracker: Tracker) -> bool:
+        """Whether the frame's edges and colours dragged the body off its landmarks: they lie off the tracked poses
+        by more than ``drag`` of the body's size beyond how far they lay off the poses the frame was tracked from
+        (its prediction, or a kept lead's, the tracker's ``anchor``; :meth:`misfit`).  Behind a table, the table
+        top's edges can tip a whole trunk over onto it within one frame's iterations, though every view's landmarks
+        say it stands (docs/keypoints.md, "Dragged off the landmarks"); no trunk turns that far in a frame, and the
+        frame then keeps the poses it started from."""
+        if self.frame is None or self.settings.drag <= 0:
+            return False
+        return self.misfit(tracker, tracker.poses) > self.misfit(tracker, tracker.anchor) + self.settings.drag

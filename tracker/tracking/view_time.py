@@ -38,7 +38,7 @@ def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, *
     ``tracker``: a :class:`tracker.tracking.track.Tracker` of the one camera, used up: each frame is loaded into its
     buffers once and searched there at every shift; ``frames``: its frames (index, [image]), already smoothed by the
     tracker; ``poses`` (F, N, 4, 4): the body tracked in the other cameras at frames 0..F-1, contiguous."""
-    search = tracker.search_range(tracker.settings.iterations - 1)
+    search = tracker.search_range(tracker.settings.solve.iterations - 1)
     work = tracker.work
     columns = {}
     for index, images in frames:

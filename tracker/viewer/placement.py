@@ -67,7 +67,7 @@ class Placement:
         self.images = [seeker.read(shown) for seeker, shown in zip(seekers, camera_frames(recording, frame))]
         for seeker in seekers:
             seeker.close()
-        self.settings = Settings(dynamics="none", iterations=snap_iterations)
+        self.settings = Settings().but(motion=dict(dynamics="none"), solve=dict(iterations=snap_iterations))
         self.tracker = Tracker(model, recording.cameras, poses, self.settings)  # redraws the frame's edge search
         self.smoothed = [self.tracker.smooth(image) for image in self.images]  # the frame never changes:
         self.tracker.load_images(self.smoothed, smoothed=True)  # smoothed and loaded once for every redraw
