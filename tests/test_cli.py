@@ -242,7 +242,7 @@ def test_motion_models_from_the_command_line(tiny_recording, tmp_path, option, c
 def test_work_side_sets_the_search_reduction():
     """--work-side reaches the tracker's settings (0: full size); without it the default stands."""
     from tracker.commands import options
-    from tracker.tracking.track import Settings
+    from tracker.tracking.settings import Settings
 
     parser = argparse.ArgumentParser()
     options.add_tuning_options(parser)

@@ -11,7 +11,7 @@ from tracker.apps.bench import HUMAN, _copies, _side_by_side, detector_ms
 from tracker.cli import main
 from tracker.io.recording import open_recording
 from tracker.model import model_from_dict
-from tracker.tracking.track import Settings
+from tracker.tracking.settings import Settings
 
 KEYS = {
     "fps_one_view",

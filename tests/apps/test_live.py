@@ -24,7 +24,8 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 

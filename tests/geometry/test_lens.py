@@ -7,7 +7,7 @@ import pytest
 
 from tracker.camera import Camera
 from tracker.geometry.lens import distort, undistort
-from tracker.tracking.outline import Rig
+from tracker.tracking.rig import Rig
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
 LENSES = {  # name: (distortions in OpenCV's order, fisheye)

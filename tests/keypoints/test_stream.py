@@ -17,7 +17,8 @@ from tracker.keypoints import stream as stream_module
 from tracker.keypoints.detect import cached, detect_recording, fingerprint
 from tracker.keypoints.store import load_keypoints, save_keypoints
 from tracker.keypoints.stream import KeypointStream, beside, default_step
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
@@ -278,9 +279,9 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
         landmarks = beside(stream, tracker)
         for frame, trusted in ((0, [trust] * 3), (1, [0.0] * 3), (4, [trust, trust, 0.0])):
             landmarks(frame)
-            assert tracker.person_trust.tolist() == trusted
+            assert tracker.person.trust.tolist() == trusted
         u, v = (square[1, 0, :2] // 2).astype(int)  # the centre on the half-size grid, and 250 pixels off
-        assert tracker.person[0, v, u] == 255 and tracker.person[0, v, max(0, u - 125)] == 0
+        assert tracker.person.mask[0, v, u] == 255 and tracker.person.mask[0, v, max(0, u - 125)] == 0
     save_keypoints(cache, dataclasses.replace(held, recording=identity))
     with KeypointStream(recording, 0, 5, 4, cache) as stream:
         stream.get(0)

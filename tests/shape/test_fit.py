@@ -202,7 +202,7 @@ def test_a_part_whose_outline_falls_off_the_person_is_left_out_of_that_view():
     from tracker.keypoints.region import Region
     from tracker.keypoints.silhouette import PersonMask
     from tracker.shape.fit import off_person
-    from tracker.tracking.track import Inspection
+    from tracker.tracking.workspace import Inspection
 
     person = np.zeros((256, 256), bool)
     person[:, :128] = True

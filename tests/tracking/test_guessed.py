@@ -11,7 +11,8 @@ from tracker.io.recording import frames, open_recording
 from tracker.model import load_model
 from tracker.tracking.body_landmarks import LANDMARKS, cue_points, landmark_world
 from tracker.tracking.guessed import BONES, SHORT, axis_points, bone_lengths, guessed, hidden_parts, leg_landmarks
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 LEGS = ("knee", "ankle", "heel", "foot_index")
@@ -90,9 +91,9 @@ def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo, 
     tracker = Tracker(model, cameras, poses)
     tracker.step(images, keypoints=folded)
     assert set(names[tracker.hidden]) == {"thigh_l", "shin_l", "foot_l", "thigh_r", "shin_r", "foot_r"}
-    assert tracker.keypoints is not None
-    assert not tracker.keypoints[1][:, _index("left", LEGS) + _index("right", LEGS)].any()
-    assert (tracker.keypoints[1][:, _index("left", ("hip", "shoulder", "wrist"))] == 1.0).all()
+    assert tracker.landmarks.frame is not None
+    assert not tracker.landmarks.frame[1][:, _index("left", LEGS) + _index("right", LEGS)].any()
+    assert (tracker.landmarks.frame[1][:, _index("left", ("hip", "shoulder", "wrist"))] == 1.0).all()
     work = tracker.work
     legs = tracker.hidden[work.samples.component[: work.samples.count]]
     assert legs.any() and (~legs).any()
@@ -106,7 +107,7 @@ def test_the_tracker_gives_guessed_legs_no_landmark_edge_or_colour_weight(demo, 
         tracker = Tracker(model, cameras, poses, settings)
         tracker.step(images, keypoints=keypoints)
         assert not tracker.hidden.any()
-        assert tracker.keypoints is not None and (tracker.keypoints[1] == keypoints[1]).all()
+        assert tracker.landmarks.frame is not None and (tracker.landmarks.frame[1] == keypoints[1]).all()
 
 
 def test_a_leg_whose_knee_the_detector_is_unsure_of_is_not_judged(demo, perfect_detections):

@@ -16,8 +16,9 @@ from tracker.io.recording import open_recording
 from tracker.model import load_model, model_from_dict
 from tracker.tracking.body_landmarks import LANDMARKS, anchors, landmark_points, limbs, placers, trunk
 from tracker.tracking.keypoint_cue import keypoint_kernel, project_point
-from tracker.tracking.outline import Rig
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.rig import Rig
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
@@ -176,7 +177,10 @@ def test_by_default_unsure_landmarks_pull_in_proportion_to_their_confidence(demo
         confidence[0, wrist] = q
         information, eta = np.zeros((model.size, 6, 6)), np.zeros((model.size, 6))
         misfit = np.full(pixels.shape[:2], np.nan)
-        used[q], _ = tracker.pull(off, confidence, zone=tracker.floor, information=information, eta=eta, misfit=misfit)
+        zone = tracker.landmarks.floor
+        used[q], _ = tracker.landmarks.pull(
+            tracker, off, confidence, zone=zone, information=information, eta=eta, misfit=misfit
+        )
         pulls[q] = eta
     assert used == {1.0: 1, 0.4: 1, 0.2: 0}
     assert np.abs(pulls[1.0]).max() > 0.0 and not pulls[0.2].any()
@@ -268,14 +272,14 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     tracker.step(images)  # the demo's frame 0 from its true pose: every visible component's edges fit
     forearm, hand, wrist = model.index("forearm_l"), model.index("hand_l"), LANDMARKS.index("left_wrist")
     assert (
-        0.0 < tracker.noise.edge_misfit[forearm] < tracker.settings.keypoints.edge_misfit
+        0.0 < tracker.landmarks.noise.edge_misfit[forearm] < tracker.settings.keypoints.edge_misfit
     )  # measured, not the start's 0
 
     def fitted(misfit: float) -> None:
         """The forearm's edges fitted with median |m| ``misfit`` in the last frame."""
-        edge_misfit = tracker.noise.edge_misfit.copy()
+        edge_misfit = tracker.landmarks.noise.edge_misfit.copy()
         edge_misfit[forearm] = misfit
-        tracker.noise = replace(tracker.noise, edge_misfit=edge_misfit)
+        tracker.landmarks.noise = replace(tracker.landmarks.noise, edge_misfit=edge_misfit)
 
     tracker.poses = poses
     far = np.full_like(pixels, np.nan)
@@ -286,39 +290,41 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     def pull() -> float:
         tracker.work.information[:] = 0.0
         tracker.work.eta[:] = 0.0
-        assert tracker.add_keypoints(far, confidence) == (1, 0)
+        assert tracker.landmarks.add_landmarks(tracker, tracker.work, far, confidence) == (1, 0)
         return float(np.linalg.norm(tracker.work.eta[hand]))
 
     held = pull()
     fitted(2.0 * tracker.settings.keypoints.edge_misfit)
     loose = pull()
     st = tracker.settings
-    assert tracker.noise.tolerance[wrist] == st.keypoints.tolerance  # nothing learnt yet: both at the floor zone
+    assert (
+        tracker.landmarks.noise.tolerance[wrist] == st.keypoints.tolerance
+    )  # nothing learnt yet: both at the floor zone
     excess = tracker.work.misfit[0, wrist] - st.keypoints.tolerance  # in body sizes (the misfit is |r| / size)
     assert excess > 2 * st.keypoints.reach
     np.testing.assert_allclose(loose, (1.0 + (excess / st.keypoints.reach) ** 2) * held, rtol=1e-9)  # no fade
-    tolerance = tracker.noise.tolerance.copy()
+    tolerance = tracker.landmarks.noise.tolerance.copy()
     tolerance[wrist] = 2.0 * tracker.work.misfit[0, wrist]  # a learnt zone wider than the miss: silent...
-    tracker.noise = replace(tracker.noise, tolerance=tolerance)
+    tracker.landmarks.noise = replace(tracker.landmarks.noise, tolerance=tolerance)
     assert pull() > 0.0  # ... but a limb the edges do not hold is pulled from the floor zone
     fitted(0.0)
     tracker.work.information[:] = 0.0
     tracker.work.eta[:] = 0.0
-    tracker.add_keypoints(far, confidence)
+    tracker.landmarks.add_landmarks(tracker, tracker.work, far, confidence)
     assert not tracker.work.eta.any()  # held: the learnt zone stands
     # and a limb the edges do not hold does not teach its landmark's zone
     for fit, learnt in ((0.0, True), (2.0 * st.keypoints.edge_misfit, False)):
         fitted(fit)
-        held_now = tracker.noise.held(tracker.placer, st.keypoints.edge_misfit)
-        taught = tracker.noise.learnt(
+        held_now = tracker.landmarks.noise.held(tracker.landmarks.placer, st.keypoints.edge_misfit)
+        taught = tracker.landmarks.noise.learnt(
             tracker.work.misfit,
             held_now,
             floor=st.keypoints.tolerance,
             multiple=1.5,
             ceiling=st.keypoints.tolerance_max,
         )
-        assert taught.row == tracker.noise.row + 1
-        assert np.isfinite(taught.misfits[tracker.noise.row % len(taught.misfits), wrist]) == learnt
+        assert taught.row == tracker.landmarks.noise.row + 1
+        assert np.isfinite(taught.misfits[tracker.landmarks.noise.row % len(taught.misfits), wrist]) == learnt
 
 
 def test_a_landmark_at_a_limbs_end_leads_its_whole_limb_and_no_other():
@@ -371,12 +377,12 @@ def test_a_limb_far_off_its_landmarks_is_led_to_them_and_the_rest_stays(demo_fra
         (60.0, shoulder_off, confidence, []),
     ):
         tracker = Tracker(model, recording.cameras, _arm_turned(model, poses, degrees))
-        chosen, crossed = tracker.led_limbs(seen, sure)
+        chosen, crossed = tracker.lead.led_limbs(tracker, seen, sure)
         assert np.flatnonzero(chosen).tolist() == led and not crossed, (degrees, sure.sum())
     wrist = model.index("hand_l")
     start = tracker.poses.copy()  # the start, coerced
     before = 1000 * np.linalg.norm(joint_centres(start)[wrist] - joint_centres(poses)[wrist])
-    tracker.move_limbs(tracker.led_limbs(pixels, confidence)[0], pixels, confidence)
+    tracker.lead.move_limbs(tracker, tracker.lead.led_limbs(tracker, pixels, confidence)[0], pixels, confidence)
     after = 1000 * np.linalg.norm(joint_centres(tracker.poses) - joint_centres(poses), axis=1)
     assert before > 300.0 and after[wrist] < 20.0, (before, after[wrist])
     np.testing.assert_array_equal(tracker.anchor, tracker.poses)  # the prediction the edges start from
@@ -421,7 +427,7 @@ def test_a_limb_off_the_persons_mask_is_led_however_near_its_landmarks(demo_fram
     ):
         tracker = Tracker(model, cameras, start, settings)
         tracker.see_person(seen)
-        chosen, _ = tracker.led_limbs(pixels, confidence)
+        chosen, _ = tracker.lead.led_limbs(tracker, pixels, confidence)
         assert np.flatnonzero(chosen).tolist() == led
     images = next(itertools.islice(frames(open_recording(DEMO)), 1))[1]
     wrist = model.index("hand_l")
@@ -453,17 +459,17 @@ def test_legs_whose_landmarks_fit_better_swapped_in_every_view_are_led_to_them_a
             one_view[0, [a, b]] = pixels[0, [b, a]]
     leg_parts = sorted(model.index(f"{part}_{side}") for part in ("thigh", "shin", "foot") for side in "lr")
     tracker = Tracker(model, recording.cameras, poses)
-    led, crossed = tracker.led_limbs(swapped, confidence)
+    led, crossed = tracker.lead.led_limbs(tracker, swapped, confidence)
     assert crossed and np.flatnonzero(led).tolist() == leg_parts
-    led_one, crossed_one = tracker.led_limbs(one_view, confidence)
+    led_one, crossed_one = tracker.lead.led_limbs(tracker, one_view, confidence)
     assert not crossed_one and not led_one.any()
     foot_l, foot_r = model.index("foot_l"), model.index("foot_r")
     start = joint_centres(tracker.poses)
-    tracker.move_limbs(led, swapped, confidence, swaps=False)
+    tracker.lead.move_limbs(tracker, led, swapped, confidence, swaps=False)
     moved = joint_centres(tracker.poses)
     assert np.linalg.norm(moved[foot_l] - start[foot_r]) < 0.5 * np.linalg.norm(start[foot_l] - start[foot_r])
     held = Tracker(model, recording.cameras, poses)
-    held.move_limbs(led, swapped, confidence)  # with the swap check on, the swapped landmarks pull nothing
+    held.lead.move_limbs(held, led, swapped, confidence)  # with the swap check on, the swapped landmarks pull nothing
     np.testing.assert_allclose(held.poses, held.anchor)
     np.testing.assert_allclose(joint_centres(held.poses)[foot_l], start[foot_l], atol=1e-6)
 

@@ -352,7 +352,7 @@ def test_a_reduced_image_gives_the_full_size_offsets(factor):
     """The search reads an image reduced by ``factor`` (tracker.tracking.track.smooth) from the samples' full-size
     places: the offsets of samples on straight and oblique edges, in full-size pixels, are those found in the
     full image, to the reduced image's sub-pixel precision."""
-    from tracker.tracking.track import smooth
+    from tracker.tracking.edge_cue import smooth
 
     size = 240
     raw = np.zeros((size, size), np.uint8)

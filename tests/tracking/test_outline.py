@@ -20,7 +20,9 @@ from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.geometry.quadric import KEEP_ALL
 from tracker.model import load_model, model_from_dict
-from tracker.tracking.outline import Rig, Samples, sample_outlines
+from tracker.tracking.outline import sample_outlines
+from tracker.tracking.rig import Rig
+from tracker.tracking.samples import Samples
 
 SIZE = (640, 480)
 

@@ -10,7 +10,7 @@ import pytest
 from tracker.camera import Camera
 from tracker.model import load_model, model_from_dict
 from tracker.synthetic.synth import demo3_rig, motion_poses
-from tracker.tracking.outline import Placed, Rig, Samples, place, sample_outlines
+from tracker.tracking.outline import place, sample_outlines
 from tracker.tracking.ownership import (
     GRID_MARGIN,
     GRID_STEP,
@@ -20,6 +20,8 @@ from tracker.tracking.ownership import (
     pixel_scale,
     undistort_grid,
 )
+from tracker.tracking.rig import Rig
+from tracker.tracking.samples import Placed, Samples
 
 HUMAN = Path(__file__).resolve().parents[2] / "models" / "human.toml"
 

@@ -17,8 +17,8 @@ from tracker.tracking.colours import (
     colour_reduction,
     part_table,
 )
-from tracker.tracking.region_cue import learn_kernel, line_profiles, log_table, region_kernel
-from tracker.tracking.track import Settings
+from tracker.tracking.region_lines import learn_kernel, line_profiles, log_table, region_kernel
+from tracker.tracking.settings import Settings
 
 MARGIN = Settings().region.margin
 PART = (200, 40, 40)  # a colour of the part, as the chroma image holds it

@@ -19,7 +19,11 @@ from tracker.model import joint_centres, load_model
 from tracker.status import LOST, TRACKED
 from tracker.synthetic.synth import Staging, synthesize
 from tracker.tracking.body_landmarks import TRUNK_TURN, cue_points, landmark_world
-from tracker.tracking.track import Settings, Tracker, constant_velocity, motion_since, smoother, views_at
+from tracker.tracking.edge_cue import smoother
+from tracker.tracking.motion_model import ConstantVelocity, constant_velocity, motion_since, views_at
+from tracker.tracking.region_cue import RegionCue
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
@@ -161,7 +165,7 @@ def test_the_region_cue_holds_striped_clothes_in_a_room_better_than_the_edges_al
     edges, _ = _track_in_colour(striped_room, Settings().but(region=dict(on=False)))
     region, tracker = _track_in_colour(striped_room, Settings().but(region=dict(on=True)))
     assert region.lost_frames == 0 and region.mpjpe_mm < 0.8 * edges.mpjpe_mm, (region.mpjpe_mm, edges.mpjpe_mm)
-    assert tracker.histograms.seen.all() and (tracker.distinct > 0.5).mean() > 0.8
+    assert tracker.cue(RegionCue).histograms.seen.all() and (tracker.cue(RegionCue).distinct > 0.5).mean() > 0.8
 
 
 def test_converges_from_a_displaced_start():
@@ -290,7 +294,7 @@ def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_
     model = load_model(rec.model_path)
     current = load_poses(DEMO / "truth.npz")["poses"][0]
     tracker = Tracker(model, rec.cameras, current)
-    component, point = tracker.landmarks[:2]
+    component, point = tracker.landmarks.component, tracker.landmarks.point
 
     def landmarks(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return perfect_detections(rec.cameras, landmark_world(poses, component, point))
@@ -302,13 +306,16 @@ def test_the_carried_motion_is_dropped_where_the_landmarks_say_the_last_pose_is_
         (0.15, None, _shifted(current, -0.15)),
     ):
         tracker.motion = replace(tracker.motion, previous=_shifted(current, before))
-        tracker.keypoints = None if seen_at is None else landmarks(seen_at)
-        np.testing.assert_allclose(tracker.carried(current), model.coerce(expected), atol=1e-9)
-    tracker.keypoints = landmarks(current)
-    assert tracker.landmark_misfit(current) < 1e-6 < tracker.landmark_misfit(_shifted(current, 0.15))
+        tracker.landmarks.frame = None if seen_at is None else landmarks(seen_at)
+        np.testing.assert_allclose(ConstantVelocity.carried(tracker, current), model.coerce(expected), atol=1e-9)
+    tracker.landmarks.frame = landmarks(current)
+    misfit = tracker.landmarks.misfit
+    assert misfit(tracker, current) < 1e-6 < misfit(tracker, _shifted(current, 0.15))
     tracker.settings = tracker.settings.but(motion=dict(check_prediction=False))  # as live sets it
     tracker.motion = replace(tracker.motion, previous=_shifted(current, 0.15))
-    np.testing.assert_allclose(tracker.carried(current), model.coerce(_shifted(current, -0.15)), atol=1e-9)
+    np.testing.assert_allclose(
+        ConstantVelocity.carried(tracker, current), model.coerce(_shifted(current, -0.15)), atol=1e-9
+    )
 
 
 def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_started_from(perfect_detections):
@@ -325,13 +332,13 @@ def test_a_frame_whose_edges_drag_the_body_off_its_landmarks_keeps_the_poses_it_
 
     free = Tracker(model, rec.cameras, start, settings.but(keypoints=dict(drag=0.0)))
     free.step(images, keypoints=keypoints)
-    assert free.landmark_misfit(free.poses) > 0.1
+    assert free.landmarks.misfit(free, free.poses) > 0.1
 
     held = Tracker(model, rec.cameras, start, settings)
     result = held.step(images, keypoints=keypoints)
     np.testing.assert_array_equal(result.poses, held.anchor)
     assert result.status != TRACKED
-    assert held.landmark_misfit(result.poses) < 0.1
+    assert held.landmarks.misfit(held, result.poses) < 0.1
 
 
 def test_a_tracker_for_other_cameras_carries_the_motion_and_the_learnt_noise_whole():
@@ -343,7 +350,9 @@ def test_a_tracker_for_other_cameras_carries_the_motion_and_the_learnt_noise_who
     for _, images in itertools.islice(frames(rec), 3):
         tracker.step(images)
     other = tracker.with_cameras(rec.cameras[:2])
-    assert other.motion is tracker.motion and other.noise is tracker.noise  # whole, never field by field
+    assert (
+        other.motion is tracker.motion and other.landmarks.noise is tracker.landmarks.noise
+    )  # whole, never field by field
     assert other.motion.previous is not None and other.motion.kalman is not None
     assert len(other.rig.names) == 2
     np.testing.assert_allclose(other.poses, tracker.poses, atol=1e-12)
@@ -368,7 +377,7 @@ def test_inspect_leaves_the_tracker_as_it_was():
         inspected.poses.copy(),
         inspected.work.images.copy(),
         inspected.motion,
-        inspected.noise,
+        inspected.landmarks.noise,
     )
     seconds = dict(inspected.work.times.seconds)
     elsewhere = poses.copy()
@@ -378,7 +387,7 @@ def test_inspect_leaves_the_tracker_as_it_was():
     assert len(moved.offset) > 100 and np.isfinite(here.offset).sum() > 100
     np.testing.assert_array_equal(inspected.poses, poses)
     np.testing.assert_array_equal(inspected.work.images, images)
-    assert inspected.motion is motion and inspected.noise is noise
+    assert inspected.motion is motion and inspected.landmarks.noise is noise
     assert inspected.work.times.seconds == seconds
     after, expected = inspected.step(read[1]), plain.step(read[1])
     assert after.poses.tobytes() == expected.poses.tobytes()
@@ -432,7 +441,8 @@ def test_large_images_are_searched_reduced_by_a_whole_factor():
     columns past the last whole block, and the tracker's buffer holds the reduced images."""
     from dataclasses import replace
 
-    from tracker.tracking.track import reduction, smooth
+    from tracker.tracking.edge_cue import smooth
+    from tracker.tracking.measure import reduction
 
     assert [reduction(side, 480) for side in (240, 480, 720, 959, 960, 1080, 1440, 2160)] == [1, 1, 1, 1, 2, 2, 3, 4]
     assert reduction(2160, 0) == 1
@@ -466,11 +476,12 @@ def test_the_region_cue_reads_large_views_colour_reduced_as_their_grey():
     demo = load_calibration(DEMO / "calibration.toml")
     cameras = [replace(demo[0], size=(1920, 1080)), replace(demo[1], size=(640, 480))]
     tracker = Tracker(model, cameras, np.tile(np.eye(4), (model.size, 1, 1)))
-    np.testing.assert_array_equal(tracker.grid, [[480, 270, 4, 1], [320, 240, 2, 0]])  # and each one's logs row
-    assert tracker.logs.shape[0] == 2
+    region = tracker.cue(RegionCue)
+    np.testing.assert_array_equal(region.grid, [[480, 270, 4, 1], [320, 240, 2, 0]])  # and each one's logs row
+    assert region.logs.shape[0] == 2
     full = Tracker(model, cameras, tracker.poses, Settings().but(images=dict(work_side=0)))
-    np.testing.assert_array_equal(full.grid, [[960, 540, 2, 0], [320, 240, 2, 0]])
-    assert full.logs.shape[0] == 1  # one table for both: the same pixel size
+    np.testing.assert_array_equal(full.cue(RegionCue).grid, [[960, 540, 2, 0], [320, 240, 2, 0]])
+    assert full.cue(RegionCue).logs.shape[0] == 1  # one table for both: the same pixel size
     chroma = np.random.default_rng(4).integers(0, 256, (540, 960, 3), dtype=np.uint8)
     expected = np.empty((270, 480), np.int16)
     colour_bins(reduced(chroma, 2), expected)
@@ -539,9 +550,9 @@ def test_views_that_go_black_are_tracked_without_the_colours(striped_room):
                 image if k == 0 else replace(image, image=0 * image.image, chroma=0 * image.chroma)
                 for k, image in enumerate(images)
             ]
-        seen = tracker.histograms.foreground.copy()
+        seen = tracker.cue(RegionCue).histograms.foreground.copy()
         result = tracker.step(images)
-        taught.append(not np.array_equal(seen, tracker.histograms.foreground))
+        taught.append(not np.array_equal(seen, tracker.cue(RegionCue).histograms.foreground))
         errors.append(np.linalg.norm(joint_centres(result.poses) - truth[index], axis=1).mean())
     assert not any(taught[index] for index in black) and all(taught[index] for index in range(5, 20))
     assert max(errors[index] for index in black) < 0.1
@@ -559,7 +570,7 @@ def test_colours_binned_in_the_reader_threads_track_as_binned_by_the_tracker(str
         tracker = Tracker(model, rec.cameras, first, Settings())
         chroma = tracker.bin_colours if binned else True
         poses.append([tracker.step(images).poses for _, images in frames(rec, 0, 12, chroma=chroma)])
-    assert tracker.histograms.ready
+    assert tracker.cue(RegionCue).histograms.ready
     np.testing.assert_array_equal(poses[0], poses[1])
 
 
@@ -640,10 +651,10 @@ def test_the_share_of_the_body_on_the_persons_mask(person_masks):
     moved = truth.copy()
     moved[:, :3, 3] += np.array([0.3, -0.3, 0.0])
     tracker = Tracker(model, recording.cameras, truth)
-    assert tracker.on_person(truth) == 0.0
+    assert tracker.person.on_person(truth) == 0.0
     tracker.see_person(person_masks(model, recording.cameras, truth))
-    assert tracker.on_person(truth) > 0.95
-    assert tracker.on_person(moved) < 0.5
+    assert tracker.person.on_person(truth) > 0.95
+    assert tracker.person.on_person(moved) < 0.5
 
 
 def _without(
@@ -681,7 +692,7 @@ def test_a_leg_off_the_mask_in_one_view_but_on_it_in_another_is_hidden_in_that_v
         empty = (work.lo > work.hi) & (work.outside == -2)
         on_leg = np.isin(s.component[: s.count], [model.names.index(name) for name in leg])
         per_view = np.array([empty[on_leg & (s.camera[: s.count] == k)].mean() for k in range(len(cameras))])
-        return {tuple(names[row]) for row in tracker.off_mask}, per_view
+        return {tuple(names[row]) for row in tracker.person.off_mask}, per_view
 
     marks, per_view = hidden_samples(_without(whole, model, cameras, truth, leg, views=[0]))
     assert marks == {leg, ()}
@@ -695,7 +706,7 @@ def test_a_leg_off_the_mask_in_one_view_but_on_it_in_another_is_hidden_in_that_v
 
 
 def test_colours_taught_at_known_poses_read_how_far_the_outlines_moved(striped_room):
-    """:meth:`Tracker.teach` at the true poses of five frames, then :meth:`Tracker.inspect_cues` of a later frame
+    """:meth:`RegionCue.teach` at the true poses of five frames, then :meth:`Tracker.inspect_cues` of a later frame
     with the body moved 4 cm: the region cue's offsets follow the outlines' move as each view sees it (correlation
     measured 0.70), where the edges' are pulled by the stripes (0.33); before any teaching it reads no line."""
     rec = open_recording(striped_room)
@@ -703,16 +714,17 @@ def test_colours_taught_at_known_poses_read_how_far_the_outlines_moved(striped_r
     truth = load_poses(rec.truth_path)["poses"]
     read = dict(frames(rec, 0, 31, chroma=True))
     tracker = Tracker(model, rec.cameras, truth[0], Settings())
-    _, untaught = tracker.inspect_cues(read[30], poses=truth[30], search_range=12)
+    untaught = tracker.inspect_cues(read[30], poses=truth[30], search_range=12)["region"]
     assert not np.isfinite(untaught.offset).any() and not untaught.weight.any()
     for k, index in enumerate(range(0, 20, 4)):
-        tracker.teach(read[index], poses=truth[index], rate=1.0 / (k + 1), search_range=12)
-    assert tracker.histograms.seen.mean() > 0.9
+        tracker.cue(RegionCue).teach(tracker, read[index], poses=truth[index], rate=1.0 / (k + 1), search_range=12)
+    assert tracker.cue(RegionCue).histograms.seen.mean() > 0.9
     move = np.array([0.04, 0.0, 0.0])
     moved = truth[30].copy()
     moved[:, :3, 3] += move
     correlation, lines = {}, {}
-    edges, regions = tracker.inspect_cues(read[30], poses=moved, search_range=12)
+    read_cues = tracker.inspect_cues(read[30], poses=moved, search_range=12)
+    edges, regions = read_cues["edges"], read_cues["region"]
     for cue, inspection in (("region", regions), ("edges", edges)):
         read_here = np.isfinite(inspection.offset) & (inspection.weight > 0)
         expected = _expected_offsets(inspection, moved, rec.cameras, move)

@@ -11,7 +11,8 @@ from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.keypoints.sync import resampled_least, rises
 from tracker.model import load_model
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 from tracker.tracking.view_time import edge_costs, poses_at
 
 

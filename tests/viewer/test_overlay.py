@@ -1,6 +1,6 @@
 import numpy as np
 
-from tracker.tracking.track import Inspection
+from tracker.tracking.workspace import Inspection
 from tracker.viewer.overlay import component_colours, draw, weight_colour
 
 

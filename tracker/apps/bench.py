@@ -47,7 +47,8 @@ from tracker.keypoints.stream import KeypointStream, beside, default_step, sched
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 from tracker.tracking.workspace import STAGES, StageTimes
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"

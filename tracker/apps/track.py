@@ -20,7 +20,8 @@ if TYPE_CHECKING:
 
     from tracker.evaluate import Report
     from tracker.io.recording import Recording
-    from tracker.tracking.track import Settings, Tracker
+    from tracker.tracking.settings import Settings
+    from tracker.tracking.track import Tracker
     from tracker.viewer.review import Review
 
 Bar = Callable[..., Callable[..., Any]]
@@ -109,7 +110,8 @@ def track(
     from tracker.io.recording import capture_times
     from tracker.keypoints.stream import beside, tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
-    from tracker.tracking.track import Tracker, reductions
+    from tracker.tracking.edge_cue import reductions
+    from tracker.tracking.track import Tracker
 
     bar = bar or _no_bar
     start, settings, step = tracking.start, tracking.settings, tracking.keypoints

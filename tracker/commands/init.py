@@ -31,7 +31,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Serve the placement until Ctrl-C (its save button writes ``--out``)."""
     from tracker.io.posefile import load_pose_file
-    from tracker.tracking.track import Settings
+    from tracker.tracking.settings import Settings
     from tracker.viewer.placement import Placement
 
     rec, model = options.opened(args)

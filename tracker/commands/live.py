@@ -91,8 +91,8 @@ def run(args: argparse.Namespace) -> int:
         )
         capture = stack.enter_context(Capture(sources, [camera.name for camera in cameras]))
         # live landmarks are an earlier frame set's, moved by the motion tracked since: they cannot lead a limb
-        # the edges lost (Tracker.lead), which would take it to where it was then, nor judge the predicted motion
-        # or the frame's (Tracker.carried, Tracker.dragged), having moved with the last poses
+        # the edges lost (Lead.retry), which would take it to where it was then, nor judge the predicted motion
+        # or the frame's (ConstantVelocity.carried, KeypointCue.dragged), having moved with the last poses
         settings = options.settings_from(args, capture.fps).but(
             keypoints=dict(lead=0.0, drag=0.0), motion=dict(check_prediction=False)
         )

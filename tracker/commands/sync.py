@@ -112,7 +112,7 @@ def _refined(args: argparse.Namespace, rec, found: Offsets, out):
     from tracker.apps.sync import refine_offsets
     from tracker.apps.track import Tracking
     from tracker.keypoints.stream import default_step
-    from tracker.tracking.track import Settings
+    from tracker.tracking.settings import Settings
 
     tracking = Tracking(
         Settings().but(motion=dict(frame_rate=rec.fps)),

@@ -28,7 +28,8 @@ from tracker.keypoints.hips import with_hips_lowered
 from tracker.keypoints.store import Keypoints
 from tracker.keypoints.triangulation import Triangulated, middle, triangulated
 from tracker.model import Model
-from tracker.tracking.track import FrameResult, Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import FrameResult, Tracker
 
 FRAMES = 5
 """Frames, from the first, whose landmarks are triangulated: the body moves a few millimetres in them, while

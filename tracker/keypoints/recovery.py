@@ -233,5 +233,5 @@ def _noise(one: FrameResult, other: FrameResult) -> float:
 
 def _backing(tracker: Tracker, result: FrameResult) -> float:
     """How well the frame's image backs ``result``: the share of its samples that found an edge, plus the share of
-    its body on the person's masks (:meth:`tracker.tracking.track.Tracker.on_person`; 0 without masks)."""
+    its body on the person's masks (:meth:`tracker.tracking.person.PersonMasks.on_person`; 0 without masks)."""
     return result.share + tracker.person.on_person(result.poses)

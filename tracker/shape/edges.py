@@ -35,7 +35,7 @@ from tracker.geometry import se3
 from tracker.keypoints.fit import Body
 from tracker.model import Model
 from tracker.shape.layout import Layout
-from tracker.tracking.track import Inspection
+from tracker.tracking.workspace import Inspection
 
 
 def stretch_rows(model: Model, factors: np.ndarray, inspection: Inspection) -> np.ndarray:

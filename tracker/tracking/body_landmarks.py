@@ -125,7 +125,7 @@ def placers(model: Model, component: np.ndarray, point: np.ndarray) -> np.ndarra
 
 
 def limbs(model: Model, component: np.ndarray) -> np.ndarray:
-    """The limb each landmark can lead (K, N) bool (:meth:`tracker.tracking.track.Tracker.lead`): for a landmark
+    """The limb each landmark can lead (K, N) bool (:meth:`tracker.tracking.lead.Lead.retry`): for a landmark
     on a component whose parent has no other child (an elbow, wrist, knee or ankle, or a point on a hand or foot),
     the whole chain of such components above it, up to the one that hangs from a branching component (the upper arm
     below the torso, the thigh below the pelvis), with everything below; none for the others (a shoulder, a hip, a
@@ -166,7 +166,7 @@ def landmark_points(model: Model, landmarks: tuple[str, ...]) -> tuple[np.ndarra
 
 TRUNK_TURN = 0.35
 """Radians the joints between the hips and the shoulders (:func:`trunk`) turn from rest before the fits of the
-first pose and the re-seeds (:mod:`tracker.keypoints.fit`) and the tracker (``Settings.trunk_hold``) pull them
+first pose and the re-seeds (:mod:`tracker.keypoints.fit`) and the tracker (``SolveSettings.trunk_hold``) pull them
 back: the pelvis turns about the line through the hips without moving them, so neither the landmarks nor the
 pelvis's round outline see its pitch well, and hips that the detector reads a few centimetres high (behind a table)
 would otherwise fold the trunk to its limit to reach them (docs/keypoints.md, "The trunk held near rest")."""

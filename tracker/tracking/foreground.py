@@ -40,7 +40,7 @@ from tracker.io.readers import FrameSeeker, read_image
 from tracker.io.recording import Recording
 from tracker.model import Model
 from tracker.raycast import RayCaster
-from tracker.tracking.track import Settings
+from tracker.tracking.settings import Settings
 
 SAMPLES = 25  # frames per camera for the median background
 CLEARED_SAMPLES = 50  # frames per camera for the median with the tracked body masked out

@@ -108,7 +108,7 @@ def keypoint_kernel(
     ``gains`` (C,), how far its view moves as the poses move (docs/sync.md).
 
     ``camera_from_world``, ``matrix``, ``lens`` and ``distortion`` are the rig's
-    (:class:`tracker.tracking.outline.Rig`); ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's
+    (:class:`tracker.tracking.rig.Rig`); ``pixels`` (C, K, 2) and ``confidence`` (C, K) are one frame's
     detections; a landmark is used when its component is >= 0, its confidence at least ``min_confidence``, its pixel
     finite, and it is not half of a left/right pair of ``pairs`` (P, 2) that fits better swapped: a pair's weight
     falls from full, where swapping it would lengthen its two residuals by :data:`SWAP_MARGIN` of the body's size or

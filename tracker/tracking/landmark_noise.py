@@ -18,7 +18,7 @@ import numpy as np
 
 NOISE_WINDOW = 30  # tracked frames whose landmark misfits set the keypoints' noise zones
 NOISE_LEAST = 5  # misfits a landmark needs before its zone is learnt
-HOLD_SPAN = 0.5  # LandmarkNoise.held falls from 1 to 0 over this share of keypoint_edge_misfit about it
+HOLD_SPAN = 0.5  # LandmarkNoise.held falls from 1 to 0 over this share of keypoints.edge_misfit about it
 
 
 def learnt_tolerance(history: np.ndarray, *, floor: float, multiple: float, ceiling: float, least: int) -> np.ndarray:
@@ -54,7 +54,7 @@ class LandmarkNoise:
     def held(self, placer: np.ndarray, limit: float) -> np.ndarray:
         """How firmly the edges hold each landmark's placing component ``placer`` (K,) (every landmark not at a
         joint, -1, is held), from 1 to 0 (K,): 1 where its outline fitted them within 3/4 of ``limit``
-        (``keypoint_edge_misfit``) in the last frame's last iteration (:attr:`edge_misfit`), 0 beyond 5/4 of it,
+        (``keypoints.edge_misfit``) in the last frame's last iteration (:attr:`edge_misfit`), 0 beyond 5/4 of it,
         linear between, so that a misfit near the limit shifts the landmark's zone and fade a little rather than all
         at once."""
         misfit = self.edge_misfit[np.maximum(placer, 0)]

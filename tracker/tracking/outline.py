@@ -30,91 +30,15 @@ preallocated :class:`Samples` buffers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numba import njit
 
-from tracker.errors import TrackerInputError
-from tracker.geometry.lens import COEFFICIENTS, FISHEYE, FISHEYE_LENGTHS, PINHOLE, PINHOLE_LENGTHS, distort
+from tracker.geometry.lens import distort
+from tracker.tracking.rig import Rig
+from tracker.tracking.samples import Placed, Samples
 
 _TANGENT_EPS = 1e-3
 _MAX_STEPS = 4096
-
-
-@dataclass(frozen=True)
-class Rig:
-    """Flat camera arrays: intrinsics ``matrix`` (C,3,3), ``camera_from_world`` (C,4,4), the lens model
-    as ``lens`` (C,) int64 kind and ``distortion`` (C,14) coefficients (:mod:`tracker.geometry.lens`),
-    ``size`` (C,2) width and height."""
-
-    names: tuple[str, ...]
-    matrix: np.ndarray
-    camera_from_world: np.ndarray
-    lens: np.ndarray
-    distortion: np.ndarray
-    size: np.ndarray
-
-    @classmethod
-    def from_cameras(cls, cameras) -> Rig:
-        """The rig of ``cameras``; TrackerInputError for a camera whose lens model the kernels do not know
-        (a calibration file cannot give one: :func:`tracker.camera.load_calibration` refuses it)."""
-        lens = np.zeros(len(cameras), np.int64)
-        distortion = np.zeros((len(cameras), COEFFICIENTS))
-        for k, cam in enumerate(cameras):
-            d = np.asarray(cam.distortions, dtype=np.float64).ravel()
-            lengths = FISHEYE_LENGTHS if cam.fisheye else PINHOLE_LENGTHS
-            if len(d) not in lengths:
-                raise TrackerInputError(
-                    f"camera {cam.name!r}: {len(d)} {'fisheye' if cam.fisheye else 'pinhole'} distortion "
-                    f"coefficients are no lens model the tracker knows; give {' or '.join(map(str, lengths))} "
-                    "(OpenCV order)"
-                )
-            lens[k] = FISHEYE if cam.fisheye else PINHOLE
-            distortion[k, : len(d)] = d
-        return cls(
-            names=tuple(c.name for c in cameras),
-            matrix=np.array([c.matrix for c in cameras], dtype=np.float64),
-            camera_from_world=np.array([c.camera_from_world for c in cameras], dtype=np.float64),
-            lens=lens,
-            distortion=distortion,
-            size=np.array([c.size for c in cameras], dtype=np.int64),
-        )
-
-
-@dataclass
-class Samples:
-    """Struct-of-arrays buffers of outline samples; the first ``count`` rows are valid.
-
-    ``camera``, ``component``, ``quadric`` indices; ``pixel`` and ``normal`` in the
-    recorded (distorted) image; ``jacobian`` the row L (6); ``point`` the contour
-    point in its component's frame.
-    """
-
-    camera: np.ndarray
-    component: np.ndarray
-    quadric: np.ndarray
-    pixel: np.ndarray
-    normal: np.ndarray
-    jacobian: np.ndarray
-    point: np.ndarray
-    count: int = 0
-
-    @classmethod
-    def allocate(cls, capacity: int) -> Samples:
-        return cls(
-            camera=np.zeros(capacity, np.int64),
-            component=np.zeros(capacity, np.int64),
-            quadric=np.zeros(capacity, np.int64),
-            pixel=np.zeros((capacity, 2)),
-            normal=np.zeros((capacity, 2)),
-            jacobian=np.zeros((capacity, 6)),
-            point=np.zeros((capacity, 3)),
-        )
-
-    @property
-    def capacity(self) -> int:
-        return len(self.camera)
 
 
 @njit(cache=True, inline="always")
@@ -598,27 +522,6 @@ def outline_kernel(
                             n,
                         )
     return n
-
-
-@dataclass
-class Placed:
-    """Buffers for :func:`place`: every quadric in every camera's frame (see there)."""
-
-    camera_from: np.ndarray
-    quadric: np.ndarray
-    clip: np.ndarray
-    sphere: np.ndarray
-    cone: np.ndarray
-
-    @classmethod
-    def allocate(cls, cameras: int, quadrics: int) -> Placed:
-        return cls(
-            np.zeros((cameras, quadrics, 4, 4)),
-            np.zeros((cameras, quadrics, 4, 4)),
-            np.zeros((cameras, quadrics, 4, 4)),
-            np.zeros((cameras, quadrics, 4)),
-            np.zeros((cameras, quadrics, 6)),
-        )
 
 
 def sample_outlines(

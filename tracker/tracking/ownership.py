@@ -28,7 +28,7 @@ Speed (two numba calls per IRLS iteration, no allocation per sample):
 
 * the camera-frame quadrics, clips, bounding spheres and their cones of rays
   are the ones :func:`tracker.tracking.outline.place` made for the outlines (the
-  :class:`~tracker.tracking.outline.Placed` buffers the :class:`~tracker.tracking.track.Tracker`
+  :class:`~tracker.tracking.samples.Placed` buffers the :class:`~tracker.tracking.track.Tracker`
   owns); per call :func:`prepare` only lists, per camera and quadric, the
   quadrics whose cone of rays comes near it (the only ones its samples can meet);
 * per sample only the two ends of the search segment ``p +- (r + 1) n`` are
@@ -95,7 +95,7 @@ def prepare(cone, cam_scale, r, o_near, o_near_count):
 
 def undistort_grid(rig, *, step=GRID_STEP, margin=GRID_MARGIN):
     """Ideal normalised coordinates of the recorded pixels on a grid (C, ny, nx, 2) for the cameras of ``rig``
-    (a :class:`tracker.tracking.outline.Rig`): node (iy, ix) is the pixel (ix step - margin, iy step - margin); it
+    (a :class:`tracker.tracking.rig.Rig`): node (iy, ix) is the pixel (ix step - margin, iy step - margin); it
     covers every camera's image and ``margin`` pixels around it."""
     width = int(np.max(rig.size[:, 0]))
     height = int(np.max(rig.size[:, 1]))
@@ -479,7 +479,7 @@ class Ownership:
     """The search limits of a tracker's samples, with every buffer allocated once for a model and a rig.
 
     ``limits(placed, samples, r)`` fills ``lo``/``hi`` for the first ``samples.count`` samples, from the
-    camera-frame quadrics that the outline stage left in ``placed`` (:class:`tracker.tracking.outline.Placed`).
+    camera-frame quadrics that the outline stage left in ``placed`` (:class:`tracker.tracking.samples.Placed`).
     """
 
     def __init__(self, model, rig, capacity: int, max_range: int, grid: np.ndarray | None = None):

@@ -4,8 +4,8 @@ person's mask").
 The landmarker segments the person in each view it finds them in (:class:`tracker.keypoints.detector.Detection`:
 an S x S probability over a square of the image).  :func:`person_grid` takes it to the grid of the view's
 colour image as the region cue reads it (0 beyond the square), where the region cue joins it to each pixel's colour
-(:func:`tracker.tracking.region_cue.with_person`) and learns each part's colours only where it agrees
-(:func:`tracker.tracking.region_cue.learn_kernel`).
+(:func:`tracker.tracking.region_lines.with_person`) and learns each part's colours only where it agrees
+(:func:`tracker.tracking.region_lines.learn_kernel`).
 """
 
 from __future__ import annotations

@@ -37,9 +37,10 @@ from tracker.tracking.keypoint_cue import KeypointCue
 from tracker.tracking.lead import Lead
 from tracker.tracking.measure import Statistics
 from tracker.tracking.motion_model import LATENESS, MODELS, constant_velocity, motion_since, views_at
-from tracker.tracking.outline import Rig, sample_outlines
+from tracker.tracking.outline import sample_outlines
 from tracker.tracking.ownership import Ownership
 from tracker.tracking.person import PersonMasks
+from tracker.tracking.rig import Rig
 from tracker.tracking.settings import DYNAMICS, Settings, scaled_to
 from tracker.tracking.solve import hold_kernel, narrowing, update_kernel
 from tracker.tracking.workspace import Inspection, Workspace

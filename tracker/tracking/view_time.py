@@ -17,7 +17,7 @@ from collections.abc import Iterable
 import numpy as np
 from numba import njit
 
-from tracker.tracking.track import motion_since, views_at
+from tracker.tracking.motion_model import motion_since, views_at
 
 
 @njit(cache=True)

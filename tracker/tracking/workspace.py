@@ -11,8 +11,8 @@ import numpy as np
 from tracker.tracking.body_landmarks import LANDMARKS
 from tracker.tracking.colours import FACTOR
 from tracker.tracking.measure import Statistics
-from tracker.tracking.outline import Placed, Samples
 from tracker.tracking.ownership import Ownership
+from tracker.tracking.samples import Placed, Samples
 
 
 @dataclass(frozen=True)
@@ -20,7 +20,7 @@ class Inspection:
     """What the edge search saw at one set of poses (for viewers and the shape fit): per sample its camera,
     component, pixel and normal, the searched interval ``[lo, hi]`` along the normal, the edge offset (NaN if
     none) and the IRLS weight, its ``quadric``, its contour ``point`` (3,) in its component's frame and its
-    Jacobian row L (6,) (:class:`tracker.tracking.outline.Samples`)."""
+    Jacobian row L (6,) (:class:`tracker.tracking.samples.Samples`)."""
 
     camera: np.ndarray
     component: np.ndarray
@@ -63,7 +63,7 @@ class Workspace:
     half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one in every camera and no
     camera's is of a single colour, as a black frame a camera dropped is (``coloured``; the region cue would read it
     as the background everywhere and shrink every outline there onto nothing, docs/region.md), and
-    the region cue's mean and variance per sample (:func:`tracker.tracking.region_cue.region_kernel`); the last edge
+    the region cue's mean and variance per sample (:func:`tracker.tracking.region_lines.region_kernel`); the last edge
     search's :class:`~tracker.tracking.measure.Statistics`.
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from tracker.io.mosaic import MosaicWriter
-from tracker.tracking.track import Inspection
+from tracker.tracking.workspace import Inspection
 
 _SHIFT = 2  # sub-pixel drawing: coordinates in quarter pixels
 _BINS = 6  # weight colours

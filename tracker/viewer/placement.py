@@ -24,7 +24,8 @@ from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording, camera_frames
 from tracker.keypoints.first_pose import snap_to_edges
 from tracker.model import Model, with_descendants
-from tracker.tracking.track import Settings, Tracker
+from tracker.tracking.settings import Settings
+from tracker.tracking.track import Tracker
 from tracker.viewer.scene import Frame, Scene
 
 

@@ -21,7 +21,7 @@ import viser.transforms as vtf
 
 from tracker.atomic import atomic_write
 from tracker.model import Model, joint_centres
-from tracker.tracking.track import Inspection
+from tracker.tracking.workspace import Inspection
 from tracker.viewer.mesh import component_meshes
 from tracker.viewer.overlay import component_colours, draw
 

@@ -1,0 +1,73 @@
+"""The tuning options (tracker.commands.options): built from the settings' fields, one group per settings group,
+each flag's help ending with the field's default, and parsed back into the settings."""
+
+import argparse
+import dataclasses
+
+import pytest
+
+from tracker.commands import options
+from tracker.tracking.settings import Settings
+
+
+def _parser(which=None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="t")
+    options.add_tuning_options(parser, which)
+    return parser
+
+
+def test_every_flagged_field_is_an_option_in_its_groups_section_with_its_default():
+    parser = _parser()
+    fields = options.tuning_fields()
+    assert {"--iterations", "--spacing", "--dynamics", "--region", "--work-side"} <= set(fields)
+    titles = {group.title: group for group in parser._action_groups}
+    for flag, (group, spec) in fields.items():
+        section = titles[f"tuning: {type(getattr(Settings(), group)).__doc__.strip()}"]
+        action = next(a for a in section._group_actions if flag in a.option_strings)
+        default = getattr(getattr(Settings(), group), spec.name)
+        assert action.help.startswith(spec.metadata["help"]), flag
+        assert action.help.endswith(f"(default {options._shown(default)})"), flag
+
+
+def test_given_options_change_their_fields_and_no_other():
+    parser = _parser()
+    given = options.settings_from(
+        parser.parse_args(["--iterations", "3", "--region", "off", "--dynamics", "kalman", "--max-turn", "0.2"]), 30.0
+    )
+    expected = Settings().but(
+        solve=dict(iterations=3, max_turn=0.2), region=dict(on=False), motion=dict(dynamics="kalman", frame_rate=30.0)
+    )
+    assert given == expected
+    assert options.settings_from(parser.parse_args([])) == Settings()
+
+
+def test_a_command_offers_the_flags_it_names_and_refuses_bad_values(capsys):
+    parser = _parser(("--spacing", "--damping"))
+    assert options.settings_from(parser.parse_args(["--spacing", "6"])).outline.spacing == 6.0
+    for bad, said in (
+        (["--iterations", "3"], "unrecognized"),
+        (["--damping", "2"], "between 0 and 1"),
+        (["--spacing", "-1"], "positive number"),
+    ):
+        with pytest.raises(SystemExit):
+            parser.parse_args(bad)
+        assert said in capsys.readouterr().err
+
+
+def test_the_old_motion_flag_still_sets_the_dynamics_with_a_warning(capsys):
+    args = _parser().parse_args(["--motion", "none"])
+    assert options.settings_from(args).motion.dynamics == "none"
+    assert "--motion is now --dynamics" in capsys.readouterr().err
+
+
+def test_the_shown_defaults_read_as_a_user_would_type_them():
+    assert [options._shown(value) for value in (True, False, float("inf"), 0.6, 1e3, 480, "kalman")] == [
+        "on",
+        "off",
+        "none",
+        "0.6",
+        "1000",
+        "480",
+        "kalman",
+    ]
+    assert all(dataclasses.is_dataclass(group) for group in vars(Settings()).values())
