@@ -1,7 +1,7 @@
 """The synthetic error experiment of Metaxas & Terzopoulos (PAMI 1993, Tables I-IV), as
 restated in docs/method-physics.md, section 6.  Results, run time, the claims per seed and
-the measurements behind each choice below are in docs/physics.md; what was tried and not kept
-is in docs/history.md.
+the measurements behind each choice below are in docs/physics.md; the decisions are listed in
+CHANGELOG.md.
 
 Truth: a 123-node deformable superquadric over 20 frames whose taper and bend grow while it
 moves slowly as a rigid body and a smooth local bump grows until frame 8 (``truth``).  Data:
@@ -102,7 +102,7 @@ INITIAL_SHAPE = np.array([2.7, 0.1, 0.2, 0.7, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.2]
 INITIAL_OFFSET = np.array([0.1, -0.05, 0.1])
 """Initial centre minus the centroid of the first frame's data (the paper did not start at
 the centre of gravity).  Kept small: with nearest-node assignment a larger offset locked clean
-data into a wrong fit (docs/history.md)."""
+data into a wrong fit."""
 
 ERRORS = ("translation", "rotation", "global", "local", "position")
 """The error columns of Tables I-IV (eq 40)."""

@@ -103,7 +103,7 @@ def anchors(model: Model) -> tuple[np.ndarray, np.ndarray]:
 
 KNUCKLES = ("left_pinky", "right_pinky", "left_index", "right_index")
 """Landmarks the tracker's cue leaves out: BlazePose places the knuckles from the body's image alone, and
-they stray far more than the wrist that already marks the hand (docs/history.md); the first pose's fit still
+they stray far more than the wrist that already marks the hand; the first pose's fit still
 uses them to turn the hand."""
 
 
