@@ -290,7 +290,7 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     def pull() -> float:
         tracker.work.information[:] = 0.0
         tracker.work.eta[:] = 0.0
-        assert tracker.landmarks.add_landmarks(tracker, tracker.work, far, confidence) == (1, 0)
+        assert tracker.landmarks.add_landmarks(tracker, tracker.work, (far, confidence)) == (1, 0)
         return float(np.linalg.norm(tracker.work.eta[hand]))
 
     held = pull()
@@ -310,7 +310,7 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     fitted(0.0)
     tracker.work.information[:] = 0.0
     tracker.work.eta[:] = 0.0
-    tracker.landmarks.add_landmarks(tracker, tracker.work, far, confidence)
+    tracker.landmarks.add_landmarks(tracker, tracker.work, (far, confidence))
     assert not tracker.work.eta.any()  # held: the learnt zone stands
     # and a limb the edges do not hold does not teach its landmark's zone
     for fit, learnt in ((0.0, True), (2.0 * st.keypoints.edge_misfit, False)):
@@ -382,7 +382,7 @@ def test_a_limb_far_off_its_landmarks_is_led_to_them_and_the_rest_stays(demo_fra
     wrist = model.index("hand_l")
     start = tracker.poses.copy()  # the start, coerced
     before = 1000 * np.linalg.norm(joint_centres(start)[wrist] - joint_centres(poses)[wrist])
-    tracker.lead.move_limbs(tracker, tracker.lead.led_limbs(tracker, pixels, confidence)[0], pixels, confidence)
+    tracker.lead.move_limbs(tracker, tracker.lead.led_limbs(tracker, pixels, confidence)[0], (pixels, confidence))
     after = 1000 * np.linalg.norm(joint_centres(tracker.poses) - joint_centres(poses), axis=1)
     assert before > 300.0 and after[wrist] < 20.0, (before, after[wrist])
     np.testing.assert_array_equal(tracker.anchor, tracker.poses)  # the prediction the edges start from
@@ -465,11 +465,11 @@ def test_legs_whose_landmarks_fit_better_swapped_in_every_view_are_led_to_them_a
     assert not crossed_one and not led_one.any()
     foot_l, foot_r = model.index("foot_l"), model.index("foot_r")
     start = joint_centres(tracker.poses)
-    tracker.lead.move_limbs(tracker, led, swapped, confidence, swaps=False)
+    tracker.lead.move_limbs(tracker, led, (swapped, confidence), swaps=False)
     moved = joint_centres(tracker.poses)
     assert np.linalg.norm(moved[foot_l] - start[foot_r]) < 0.5 * np.linalg.norm(start[foot_l] - start[foot_r])
     held = Tracker(model, recording.cameras, poses)
-    held.lead.move_limbs(held, led, swapped, confidence)  # with the swap check on, the swapped landmarks pull nothing
+    held.lead.move_limbs(held, led, (swapped, confidence))  # with the swap check on, the swapped landmarks pull nothing
     np.testing.assert_allclose(held.poses, held.anchor)
     np.testing.assert_allclose(joint_centres(held.poses)[foot_l], start[foot_l], atol=1e-6)
 

@@ -8,8 +8,8 @@
 3. Each frame's pose snapped to its edges with its landmarks (:func:`tracker.keypoints.first_pose.snap_to_edges`);
    the frames the edges hold (status not lost) are kept.
 4. One round per search range of :data:`RANGES`: the parts' and the room's colours learnt over the kept frames at
-   their poses (:meth:`tracker.tracking.region_cue.RegionCue.teach`), every kept frame's outlines measured at its pose by
-   their edges and by the region cue's lines (:meth:`tracker.tracking.track.Tracker.inspect_cues`: where the
+   their poses (:meth:`tracker.tracking.region_cue.RegionCue.teach`), every kept frame's outlines measured at its pose
+   by their edges and by the region cue's lines (:meth:`tracker.tracking.track.Tracker.inspect_cues`: where the
    colours change from the part's to the room's, which a pattern inside the outline does not move), then one
    Gauss-Newton step of the shape and every frame's pose together (:func:`tracker.shape.edges.bundle_step`);
    a part is left out of a view where the detector does not see the joints at its ends (:func:`unseen_parts`)

@@ -235,11 +235,14 @@ class KeypointCue:
         hold in the last frame (:meth:`LandmarkNoise.held <tracker.tracking.landmark_noise.LandmarkNoise.held>`)
         pulls from the floor zone with no fade."""
         if self.frame is not None:
-            self.add_landmarks(tracker, work, *self.frame)
+            self.add_landmarks(tracker, work, self.frame)
 
-    def add_landmarks(self, tracker: Tracker, work: Workspace, pixels, confidence) -> tuple[int, int]:
-        """:meth:`add` of the landmarks ``pixels`` (C, 33, 2) at ``confidence`` (C, 33) float64 into ``work``;
+    def add_landmarks(
+        self, tracker: Tracker, work: Workspace, keypoints: tuple[np.ndarray, np.ndarray]
+    ) -> tuple[int, int]:
+        """:meth:`add` of the landmarks ``keypoints``, pixels (C, 33, 2) at confidence (C, 33) float64, into ``work``;
         returns (landmarks used, left/right pairs rejected)."""
+        pixels, confidence = keypoints
         st = self.settings
         held = self.noise.held(self.placer, st.edge_misfit)
         with np.errstate(divide="ignore"):

@@ -40,10 +40,11 @@ class Lead:
         self.roots = (component[None, :] == top[:, None]) & (top[:, None] >= 0)  # (K, K): each limb's root
         self.leads_leg = (self.limbs & legs[None]).any(axis=1)
 
-    def retry(self, tracker: Tracker, stats: Statistics, pixels: np.ndarray, confidence: np.ndarray) -> Statistics:
-        """Try again the limbs the edges could not reach, led by the landmarks ``pixels`` at ``confidence`` (the
+    def retry(self, tracker: Tracker, stats: Statistics, keypoints: tuple[np.ndarray, np.ndarray]) -> Statistics:
+        """Try again the limbs the edges could not reach, led by the landmarks ``keypoints`` (pixels, confidence; the
         module docstring); the frame's statistics (``stats`` as tracked, unless the try is kept)."""
         work = tracker.work
+        pixels, confidence = keypoints
         led, crossed = self.led_limbs(tracker, pixels, confidence)
         if not led.any():
             return stats
@@ -58,7 +59,7 @@ class Lead:
         before = fit(work)
         tracker.work, tracker.retry = tracker.retry, work  # the try searches in the spare buffers, the frame's kept
         tracker.work.coloured = work.coloured
-        self.move_limbs(tracker, led, pixels, confidence, swaps=not crossed)
+        self.move_limbs(tracker, led, keypoints, swaps=not crossed)
         for iteration in range(tracker.settings.solve.iterations):
             again = tracker.iterate(iteration)
         tried = tracker.work
@@ -140,14 +141,15 @@ class Lead:
         return off.any(axis=0), (away | ~judged).all(axis=0) & judged.any(axis=0)
 
     def move_limbs(
-        self, tracker: Tracker, led: np.ndarray, pixels: np.ndarray, confidence: np.ndarray, *, swaps: bool = True
+        self, tracker: Tracker, led: np.ndarray, keypoints: tuple[np.ndarray, np.ndarray], *, swaps: bool = True
     ) -> None:
-        """Move the components ``led`` (N,) bool to the landmarks ``pixels`` at ``confidence``, landmarks alone:
+        """Move the components ``led`` (N,) bool to the landmarks ``keypoints`` (pixels, confidence), alone:
         :data:`LEAD_ITERATIONS` solves of the landmarks on them, from the floor zone with no fade, while the other
         components are held where they are (their prior times :data:`PIN`) and the prior about each step's start
         damps the led ones.  The moved pose becomes the frame's prediction (the anchor).  ``swaps``: as in
         :meth:`tracker.tracking.keypoint_cue.KeypointCue.pull`."""
         work, landmarks = tracker.work, tracker.landmarks
+        pixels, confidence = keypoints
         component = landmarks.component
         chosen = np.where((component >= 0) & led[np.maximum(component, 0)], confidence, 0.0)
         prior = np.where(led[:, None, None], tracker.prior, PIN * tracker.prior)
@@ -166,5 +168,5 @@ class Lead:
                 misfit=misfit,
                 swaps=swaps,
             )
-            tracker.poses = tracker.solved(information, eta, prior, tracker.poses)
+            tracker.poses = tracker.solved(information, eta, prior=prior, poses=tracker.poses)
         tracker.anchor = tracker.poses

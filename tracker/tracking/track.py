@@ -190,12 +190,12 @@ class Tracker:
         for cue in self.cues:
             cue.add(self, work, now)
             started = work.times.add(cue.stage, started)
-        self.poses = self.solved(work.information, work.eta, self.prior, self.poses)
+        self.poses = self.solved(work.information, work.eta, prior=self.prior, poses=self.poses)
         work.times.add("solve", started)
         assert work.statistics is not None  # the edge cue's
         return work.statistics
 
-    def solved(self, information: np.ndarray, eta: np.ndarray, prior: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    def solved(self, information: np.ndarray, eta: np.ndarray, *, prior: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """``poses`` after one solve of ``information`` and ``eta`` with ``prior`` about the anchor, the trunk held
         near rest (:meth:`hold_trunk`), stepped and coerced (:func:`tracker.tracking.solve.update_kernel`)."""
         m = self.model
@@ -334,7 +334,7 @@ class Tracker:
             stats = self.iterate(iteration)
         landmarks = self.landmarks.frame
         if landmarks is not None and st.keypoints.lead > 0:
-            stats = self.lead.retry(self, stats, *landmarks)
+            stats = self.lead.retry(self, stats, landmarks)
         dragged = self.landmarks.dragged(self)
         if dragged:
             self.poses = self.anchor.copy()

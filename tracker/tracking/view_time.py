@@ -17,6 +17,7 @@ from collections.abc import Iterable
 import numpy as np
 from numba import njit
 
+from tracker.tracking.edge_cue import EdgeCue
 from tracker.tracking.motion_model import motion_since, views_at
 
 
@@ -49,7 +50,7 @@ def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, *
             if not 0.0 <= time <= len(poses) - 1:
                 continue
             tracker.sample(work, poses_at(poses, time), search)
-            tracker.measure(work, search, tracker.still)
+            EdgeCue.measure(tracker, work, search_range=search, twist=tracker.still)
             distance = np.abs(work.offset[: work.samples.count])
             column[row] = np.where(np.isfinite(distance), np.minimum(distance, search), search).sum(), len(distance)
         columns[index] = column
