@@ -60,6 +60,24 @@ def test_help_says_what_the_tracker_does(capsys):
     assert "3-D pose" in out and "no algorithm here" not in out
 
 
+def test_tracker_alone_prints_its_help(capsys, monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["tracker"])
+    assert main() == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: tracker") and "3-D pose" in out and "track" in out and "eval" in out
+
+
+def test_version_is_the_installed_packages(capsys):
+    from importlib.metadata import version
+
+    import tracker
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out == f"tracker {version('tracker')}\n" == f"tracker {tracker.__version__}\n"
+
+
 def _number(pattern: str, text: str) -> str:
     """The first group of ``pattern``'s one match in ``text`` (the test fails when it matches none or several)."""
     found = re.findall(pattern, text)

@@ -15,6 +15,7 @@ import os
 import sys
 import warnings
 
+from tracker import __version__
 from tracker.commands import (
     background,
     batch,
@@ -67,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
         "calibrate the cameras, track a recording or live cameras, review it in the browser, export the poses.",
         epilog="Start with: tracker track RECORDING (docs/own-rig.md); options: tracker COMMAND --help.",
     )
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {__version__}", help="print the tracker's version and exit"
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     for name, command in COMMANDS.items():
         subparser = sub.add_parser(name, help=command.HELP)
@@ -86,6 +90,10 @@ def main(argv: list[str] | None = None) -> int:
 
     cv2.setNumThreads(1)  # the reader threads already run in parallel; OpenCV's own pool only contends
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv:  # `tracker` alone: what it can do, not a usage error
+        parser.print_help()
+        return 0
     args = parser.parse_args(argv)
     warnings.showwarning = _show_warning
     try:
