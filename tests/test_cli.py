@@ -2,6 +2,7 @@
 
 import argparse
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from tracker.cli import main
+from tracker.cli import COMMANDS, build_parser, main
 from tracker.evaluate import evaluate
 from tracker.io.poses import load_poses
 
@@ -76,6 +77,22 @@ def test_version_is_the_installed_packages(capsys):
         main(["--version"])
     assert stop.value.code == 0
     assert capsys.readouterr().out == f"tracker {version('tracker')}\n" == f"tracker {tracker.__version__}\n"
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_each_commands_help_opens_with_what_it_does_and_an_example(name, capsys):
+    """After a short usage line (no list of every option), the help says what the command does in the module's
+    words, then shows an example that the parser takes, before any option."""
+    command = COMMANDS[name]
+    with pytest.raises(SystemExit) as stop:
+        main([name, "--help"])
+    assert stop.value.code == 0
+    usage, opening, example, options = capsys.readouterr().out.split("\n\n", 3)
+    assert usage.startswith(f"usage: tracker {name} [options]") and len(usage.splitlines()) <= 2
+    assert " ".join(opening.split()) == " ".join(command.ABOUT.split())
+    assert example == f"example:\n  {command.EXAMPLE}" and shlex.split(command.EXAMPLE)[:2] == ["tracker", name]
+    assert "--" in options
+    build_parser().parse_args(shlex.split(command.EXAMPLE)[1:])
 
 
 def _number(pattern: str, text: str) -> str:
@@ -271,7 +288,7 @@ def test_work_side_sets_the_search_reduction():
 def test_output_cut_short_ends_quietly(tiny_recording):
     """``tracker ... | head``: the reader goes away mid-output; exit 141 as a shell reports it, no traceback."""
     code = (
-        "import sys; from tracker.cli import main\n"
+        "import sys; from tracker.cli import COMMANDS, build_parser, main\n"
         "import tracker.commands.evaluate as e\n"
         "def run(args):\n"
         "    while True: print('row ' * 100)\n"

@@ -10,6 +10,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "estimate the empty scene with a tracked run's body masked out, for tracker track --background"
 
+ABOUT = (
+    "Make a picture of the empty scene for each camera from a tracked run: the median of many frames with the "
+    "tracked body masked out. tracker track --background then searches the body's edges in the difference from "
+    "it, which helps in a cluttered room."
+)
+EXAMPLE = "tracker background myrec"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker background``."""

@@ -28,6 +28,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "track many recording folders, one Ray task each, locally or on a cluster"
 
+ABOUT = (
+    "Track many recording folders, several at a time, on this machine or on a Ray cluster, each as tracker track "
+    "would, into its own folder under OUT, with a summary of all in OUT/summary.csv. Run it again after a stop "
+    "and it goes on with the recordings not yet done."
+)
+EXAMPLE = "tracker batch 'data/*' --out results"
+
 RETRIES = 2
 """Tries after the first for a recording whose task crashed."""
 

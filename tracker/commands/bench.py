@@ -10,6 +10,13 @@ from tracker.commands import options
 
 HELP = "per-stage timings, frames per second and the decode-only floor"
 
+ABOUT = (
+    "Time the tracker on a recording (by default the demo that comes with it): each stage of a frame, the frames "
+    "per second, and how fast the videos decode alone, the most tracking could reach. --scaling times it against "
+    "the number of body parts and cameras; --long tracks many frames and reports the memory used."
+)
+EXAMPLE = "tracker bench"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker bench``."""

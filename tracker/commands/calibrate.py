@@ -10,6 +10,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "calibrate a camera rig from videos or photos of a board"
 
+ABOUT = (
+    "Find each camera's lens and position from videos or photos of a printed chessboard or ChArUco board filmed "
+    "by every camera at once, and write the calibration.toml a recording folder needs. It prints how many pixels "
+    "each camera's board corners miss by."
+)
+EXAMPLE = "tracker calibrate boards/ --board charuco:7x5:0.04:0.03:DICT_4X4_50 --out myrec/calibration.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker calibrate``."""

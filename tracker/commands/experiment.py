@@ -9,6 +9,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "the physics paper's experiments: Tables I-IV, or the insect"
 
+ABOUT = (
+    "Run again the experiments of the physics paper the points tracker follows: the error analysis of its Tables "
+    "I-IV (parts fitted at four data densities and four noise levels, printed beside the paper's values), or the "
+    "insect tracked from dense and sparse points."
+)
+EXAMPLE = "tracker experiment superquadric"
+
 
 def percentage_list(text: str) -> tuple[int, ...]:
     """Argument type: comma-separated percentages 1-100."""

@@ -8,6 +8,13 @@ from tracker.commands.options import positive_float
 
 HELP = "write poses.npz as TRC, C3D, BVH or CSV for other tools"
 
+ABOUT = (
+    "Write a tracked run (poses.npz) in a format other tools read: TRC for OpenSim and Pose2Sim, C3D for motion-"
+    "capture software, BVH for Blender (it needs the body model) or CSV for a spreadsheet. The file goes beside "
+    "POSES unless --out names another."
+)
+EXAMPLE = "tracker export out/demo/poses.npz --to trc"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker export``."""

@@ -10,6 +10,13 @@ from tracker.commands import options
 
 HELP = "fit a body model's joints and part sizes to the person in a recording, write a model TOML"
 
+ABOUT = (
+    "Measure the person in a recording: fit a body model's joint positions and part sizes (lengths and radii) to "
+    "the keypoint detector's landmarks, then to the outlines in the images, and write the fitted model for "
+    "tracker track --model. It needs two cameras or more."
+)
+EXAMPLE = "tracker fit-model recordings/demo --out me.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker fit-model``."""

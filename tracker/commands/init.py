@@ -13,6 +13,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "place the first pose by hand in the browser viewer and save init.toml"
 
+ABOUT = (
+    "Place the body in the first frame by hand in the web browser (move and turn the body and each limb, or let "
+    "it snap to the images) and save the pose as the init.toml that tracker track starts from. It starts from the"
+    " recording's init.toml, else from the pose fitted to the keypoint detector's landmarks."
+)
+EXAMPLE = "tracker init recordings/demo --out my-init.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker init``."""

@@ -10,6 +10,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "detect BlazePose's 33 landmarks in every camera and frame, write DIR/keypoints.npz"
 
+ABOUT = (
+    "Run the 2-D keypoint detector (BlazePose: 33 landmarks of the body) over every camera and frame of a "
+    "recording and write OUT/keypoints.npz, from which tracker track, fit-model and sync then take the detections"
+    " instead of detecting them again."
+)
+EXAMPLE = "tracker keypoints recordings/demo --out out/demo"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker keypoints``."""

@@ -19,6 +19,16 @@ from tracker.errors import TrackerInputError
 
 HELP = "track cameras live (V4L2 through OpenCV), optionally recording them"
 
+ABOUT = (
+    "Track the body from cameras plugged into this machine (or from video files played in real time) as the "
+    "frames arrive, and write the poses to OUT/poses.npz; --view shows it in the browser as it goes and --record "
+    "keeps the frames as a recording folder."
+)
+EXAMPLE = (
+    "tracker live --camera /dev/video0 --camera /dev/video2 --calib rig.toml --model models/human.toml --init "
+    "init.toml --view"
+)
+
 
 def size(text: str) -> tuple[int, int]:
     """Argument type: WIDTHxHEIGHT in pixels."""

@@ -13,6 +13,12 @@ from tracker.commands.viewing import serve
 
 HELP = "fit and track a deformable multi-part model to 3-D markers (C3D, TRC)"
 
+ABOUT = (
+    "Fit a model of joined, deformable parts to 3-D marker positions from motion capture (C3D or TRC), follow it "
+    "through the frames and write OUT/poses.npz and OUT/shapes.npz; --view shows the fitted parts in the browser."
+)
+EXAMPLE = "tracker points tests/data/markers/Vicon.c3d --model models/vicon_arm.points.toml --frames 40"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker points``."""

@@ -11,6 +11,12 @@ from tracker.errors import TrackerInputError
 
 HELP = "refine the rig's extrinsics to the outlines of a tracked body, write a calibration.toml"
 
+ABOUT = (
+    "Correct the cameras' positions in the calibration so that the outline of a tracked body fits every camera's "
+    "images better, and write the corrected calibration; track again with --calib to use it."
+)
+EXAMPLE = "tracker refine myrec --out myrec/refined.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker refine``."""

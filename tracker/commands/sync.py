@@ -16,6 +16,13 @@ if TYPE_CHECKING:
 
 HELP = "find each camera's capture-time offset from the body's motion, write REC/sync.toml"
 
+ABOUT = (
+    "For cameras that do not record in step (webcams, phones, action cameras), find how much later or earlier "
+    "each one's frames were taken than the first camera's, from the body's motion the keypoint detector sees, and"
+    " write it to REC/sync.toml, which tracker track then reads."
+)
+EXAMPLE = "tracker sync myrec"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker sync``."""

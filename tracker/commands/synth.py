@@ -8,6 +8,13 @@ from tracker.commands.options import camera_names, camera_seconds, positive_floa
 
 HELP = "render a recording with ground truth from a model, a rig and a motion"
 
+ABOUT = (
+    "Render a test recording whose true poses are known: a body model going through a motion, filmed by the "
+    "cameras of a calibration, written as a recording folder with its truth.npz (and init.toml), ready for "
+    "tracker track and tracker eval."
+)
+EXAMPLE = "tracker synth --model models/human.toml --calib calib/ring4.toml --motion procedural --out out/ring"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker synth``: what to render, and how the render departs from the plain model."""

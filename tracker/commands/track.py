@@ -14,6 +14,15 @@ from tracker.errors import TrackerInputError
 
 HELP = "track a recording folder, write DIR/poses.npz and print a summary"
 
+ABOUT = (
+    "Follow the body through a recording folder (its calibration.toml and one video per camera) and write the "
+    "pose of every frame to OUT/poses.npz. Without a model.toml in the folder it first fits the standard human "
+    "model to the person; without an init.toml it finds the first pose with the keypoint detector. At the end it "
+    "says how well the frames were followed, which files it wrote and, when the folder holds the true poses "
+    "(truth.npz), how close the tracked joints came to them."
+)
+EXAMPLE = "tracker track recordings/demo --frames 40 --out out/demo"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker track``."""

@@ -10,6 +10,13 @@ from tracker.commands.viewing import scene, serve
 
 HELP = "review poses.npz over its recording in the browser viewer"
 
+ABOUT = (
+    "Open a tracked run (poses.npz) over its recording in the web browser: the body drawn over every camera's "
+    "images, the 3-D scene, and a timeline to play or step through the frames. With --record it writes the "
+    "session to a .viser file, which plays in a browser without the tracker, and returns."
+)
+EXAMPLE = "tracker view recordings/demo --poses out/demo/poses.npz"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker view``."""
