@@ -95,6 +95,18 @@ def test_each_commands_help_opens_with_what_it_does_and_an_example(name, capsys)
     build_parser().parse_args(shlex.split(command.EXAMPLE)[1:])
 
 
+def test_track_help_groups_what_it_reads_writes_and_shows(capsys):
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    sections = {}
+    for block in capsys.readouterr().out.split("\n\n"):
+        title, _, body = block.partition("\n")
+        sections[title] = re.findall(r"(?m)^  (-[-\w]+|[A-Z]+)", body)
+    assert sections["inputs:"] == ["RECORDING", "--model", "--init", "--cameras", "--calib", "--start", "--frames"]
+    assert sections["outputs:"] == ["--out", "--quiet", "--overlay"]
+    assert sections["viewer:"] == ["--view", "--view-rate", "--host", "--port", "--record"]
+
+
 def _number(pattern: str, text: str) -> str:
     """The first group of ``pattern``'s one match in ``text`` (the test fails when it matches none or several)."""
     found = re.findall(pattern, text)

@@ -17,8 +17,9 @@ EXAMPLE = "tracker eval out/demo/poses.npz recordings/demo/truth.npz"
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``tracker eval``: the poses and the truth."""
-    parser.add_argument("poses")
-    parser.add_argument("truth")
+    inputs = parser.add_argument_group("inputs")
+    inputs.add_argument("poses", metavar="POSES", help="poses.npz of a tracked run")
+    inputs.add_argument("truth", metavar="TRUTH", help="truth.npz: the true joints of the same recording")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -64,8 +64,9 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         metavar="LIST",
         help="superquadric: comma-separated noise variances (default 10,5,1,0)",
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    outputs = parser.add_argument_group("outputs")
+    outputs.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,17 +26,22 @@ EXAMPLE = "tracker track recordings/demo --frames 40 --out out/demo"
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker track``."""
-    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
-    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
-    options.add_tracking_options(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument(
+        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
+    )
+    outputs.add_argument("--out", help="output folder (default: out/<recording name>)")
+    options.add_tracking_options(parser, inputs=inputs)
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
+    outputs.add_argument(
         "--overlay",
         metavar="VIDEO",
         help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches",
     )
-    options.add_live_view_options(parser, "then review the result")
-    options.add_viewer_options(parser)
+    options.add_live_view_options(viewer, "then review the result")
+    options.add_viewer_options(viewer)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -20,18 +20,20 @@ EXAMPLE = "tracker view recordings/demo --poses out/demo/poses.npz"
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker view``."""
-    parser.add_argument("recording", help="recording folder")
-    parser.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
-    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    options.add_recording_options(parser)
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    inputs.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
+    inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    options.add_recording_options(inputs)
+    inputs.add_argument(
         "--background",
         metavar="DIR",
         help="the empty scene a run was tracked against (tracker track --background; a median one "
         "is saved in OUT/background): the panels then show and search the difference images",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar while recording")
-    options.add_viewer_options(parser)
+    options.add_viewer_options(viewer)
+    viewer.add_argument("--quiet", action="store_true", help="no progress bar while recording")
 
 
 def run(args: argparse.Namespace) -> int:
