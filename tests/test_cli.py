@@ -43,6 +43,31 @@ def test_track_writes_poses_and_summary(tiny_recording, tmp_path, capsys):
     assert sum(counts) == 6 and counts[0] == (poses["status"] == 0).sum()
     assert _number(r"(?m)^MPJPE ([\d.]+) mm", out) == f"{report.mpjpe_mm:.1f}"
     assert _number(r"PCK@50mm ([\d.]+)%", out) == f"{100 * report.pck:.1f}"
+    assert "truth.npz over frames 0..5:" in out and "not tracked" not in out
+    assert sorted(_files_listed(out)) == [str(path) for path in sorted((tmp_path / "out").iterdir())]  # every one
+
+
+def test_track_summary_scores_the_frames_asked_for_and_says_what_it_left_out(tiny_recording, tmp_path, capsys):
+    """With --start/--frames the summary's accuracy is over those frames, as eval scores the same poses against
+    the same frames of the truth, and it names the truth's frames it leaves out; the files it lists are there."""
+    out = tmp_path / "out"
+    assert main(["track", str(tiny_recording), "--out", str(out), "--start", "1", "--frames", "3", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    truth = load_poses(tiny_recording / "truth.npz")
+    asked = {key: truth[key][1:4] for key in ("joints", "frame")} | {"joint_names": truth["joint_names"]}
+    report = evaluate(load_poses(out / "poses.npz"), asked)
+    assert "over frames 1..3, the ones asked for; its other 3 frames were not tracked" in printed
+    assert "tracker eval counts them as lost" in printed
+    assert _number(r"frames (\d+), lost (\d+)", printed) == ("3", str(report.lost_frames))
+    assert _number(r"(?m)^MPJPE ([\d.]+) mm", printed) == f"{report.mpjpe_mm:.1f}"
+    assert str(out / "poses.npz") in _files_listed(printed)
+    assert all(Path(path).exists() for path in _files_listed(printed))
+
+
+def _files_listed(printed: str) -> list[str]:
+    """The paths the summary lists under "files of this run:", in its order."""
+    listed = printed.split("files of this run:\n", 1)[1]
+    return [line.split()[0] for line in listed.splitlines() if line.startswith("  ")]
 
 
 def test_eval_prints_report(tiny_recording, capsys):

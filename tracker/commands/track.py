@@ -63,8 +63,8 @@ def run(args: argparse.Namespace) -> int:
         view=view,
         bar=functools.partial(options.bar, args),
     )
-    print(f"wrote {outcome.poses} ({outcome.frames} frames)")
     if outcome.interrupted:
+        print(f"wrote {outcome.poses} ({outcome.frames} frames)")
         print("interrupted: the frames done so far are saved", file=sys.stderr)
         return 130
     print_summary(outcome)
