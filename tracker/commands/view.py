@@ -51,11 +51,13 @@ def run(args: argparse.Namespace) -> int:
         background = load_background(args.background, rec)
     truth = options.truth(rec)
     tracker = Tracker(model, rec.cameras, results["poses"][0], settings)
-    review = Review(scene(args, rec, model, settings=settings, truth=truth), rec, tracker, results, truth, background)
+    shown = scene(args, rec, model, settings=settings, truth=truth, quiet=bool(args.record))
+    review = Review(shown, rec, tracker, results, truth, background)
     review.show(0)
-    if args.record:
+    if args.record:  # a file, not a viewer to open: the server that drew it goes without a word
         review.record(Path(args.record), progress=not args.quiet)
         review.close()
+        shown.server.stop()
         print(f"wrote {args.record}")
         return 0
     return serve(f"reviewing {poses_path} ({len(results['frame'])} frames)", review)
