@@ -2,6 +2,7 @@
 
 import argparse
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from tracker.cli import main
+from tracker.cli import COMMANDS, build_parser, main
 from tracker.evaluate import evaluate
 from tracker.io.poses import load_poses
 
@@ -42,6 +43,31 @@ def test_track_writes_poses_and_summary(tiny_recording, tmp_path, capsys):
     assert sum(counts) == 6 and counts[0] == (poses["status"] == 0).sum()
     assert _number(r"(?m)^MPJPE ([\d.]+) mm", out) == f"{report.mpjpe_mm:.1f}"
     assert _number(r"PCK@50mm ([\d.]+)%", out) == f"{100 * report.pck:.1f}"
+    assert "truth.npz over frames 0..5:" in out and "not tracked" not in out
+    assert sorted(_files_listed(out)) == [str(path) for path in sorted((tmp_path / "out").iterdir())]  # every one
+
+
+def test_track_summary_scores_the_frames_asked_for_and_says_what_it_left_out(tiny_recording, tmp_path, capsys):
+    """With --start/--frames the summary's accuracy is over those frames, as eval scores the same poses against
+    the same frames of the truth, and it names the truth's frames it leaves out; the files it lists are there."""
+    out = tmp_path / "out"
+    assert main(["track", str(tiny_recording), "--out", str(out), "--start", "1", "--frames", "3", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    truth = load_poses(tiny_recording / "truth.npz")
+    asked = {key: truth[key][1:4] for key in ("joints", "frame")} | {"joint_names": truth["joint_names"]}
+    report = evaluate(load_poses(out / "poses.npz"), asked)
+    assert "over frames 1..3, the ones asked for; its other 3 frames were not tracked" in printed
+    assert "tracker eval counts them as lost" in printed
+    assert _number(r"frames (\d+), lost (\d+)", printed) == ("3", str(report.lost_frames))
+    assert _number(r"(?m)^MPJPE ([\d.]+) mm", printed) == f"{report.mpjpe_mm:.1f}"
+    assert str(out / "poses.npz") in _files_listed(printed)
+    assert all(Path(path).exists() for path in _files_listed(printed))
+
+
+def _files_listed(printed: str) -> list[str]:
+    """The paths the summary lists under "files of this run:", in its order."""
+    listed = printed.split("files of this run:\n", 1)[1]
+    return [line.split()[0] for line in listed.splitlines() if line.startswith("  ")]
 
 
 def test_eval_prints_report(tiny_recording, capsys):
@@ -58,6 +84,52 @@ def test_help_says_what_the_tracker_does(capsys):
     assert stop.value.code == 0
     out = capsys.readouterr().out
     assert "3-D pose" in out and "no algorithm here" not in out
+
+
+def test_tracker_alone_prints_its_help(capsys, monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["tracker"])
+    assert main() == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: tracker") and "3-D pose" in out and "track" in out and "eval" in out
+
+
+def test_version_is_the_installed_packages(capsys):
+    from importlib.metadata import version
+
+    import tracker
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out == f"tracker {version('tracker')}\n" == f"tracker {tracker.__version__}\n"
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_each_commands_help_opens_with_what_it_does_and_an_example(name, capsys):
+    """After a short usage line (no list of every option), the help says what the command does in the module's
+    words, then shows an example that the parser takes, before any option."""
+    command = COMMANDS[name]
+    with pytest.raises(SystemExit) as stop:
+        main([name, "--help"])
+    assert stop.value.code == 0
+    usage, opening, example, options = capsys.readouterr().out.split("\n\n", 3)
+    assert usage.startswith(f"usage: tracker {name} [options]") and len(usage.splitlines()) <= 2
+    assert " ".join(opening.split()) == " ".join(command.ABOUT.split())
+    assert example == f"example:\n  {command.EXAMPLE}" and shlex.split(command.EXAMPLE)[:2] == ["tracker", name]
+    assert "--" in options
+    build_parser().parse_args(shlex.split(command.EXAMPLE)[1:])
+
+
+def test_track_help_groups_what_it_reads_writes_and_shows(capsys):
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    sections = {}
+    for block in capsys.readouterr().out.split("\n\n"):
+        title, _, body = block.partition("\n")
+        sections[title] = re.findall(r"(?m)^  (-[-\w]+|[A-Z]+)", body)
+    assert sections["inputs:"] == ["RECORDING", "--model", "--init", "--cameras", "--calib", "--start", "--frames"]
+    assert sections["outputs:"] == ["--out", "--quiet", "--overlay"]
+    assert sections["viewer:"] == ["--view", "--view-rate", "--host", "--port", "--record"]
 
 
 def _number(pattern: str, text: str) -> str:
@@ -253,7 +325,7 @@ def test_work_side_sets_the_search_reduction():
 def test_output_cut_short_ends_quietly(tiny_recording):
     """``tracker ... | head``: the reader goes away mid-output; exit 141 as a shell reports it, no traceback."""
     code = (
-        "import sys; from tracker.cli import main\n"
+        "import sys; from tracker.cli import COMMANDS, build_parser, main\n"
         "import tracker.commands.evaluate as e\n"
         "def run(args):\n"
         "    while True: print('row ' * 100)\n"

@@ -11,4 +11,9 @@ small motion is a body twist ``(v, w)`` (6,), translation first, applied on the 
 symbols stand (``E_i`` world_from_component, ``P_k`` camera_from_world).
 """
 
-__version__ = "0.1.0"
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("tracker")
+except PackageNotFoundError:  # run from a source tree that was never installed (pip install -e .)
+    __version__ = "unknown (not installed)"

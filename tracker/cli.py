@@ -3,7 +3,8 @@
 Bad input raises :class:`TrackerInputError` and exits with code 2 and one line;
 an interrupted run (Ctrl-C) keeps the frames already written and exits 130; output whose reader
 stopped early (``| head``) ends the command quietly with 141, as a shell reports a broken pipe.
-Each subcommand's options and body are in its module under :mod:`tracker.commands`.
+Each subcommand's options, help and body are in its module under :mod:`tracker.commands`; every help opens with
+what the command does and an example.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import os
 import sys
 import warnings
 
+from tracker import __version__
 from tracker.commands import (
     background,
     batch,
@@ -37,40 +39,76 @@ from tracker.commands import (
 )
 from tracker.errors import TrackerInputError
 
-COMMANDS = {
+COMMANDS = {  # in the order a newcomer meets them: track, look, score, export; then their own rig; then the rest
     "track": track,
-    "background": background,
-    "refine": refine,
     "view": view,
+    "eval": evaluate,
+    "export": export,
     "init": init,
     "fit-model": fit_model,
-    "eval": evaluate,
-    "synth": synth,
-    "sync": sync,
-    "suite": suite,
-    "live": live,
     "calibrate": calibrate,
-    "export": export,
+    "sync": sync,
+    "live": live,
+    "batch": batch,
+    "background": background,
+    "refine": refine,
     "keypoints": keypoints,
+    "synth": synth,
+    "suite": suite,
+    "bench": bench,
     "points": points,
     "experiment": experiment,
-    "bench": bench,
-    "batch": batch,
 }
+
+
+class _Paragraphs(argparse.HelpFormatter):
+    """Help text as paragraphs split by blank lines: each filled to the terminal's width, except one with an indented
+    line (an example command), which is kept as written."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        fill = super()._fill_text
+        return "\n\n".join(
+            paragraph if "\n " in paragraph else fill(paragraph, width, indent) for paragraph in text.split("\n\n")
+        )
+
+
+def _opening(about: str, example: str) -> str:
+    """A help's opening: what the command does, then an example of it."""
+    return f"{about}\n\nexample:\n  {example}"
+
+
+def _short_usage(parser: argparse.ArgumentParser) -> str:
+    """The usage line with only what must be given (the arguments and required options): the full one lists every
+    option and fills a screen before the help says what the command does."""
+    needed = [action for action in parser._actions if action.required or not action.option_strings]
+    formatter = parser._get_formatter()
+    formatter.add_usage(None, needed, [], prefix="")
+    return f"%(prog)s [options] {formatter.format_help().strip().removeprefix(parser.prog).strip()}"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``tracker`` parser: one subparser per command, whose ``run`` default is the command's body."""
     parser = argparse.ArgumentParser(
         prog="tracker",
-        description="Follow the 3-D pose of a person or other articulated body in calibrated multi-camera video: "
-        "calibrate the cameras, track a recording or live cameras, review it in the browser, export the poses.",
-        epilog="Start with: tracker track RECORDING (docs/own-rig.md); options: tracker COMMAND --help.",
+        description=_opening(
+            "Follow the 3-D pose of a person or other articulated body in calibrated multi-camera video: calibrate "
+            "the cameras, track a recording or live cameras, review it in the browser, export the poses. Start with "
+            "the demo recording that comes with the tracker; your own cameras: docs/own-rig.md.",
+            "tracker track recordings/demo --frames 40 --out out/demo",
+        ),
+        epilog="What each command does, with an example and its options: tracker COMMAND --help.",
+        formatter_class=_Paragraphs,
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {__version__}", help="print the tracker's version and exit"
+    )
+    sub = parser.add_subparsers(dest="command", required=True, title="commands", metavar="COMMAND")
     for name, command in COMMANDS.items():
-        subparser = sub.add_parser(name, help=command.HELP)
+        subparser = sub.add_parser(
+            name, help=command.HELP, description=_opening(command.ABOUT, command.EXAMPLE), formatter_class=_Paragraphs
+        )
         command.add_options(subparser)
+        subparser.usage = _short_usage(subparser)
         subparser.set_defaults(run=command.run)
     return parser
 
@@ -86,6 +124,10 @@ def main(argv: list[str] | None = None) -> int:
 
     cv2.setNumThreads(1)  # the reader threads already run in parallel; OpenCV's own pool only contends
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv:  # `tracker` alone: what it can do, not a usage error
+        parser.print_help()
+        return 0
     args = parser.parse_args(argv)
     warnings.showwarning = _show_warning
     try:

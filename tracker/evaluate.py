@@ -85,6 +85,14 @@ def evaluate(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray], pck_thr
     )
 
 
+def truth_within(truth: dict[str, np.ndarray], start: int, stop: int) -> dict[str, np.ndarray]:
+    """The joints of ``truth`` (truth.npz arrays) in frames ``start``..``stop - 1`` only, with their frame numbers:
+    what :func:`evaluate` scores a run of those frames against."""
+    frames = _frame_numbers(truth)
+    kept = (frames >= start) & (frames < stop)
+    return {"joint_names": truth["joint_names"], "joints": truth["joints"][kept], "frame": frames[kept]}
+
+
 def _frame_numbers(arrays: dict[str, np.ndarray]) -> np.ndarray:
     """The ``frame`` array, or 0..F-1 when there is none."""
     return arrays["frame"] if "frame" in arrays else np.arange(len(arrays["joints"]))

@@ -71,6 +71,19 @@ def test_view_of_poses_from_another_model_is_a_one_line_error(tracked, tmp_path,
     assert "do not match the model" in capsys.readouterr().err
 
 
+def test_view_record_writes_the_session_and_says_only_that(tracked, tmp_path, capsys):
+    """--record writes a file: no viewer address, no banner of viser's server and no "Server stopped"."""
+    recording, results = tracked
+    np.savez(tmp_path / "poses.npz", **results)
+    session = tmp_path / "review.viser"
+    argv = ["view", str(recording), "--poses", str(tmp_path / "poses.npz"), "--record", str(session), "--quiet"]
+    assert main([*argv, "--port", "0"]) == 0
+    printed = capsys.readouterr()
+    assert printed.out == f"wrote {session}\n"
+    assert "viser" not in printed.err and "http" not in printed.err
+    assert session.stat().st_size > 6 * 5000
+
+
 def test_record_without_view_is_refused(tiny_recording, tmp_path, capsys):
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--record", str(tmp_path / "a.viser")]) == 2
     assert "add --view" in capsys.readouterr().err

@@ -65,17 +65,21 @@ class Outcome:
     counts: dict[int, int]  # frames per status (tracker.status)
     declined: int | None  # re-seeds the edges declined; None without the keypoint cue
     interrupted: bool  # stopped by Ctrl-C: the frames done are written
-    report: Report | None  # the accuracy against the recording's truth.npz, when it has one
+    files: tuple[tuple[Path, str], ...]  # the files the run wrote, each with what it holds
+    report: Report | None  # the accuracy against the recording's truth.npz over ``span``, when it has one
+    span: range  # the frames asked for (--start, --frames): the frames of the truth the report scores
+    unscored: int  # the truth's frames outside ``span``, left out of the report
     review: Callable[[], Review] | None = dataclasses.field(default=None, compare=False)  # view: the review to serve
 
 
 def print_summary(outcome: Outcome) -> None:
-    """What a finished run prints after the file it wrote: speed, residual, status counts and the accuracy."""
+    """What a finished run prints: speed, residual, status counts, the accuracy over the frames asked for (and how
+    many frames of the truth that leaves out), and the files it wrote."""
     from tracker.evaluate import format_report
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
     print(f"frames per second: {outcome.fps:.1f} ({outcome.views} views, {outcome.iterations} iterations per frame)")
-    print(f"mean residual: {outcome.residual:.2f} px")
+    print(f"mean residual: {outcome.residual:.2f} px (how far the body's outline lies from the image edges it found)")
     counts = outcome.counts
     reseeded = ""
     if outcome.declined is not None:
@@ -83,7 +87,17 @@ def print_summary(outcome: Outcome) -> None:
         reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({declined})"
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
     if outcome.report is not None:
+        scored = f"accuracy against the recording's truth.npz over frames {outcome.span.start}..{outcome.span.stop - 1}"
+        if outcome.unscored:
+            print(f"{scored}, the ones asked for; its other {outcome.unscored} frames were not tracked")
+            print("(--start, --frames) and are left out here, while tracker eval counts them as lost:")
+        else:
+            print(f"{scored}:")
         print(format_report(outcome.report))
+    width = max(len(str(path)) for path, _ in outcome.files)
+    print("files of this run:")
+    for path, holds in outcome.files:
+        print(f"  {str(path):<{width}}  {holds}")
 
 
 def track(
@@ -104,7 +118,7 @@ def track(
     import numpy as np
 
     from tracker.apps.loop import Tracked, track_frames
-    from tracker.evaluate import evaluate
+    from tracker.evaluate import evaluate, truth_within
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
@@ -120,6 +134,7 @@ def track(
             f"{rec.path}: --start {start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
     stop = rec.frame_count if tracking.frames is None else min(rec.frame_count, start + tracking.frames)
+    asked = range(start, stop)
     model = _model(tracking.model, rec, out, step, bar)
     background = _background(tracking.background, rec, out, bar)
     init, begin, back_to = _first_pose(tracking.init, start, rec, model, stop, out, settings, step)
@@ -240,7 +255,8 @@ def track(
     done = run.frames + (0 if before is None else len(before["frame"]))
     poses = out / "poses.npz"
     results = load_poses(poses) if not run.interrupted and (truth is not None or live is not None) else None
-    report = evaluate(results, truth) if results is not None and truth is not None else None
+    scored = None if truth is None else truth_within(truth, asked.start, asked.stop)
+    report = evaluate(results, scored) if results is not None and scored is not None else None
     review: Callable[[], Review] | None = None
     if live is not None and results is not None and done > 0:
         from tracker.viewer.review import Review
@@ -262,9 +278,34 @@ def track(
         counts=counts,
         declined=None if recovery is None else recovery.declined + back.declined,
         interrupted=run.interrupted or back.interrupted,
+        files=_files(rec, tracking, out, frames=done, overlay=overlay, view=view),
         report=report,
+        span=asked,
+        unscored=0 if truth is None or scored is None else len(truth["joints"]) - len(scored["joints"]),
         review=review,
     )
+
+
+def _files(
+    rec, tracking: Tracking, out: Path, *, frames: int, overlay: str | None, view: Viewing | None
+) -> tuple[tuple[Path, str], ...]:
+    """The files a run of ``tracking`` on ``rec`` wrote (in ``out``, and ``overlay`` and ``view``'s recording when
+    asked for), each with what it holds for the user."""
+    from tracker.keypoints.detect import cache_file
+
+    files = [(out / "poses.npz", f"the pose of each of the {frames} frames: tracker view, eval and export read it")]
+    if not tracking.model and rec.model_path is None:  # as _model: fitted to the person
+        files.append((out / "model.toml", "the body model fitted to the person: pass it with --model to reuse it"))
+    keypoints = cache_file(out, rec)
+    if tracking.keypoints and keypoints.is_file():
+        files.append((keypoints, "the keypoint detector's landmarks, reused when this recording is tracked again"))
+    if tracking.background == "median":
+        files.append((out / "background", "the empty scene: pass it with --background to reuse it"))
+    if overlay:
+        files.append((Path(overlay), "the tracked outlines drawn over every camera's video"))
+    if view is not None and view.record is not None:
+        files.append((view.record, "the viewer session: it plays in a browser without the tracker"))
+    return tuple(files)
 
 
 BACK_CHUNK = 30

@@ -10,14 +10,23 @@ from tracker.errors import TrackerInputError
 
 HELP = "estimate the empty scene with a tracked run's body masked out, for tracker track --background"
 
+ABOUT = (
+    "Make a picture of the empty scene for each camera from a tracked run: the median of many frames with the "
+    "tracked body masked out. tracker track --background then searches the body's edges in the difference from "
+    "it, which helps in a cluttered room."
+)
+EXAMPLE = "tracker background myrec"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker background``."""
-    parser.add_argument("recording", help="recording folder")
-    parser.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
-    parser.add_argument("--model", help="body model TOML it was tracked with (default: the recording's model.toml)")
-    parser.add_argument("--out", help="folder for <camera>.png (default: background-cleared beside the poses)")
-    options.add_recording_options(parser)
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    inputs.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
+    inputs.add_argument("--model", help="body model TOML it was tracked with (default: the recording's model.toml)")
+    outputs.add_argument("--out", help="folder for <camera>.png (default: background-cleared beside the poses)")
+    options.add_recording_options(inputs)
     parser.add_argument(
         "--samples", type=options.positive_int, help="tracked frames per camera the median is taken over (default 50)"
     )
@@ -27,7 +36,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="pixels the tracked silhouette is widened by, at a 480-pixel short side; grows "
         "with the image (default 12)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

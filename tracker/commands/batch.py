@@ -28,6 +28,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "track many recording folders, one Ray task each, locally or on a cluster"
 
+ABOUT = (
+    "Track many recording folders, several at a time, on this machine or on a Ray cluster, each as tracker track "
+    "would, into its own folder under OUT, with a summary of all in OUT/summary.csv. Run it again after a stop "
+    "and it goes on with the recordings not yet done."
+)
+EXAMPLE = "tracker batch 'data/*' --out results"
+
 RETRIES = 2
 """Tries after the first for a recording whose task crashed."""
 
@@ -39,31 +46,34 @@ PATHS = ("model", "init", "calib")
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker batch``: its own, then those of ``tracker track`` that it passes on."""
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    cluster = parser.add_argument_group("where it runs")
+    inputs.add_argument(
         "recordings",
         nargs="+",
         metavar="GLOB",
         help="recording folders, or glob patterns matching them (quote them to match on the driver: 'data/*/trial*')",
     )
-    parser.add_argument(
+    outputs.add_argument(
         "--out",
         required=True,
         metavar="DIR",
         help="output folder: one results folder a recording, the manifest and summary.csv",
     )
-    parser.add_argument(
+    cluster.add_argument(
         "--ray",
         metavar="ADDRESS",
         help="address of a running Ray cluster (e.g. 10.0.0.5:6379, or auto); default: a local one started for "
         "the batch",
     )
-    parser.add_argument(
+    cluster.add_argument(
         "--workers",
         type=options.positive_int,
         help="recordings tracked at once (default: the machine's cores locally, the cluster's CPUs with --ray)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    options.add_tracking_options(parser)
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
+    options.add_tracking_options(parser, inputs=inputs)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,7 +127,7 @@ def tracking_options(args: argparse.Namespace) -> dict:
     """The ``tracker track`` options of ``args`` (the ones :func:`tracker.commands.options.add_tracking_options`
     makes), file names made absolute."""
     parser = argparse.ArgumentParser()
-    options.add_tracking_options(parser)
+    options.add_tracking_options(parser, inputs=parser)
     chosen = {key: getattr(args, key) for key in vars(parser.parse_args([]))}
     for key in PATHS:
         if chosen[key] is not None:

@@ -10,13 +10,24 @@ from tracker.commands import options
 
 HELP = "per-stage timings, frames per second and the decode-only floor"
 
+ABOUT = (
+    "Time the tracker on a recording (by default the demo that comes with it): each stage of a frame, the frames "
+    "per second, and how fast the videos decode alone, the most tracking could reach. --scaling times it against "
+    "the number of body parts and cameras; --long tracks many frames and reports the memory used."
+)
+EXAMPLE = "tracker bench"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker bench``."""
-    parser.add_argument("recording", nargs="?", help="recording folder (default: the bundled demo)")
-    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    parser.add_argument("--init", help="first pose TOML (default: the recording's init.toml)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument(
+        "recording", nargs="?", metavar="RECORDING", help="recording folder (default: the bundled demo)"
+    )
+    inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    inputs.add_argument("--init", help="first pose TOML (default: the recording's init.toml)")
+    outputs.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     parser.add_argument(
         "--scaling",
         action="store_true",
@@ -29,7 +40,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         metavar="FRAMES",
         help="instead, track this many frames (the recording read in a loop) and report resident memory",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar (--long)")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar (--long)")
     options.add_keypoint_options(parser, "time the keypoint cue at this rate")
     options.add_tuning_options(parser, ("--iterations", "--spacing", "--resample-every", "--work-side", "--region"))
 

@@ -10,15 +10,24 @@ from tracker.errors import TrackerInputError
 
 HELP = "calibrate a camera rig from videos or photos of a board"
 
+ABOUT = (
+    "Find each camera's lens and position from videos or photos of a printed chessboard or ChArUco board filmed "
+    "by every camera at once, and write the calibration.toml a recording folder needs. It prints how many pixels "
+    "each camera's board corners miss by."
+)
+EXAMPLE = "tracker calibrate boards/ --board charuco:7x5:0.04:0.03:DICT_4X4_50 --out myrec/calibration.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker calibrate``."""
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument(
         "folder",
         metavar="DIR",
         help="folder with one board video (<cam>.mp4|.avi|.mkv) or image folder (<cam>/) per camera, frame-synchronous",
     )
-    parser.add_argument(
+    inputs.add_argument(
         "--board",
         required=True,
         metavar="SPEC",
@@ -26,8 +35,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT (squares); add :inverted for "
         "light-on-dark boards",
     )
-    parser.add_argument("--out", required=True, metavar="calibration.toml", help="the calibration file to write")
-    parser.add_argument(
+    outputs.add_argument("--out", required=True, metavar="calibration.toml", help="the calibration file to write")
+    inputs.add_argument(
         "--fix-intrinsics",
         metavar="calibration.toml",
         help="take each camera's K and distortion from this file (by camera name) and keep them fixed",
@@ -43,7 +52,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         default="first-camera",
         help="world frame: the first camera (default), or the board where first seen, on the floor with z up",
     )
-    parser.add_argument("--inverted", action="store_true", help="the board is printed light on dark")
+    inputs.add_argument("--inverted", action="store_true", help="the board is printed light on dark")
     parser.add_argument(
         "--refine-intrinsics",
         action="store_true",

@@ -9,6 +9,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "the physics paper's experiments: Tables I-IV, or the insect"
 
+ABOUT = (
+    "Run again the experiments of the physics paper the points tracker follows: the error analysis of its Tables "
+    "I-IV (parts fitted at four data densities and four noise levels, printed beside the paper's values), or the "
+    "insect tracked from dense and sparse points."
+)
+EXAMPLE = "tracker experiment superquadric"
+
 
 def percentage_list(text: str) -> tuple[int, ...]:
     """Argument type: comma-separated percentages 1-100."""
@@ -57,8 +64,9 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         metavar="LIST",
         help="superquadric: comma-separated noise variances (default 10,5,1,0)",
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    outputs = parser.add_argument_group("outputs")
+    outputs.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,11 +8,20 @@ from tracker.commands.options import positive_float
 
 HELP = "write poses.npz as TRC, C3D, BVH or CSV for other tools"
 
+ABOUT = (
+    "Write a tracked run (poses.npz) in a format other tools read: TRC for OpenSim and Pose2Sim, C3D for motion-"
+    "capture software, BVH for Blender (it needs the body model) or CSV for a spreadsheet. The file goes beside "
+    "POSES unless --out names another."
+)
+EXAMPLE = "tracker export out/demo/poses.npz --to trc"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker export``."""
-    parser.add_argument("poses", metavar="POSES", help="poses.npz written by tracker track (or a truth.npz)")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument("poses", metavar="POSES", help="poses.npz written by tracker track (or a truth.npz)")
+    outputs.add_argument(
         "--to",
         required=True,
         metavar="FORMAT",
@@ -20,9 +29,9 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="trc (OpenSim/Pose2Sim markers, mm, z up), c3d (POINT data, mm, z up), "
         "bvh (the model's skeleton for Blender, metres, y up) or csv (metres, z up)",
     )
-    parser.add_argument("--out", help="output file (default: POSES with the format's suffix, e.g. poses.trc)")
-    parser.add_argument("--model", help="body model TOML the poses were tracked with (bvh only, where it is needed)")
-    parser.add_argument(
+    outputs.add_argument("--out", help="output file (default: POSES with the format's suffix, e.g. poses.trc)")
+    inputs.add_argument("--model", help="body model TOML the poses were tracked with (bvh only, where it is needed)")
+    inputs.add_argument(
         "--fps", type=positive_float, help="frames per second (default: from the poses file's frame and time arrays)"
     )
 

@@ -10,12 +10,23 @@ from tracker.commands import options
 
 HELP = "fit a body model's joints and part sizes to the person in a recording, write a model TOML"
 
+ABOUT = (
+    "Measure the person in a recording: fit a body model's joint positions and part sizes (lengths and radii) to "
+    "the keypoint detector's landmarks, then to the outlines in the images, and write the fitted model for "
+    "tracker track --model. It needs two cameras or more."
+)
+EXAMPLE = "tracker fit-model recordings/demo --out me.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker fit-model``."""
-    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
-    parser.add_argument("--out", required=True, help="model TOML to write")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument(
+        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
+    )
+    outputs.add_argument("--out", required=True, help="model TOML to write")
+    inputs.add_argument(
         "--model",
         help="model to start from (default: the recording's model.toml, else models/human.toml)",
     )
@@ -30,8 +41,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="fit left and right parts apart (default: one size for both)",
     )
-    options.add_recording_options(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    options.add_recording_options(inputs)
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

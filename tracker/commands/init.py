@@ -13,19 +13,29 @@ from tracker.errors import TrackerInputError
 
 HELP = "place the first pose by hand in the browser viewer and save init.toml"
 
+ABOUT = (
+    "Place the body in the first frame by hand in the web browser (move and turn the body and each limb, or let "
+    "it snap to the images) and save the pose as the init.toml that tracker track starts from. It starts from the"
+    " recording's init.toml, else from the pose fitted to the keypoint detector's landmarks."
+)
+EXAMPLE = "tracker init recordings/demo --out my-init.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker init``."""
-    parser.add_argument("recording", help="recording folder")
-    parser.add_argument("--out", required=True, help="init.toml to write")
-    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    outputs.add_argument("--out", required=True, help="init.toml to write")
+    inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    inputs.add_argument(
         "--init",
         help="pose to start from (default: the recording's init.toml, else the pose fitted to the keypoints)",
     )
-    parser.add_argument("--start", type=int, default=0, help="the frame to place the pose in (default 0)")
-    options.add_recording_options(parser)
-    options.add_viewer_options(parser, record=False)
+    inputs.add_argument("--start", type=int, default=0, help="the frame to place the pose in (default 0)")
+    options.add_recording_options(inputs)
+    options.add_viewer_options(viewer, record=False)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,15 +10,26 @@ from tracker.errors import TrackerInputError
 
 HELP = "detect BlazePose's 33 landmarks in every camera and frame, write DIR/keypoints.npz"
 
+ABOUT = (
+    "Run the 2-D keypoint detector (BlazePose: 33 landmarks of the body) over every camera and frame of a "
+    "recording and write OUT/keypoints.npz, from which tracker track, fit-model and sync then take the detections"
+    " instead of detecting them again."
+)
+EXAMPLE = "tracker keypoints recordings/demo --out out/demo"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker keypoints``."""
-    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
-    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
-    options.add_recording_options(parser)
-    parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
-    parser.add_argument("--frames", type=options.positive_int, help="number of frames (default: all)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument(
+        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
+    )
+    outputs.add_argument("--out", help="output folder (default: out/<recording name>)")
+    options.add_recording_options(inputs)
+    inputs.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    inputs.add_argument("--frames", type=options.positive_int, help="number of frames (default: all)")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -18,6 +18,16 @@ from tracker.errors import TrackerInputError
 
 HELP = "track cameras live (V4L2 through OpenCV), optionally recording them"
 
+ABOUT = (
+    "Track the body from cameras plugged into this machine (or from video files played in real time) as the "
+    "frames arrive, and write the poses to OUT/poses.npz; --view shows it in the browser as it goes and --record "
+    "keeps the frames as a recording folder."
+)
+EXAMPLE = (
+    "tracker live --camera /dev/video0 --camera /dev/video2 --calib rig.toml --model models/human.toml --init "
+    "init.toml --view"
+)
+
 
 def size(text: str) -> tuple[int, int]:
     """Argument type: WIDTHxHEIGHT in pixels."""
@@ -29,7 +39,10 @@ def size(text: str) -> tuple[int, int]:
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker live``."""
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument(
         "--camera",
         action="append",
         required=True,
@@ -38,23 +51,23 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "rate; repeat for each camera; matched to the calibration's cameras in order, or "
         "to the one called NAME",
     )
-    parser.add_argument("--calib", required=True, help="calibration.toml of the cameras")
-    parser.add_argument("--model", required=True, help="body model TOML")
-    parser.add_argument("--init", required=True, help="pose at the first frame (init.toml)")
-    parser.add_argument(
+    inputs.add_argument("--calib", required=True, help="calibration.toml of the cameras")
+    inputs.add_argument("--model", required=True, help="body model TOML")
+    inputs.add_argument("--init", required=True, help="pose at the first frame (init.toml)")
+    inputs.add_argument(
         "--size",
         type=size,
         metavar="WxH",
         help="image size to ask the cameras for (default: each camera's calibrated size, which the camera must give)",
     )
-    parser.add_argument(
+    inputs.add_argument(
         "--fps",
         type=options.positive_float,
         help="frame rate to ask the cameras for (default: the driver's); a video file is played at this rate "
         "(default: its own)",
     )
-    parser.add_argument("--out", help="output folder for poses.npz (default out/live)")
-    parser.add_argument(
+    outputs.add_argument("--out", help="output folder for poses.npz (default out/live)")
+    outputs.add_argument(
         "--record",
         metavar="DIR",
         help="also write the tracked frames as a recording folder that `tracker track DIR` replays to the same poses",
@@ -65,8 +78,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "offer every N-th frame set to the 2-D keypoint detector, a worker process that takes one when it is free "
         "(the tracker never waits), and fuse its landmarks with the edges",
     )
-    options.add_live_view_options(parser, "while it tracks")
-    options.add_viewer_options(parser, record=False)
+    options.add_live_view_options(viewer, "while it tracks")
+    options.add_viewer_options(viewer, record=False)
 
 
 def run(args: argparse.Namespace) -> int:

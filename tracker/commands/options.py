@@ -139,10 +139,14 @@ def choose(given: str | None, found: Path | None, *, what: str, option: str, rec
     return found
 
 
-def add_recording_options(parser: argparse.ArgumentParser) -> None:
+Options = argparse._ActionsContainer
+"""Where a command's options are added: its parser, or one of the parser's argument groups (inputs, outputs, ...)."""
+
+
+def add_recording_options(inputs: Options) -> None:
     """``--cameras`` and ``--calib``: which cameras of a recording folder, and their calibration."""
-    parser.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
-    parser.add_argument(
+    inputs.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")
+    inputs.add_argument(
         "--calib",
         metavar="TOML",
         help="calibration to use instead of the recording's calibration.toml (e.g. from tracker refine)",
@@ -241,22 +245,23 @@ def settings_from(args: argparse.Namespace, frame_rate: float | None = None):
     return Settings().but(**given)
 
 
-def add_tracking_options(parser: argparse.ArgumentParser) -> None:
+def add_tracking_options(parser: argparse.ArgumentParser, *, inputs: Options) -> None:
     """The options of ``tracker track`` that say how a recording is tracked (``tracker batch`` passes them on;
-    :func:`tracking` resolves them)."""
-    parser.add_argument(
+    :func:`tracking` resolves them): the body model, first pose, cameras and frames in ``inputs`` (a group of
+    ``parser``), how to track them in ``parser``."""
+    inputs.add_argument(
         "--model",
         help="body model TOML (default: the recording's model.toml, else models/human.toml fitted to the person "
         "and written to OUT/model.toml)",
     )
-    parser.add_argument(
+    inputs.add_argument(
         "--init",
         help="pose at the first frame (default: the recording's init.toml, else fitted to the keypoints of the "
         "first frames)",
     )
-    add_recording_options(parser)
-    parser.add_argument("--start", type=int, default=0, help="first frame (default 0)")
-    parser.add_argument("--frames", type=positive_int, help="number of frames to track (default: all)")
+    add_recording_options(inputs)
+    inputs.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    inputs.add_argument("--frames", type=positive_int, help="number of frames to track (default: all)")
     add_tuning_options(parser)
     add_keypoint_options(parser)
     parser.add_argument(
@@ -269,34 +274,35 @@ def add_tracking_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_live_view_options(parser: argparse.ArgumentParser, after: str) -> None:
+def add_live_view_options(viewer: Options, after: str) -> None:
     """``--view`` and ``--view-rate``: the browser viewer following a run, and ``after`` it what it shows."""
-    parser.add_argument(
+    viewer.add_argument(
         "--view", action="store_true", help=f"show the run in the browser viewer (about 30 updates a second), {after}"
     )
-    parser.add_argument(
+    viewer.add_argument(
         "--view-rate", type=positive_float, default=30.0, help="viewer updates per second while tracking (default 30)"
     )
 
 
-def add_viewer_options(parser: argparse.ArgumentParser, record: bool = True) -> None:
+def add_viewer_options(viewer: Options, record: bool = True) -> None:
     """``--host`` and ``--port`` of the browser viewer, and ``--record`` of its session when ``record``."""
-    parser.add_argument(
+    viewer.add_argument(
         "--host",
         default="127.0.0.1",
         help="address the viewer listens on (default 127.0.0.1; 0.0.0.0 opens it to the network)",
     )
-    parser.add_argument(
+    viewer.add_argument(
         "--port",
         type=port,
         default=8080,
         help="viewer port (default 8080, or the next free one; 0 picks any free port)",
     )
     if record:
-        parser.add_argument(
+        viewer.add_argument(
             "--record",
             metavar="FILE.viser",
-            help="also write the viewer session as a .viser file for viser's static client",
+            help="also write the viewer session as a .viser file, which plays in a browser without the tracker "
+            "(docs/viewer.md)",
         )
 
 

@@ -13,19 +13,28 @@ from tracker.commands.viewing import serve
 
 HELP = "fit and track a deformable multi-part model to 3-D markers (C3D, TRC)"
 
+ABOUT = (
+    "Fit a model of joined, deformable parts to 3-D marker positions from motion capture (C3D or TRC), follow it "
+    "through the frames and write OUT/poses.npz and OUT/shapes.npz; --view shows the fitted parts in the browser."
+)
+EXAMPLE = "tracker points tests/data/markers/Vicon.c3d --model models/vicon_arm.points.toml --frames 40"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker points``."""
-    parser.add_argument("markers", metavar="FILE", help="marker file: .c3d or .trc")
-    parser.add_argument("--model", required=True, help="points model TOML: parts, their markers and parents")
-    parser.add_argument("--out", help="output folder for poses.npz and shapes.npz (default: out/<file name>)")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument("markers", metavar="FILE", help="marker file: .c3d or .trc")
+    inputs.add_argument("--model", required=True, help="points model TOML: parts, their markers and parents")
+    outputs.add_argument("--out", help="output folder for poses.npz and shapes.npz (default: out/<file name>)")
+    inputs.add_argument(
         "--start",
         type=int,
         help="first frame, counted from 0 in the file (default: the first with 3 markers seen on every part)",
     )
-    parser.add_argument("--frames", type=options.positive_int, help="number of frames to span (default: all)")
-    parser.add_argument("--every", type=options.positive_int, default=1, help="fit every N-th frame (default 1)")
+    inputs.add_argument("--frames", type=options.positive_int, help="number of frames to span (default: all)")
+    inputs.add_argument("--every", type=options.positive_int, default=1, help="fit every N-th frame (default 1)")
     parser.add_argument(
         "--level",
         choices=("rigid", "global", "local"),
@@ -55,11 +64,11 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         default=0.01,
         help="marker noise, metres: how much the data weigh against the membrane (default 0.01)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument(
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
+    viewer.add_argument(
         "--view", action="store_true", help="then show the fitted parts, markers and joints in the browser viewer"
     )
-    options.add_viewer_options(parser)
+    options.add_viewer_options(viewer)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -11,17 +11,25 @@ from tracker.errors import TrackerInputError
 
 HELP = "refine the rig's extrinsics to the outlines of a tracked body, write a calibration.toml"
 
+ABOUT = (
+    "Correct the cameras' positions in the calibration so that the outline of a tracked body fits every camera's "
+    "images better, and write the corrected calibration; track again with --calib to use it."
+)
+EXAMPLE = "tracker refine myrec --out myrec/refined.toml"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker refine``."""
-    parser.add_argument("recording", help="recording folder")
-    parser.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
-    parser.add_argument("--model", help="body model TOML it was tracked with (default: the recording's model.toml)")
-    parser.add_argument("--out", required=True, help="calibration TOML to write")
-    options.add_recording_options(parser)
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    inputs.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
+    inputs.add_argument("--model", help="body model TOML it was tracked with (default: the recording's model.toml)")
+    outputs.add_argument("--out", required=True, help="calibration TOML to write")
+    options.add_recording_options(inputs)
     parser.add_argument("--fix", metavar="CAMERAS", help="comma-separated cameras to hold as calibrated")
-    parser.add_argument("--start", type=int, default=0, help="first frame to use (default 0)")
-    parser.add_argument("--frames", type=options.positive_int, help="number of frames to use from there (default: all)")
+    inputs.add_argument("--start", type=int, default=0, help="first frame to use (default 0)")
+    inputs.add_argument("--frames", type=options.positive_int, help="number of frames to use from there (default: all)")
     parser.add_argument(
         "--samples",
         type=options.positive_int,
@@ -33,7 +41,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         type=options.positive_int,
         help="rounds of measuring and moving the cameras, searches narrowing (default 8)",
     )
-    parser.add_argument(
+    inputs.add_argument(
         "--background",
         metavar="DIR",
         help="an empty scene (<camera>.png, e.g. from tracker background): search the differences "
@@ -46,7 +54,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "cameras; by default each frame's body is fitted again after every round",
     )
     options.add_tuning_options(parser, ("--spacing", "--search-range", "--iterations", "--max-turn"))
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -14,6 +14,13 @@ from tracker.errors import TrackerInputError
 
 HELP = "make, track and score the hard suite of renders unlike the model"
 
+ABOUT = (
+    "The hard test suite: render recordings whose body, clothing, room and cameras differ from the tracking model"
+    " (make), then track and score them all (run), score results tracked otherwise (score), or score the keypoint"
+    " detector's landmarks on them (landmarks)."
+)
+EXAMPLE = "tracker suite make out/suite"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The actions of ``tracker suite``: make, score, run and landmarks."""

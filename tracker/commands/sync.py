@@ -16,12 +16,24 @@ if TYPE_CHECKING:
 
 HELP = "find each camera's capture-time offset from the body's motion, write REC/sync.toml"
 
+ABOUT = (
+    "For cameras that do not record in step (webcams, phones, action cameras), find how much later or earlier "
+    "each one's frames were taken than the first camera's, from the body's motion the keypoint detector sees, and"
+    " write it to REC/sync.toml, which tracker track then reads."
+)
+EXAMPLE = "tracker sync myrec"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker sync``."""
-    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
-    parser.add_argument("--out", help="folder for the detections, OUT/keypoints.npz (default: out/<recording name>)")
-    options.add_recording_options(parser)
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    refining = parser.add_argument_group("refining by the edges (--refine)")
+    inputs.add_argument(
+        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
+    )
+    outputs.add_argument("--out", help="folder for the detections, OUT/keypoints.npz (default: out/<recording name>)")
+    options.add_recording_options(inputs)
     parser.add_argument(
         "--reach",
         type=options.positive_float,
@@ -29,19 +41,21 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="largest offset searched, either way (default 0.5 s)",
     )
-    parser.add_argument(
+    refining.add_argument(
         "--refine",
         action="store_true",
         help="then refine each camera's offset by its edges against the body tracked in the other cameras (tracks "
         "the recording once per camera but the first, in OUT/sync/without-<camera>/)",
     )
-    parser.add_argument("--model", help="--refine: body model TOML (default: the recording's model.toml, else fitted)")
-    parser.add_argument(
+    refining.add_argument(
+        "--model", help="--refine: body model TOML (default: the recording's model.toml, else fitted)"
+    )
+    refining.add_argument(
         "--init",
         help="--refine: pose at the first frame (default: the recording's init.toml, else fitted to the keypoints)",
     )
-    parser.add_argument("--frames", type=options.positive_int, help="--refine: frames to track (default: all)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    refining.add_argument("--frames", type=options.positive_int, help="--refine: frames to track (default: all)")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

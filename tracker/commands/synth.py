@@ -8,19 +8,28 @@ from tracker.commands.options import camera_names, camera_seconds, positive_floa
 
 HELP = "render a recording with ground truth from a model, a rig and a motion"
 
+ABOUT = (
+    "Render a test recording whose true poses are known: a body model going through a motion, filmed by the "
+    "cameras of a calibration, written as a recording folder with its truth.npz (and init.toml), ready for "
+    "tracker track and tracker eval."
+)
+EXAMPLE = "tracker synth --model models/human.toml --calib calib/ring4.toml --motion procedural --out out/ring"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker synth``: what to render, and how the render departs from the plain model."""
     from tracker.synthetic.texture import CHOICES  # numpy only: cheap at start-up, unlike tracker.synthetic.synth
 
-    parser.add_argument("--model", required=True, help="body model TOML")
-    parser.add_argument("--calib", required=True, help="camera rig calibration.toml")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    inputs.add_argument("--model", required=True, help="body model TOML")
+    inputs.add_argument("--calib", required=True, help="camera rig calibration.toml")
+    inputs.add_argument(
         "--motion",
         required=True,
         help="bvh:PATH (a BVH clip, retargeted), procedural, athletic (hops, kicks, spins) or seated (at a desk)",
     )
-    parser.add_argument("--out", required=True, help="recording folder to write")
+    outputs.add_argument("--out", required=True, help="recording folder to write")
     parser.add_argument("--frames", type=positive_int, default=160, help="frames to render (default 160)")
     parser.add_argument("--start", type=int, default=0, help="first BVH frame (default 0)")
     parser.add_argument("--stride", type=positive_int, default=2, help="BVH frames per rendered frame (default 2)")
@@ -69,7 +78,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--face", action="store_true", help="paint a face on the front of the head and hair on its back and top"
     )
-    parser.add_argument(
+    outputs.add_argument(
         "--no-init",
         action="store_true",
         help="write the first true pose as truth_init.toml, not init.toml, so that tracking needs --init",
@@ -82,7 +91,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="render these cameras late (or early, negative) by so many seconds, as a rig that is not frame-locked "
         "records; the truth keeps the frames' times and the recording does not say (tracker sync finds them)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -14,20 +14,34 @@ from tracker.errors import TrackerInputError
 
 HELP = "track a recording folder, write DIR/poses.npz and print a summary"
 
+ABOUT = (
+    "Follow the body through a recording folder (its calibration.toml and one video per camera) and write the "
+    "pose of every frame to OUT/poses.npz. Without a model.toml in the folder it first fits the standard human "
+    "model to the person; without an init.toml it finds the first pose with the keypoint detector. At the end it "
+    "says how well the frames were followed, which files it wrote and, when the folder holds the true poses "
+    "(truth.npz), how close the tracked joints came to them."
+)
+EXAMPLE = "tracker track recordings/demo --frames 40 --out out/demo"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker track``."""
-    parser.add_argument("recording", help="recording folder (calibration.toml and one video per camera)")
-    parser.add_argument("--out", help="output folder (default: out/<recording name>)")
-    options.add_tracking_options(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    outputs = parser.add_argument_group("outputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument(
+        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
+    )
+    outputs.add_argument("--out", help="output folder (default: out/<recording name>)")
+    options.add_tracking_options(parser, inputs=inputs)
+    outputs.add_argument("--quiet", action="store_true", help="no progress bar")
+    outputs.add_argument(
         "--overlay",
         metavar="VIDEO",
         help="also write a video (.mp4/.avi) of every camera with the tracked outlines and edge searches",
     )
-    options.add_live_view_options(parser, "then review the result")
-    options.add_viewer_options(parser)
+    options.add_live_view_options(viewer, "then review the result")
+    options.add_viewer_options(viewer)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,8 +63,8 @@ def run(args: argparse.Namespace) -> int:
         view=view,
         bar=functools.partial(options.bar, args),
     )
-    print(f"wrote {outcome.poses} ({outcome.frames} frames)")
     if outcome.interrupted:
+        print(f"wrote {outcome.poses} ({outcome.frames} frames)")
         print("interrupted: the frames done so far are saved", file=sys.stderr)
         return 130
     print_summary(outcome)

@@ -10,21 +10,30 @@ from tracker.commands.viewing import scene, serve
 
 HELP = "review poses.npz over its recording in the browser viewer"
 
+ABOUT = (
+    "Open a tracked run (poses.npz) over its recording in the web browser: the body drawn over every camera's "
+    "images, the 3-D scene, and a timeline to play or step through the frames. With --record it writes the "
+    "session to a .viser file, which plays in a browser without the tracker, and returns."
+)
+EXAMPLE = "tracker view recordings/demo --poses out/demo/poses.npz"
+
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker view``."""
-    parser.add_argument("recording", help="recording folder")
-    parser.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
-    parser.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
-    options.add_recording_options(parser)
-    parser.add_argument(
+    inputs = parser.add_argument_group("inputs")
+    viewer = parser.add_argument_group("viewer")
+    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    inputs.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
+    inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
+    options.add_recording_options(inputs)
+    inputs.add_argument(
         "--background",
         metavar="DIR",
         help="the empty scene a run was tracked against (tracker track --background; a median one "
         "is saved in OUT/background): the panels then show and search the difference images",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar while recording")
-    options.add_viewer_options(parser)
+    options.add_viewer_options(viewer)
+    viewer.add_argument("--quiet", action="store_true", help="no progress bar while recording")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,11 +52,13 @@ def run(args: argparse.Namespace) -> int:
         background = load_background(args.background, rec)
     truth = options.truth(rec)
     tracker = Tracker(model, rec.cameras, results["poses"][0], settings)
-    review = Review(scene(args, rec, model, settings=settings, truth=truth), rec, tracker, results, truth, background)
+    shown = scene(args, rec, model, settings=settings, truth=truth, quiet=bool(args.record))
+    review = Review(shown, rec, tracker, results, truth, background)
     review.show(0)
-    if args.record:
+    if args.record:  # a file, not a viewer to open: the server that drew it goes without a word
         review.record(Path(args.record), progress=not args.quiet)
         review.close()
+        shown.server.stop()
         print(f"wrote {args.record}")
         return 0
     return serve(f"reviewing {poses_path} ({len(results['frame'])} frames)", review)

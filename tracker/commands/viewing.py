@@ -7,12 +7,13 @@ import sys
 import threading
 
 
-def scene(args: argparse.Namespace, rec, model, *, settings, truth=None):
+def scene(args: argparse.Namespace, rec, model, *, settings, truth=None, quiet: bool = False):
     """A viewer scene of ``rec``'s cameras and ``model`` on a server at ``--host``/``--port``, with the
-    joints of ``truth`` (truth.npz arrays) when given."""
+    joints of ``truth`` (truth.npz arrays) when given; ``quiet``: a server only to record from, which says
+    nothing (:func:`tracker.viewer.scene.start_server`)."""
     from tracker.viewer.scene import Scene, start_server
 
-    server = start_server(args.host, args.port)
+    server = start_server(args.host, args.port, quiet=quiet)
     names = None if truth is None else list(truth["joint_names"])
     return Scene(server, model, rec.cameras, settings.solve.robust_c, names)
 

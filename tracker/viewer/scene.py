@@ -10,6 +10,8 @@ edges (:mod:`tracker.viewer.overlay`).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,8 +33,22 @@ TRAJECTORY = (250, 220, 60)
 FRUSTUM_WIDTH = 200  # pixels of the images shown on the frustums (the panels get full size)
 
 
+class _Silent(viser.ViserServer):
+    """A viser server that prints nothing: viser prints its address in a box when it starts and "(viser) Server
+    stopped" when it stops (also at exit), whatever its ``verbose``, on standard output."""
+
+    def __init__(self, **kwargs) -> None:
+        with contextlib.redirect_stdout(io.StringIO()):
+            super().__init__(**kwargs)
+
+    def stop(self) -> None:
+        with contextlib.redirect_stdout(io.StringIO()):
+            super().stop()
+
+
 def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False) -> viser.ViserServer:
-    """A viser server on ``host:port`` (the next free port if taken); says its URL on stderr.
+    """A viser server on ``host:port`` (the next free port if taken); says its URL on stderr, unless ``quiet``: a
+    server no one is meant to open (one that only records a .viser file) says nothing at all.
 
     Any address other than loopback opens the viewer to the network, so it warns.
     """
@@ -41,7 +57,7 @@ def start_server(host: str = "127.0.0.1", port: int = 8080, quiet: bool = False)
             f"tracker: warning: the viewer listens on {host}: anyone who can reach this machine can see it",
             file=sys.stderr,
         )
-    server = viser.ViserServer(host=host, port=port, verbose=False)
+    server = (_Silent if quiet else viser.ViserServer)(host=host, port=port, verbose=False)
     server.scene.set_up_direction("+z")
     server.scene.configure_default_lights(cast_shadow=False)  # shadow maps double the cost of every redraw
     if not quiet:
