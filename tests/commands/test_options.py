@@ -71,3 +71,19 @@ def test_the_shown_defaults_read_as_a_user_would_type_them():
         "kalman",
     ]
     assert all(dataclasses.is_dataclass(group) for group in vars(Settings()).values())
+
+
+def test_the_table_of_tuning_options_in_the_docs_shows_the_settings_defaults():
+    """docs/commands.md's table of `tracker track`'s tuning options: each flag the settings give is a row, and its
+    default cell is the settings' default as the help shows it."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "commands.md").read_text()
+    rows = {}
+    for line in text.splitlines():
+        cells = [cell.strip() for cell in line.replace("\\|", "/").strip().strip("|").split("|")]
+        if line.startswith("| `--") and len(cells) >= 3:
+            rows[cells[0].strip("`").split()[0]] = cells[1].strip("`")
+    for flag, (group, spec) in options.tuning_fields().items():
+        assert flag in rows, flag
+        assert rows[flag] == options._shown(getattr(getattr(Settings(), group), spec.name)), flag
