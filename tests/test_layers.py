@@ -50,13 +50,23 @@ def layer(module: str) -> int:
     return max(matches)[1]
 
 
-def imports(module: str) -> set[str]:
+def imports(module: str, *, typing: bool = True) -> set[str]:
     """The modules of this package that ``module`` imports anywhere in its source (``from a import b``
-    counts as a.b when that is a module)."""
+    counts as a.b when that is a module); without ``typing``, not those imported only for type checking (under
+    ``if TYPE_CHECKING:``), which are never imported when the program runs."""
     tree = ast.parse(MODULES[module].read_text(encoding="utf-8"))
     package = module if MODULES[module].name == "__init__.py" else module.rpartition(".")[0]
+    typed = {
+        id(inner)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.If) and ast.unparse(node.test) in ("TYPE_CHECKING", "typing.TYPE_CHECKING")
+        for statement in node.body
+        for inner in ast.walk(statement)
+    }
     found = set()
     for node in ast.walk(tree):
+        if not typing and id(node) in typed:
+            continue
         if isinstance(node, ast.Import):
             names = [alias.name for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -73,6 +83,8 @@ def imports(module: str) -> set[str]:
 
 
 GRAPH = {module: imports(module) for module in MODULES}
+RUNNING = {module: imports(module, typing=False) for module in MODULES}
+"""The imports that run: a cue's module names the tracker it serves only for type checking (tracking/cue.py)."""
 
 
 def test_every_module_has_a_layer():
@@ -127,7 +139,13 @@ def test_cycles_are_found():
 
 
 def test_the_import_graph_has_no_cycle():
-    assert cycles(GRAPH) == []
+    assert cycles(RUNNING) == []
+
+
+def test_imports_for_type_checking_alone_are_no_running_imports():
+    assert "tracker.tracking.track" in GRAPH["tracker.tracking.cue"]
+    assert "tracker.tracking.track" not in RUNNING["tracker.tracking.cue"]
+    assert RUNNING["tracker.tracking.cues"] == GRAPH["tracker.tracking.cues"]
 
 
 def reachable(graph: dict[str, set[str]], start: str) -> set[str]:
