@@ -18,8 +18,9 @@ LAYERS = (
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
     ("tracker.model", "tracker.camera", "tracker.proportions", "tracker.evaluate"),
     ("tracker.raycast", "tracker.io"),  # the body's pixels in a camera; files and cameras in and out
+    ("tracker.landmarks",),  # the detector's landmarks: names on the model, detection, cache, checks across views
     ("tracker.tracking",),  # the tracking method
-    ("tracker.keypoints", "tracker.shape", "tracker.calibrate", "tracker.physics", "tracker.viewer"),  # beside it
+    ("tracker.seeding", "tracker.shape", "tracker.calibrate", "tracker.physics", "tracker.viewer"),  # beside it
     ("tracker.synthetic",),  # the rendered-data generator, made to test the method and never imported by it
     ("tracker.apps",),  # what runs the method: tracker track's library form, live, bench
     ("tracker.commands", "tracker.cli"),
