@@ -1,4 +1,5 @@
-"""A second-order motion prior per component: a continuous-discrete Kalman filter (``Settings.motion.dynamics = "kalman"``).
+"""A second-order motion prior per component: a continuous-discrete Kalman filter
+(``Settings.motion.dynamics = "kalman"``).
 
 docs/method-physics.md: section 3 (second-order dynamics
 ``M qddot + D qdot = f`` with ``D = gamma M``) and section 5 (the continuous EKF as code: the state
@@ -117,8 +118,8 @@ class MotionState:
 
 @dataclass(frozen=True)
 class Motion:
-    """What a tracker carries from frame to frame for its motion model (``Settings.motion.dynamics``), whole to a tracker
-    for other cameras: the poses it tracked in the frame before the last (constant velocity carries the motion
+    """What a tracker carries from frame to frame for its motion model (``Settings.motion.dynamics``), whole to a
+    tracker for other cameras: the poses it tracked in the frame before the last (constant velocity carries the motion
     between them on; None after a start), and with dynamics "kalman" the filter's state (None otherwise) and each
     component's measurement noise scale ``s'`` (N,) (module docstring, "Measurement")."""
 
