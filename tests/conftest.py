@@ -78,8 +78,8 @@ def tiny_recording(tmp_path_factory) -> Path:
 @pytest.fixture
 def person_masks():
     """Draw a segmenter's perfect person masks: ``draw(model, cameras, poses)`` gives each camera's silhouette of the
-    body at ``poses`` as the detector hands it over (:meth:`tracker.tracking.track.Tracker.see_person`): masks (C, S,
-    S) uint8, 255 on the body, over squares (C, 3: centre x, y and side) that cover the whole image."""
+    body at ``poses`` as the detector hands it over (:meth:`tracker.tracking.frame_loop.Tracker.see_person`): masks
+    (C, S, S) uint8, 255 on the body, over squares (C, 3: centre x, y and side) that cover the whole image."""
 
     def draw(model, cameras, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         from tracker.raycast import RayCaster

@@ -1,10 +1,12 @@
 """The package's layers: a module imports only from its own layer or the ones below, the import
 graph has no cycle, the tracking method never imports the rendered-data generator (not even through
-another module), and every module imports alone in a fresh interpreter."""
+another module), and every module imports alone in a fresh interpreter; docs/layout.md names every module, and a
+module name means one thing across the package."""
 
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -18,8 +20,9 @@ LAYERS = (
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
     ("tracker.model", "tracker.camera", "tracker.proportions", "tracker.evaluate"),
     ("tracker.raycast", "tracker.io"),  # the body's pixels in a camera; files and cameras in and out
+    ("tracker.landmarks",),  # the detector's landmarks: names on the model, detection, cache, checks across views
     ("tracker.tracking",),  # the tracking method
-    ("tracker.keypoints", "tracker.shape", "tracker.calibrate", "tracker.physics", "tracker.viewer"),  # beside it
+    ("tracker.seeding", "tracker.shape", "tracker.calibrate", "tracker.physics", "tracker.viewer"),  # beside it
     ("tracker.synthetic",),  # the rendered-data generator, made to test the method and never imported by it
     ("tracker.apps",),  # what runs the method: tracker track's library form, live, bench
     ("tracker.commands", "tracker.cli"),
@@ -143,8 +146,8 @@ def test_the_import_graph_has_no_cycle():
 
 
 def test_imports_for_type_checking_alone_are_no_running_imports():
-    assert "tracker.tracking.track" in GRAPH["tracker.tracking.cue"]
-    assert "tracker.tracking.track" not in RUNNING["tracker.tracking.cue"]
+    assert "tracker.tracking.frame_loop" in GRAPH["tracker.tracking.cue"]
+    assert "tracker.tracking.frame_loop" not in RUNNING["tracker.tracking.cue"]
     assert RUNNING["tracker.tracking.cues"] == GRAPH["tracker.tracking.cues"]
 
 
@@ -191,3 +194,50 @@ def test_importing_the_tracking_method_loads_no_generator_module():
 def test_module_imports_alone(module):
     done = subprocess.run([sys.executable, "-c", f"import {module}"], cwd=ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr.strip().splitlines()[-1:]
+
+
+LAYOUT = ROOT / "docs" / "layout.md"
+FILES = sorted(path.relative_to(ROOT).as_posix() for path in (ROOT / "tracker").rglob("*.py"))
+LISTED = set(re.findall(r"`(tracker/[\w/]+\.py)`", LAYOUT.read_text(encoding="utf-8")))
+
+
+def test_the_layout_page_names_every_module():
+    """docs/layout.md names every module by its path (a package's __init__.py aside), and only modules that exist."""
+    missing = [path for path in FILES if path not in LISTED and not path.endswith("/__init__.py")]
+    assert not missing, f"docs/layout.md does not list {missing}"
+    stale = sorted(LISTED - set(FILES))
+    assert not stale, f"docs/layout.md lists modules that do not exist: {stale}"
+
+
+SHARED_NAMES = {
+    "bench.py": {"tracker/commands/bench.py", "tracker/apps/bench.py"},
+    "evaluate.py": {"tracker/commands/evaluate.py", "tracker/evaluate.py"},
+    "experiment.py": {"tracker/commands/experiment.py", "tracker/physics/experiment.py"},
+    "live.py": {"tracker/commands/live.py", "tracker/apps/live.py"},
+    "points.py": {"tracker/commands/points.py", "tracker/physics/points.py"},
+    "refine.py": {"tracker/commands/refine.py", "tracker/calibrate/refine.py"},
+    "suite.py": {"tracker/commands/suite.py", "tracker/synthetic/suite.py"},
+    "sync.py": {"tracker/commands/sync.py", "tracker/apps/sync.py"},
+    "synth.py": {"tracker/commands/synth.py", "tracker/synthetic/synth.py"},
+    "track.py": {"tracker/commands/track.py", "tracker/apps/track.py"},
+}
+"""The module names two packages share: each a command's module (its options and output) and the one module that is
+that command's library form, which the command calls to do its work."""
+
+
+def test_a_module_name_means_one_thing():
+    """No module name is used in two packages, but for a command's module and its library form
+    (:data:`SHARED_NAMES`, which holds no more than those)."""
+    by_name: dict[str, set[str]] = {}
+    for path in FILES:
+        if not path.endswith("/__init__.py"):
+            by_name.setdefault(path.rpartition("/")[2], set()).add(path)
+    shared = {name: paths for name, paths in by_name.items() if len(paths) > 1}
+    assert shared == SHARED_NAMES
+
+
+@pytest.mark.parametrize("name", sorted(SHARED_NAMES))
+def test_a_command_shares_its_name_with_the_module_it_calls(name):
+    command = f"tracker/commands/{name}"
+    (library,) = SHARED_NAMES[name] - {command}
+    assert module_name(ROOT / library) in GRAPH[module_name(ROOT / command)]

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tracker.cli import main
-from tracker.keypoints.store import load_keypoints
+from tracker.landmarks.store import load_keypoints
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"

@@ -15,8 +15,8 @@ from tracker.io.poses import load_poses
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import open_recording
 from tracker.model import joint_centres, load_model
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 
 
 def test_camera_rows_move_the_body_as_the_camera_moves():

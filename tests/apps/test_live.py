@@ -24,8 +24,8 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
@@ -254,8 +254,8 @@ def test_the_keypoint_detector_runs_beside_the_live_tracker(tmp_path, capsys):
 
 
 def test_late_landmarks_move_with_the_tracked_body():
-    from tracker.keypoints.live import transferred
-    from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
+    from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+    from tracker.landmarks.live_detection import transferred
 
     recording = open_recording(DEMO)
     model = load_model(recording.model_path)

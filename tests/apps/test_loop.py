@@ -11,7 +11,7 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
-from tracker.tracking.track import Tracker
+from tracker.tracking.frame_loop import Tracker
 
 
 @pytest.fixture
@@ -45,7 +45,7 @@ def test_the_rows_are_those_of_a_tracker_stepped_by_hand(tiny, tmp_path):
 def test_a_wrapped_keypoint_source_is_asked_for_every_frame_and_fused(tiny, tmp_path):
     """A source of landmarks at the true poses' joints, moved by 0.1 px of seeded noise as an ensemble test would:
     each frame asks for its own, and they pull the solve (the rows differ from the edges' alone)."""
-    from tracker.tracking.body_landmarks import cue_points, landmark_world
+    from tracker.landmarks.body_landmarks import cue_points, landmark_world
 
     rec, model, init = tiny
     truth = load_poses(rec.truth_path)["poses"]

@@ -19,8 +19,8 @@ from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
 from tracker.synthetic.synth import Staging, synthesize
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 
 FPS = 30.0
 OFFSETS = (("cam1", 2 / FPS), ("cam2", -3 / FPS))  # whole frames: the pairing leaves nothing to carry

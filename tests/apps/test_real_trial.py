@@ -77,8 +77,8 @@ def test_real_man_head_held_from_every_nudged_first_pose():
     the keypoint cue holds him through all 100 frames (the test below)."""
     from tracker.io.posefile import load_pose_file
     from tracker.model import load_model
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.settings import Settings
-    from tracker.tracking.track import Tracker
 
     recording = open_recording(BALANCING)
     model = load_model(MAN)

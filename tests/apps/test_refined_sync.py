@@ -9,7 +9,7 @@ from conftest import HUMAN, ROOT
 from tracker.apps.sync import _track
 from tracker.cli import main
 from tracker.io.poses import load_poses
-from tracker.io.sync import load_offsets
+from tracker.io.sync_file import load_offsets
 from tracker.status import LOST, TRACKED
 
 

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from tracker.io.batch import COLUMNS, DONE, FAILED, Manifest, Row, format_summary, write_summary
+from tracker.io.batch_records import COLUMNS, DONE, FAILED, Manifest, Row, format_summary, write_summary
 
 OPTIONS = {"model": None, "iterations": 6, "keypoints": None, "background": "none"}
 

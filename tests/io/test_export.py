@@ -18,7 +18,7 @@ from tracker.cli import build_parser
 from tracker.commands.export import run
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.io.bvh import bvh_global, load_bvh
+from tracker.io.bvh_clip import bvh_global, load_bvh
 from tracker.io.export import export
 from tracker.io.export.bvh import Z_UP_TO_Y_UP, depth_first, euler_zxy, hold_lost, motion, write_bvh
 from tracker.io.export.trc import read_trc, write_trc

@@ -1,10 +1,10 @@
-"""sync.toml (tracker.io.sync): the cameras' capture-time offsets written and read back, and the one-line errors for bad
-files."""
+"""sync.toml (tracker.io.sync_file): the cameras' capture-time offsets written and read back, and the one-line errors
+for bad files."""
 
 import pytest
 
 from tracker.errors import TrackerInputError
-from tracker.io.sync import load_offsets, save_offsets
+from tracker.io.sync_file import load_offsets, save_offsets
 
 CAMERAS = ["cam0", "cam1", "cam2"]
 

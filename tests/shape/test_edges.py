@@ -27,8 +27,8 @@ from tracker.shape.edges import (
 from tracker.shape.layout import Layout
 from tracker.synthetic.render import Renderer
 from tracker.tomlfile import read_toml
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 from tracker.tracking.workspace import Inspection
 
 PARTS = {

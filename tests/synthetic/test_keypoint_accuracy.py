@@ -11,11 +11,11 @@ import pytest
 
 from tracker.camera import load_calibration
 from tracker.io.poses import load_poses
-from tracker.keypoints.store import Keypoints
+from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.store import Keypoints
 from tracker.model import load_model
 from tracker.synthetic.keypoint_accuracy import accuracy
 from tracker.synthetic.synth import table_before
-from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import pytest
 
 from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
-from tracker.keypoints.detector import Detector, detect_views
+from tracker.landmarks.detector import Detector, detect_views
 from tracker.model import joint_centres, load_model
 from tracker.synthetic import render, room, synth
 from tracker.synthetic.props import box_corners, cast_boxes

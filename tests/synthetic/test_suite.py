@@ -12,11 +12,11 @@ from conftest import SHARED_DATA, needs_shared
 from tracker.camera import load_calibration
 from tracker.cli import main
 from tracker.io.poses import PosesWriter, load_poses
-from tracker.keypoints.store import Keypoints, save_keypoints
+from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.store import Keypoints, save_keypoints
 from tracker.model import load_model
 from tracker.synthetic import suite
 from tracker.synthetic.texture import KINDS
-from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = "turn-6fps-table"  # procedural, ring4 at 640x480: the cheapest render to make in a test

@@ -16,7 +16,7 @@ from tracker.camera import load_calibration, look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.io import bvh as bvh_io
+from tracker.io import bvh_clip
 from tracker.io.avi import MjpegAviWriter
 from tracker.model import joint_centres, load_model, model_from_dict
 from tracker.synthetic import actor as capsules
@@ -36,7 +36,7 @@ def human():
 
 @pytest.fixture(scope="module")
 def bvh():
-    return bvh_io.load_bvh(CMU)
+    return bvh_clip.load_bvh(CMU)
 
 
 def joint_gap(model, poses) -> float:
@@ -67,7 +67,7 @@ def test_bvh_parse(bvh):
 
 @needs_shared("cmu-mocap", "131_01.bvh")
 def test_full_clip_parses_and_holds_the_committed_frames(bvh, human):
-    full = bvh_io.load_bvh(FULL_CMU)
+    full = bvh_clip.load_bvh(FULL_CMU)
     _bvh_parse(full, 994)
     assert full.names == bvh.names and full.channels == bvh.channels
     np.testing.assert_array_equal(full.parents, bvh.parents)
@@ -84,7 +84,7 @@ def test_full_clip_parses_and_holds_the_committed_frames(bvh, human):
 
 def test_bvh_forward_kinematics_intrinsic_order(bvh):
     """A joint's world rotation is the parent's times Rz Ry Rx (channels in listed order) and offsets hang on it."""
-    world = bvh_io.bvh_global(bvh, np.array([100]))[0]
+    world = bvh_clip.bvh_global(bvh, np.array([100]))[0]
     j = bvh.index("LeftKnee")
     p = bvh.parents[j]
     start = bvh.channel_start[j]
@@ -118,7 +118,7 @@ def test_retarget_valid_poses_and_hinge_knee(bvh, human):
 
 def test_retarget_follows_bvh_bone_directions(bvh, human):
     poses = clips.retarget(bvh, human, start=100, frames=5, stride=3, centre=False)  # the clip's 600-612
-    world = bvh_io.bvh_global(bvh, 100 + 3 * np.arange(5))
+    world = bvh_clip.bvh_global(bvh, 100 + 3 * np.arange(5))
     for name in ("thigh_r", "shin_r", "upperarm_l", "forearm_l", "foot_r"):
         joint, tip, direction = clips.RETARGET_MAP[name]
         bone = (world[:, bvh.index(tip), 0:3, 3] - world[:, bvh.index(joint), 0:3, 3]) @ clips.BVH_TO_WORLD.T
@@ -129,7 +129,7 @@ def test_retarget_follows_bvh_bone_directions(bvh, human):
 
 def test_bvh_errors(tmp_path, human):
     with pytest.raises(TrackerInputError, match="not found"):
-        bvh_io.load_bvh(tmp_path / "missing.bvh")
+        bvh_clip.load_bvh(tmp_path / "missing.bvh")
     text = """HIERARCHY
 ROOT Hips
 {
@@ -153,9 +153,9 @@ Frame Time: 0.0083333
 """
     path = tmp_path / "tiny.bvh"
     path.write_text(text)
-    tiny = bvh_io.load_bvh(path)
+    tiny = bvh_clip.load_bvh(path)
     assert tiny.names == ("Hips", "Spine") and tiny.frames == 2
-    world = bvh_io.bvh_global(tiny)
+    world = bvh_clip.bvh_global(tiny)
     np.testing.assert_allclose(world[1, 1, 0:3, 3], [0, 19, 1])
     np.testing.assert_allclose(world[1, 1, 0:3, 0:3] @ [0, 1, 0], [0, 0, 1], atol=1e-12)  # 90 deg about X
     with pytest.raises(TrackerInputError, match="tiny.bvh.*no joint"):
@@ -164,7 +164,7 @@ Frame Time: 0.0083333
         synth.synthesize(MODEL, _rig(tmp_path), tmp_path / "out", motion=f"bvh:{path}", frames=1, progress=False)
     (tmp_path / "bad.bvh").write_text("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0\n")
     with pytest.raises(TrackerInputError, match="bad.bvh"):
-        bvh_io.load_bvh(tmp_path / "bad.bvh")
+        bvh_clip.load_bvh(tmp_path / "bad.bvh")
 
 
 def test_seated_motion_sits(human):

@@ -10,7 +10,7 @@ import numpy as np
 from tracker.io.posefile import load_pose_file
 from tracker.io.recording import frames, open_recording
 from tracker.model import load_model
-from tracker.tracking import track
+from tracker.tracking import frame_loop
 from tracker.tracking.cues import CUES
 from tracker.tracking.settings import Settings
 
@@ -56,11 +56,11 @@ class Beacon:
 
 
 def test_a_cue_listed_with_the_others_is_asked_in_every_step_and_moves_the_body(monkeypatch):
-    monkeypatch.setattr(track, "CUES", (*CUES, Beacon))
+    monkeypatch.setattr(frame_loop, "CUES", (*CUES, Beacon))
     rec = open_recording(DEMO)
     model = load_model(rec.model_path)
     start = load_pose_file(rec.init_path, model)
-    tracker = track.Tracker(model, rec.cameras, start, Settings().but(motion=dict(dynamics="none")))
+    tracker = frame_loop.Tracker(model, rec.cameras, start, Settings().but(motion=dict(dynamics="none")))
     beacon = tracker.cue(Beacon)
     assert isinstance(beacon, Beacon) and beacon.calls == ["restart"]
     images = next(itertools.islice(frames(rec), 1))[1]

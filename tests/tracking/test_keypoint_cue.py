@@ -13,12 +13,12 @@ import pytest
 from tracker.geometry import se3
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
+from tracker.landmarks.body_landmarks import LANDMARKS, anchors, landmark_points, limbs, placers, trunk
 from tracker.model import load_model, model_from_dict
-from tracker.tracking.body_landmarks import LANDMARKS, anchors, landmark_points, limbs, placers, trunk
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.keypoint_cue import keypoint_kernel, project_point
 from tracker.tracking.rig import Rig
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"
@@ -225,7 +225,7 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
     from tracker.io.posefile import load_pose_file
     from tracker.io.recording import frames
     from tracker.model import joint_centres
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     model, rig, component, point, pairs, _, _ = demo_frame
     recording = open_recording(DEMO)
@@ -263,7 +263,7 @@ def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zo
     import itertools
 
     from tracker.io.recording import frames
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     model, rig, component, point, pairs, poses, pixels = demo_frame
     recording = open_recording(DEMO)
@@ -359,7 +359,7 @@ def test_a_limb_far_off_its_landmarks_is_led_to_them_and_the_rest_stays(demo_fra
     view alone; a one-degree miss leads nothing, and neither does a wrist whose shoulder's landmark is off too (the
     trunk is the recovery's)."""
     from tracker.model import joint_centres
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     model, _, _, _, _, poses, pixels = demo_frame
     recording = open_recording(DEMO)
@@ -401,7 +401,7 @@ def test_a_limb_off_the_persons_mask_is_led_however_near_its_landmarks(demo_fram
 
     from tracker.io.recording import frames
     from tracker.model import joint_centres
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     model, _, _, _, _, poses, pixels = demo_frame
     cameras = open_recording(DEMO).cameras
@@ -445,7 +445,7 @@ def test_legs_whose_landmarks_fit_better_swapped_in_every_view_are_led_to_them_a
     moved to the landmarks as detected (the left foot towards the right one's image); swapped in one view only, it is
     that view's detector's swap, left out as before, and nothing is led."""
     from tracker.model import joint_centres
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     model, _, _, _, pairs, poses, pixels = demo_frame
     recording = open_recording(DEMO)
@@ -484,7 +484,7 @@ def test_the_edges_keep_a_led_limb_where_the_landmarks_are_right_and_refuse_it_w
 
     from tracker.io.recording import frames
     from tracker.model import joint_centres
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     model, _, component, _, _, poses, pixels = demo_frame
     recording = open_recording(DEMO)

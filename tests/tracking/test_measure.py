@@ -349,7 +349,7 @@ def test_support_is_the_mean_scaled_weight_of_the_chosen_components_samples():
 
 @pytest.mark.parametrize("factor", [2, 3])
 def test_a_reduced_image_gives_the_full_size_offsets(factor):
-    """The search reads an image reduced by ``factor`` (tracker.tracking.track.smooth) from the samples' full-size
+    """The search reads an image reduced by ``factor`` (tracker.tracking.frame_loop.smooth) from the samples' full-size
     places: the offsets of samples on straight and oblique edges, in full-size pixels, are those found in the
     full image, to the reduced image's sub-pixel precision."""
     from tracker.tracking.edge_cue import smooth

@@ -15,8 +15,8 @@ from tracker.io.recording import frames, open_recording
 from tracker.model import joint_centres, load_model
 from tracker.status import LOST
 from tracker.tracking import motion_prior
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "recordings" / "demo"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracker.keypoints.region import Region, cut
+from tracker.landmarks.crop import Region, cut
 from tracker.tracking.person import person_grid
 
 
@@ -39,7 +39,7 @@ def test_each_grid_pixel_reads_the_mask_where_its_full_size_point_falls(square, 
 
 
 def test_a_mask_cut_from_the_image_comes_back_to_it():
-    """The detector cuts its mask to a square of the image (tracker.keypoints.region.cut); on the half-size grid
+    """The detector cuts its mask to a square of the image (tracker.landmarks.crop.cut); on the half-size grid
     it is back where the image had it: a disc of radius 40 about (130, 90) in a 260 x 200 image."""
     v, u = np.mgrid[0:200, 0:260]
     image = ((u - 130.0) ** 2 + (v - 90.0) ** 2 <= 40.0**2).astype(np.float32)

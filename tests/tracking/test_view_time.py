@@ -9,10 +9,10 @@ from tracker.cli import main
 from tracker.geometry.se3 import from_rotvec
 from tracker.io.poses import load_poses
 from tracker.io.recording import frames, open_recording
-from tracker.keypoints.sync import resampled_least, rises
+from tracker.landmarks.time_offsets import resampled_least, rises
 from tracker.model import load_model
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 from tracker.tracking.view_time import edge_costs, poses_at
 
 

@@ -15,7 +15,7 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.recording import open_recording
 from tracker.model import load_model
-from tracker.tracking.track import Tracker
+from tracker.tracking.frame_loop import Tracker
 from tracker.viewer.placement import Placement
 from tracker.viewer.review import Review
 from tracker.viewer.scene import BODY, Scene

@@ -3,7 +3,7 @@ import numpy as np
 from tracker.cli import main
 from tracker.io.recording import open_recording
 from tracker.model import load_model
-from tracker.tracking.track import Tracker
+from tracker.tracking.frame_loop import Tracker
 from tracker.viewer.review import Review, truth_rows
 from tracker.viewer.scene import Scene
 

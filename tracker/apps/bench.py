@@ -5,7 +5,7 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 
 * ``decode``: CPU milliseconds per frame to decode every camera's frame to grey,
   one camera after the other in one thread;
-* the tracker's stages (:data:`tracker.tracking.track.STAGES`) and ``output`` (joint
+* the tracker's stages (:data:`tracker.tracking.workspace.STAGES`) and ``output`` (joint
   centres and the poses.npz writer), milliseconds per frame;
 * end to end: frames per second of the whole ``tracker track`` loop (reader
   threads, tracking, writing) with the first camera only and with all cameras;
@@ -34,6 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracker.apps.keypoint_stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
 from tracker.apps.loop import Tracked, track_frames
 from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
@@ -42,13 +43,12 @@ from tracker.io.posefile import load_pose_file
 from tracker.io.poses import load_poses
 from tracker.io.readers import grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
-from tracker.keypoints.detector import Detector
-from tracker.keypoints.stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
+from tracker.landmarks.detector import Detector
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 from tracker.tracking.workspace import STAGES, StageTimes
 
 DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
@@ -87,7 +87,7 @@ def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> fl
     """Median milliseconds per image of the keypoint detector's pass on the whole image, which every view gets,
     over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the tracker's
     worker runs them), each image reduced as the tracker's readers reduce what they feed the worker
-    (:func:`tracker.tracking.track.reductions`: a 1080x1920 view at half size)."""
+    (:func:`tracker.tracking.frame_loop.reductions`: a 1080x1920 view at half size)."""
     seconds = []
     for source, factor in zip(recording.sources, reductions(settings, recording.cameras)):
         detector, images = Detector(), grey_frames(source, range(min(count, recording.frame_count)), colour=True)

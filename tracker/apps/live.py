@@ -51,9 +51,9 @@ from tracker.io.avi import MjpegAviWriter
 from tracker.io.capture import Capture, Counts, FrameSet, ReplayClock, ReplaySource, Source, V4L2Source
 from tracker.io.readers import WithChroma
 from tracker.io.recording import VIDEO_SUFFIXES
-from tracker.keypoints.hips import Proportions, lowered, proportions
-from tracker.keypoints.live import LiveDetector, transferred
-from tracker.tracking.track import Tracker
+from tracker.landmarks.hips import Proportions, lowered, proportions
+from tracker.landmarks.live_detection import LiveDetector, transferred
+from tracker.tracking.frame_loop import Tracker
 
 DEFAULT_OUT = Path("out") / "live"
 STATUS_PERIOD = 1.0  # seconds between status lines
@@ -236,7 +236,7 @@ def _landmarks_now(
     body: Proportions | None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The detector's newest landmarks (if any arrived, of a frame still in ``history``), their hips lowered where
-    they were read high (:func:`tracker.keypoints.hips.lowered`, for a model of proportions ``body``), moved to the
+    they were read high (:func:`tracker.landmarks.hips.lowered`, for a model of proportions ``body``), moved to the
     frame about to be tracked by the motion tracked since their capture, for the cameras of ``rig``."""
     newest = detector.newest()
     if newest is None or newest[0] not in history:
@@ -266,7 +266,7 @@ class _Session:
         body: Proportions | None,
     ):
         self.capture, self.cameras, self.stop = capture, cameras, stop
-        self.body = body  # the model's, for the detector's hips read high (tracker.keypoints.hips)
+        self.body = body  # the model's, for the detector's hips read high (tracker.landmarks.hips)
         self.recorder, self.view, self.detector = recorder, view, detector
         self.recording = recorder is not None
         self.rig = tuple(range(len(cameras)))  # the cameras of the set in hand
@@ -321,7 +321,7 @@ class _Session:
 
     def retarget(self, tracker: Tracker) -> Tracker:
         """The tracker for the set in hand: ``tracker``, or when cameras dropped one for those still delivering that
-        goes on from its poses, motion and learnt noise (:meth:`~tracker.tracking.track.Tracker.with_cameras`)."""
+        goes on from its poses, motion and learnt noise (:meth:`~tracker.tracking.frame_loop.Tracker.with_cameras`)."""
         delivering = [self.cameras[camera] for camera in self.rig]
         if tracker.rig.names != tuple(camera.name for camera in delivering):
             tracker = tracker.with_cameras(delivering)
@@ -370,10 +370,10 @@ def track_live(
     left, or Ctrl-C.
 
     ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order (``tracker``'s rig);
-    ``recorder`` and ``view`` (a :class:`~tracker.viewer.live.LiveView`), if given, get every tracked frame (the
+    ``recorder`` and ``view`` (a :class:`~tracker.viewer.live_view.LiveView`), if given, get every tracked frame (the
     recorder until a camera drops) and stay open for the caller to close.  ``detector``, if given, is offered every
     frame set and its newest landmarks are fused with the edges (moved to the frame by the tracked motion
-    since their capture, :func:`tracker.keypoints.live.transferred`); it stays open too.  Closes ``capture``.
+    since their capture, :func:`tracker.landmarks.live_detection.transferred`); it stays open too.  Closes ``capture``.
     """
     try:
         print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)

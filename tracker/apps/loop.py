@@ -24,18 +24,18 @@ import numpy as np
 
 from tracker.io.poses import PosesWriter
 from tracker.model import joint_centres
-from tracker.tracking.track import FrameResult, Tracker
+from tracker.tracking.frame_loop import FrameResult, Tracker
 
 Landmarks = tuple[np.ndarray, np.ndarray]
 """A frame's landmarks: pixels (C, 33, 2) and confidence (C, 33), one row per camera of the tracker's rig."""
 
 KeypointSource = Callable[[int], Landmarks | None]
-"""The landmarks of frame ``index``, or None when it has none: :meth:`tracker.keypoints.stream.KeypointStream.get`,
+"""The landmarks of frame ``index``, or None when it has none: :meth:`tracker.apps.keypoint_stream.KeypointStream.get`,
 or that wrapped (a test may move them by a little noise)."""
 
 Check = Callable[[Tracker, Sequence[np.ndarray], Landmarks | None, FrameResult], FrameResult]
 """Sees a frame's result (the tracker, the frame's smoothed images, its landmarks, the result) before it is written,
-and may track the frame again: the keypoints' recovery, :class:`tracker.keypoints.recovery.Recovery`."""
+and may track the frame again: the keypoints' recovery, :class:`tracker.seeding.recovery.Recovery`."""
 
 
 @dataclass(frozen=True)
@@ -80,10 +80,11 @@ def track_frames(
     with the frames done written (:attr:`Loop.interrupted`).
 
     ``frames`` yields (index, images), one image per camera of the tracker's rig, already :meth:`Tracker.smooth
-    <tracker.tracking.track.Tracker.smooth>`-ed.  ``keypoints(index)``: the frame's landmarks, fused with the edges.
-    ``check``: sees each result before it is written (:data:`Check`).  ``times(index)``: the frame's capture time in
-    seconds (live capture), written in its row; the step's ``dt`` is the time since the frame before.  ``late(index)``:
-    seconds (C,) each camera's image of the frame was captured after the frame's time (cameras not frame-locked).
+    <tracker.tracking.frame_loop.Tracker.smooth>`-ed.  ``keypoints(index)``: the frame's landmarks, fused with the
+    edges.  ``check``: sees each result before it is written (:data:`Check`).  ``times(index)``: the frame's capture
+    time in seconds (live capture), written in its row; the step's ``dt`` is the time since the frame before.
+    ``late(index)``: seconds (C,) each camera's image of the frame was captured after the frame's time (cameras not
+    frame-locked).
     ``retarget(tracker)``: before each frame, the tracker to track it with (``tracker live`` rebuilds it for the
     cameras still delivering).  ``each``: called with every frame once its row is written.  ``before``: rows of a
     poses.npz (its arrays: frame, poses, joints, status, residual, elapsed, time) written first, in their order, as the

@@ -24,7 +24,7 @@ from tracker.apps.track import Bar, Tracking, track
 from tracker.errors import TrackerInputError
 from tracker.io.pairing import by_offsets
 from tracker.io.recording import Recording, frames, open_recording
-from tracker.keypoints.sync import RISE_SECONDS, UNDECIDED, Offsets, resampled_least, rises
+from tracker.landmarks.time_offsets import RISE_SECONDS, UNDECIDED, Offsets, resampled_least, rises
 
 REACH = 4.0
 """Frames either side of the landmarks' offset (0 where they leave it undecided) searched."""
@@ -111,7 +111,7 @@ def _timed(
     against the poses tracked without it (``held``: the first frame of the run and its poses, :func:`_track`;
     module docstring), trial offsets about ``start`` seconds."""
     from tracker.model import load_model
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.view_time import edge_costs
 
     assert tracking.model is not None  # set by refine_offsets after the first track

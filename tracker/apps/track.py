@@ -20,8 +20,8 @@ if TYPE_CHECKING:
 
     from tracker.evaluate import Report
     from tracker.io.recording import Recording
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.settings import Settings
-    from tracker.tracking.track import Tracker
     from tracker.viewer.review import Review
 
 Bar = Callable[..., Callable[..., Any]]
@@ -117,15 +117,15 @@ def track(
     gives the progress bars (default none)."""
     import numpy as np
 
+    from tracker.apps.keypoint_stream import beside, tracked_frames
     from tracker.apps.loop import Tracked, track_frames
     from tracker.evaluate import evaluate, truth_within
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
-    from tracker.keypoints.stream import beside, tracked_frames
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.tracking.edge_cue import reductions
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     bar = bar or _no_bar
     start, settings, step = tracking.start, tracking.settings, tracking.keypoints
@@ -149,7 +149,7 @@ def track(
     late = None if pairing is None else lambda index: pairing.late[index]
     back = TrackedBack(None, 0, False)
     if back_to < begin:
-        from tracker.keypoints.first_pose import FRAMES
+        from tracker.seeding.first_pose import FRAMES
 
         back = _tracked_back(
             rec,
@@ -179,7 +179,7 @@ def track(
     )
     recovery = None
     if stream is not None:
-        from tracker.keypoints.recovery import Recovery
+        from tracker.seeding.recovery import Recovery
 
         recovery = Recovery(model, rec.cameras)
     print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
@@ -291,7 +291,7 @@ def _files(
 ) -> tuple[tuple[Path, str], ...]:
     """The files a run of ``tracking`` on ``rec`` wrote (in ``out``, and ``overlay`` and ``view``'s recording when
     asked for), each with what it holds for the user."""
-    from tracker.keypoints.detect import cache_file
+    from tracker.landmarks.detect_recording import cache_file
 
     files = [(out / "poses.npz", f"the pose of each of the {frames} frames: tracker view, eval and export read it")]
     if not tracking.model and rec.model_path is None:  # as _model: fitted to the person
@@ -343,7 +343,7 @@ def _tracked_back(
 ) -> TrackedBack:
     """The frames ``span`` = (first, begin, settled) before the first pose ``init`` (at frame ``begin``) tracked
     backwards: the tracker settles on the first pose over the frames from ``begin`` to ``settled`` - 1 (the first
-    pose's own :data:`tracker.keypoints.first_pose.FRAMES` frames and as many again, so that a limb the fit left off
+    pose's own :data:`tracker.seeding.first_pose.FRAMES` frames and as many again, so that a limb the fit left off
     is mended), turns round, its motion dropped, and tracks back to ``first``, the last frame first, with its own
     detections and recovery, reading :data:`BACK_CHUNK` frames at a time.  Time runs backwards there: the loop is
     given the capture times ``times(index)`` (a live recording's) negated, so that its steps are forward in that
@@ -354,10 +354,10 @@ def _tracked_back(
 
     import numpy as np
 
+    from tracker.apps.keypoint_stream import beside, tracked_frames
     from tracker.apps.loop import track_frames
     from tracker.io.poses import load_poses
-    from tracker.keypoints.stream import beside, tracked_frames
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     first, begin, settled = span
     settings = tracking.settings
@@ -394,7 +394,7 @@ def _tracked_back(
     with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
         try:
             if stream is not None:
-                from tracker.keypoints.recovery import Recovery
+                from tracker.seeding.recovery import Recovery
 
                 recovery = Recovery(model, rec.cameras)
             tracker = Tracker(model, rec.cameras, init, settings)
@@ -442,15 +442,15 @@ def _preparer(tracker, background, *, keep: bool):
 
 def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
     """The body model: ``given`` (``--model``), else the recording's model.toml, else models/human.toml fitted to the
-    person (:func:`tracker.shape.fit.fit_and_save`), written to OUT/model.toml."""
+    person (:func:`tracker.shape.model_fit.fit_and_save`), written to OUT/model.toml."""
     from tracker.model import load_model
 
     if given or rec.model_path is not None:
         return load_model(given or rec.model_path)
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import cache_file
-    from tracker.keypoints.detector import missing
-    from tracker.shape.fit import GENERIC, fit_and_save
+    from tracker.landmarks.detect_recording import cache_file
+    from tracker.landmarks.detector import missing
+    from tracker.shape.model_fit import GENERIC, fit_and_save
     from tracker.tomlfile import read_toml
 
     reason = missing() if step else "--keypoints off"
@@ -477,7 +477,7 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
 def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
     """The pose at the first frame, that frame (``start``, or later) and the first frame to track back to from it:
     ``given`` (``--init``), else the recording's init.toml, else fitted to the keypoints of the first frames
-    (:func:`tracker.keypoints.first_pose.first_pose`, detections cached in OUT/keypoints.npz).  When they cannot place
+    (:func:`tracker.seeding.first_pose.first_pose`, detections cached in OUT/keypoints.npz).  When they cannot place
     the body, the detector tries the next frames if it saw someone in them (a body cut by the borders, in one view
     only, or in views that face each other), else a second of frames later, and tracking starts where the body is
     first placed; the frames before it back to the first of those in which someone was seen, one try after another,
@@ -493,8 +493,8 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
             "keypoint detector find the first pose (--keypoints every or N)"
         )
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import cache_file, detect_recording
-    from tracker.keypoints.first_pose import FRAMES, first_pose
+    from tracker.landmarks.detect_recording import cache_file, detect_recording
+    from tracker.seeding.first_pose import FRAMES, first_pose
 
     cache = cache_file(ensure_writable_folder(out), rec)
     last_begin = max(start, stop - FRAMES)
@@ -527,9 +527,9 @@ def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):
     (off); fed the tracker's images, reduced by ``reduction``, unless that is None."""
     if not step:
         return None
+    from tracker.apps.keypoint_stream import KeypointStream, schedule_words
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import cache_file
-    from tracker.keypoints.stream import KeypointStream, schedule_words
+    from tracker.landmarks.detect_recording import cache_file
 
     stream = KeypointStream(rec, begin, stop, step, cache_file(ensure_writable_folder(out), rec), reduction)
     every = schedule_words(step)
@@ -563,7 +563,7 @@ def _live_view(view: Viewing, rec, tracker, truth):
     joints."""
     import numpy as np
 
-    from tracker.viewer.live import LiveView
+    from tracker.viewer.live_view import LiveView
     from tracker.viewer.review import truth_rows
     from tracker.viewer.scene import Scene, start_server
 

@@ -29,9 +29,9 @@ import numpy as np
 from tracker.camera import Camera
 from tracker.geometry import se3
 from tracker.model import Model
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
 from tracker.tracking.solve import narrowing
-from tracker.tracking.track import Tracker
 
 ROUNDS = 8
 

@@ -2,7 +2,7 @@
 
 The driver matches the folders, gives each a results folder under ``--out`` (its path from the folders' common
 parent), and submits one task per folder that is not finished according to the manifest
-(:mod:`tracker.io.batch`), at most ``--workers`` at a time. A task runs ``tracker track`` in the Ray worker,
+(:mod:`tracker.io.batch_records`), at most ``--workers`` at a time. A task runs ``tracker track`` in the Ray worker,
 its output going to the results folder's ``track.log``, and returns the recording's :class:`Row`. A one-line
 input error (a missing calibration, say) fails the recording at once; a crash (an exception, a worker that
 died) is tried again, up to :data:`RETRIES` times. Each finished recording is written to the manifest as it
@@ -145,7 +145,7 @@ def track_recording(recording: str, name: str, out: str, *, chosen: dict):
 
     from tracker.apps.track import print_summary, track
     from tracker.atomic import ensure_writable_folder
-    from tracker.io.batch import DONE, FAILED, Row
+    from tracker.io.batch_records import DONE, FAILED, Row
     from tracker.status import LOST
 
     cv2.setNumThreads(1)  # as tracker.cli.main: the reader threads run in parallel already
@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     when a recording failed, 130 after Ctrl-C (the finished ones kept, the batch resumable)."""
     ray = _ray()
     from tracker.atomic import ensure_writable_folder
-    from tracker.io.batch import FAILED, Manifest, format_summary, write_summary
+    from tracker.io.batch_records import FAILED, Manifest, format_summary, write_summary
 
     recordings = matched(args.recordings, Path(args.out).resolve())
     out = ensure_writable_folder(args.out).resolve()
@@ -271,7 +271,7 @@ def _line(error: BaseException) -> str:
 def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool:
     """Track ``todo`` on Ray, at most the workers' number at a time, each finished row written to ``manifest``
     as it comes; a crashed try tried again up to :data:`RETRIES` times. Whether Ctrl-C stopped it."""
-    from tracker.io.batch import FAILED, Row
+    from tracker.io.batch_records import FAILED, Row
 
     workers = _start(ray, args)
     try:

@@ -48,10 +48,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, write ``--out`` and print what changed (docs/fit-model.md)."""
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import cache_file
-    from tracker.keypoints.detector import require_detector
+    from tracker.landmarks.detect_recording import cache_file
+    from tracker.landmarks.detector import require_detector
     from tracker.model import model_from_dict
-    from tracker.shape.fit import GENERIC, fit_and_save
+    from tracker.shape.model_fit import GENERIC, fit_and_save
     from tracker.tomlfile import read_toml
 
     rec = options.recording(args)

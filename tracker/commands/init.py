@@ -61,10 +61,10 @@ def keypoint_pose(rec, model, start: int) -> np.ndarray:
     their detections cached in out/<recording name>/keypoints.npz; the rest pose where the cameras look when
     the detector is not installed."""
     from tracker.atomic import ensure_writable_folder
-    from tracker.keypoints.detect import cache_file, detect_recording
-    from tracker.keypoints.detector import missing
-    from tracker.keypoints.first_pose import FRAMES, first_pose
+    from tracker.landmarks.detect_recording import cache_file, detect_recording
+    from tracker.landmarks.detector import missing
     from tracker.model import rest_poses
+    from tracker.seeding.first_pose import FRAMES, first_pose
     from tracker.viewer.placement import in_view
 
     reason = missing()

@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     the time it took per view and how often a person was found per camera."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording
-    from tracker.keypoints.detect import cache_file, detect_recording
+    from tracker.landmarks.detect_recording import cache_file, detect_recording
 
     rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib)
     if not 0 <= args.start < rec.frame_count:

@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.io.capture import Capture
     from tracker.io.posefile import load_pose_file
     from tracker.model import load_model
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
     calibration_path = Path(args.calib)
     rig = assign_cameras(args.camera, load_calibration(calibration_path), calibration_path)
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
             recorder = stack.enter_context(Recorder(Path(args.record), cameras, capture.fps, copies))
         view = None
         if args.view:
-            from tracker.viewer.live import LiveView
+            from tracker.viewer.live_view import LiveView
             from tracker.viewer.scene import Scene, start_server
 
             server = start_server(args.host, args.port)
@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         detector = None
         step = options.keypoint_step_at(args, capture.fps)
         if step:
-            from tracker.keypoints.live import LiveDetector
+            from tracker.landmarks.live_detection import LiveDetector
 
             detector = LiveDetector(cameras, step)
             stack.callback(detector.close)

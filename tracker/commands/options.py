@@ -100,8 +100,8 @@ def keypoint_step(text: str) -> int:
 
 def keypoint_step_at(args: argparse.Namespace, fps: float) -> int:
     """``--keypoints`` as a step (0: off) for footage of ``fps`` frames a second: the given one, or by default
-    :func:`tracker.keypoints.stream.default_step`."""
-    from tracker.keypoints.stream import default_step
+    :func:`tracker.apps.keypoint_stream.default_step`."""
+    from tracker.apps.keypoint_stream import default_step
 
     return default_step(fps) if args.keypoints is None else args.keypoints
 
@@ -109,7 +109,7 @@ def keypoint_step_at(args: argparse.Namespace, fps: float) -> int:
 def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = None) -> None:
     """``--keypoints``: how often the 2-D keypoint detector runs beside the tracker (``what``: the help's
     first words, if not tracking's)."""
-    from tracker.keypoints.stream import RATE
+    from tracker.apps.keypoint_stream import RATE
 
     what = what or (
         "run the 2-D keypoint detector (BlazePose) on every N-th frame beside the tracker and fuse its "
@@ -384,7 +384,7 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
 def bar(args: argparse.Namespace, desc: str | None, unit: str, *, leave: bool = False):
     """A progress bar on the terminal's standard error (off with --quiet) to wrap an iterable in; it stays on the
     screen when done only with ``leave``.  It writes to its own copy of file descriptor 2, so it still shows
-    while MediaPipe's native logs are muted (:func:`tracker.keypoints.detector.native_logs_muted`)."""
+    while MediaPipe's native logs are muted (:func:`tracker.landmarks.detector.native_logs_muted`)."""
     from tqdm import tqdm
 
     file = sys.stderr if args.quiet else _terminal(sys.stderr)

@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
     if interrupted or not done or not (args.view or args.record):
         return 130 if interrupted else 0
-    from tracker.viewer.points import PointsView
+    from tracker.viewer.marker_view import PointsView
     from tracker.viewer.scene import start_server
 
     view = PointsView(

@@ -12,7 +12,7 @@ from tracker.errors import TrackerInputError
 
 if TYPE_CHECKING:
     from tracker.apps.sync import Refined
-    from tracker.keypoints.sync import Offsets
+    from tracker.landmarks.time_offsets import Offsets
 
 HELP = "find each camera's capture-time offset from the body's motion, write REC/sync.toml"
 
@@ -64,9 +64,9 @@ def run(args: argparse.Namespace) -> int:
     others' lines, and nothing is written."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording, rig_names
-    from tracker.io.sync import FILE, load_offsets, save_offsets
-    from tracker.keypoints.detect import detect_recording
-    from tracker.keypoints.sync import camera_offsets
+    from tracker.io.sync_file import FILE, load_offsets, save_offsets
+    from tracker.landmarks.detect_recording import detect_recording
+    from tracker.landmarks.time_offsets import camera_offsets
 
     given = [option for option in ("model", "init", "frames") if getattr(args, option) is not None]
     if given and not args.refine:
@@ -123,9 +123,9 @@ def _refined(args: argparse.Namespace, rec, found: Offsets, out):
     """The offsets refined by the edges (:func:`tracker.apps.sync.refine_offsets`), the tracks in OUT/sync/."""
     import functools
 
+    from tracker.apps.keypoint_stream import default_step
     from tracker.apps.sync import refine_offsets
     from tracker.apps.track import Tracking
-    from tracker.keypoints.stream import default_step
     from tracker.tracking.settings import Settings
 
     tracking = Tracking(

@@ -38,8 +38,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the review until Ctrl-C, or with ``--record`` write the session and return."""
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.settings import Settings
-    from tracker.tracking.track import Tracker
     from tracker.viewer.review import Review
 
     rec, model = options.opened(args)

@@ -31,8 +31,8 @@ from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.pairing import Pairing, by_offsets, by_times
 from tracker.io.readers import ColourCopies, image_files, read_frames, read_image
-from tracker.io.sync import FILE as SYNC
-from tracker.io.sync import load_offsets
+from tracker.io.sync_file import FILE as SYNC
+from tracker.io.sync_file import load_offsets
 from tracker.io.timestamps import camera_times
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv")

@@ -18,10 +18,10 @@ tracker's robust cost with the layout's prior over every sample of every frame:
 
     sum w (row dx + (R_c g) . dt_f - m)^2 + |P (x + dx)|^2,    w = 1 / (c + |m|)
 
-(a region line of the same sample, :meth:`tracker.tracking.track.Tracker.inspect_cues`, gives a row of its own:
+(a region line of the same sample, :meth:`tracker.tracking.frame_loop.Tracker.inspect_cues`, gives a row of its own:
 the same row, with the posterior mean of where the colours change as its m and the tracker's weight of it as its w),
 solved as one set of normal equations (:func:`shape_step`); the poses are then fitted to the edges again with the
-new shape (:mod:`tracker.shape.fit`), and so on in turn.
+new shape (:mod:`tracker.shape.model_fit`), and so on in turn.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.geometry import se3
-from tracker.keypoints.fit import Body
 from tracker.model import Model
+from tracker.seeding.pose_fit import Body
 from tracker.shape.layout import Layout
 from tracker.tracking.workspace import Inspection
 
@@ -105,7 +105,7 @@ class FrameRows:
 
 def joint_twists(model: Model, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each joint motion's world twist (P, 6), (omega, v) (a world point p of a component it moves goes at
-    omega x p + v per unit; :meth:`tracker.keypoints.fit.Body.twists` at rest from ``poses``), and which components
+    omega x p + v per unit; :meth:`tracker.seeding.pose_fit.Body.twists` at rest from ``poses``), and which components
     each one moves (P, N) bool: its own and every one below it."""
     body = Body.of(model)
     twists = body.twists(np.zeros(body.offsets[-1]), poses)
@@ -120,7 +120,7 @@ def frame_rows(
     layout: Layout, model: Model, *, factors: np.ndarray, poses: np.ndarray, inspection: Inspection
 ) -> FrameRows:
     """The rows (module docstring) of the samples in ``inspection`` that found an edge (or whose line the region cue
-    read, :meth:`tracker.tracking.track.Tracker.inspect_cues`), the model at ``poses``
+    read, :meth:`tracker.tracking.frame_loop.Tracker.inspect_cues`), the model at ``poses``
     (N, 4, 4) with stretch ``factors`` (N, 3)."""
     found = np.isfinite(inspection.offset) & (inspection.weight > 0)
     seen = Inspection(

@@ -2,7 +2,7 @@
 
 Both give valid model poses (F, N, 4, 4): every joint exact and within its
 limits (:meth:`tracker.model.Model.coerce`).  BVH conventions are in
-:mod:`tracker.io.bvh`.
+:mod:`tracker.io.bvh_clip`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 from tracker.chain import HINGE
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.io.bvh import Bvh, bvh_global
+from tracker.io.bvh_clip import Bvh, bvh_global
 from tracker.model import Model, poses_from_rotations, rest_poses
 
 CMU_UNIT = 0.0564

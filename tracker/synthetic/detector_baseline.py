@@ -2,8 +2,8 @@
 
 The tracker fuses the detector's landmarks with the image cues; it should never do worse than those landmarks
 alone.  Per frame, each of the twelve joint landmarks (shoulders, elbows, wrists, hips, knees, ankles: the joint
-centres of :data:`tracker.tracking.body_landmarks.SIDES`) is triangulated from the views that agree on it, left and
-right told by the body (:func:`tracker.keypoints.triangulation.frame_by_frame`), with no tracking and no model
+centres of :data:`tracker.landmarks.body_landmarks.SIDES`) is triangulated from the views that agree on it, left and
+right told by the body (:func:`tracker.landmarks.triangulation.frame_by_frame`), with no tracking and no model
 fit.  Its error is the distance to the true joint centre where the truth has one (the camera sees the joint);
 the tracker is scored over the same joints and frames, so the two numbers compare.
 """
@@ -16,10 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracker.camera import Camera
-from tracker.keypoints.store import Keypoints
-from tracker.keypoints.triangulation import frame_by_frame
+from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.store import Keypoints
+from tracker.landmarks.triangulation import frame_by_frame
 from tracker.model import Model
-from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 
 @dataclass(frozen=True)

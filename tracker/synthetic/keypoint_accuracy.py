@@ -1,7 +1,7 @@
 """The detector's landmarks against a render's truth: pixel errors as a share of the body's size, and swaps.
 
 In camera k and frame f, the truth of a joint landmark j (shoulders, elbows, wrists, hips, knees,
-ankles: the origins of the components of :data:`tracker.tracking.body_landmarks.SIDES`) is the image u of its
+ankles: the origins of the components of :data:`tracker.landmarks.body_landmarks.SIDES`) is the image u of its
 true joint centre. It is scored where the camera sees that joint (inside the image, not behind a
 prop; :func:`tracker.synthetic.synth.seen_joints`) and the detector gave it a confidence of at least
 ``min_confidence`` (the tracker's default, 0.5). The body's size s in that view is the diagonal of the
@@ -29,12 +29,12 @@ import numpy as np
 from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.poses import load_poses
-from tracker.keypoints.store import Keypoints, load_keypoints
+from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.store import Keypoints, load_keypoints
 from tracker.model import Model, load_model
 from tracker.synthetic.props import Box
 from tracker.synthetic.suite import Render
 from tracker.synthetic.synth import seen_joints, table_before
-from tracker.tracking.body_landmarks import LANDMARKS, landmark_points
 
 WRONG = 0.1
 """An error above this share of the body's size counts as a wrong landmark."""

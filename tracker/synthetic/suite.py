@@ -21,7 +21,7 @@ from tracker.camera import load_calibration
 from tracker.errors import TrackerInputError
 from tracker.evaluate import Report, evaluate
 from tracker.io.poses import load_poses
-from tracker.keypoints.store import load_keypoints
+from tracker.landmarks.store import load_keypoints
 from tracker.model import load_model
 from tracker.synthetic.detector_baseline import Baseline, baseline
 from tracker.synthetic.synth import Staging, synthesize

@@ -30,7 +30,7 @@ from tracker.camera import Camera, load_calibration, look_at_camera, save_calibr
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.avi import MjpegAviWriter
-from tracker.io.bvh import load_bvh
+from tracker.io.bvh_clip import load_bvh
 from tracker.io.posefile import save_pose_file
 from tracker.model import Model, joint_centres, load_model, model_from_dict, save_model
 from tracker.synthetic import texture as textures

@@ -12,9 +12,7 @@ cue.py             the interface every cue stands behind: prepare, add C_i and e
 cues.py            the cues the tracker asks, in order
 edge_cue.py        the edge cue, and the images as its search reads them
 keypoint_cue.py    the keypoint cue: the detector's landmarks pulling on the model points they mark
-body_landmarks.py  the detector's landmarks on the body model: names, model points, limbs, trunk, left/right pairs
 landmark_noise.py  the keypoints' learnt noise: each landmark's zone, and how firmly the edges hold its limb
-guessed.py         legs the detector guesses behind a table, and the parts they hide
 region_cue.py      the region cue: the outline's offset posterior along each line, from the colours either side
 region_lines.py    the region cue's lines in numba kernels: scored, added, counted
 colours.py         the colours the region cue learns per part and background, and the colour images it reads
@@ -23,9 +21,11 @@ lead.py            the limb lead: a limb beyond its edges' reach moved to its la
 motion_prior.py    the Kalman motion prior (``--dynamics kalman``) and the motion a tracker carries between frames
 motion_model.py    the motion models behind one interface (none, constant velocity, Kalman); poses moved along a motion
 solve.py           one solve of the whole body: prior, trunk hold, tree solve, step, coercion; sections 3-5
-track.py           the frame loop (:class:`~tracker.tracking.track.Tracker`); section 6
+frame_loop.py      the frame loop (:class:`~tracker.tracking.frame_loop.Tracker`); section 6
 foreground.py      the empty scene: median and cleared backgrounds, the difference image the edges are searched in
 view_time.py       when a view was captured, from its edges against a track of the other views (``tracker sync``)
 
+The landmarks it reads, their names on the body model and the legs the detector guesses are below it
+(:mod:`tracker.landmarks`); the first pose and the re-seeds that start it again are above it (:mod:`tracker.seeding`).
 The rendered-data generator (:mod:`tracker.synthetic`) exists to test this method and is never imported by it.
 """

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.workspace import Workspace
 
 
@@ -37,8 +37,8 @@ class Frame:
 @dataclass(frozen=True)
 class Iteration:
     """One iteration of a frame as the cues see it: its number ``index`` of ``count``, the edge search's range
-    (pixels either side, :meth:`tracker.tracking.track.Tracker.search_range`), whether the outlines were just sampled
-    afresh (``resampled``), and each component's body twist since they were (``twist`` (N, 6); zero when just
+    (pixels either side, :meth:`tracker.tracking.frame_loop.Tracker.search_range`), whether the outlines were just
+    sampled afresh (``resampled``), and each component's body twist since they were (``twist`` (N, 6); zero when just
     sampled), by which every sample is moved along its line to first order."""
 
     index: int
@@ -57,7 +57,7 @@ class Cue(Protocol):
     """One cue of the solve (the module docstring)."""
 
     name: str
-    """What a viewer's inspection calls it (:meth:`tracker.tracking.track.Tracker.inspect_cues`)."""
+    """What a viewer's inspection calls it (:meth:`tracker.tracking.frame_loop.Tracker.inspect_cues`)."""
     stage: str
     """The stage of :class:`~tracker.tracking.workspace.StageTimes` its seconds count to."""
 

@@ -19,7 +19,7 @@ from tracker.tracking.settings import Settings, scaled_to
 from tracker.tracking.workspace import Workspace
 
 if TYPE_CHECKING:
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
 
 def reductions(settings: Settings, cameras) -> np.ndarray:
@@ -46,7 +46,7 @@ def smooth(image: np.ndarray, sigma: float, work_side: int = 0) -> np.ndarray:
 
 
 def smoother(settings: Settings, cameras) -> Callable[[np.ndarray], np.ndarray]:
-    """:func:`smooth` at the blur that a :class:`~tracker.tracking.track.Tracker` of ``settings`` uses for the
+    """:func:`smooth` at the blur that a :class:`~tracker.tracking.frame_loop.Tracker` of ``settings`` uses for the
     images of ``cameras`` (``blur_sigma`` scaled to their largest short side, :func:`scaled_to`)."""
     sigma = scaled_to(settings, max(min(camera.size) for camera in cameras)).edges.blur_sigma
     return functools.partial(smooth, sigma=sigma, work_side=settings.images.work_side)

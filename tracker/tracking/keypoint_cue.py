@@ -38,16 +38,16 @@ import numpy as np
 from numba import njit
 
 from tracker.geometry.lens import distort
+from tracker.landmarks.body_landmarks import LANDMARKS, cue_points, left_right_pairs, placers
+from tracker.landmarks.guessed import bone_lengths, guessed, hidden_parts
 from tracker.status import TRACKED
-from tracker.tracking.body_landmarks import LANDMARKS, cue_points, left_right_pairs, placers
 from tracker.tracking.cue import Frame, Iteration
-from tracker.tracking.guessed import bone_lengths, guessed, hidden_parts
 from tracker.tracking.landmark_noise import LandmarkNoise
 from tracker.tracking.measure import component_misfits
 from tracker.tracking.outline import component_row
 
 if TYPE_CHECKING:
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.workspace import Workspace
 
 SWAP_MARGIN = 0.02
@@ -202,7 +202,7 @@ class KeypointCue:
         self.component, self.point = cue_points(model)
         self.pairs = left_right_pairs(LANDMARKS)
         self.placer = placers(model, self.component, self.point)
-        self.bone_lengths = bone_lengths(poses, self.component, self.point)  # the legs' (tracker.tracking.guessed)
+        self.bone_lengths = bone_lengths(poses, self.component, self.point)  # the legs' (tracker.landmarks.guessed)
         self.floor = (np.full(len(LANDMARKS), self.settings.tolerance), np.full(len(LANDMARKS), np.inf))
         self.noise = LandmarkNoise.start(len(LANDMARKS), model.size, self.settings.tolerance)
         self.frame: tuple[np.ndarray, np.ndarray] | None = None  # the frame's landmarks: pixels, confidence
@@ -216,7 +216,7 @@ class KeypointCue:
 
     def prepare(self, tracker: Tracker, frame: Frame) -> np.ndarray | None:
         """Take the frame's landmarks; with ``hide_guessed`` and two views or more, the legs the detector guessed
-        (:func:`tracker.tracking.guessed.guessed`) lose their landmarks, and their parts are hidden."""
+        (:func:`tracker.landmarks.guessed.guessed`) lose their landmarks, and their parts are hidden."""
         self.frame = None
         if frame.keypoints is None:
             return None

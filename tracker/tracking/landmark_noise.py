@@ -3,7 +3,7 @@ firmly the edges hold the limb that places it (docs/keypoints.md, "Fusion with t
 
 A landmark's zone ``t`` (:func:`tracker.tracking.keypoint_cue.keypoint_kernel`) is learnt from its misfits in the
 recent frames whose edges held the body (:func:`learnt_tolerance`), for this detector on this subject.  Where the
-edges do not hold a limb (the component that places a joint landmark, :func:`tracker.tracking.body_landmarks.placers`,
+edges do not hold a limb (the component that places a joint landmark, :func:`tracker.landmarks.body_landmarks.placers`,
 fitted its outline's edges worse than ``KeypointSettings.edge_misfit`` in the last frame's last iteration,
 :func:`tracker.tracking.measure.component_misfits`), its landmarks pull from the floor zone with no fade, and that
 frame does not teach their zones (:meth:`LandmarkNoise.held`).

@@ -6,7 +6,7 @@ last frame (a fast swing, a low frame rate, a re-seed that left no velocity) lie
 hold it on whatever lies within reach, against the landmarks that say where it is (their pull is bounded, like an
 edge sample's).  So where the frame's landmarks still lie far off a limb once tracked (:meth:`Lead.led_limbs`), that
 limb is moved to them (:meth:`Lead.move_limbs`) and the frame tracked again from there.  The edges arbitrate, as they
-do a re-seed (:mod:`tracker.keypoints.recovery`): the led pose is kept only when the led components' outlines find
+do a re-seed (:mod:`tracker.seeding.recovery`): the led pose is kept only when the led components' outlines find
 their edges closer (:func:`tracker.tracking.measure.support`) than the tracked ones did; a detector that is wrong
 where the edges are right (a faceless mannequin's wrists) is then outvoted.
 """
@@ -17,13 +17,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tracker.landmarks.body_landmarks import limbs
 from tracker.model import Model
-from tracker.tracking.body_landmarks import limbs
 from tracker.tracking.measure import Statistics, support
 from tracker.tracking.workspace import Workspace
 
 if TYPE_CHECKING:
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
 CROSSED_VIEWS = 3  # views in which a left/right pair must fit better swapped to say the tracked limbs crossed over
 LEAD_ITERATIONS = 3  # solves of the landmarks alone that move a limb they lead (Lead.move_limbs)
@@ -31,7 +31,7 @@ PIN = 1e6  # the prior's multiple that holds the components a lead does not move
 
 
 class Lead:
-    """The limbs each landmark can lead, ``limbs`` (K, N) bool (:func:`tracker.tracking.body_landmarks.limbs`),
+    """The limbs each landmark can lead, ``limbs`` (K, N) bool (:func:`tracker.landmarks.body_landmarks.limbs`),
     each limb's root landmarks, ``roots`` (K, K), and the landmarks that lead a leg, ``leads_leg`` (K,)."""
 
     def __init__(self, model: Model, component: np.ndarray, legs: np.ndarray):
@@ -73,10 +73,10 @@ class Lead:
         """The components (N,) bool that the landmarks ``pixels`` at ``confidence`` lead at the tracker's current
         poses: the limbs of the landmarks that lie more than ``keypoints.lead`` of the body's image size beyond their
         learnt noise zone (:class:`~tracker.tracking.landmark_noise.LandmarkNoise`) off their image, in the median
-        over the views that see them (their detections already checked to agree, :mod:`tracker.keypoints.consistency`;
+        over the views that see them (their detections already checked to agree, :mod:`tracker.landmarks.consistency`;
         one view may be all there is: the edges arbitrate, :meth:`retry`), where the landmarks at the limb's root (the
         shoulder of an arm, the hip of a leg) lie within that of theirs: a limb is led from a trunk in place; a trunk
-        off its landmarks is the recovery's (:mod:`tracker.keypoints.recovery`), and leading its limbs would hide it
+        off its landmarks is the recovery's (:mod:`tracker.seeding.recovery`), and leading its limbs would hide it
         from it.
 
         A left/right pair that fits better swapped in every view that sees it, :data:`CROSSED_VIEWS` or more, says the

@@ -21,7 +21,7 @@ from tracker.tracking import motion_prior
 from tracker.tracking.motion_prior import Motion
 
 if TYPE_CHECKING:
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
 
 
 @njit(cache=True, nogil=True)

@@ -28,7 +28,7 @@ Speed (two numba calls per IRLS iteration, no allocation per sample):
 
 * the camera-frame quadrics, clips, bounding spheres and their cones of rays
   are the ones :func:`tracker.tracking.outline.place` made for the outlines (the
-  :class:`~tracker.tracking.samples.Placed` buffers the :class:`~tracker.tracking.track.Tracker`
+  :class:`~tracker.tracking.samples.Placed` buffers the :class:`~tracker.tracking.frame_loop.Tracker`
   owns); per call :func:`prepare` only lists, per camera and quadric, the
   quadrics whose cone of rays comes near it (the only ones its samples can meet);
 * per sample only the two ends of the search segment ``p +- (r + 1) n`` are

@@ -1,7 +1,7 @@
 """The person's mask as the region cue reads it: the detector's segmentation of the person (docs/region.md, "The
 person's mask").
 
-The landmarker segments the person in each view it finds them in (:class:`tracker.keypoints.detector.Detection`:
+The landmarker segments the person in each view it finds them in (:class:`tracker.landmarks.detector.Detection`:
 an S x S probability over a square of the image).  :func:`person_grid` takes it to the grid of the view's
 colour image as the region cue reads it (0 beyond the square), where the region cue joins it to each pixel's colour
 (:func:`tracker.tracking.region_lines.with_person`) and learns each part's colours only where it agrees
@@ -13,10 +13,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from tracker.landmarks.body_landmarks import cue_points
+from tracker.landmarks.guessed import axis_points, hidden_parts, leg_landmarks
 from tracker.model import Model
-from tracker.tracking.body_landmarks import cue_points
 from tracker.tracking.colours import FACTOR
-from tracker.tracking.guessed import axis_points, hidden_parts, leg_landmarks
 from tracker.tracking.settings import Settings
 
 
@@ -99,7 +99,7 @@ class PersonMasks:
         return np.flatnonzero(self.trust > 0).tolist()
 
     def shares(self, camera: int, poses: np.ndarray) -> np.ndarray:
-        """Each component's share (N,) of its axis points (:func:`tracker.tracking.guessed.axis_points`) at ``poses``
+        """Each component's share (N,) of its axis points (:func:`tracker.landmarks.guessed.axis_points`) at ``poses``
         that lie on the mask of view ``camera``, over those within the image and the mask's square; NaN where none
         is."""
         component, points = self.axis

@@ -54,7 +54,7 @@ from tracker.tracking.motion_model import motion_since
 from tracker.tracking.region_lines import learn_kernel, line_profiles, log_table, region_kernel
 
 if TYPE_CHECKING:
-    from tracker.tracking.track import Tracker
+    from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.workspace import Workspace
 
 

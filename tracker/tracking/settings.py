@@ -182,7 +182,7 @@ class KeypointSettings:
     hide_guessed: bool = setting(
         True,
         "legs whose landmarks triangulate to bones under half the model's are guessed by the detector: their "
-        "landmarks are dropped and their parts hidden in that frame (tracking.guessed)",
+        "landmarks are dropped and their parts hidden in that frame (landmarks.guessed)",
     )
     drag: float = setting(
         0.05,

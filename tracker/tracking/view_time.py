@@ -25,7 +25,7 @@ from tracker.tracking.motion_model import motion_since, views_at
 def poses_at(poses: np.ndarray, time: float) -> np.ndarray:
     """The poses (N, 4, 4) at the fractional frame ``time`` of a track ``poses`` (F, N, 4, 4): each component moved
     from the frame before along the geodesic to the frame after, E = E_i exp(f log(E_i^-1 E_i+1)), f = time - i
-    (:func:`~tracker.tracking.track.views_at` of the motion between them); ``time`` within 0..F-1."""
+    (:func:`~tracker.tracking.frame_loop.views_at` of the motion between them); ``time`` within 0..F-1."""
     first = min(int(np.floor(time)), poses.shape[0] - 2)
     velocity = motion_since(poses[first], poses[first + 1])
     return views_at(np.ascontiguousarray(poses[first]), velocity, np.array([time - first]))[0]
@@ -36,8 +36,8 @@ def edge_costs(tracker, frames: Iterable[tuple[int, list]], poses: np.ndarray, *
     (S, 2, M) over ``shifts`` (S,) (frames: the camera's frame m shows the track's frame m + shift) and the camera's
     frames 0..M-1 (module docstring); zeros where the shifted time lies outside the track.
 
-    ``tracker``: a :class:`tracker.tracking.track.Tracker` of the one camera, used up: each frame is loaded into its
-    buffers once and searched there at every shift; ``frames``: its frames (index, [image]), already smoothed by the
+    ``tracker``: a :class:`tracker.tracking.frame_loop.Tracker` of the one camera, used up: each frame is loaded into
+    its buffers once and searched there at every shift; ``frames``: its frames (index, [image]), already smoothed by the
     tracker; ``poses`` (F, N, 4, 4): the body tracked in the other cameras at frames 0..F-1, contiguous."""
     search = tracker.search_range(tracker.settings.solve.iterations - 1)
     work = tracker.work

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracker.tracking.body_landmarks import LANDMARKS
+from tracker.landmarks.body_landmarks import LANDMARKS
 from tracker.tracking.colours import FACTOR
 from tracker.tracking.measure import Statistics
 from tracker.tracking.ownership import Ownership

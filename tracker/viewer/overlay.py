@@ -1,4 +1,4 @@
-"""Camera images annotated with what the edge search saw (:class:`tracker.tracking.track.Inspection`).
+"""Camera images annotated with what the edge search saw (:class:`tracker.tracking.frame_loop.Inspection`).
 
 On each camera's image: every sample's search line, coloured by its IRLS weight
 relative to a perfect fit, ``w c = c / (c + |m|)`` (green when the edge lies on

@@ -22,10 +22,10 @@ from tracker.geometry.se3 import inverse
 from tracker.io.posefile import save_pose_file
 from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording, camera_frames
-from tracker.keypoints.first_pose import snap_to_edges
 from tracker.model import Model, with_descendants
+from tracker.seeding.first_pose import snap_to_edges
+from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
-from tracker.tracking.track import Tracker
 from tracker.viewer.scene import Frame, Scene
 
 

@@ -3,7 +3,7 @@
 The timeline slider, play/pause, single steps and the playback speed pick a row of
 ``poses.npz``; the scene then shows that frame's poses and truth, and each camera's
 image with the edge search redone at those poses by the run's tracker
-(:meth:`tracker.tracking.track.Tracker.inspect`, a query that leaves it as it was), so what the panels show is what
+(:meth:`tracker.tracking.frame_loop.Tracker.inspect`, a query that leaves it as it was), so what the panels show is what
 the tracker saw.  Plots give each frame's status,
 residual and, for files that record it, the tracker's speed.  Playback keeps to real
 time (times the speed) by skipping frames when drawing is slower than the video.
@@ -20,7 +20,7 @@ from tracker.io.readers import FrameSeeker
 from tracker.io.recording import Recording, camera_frames
 from tracker.status import NAMES
 from tracker.tracking.foreground import Background
-from tracker.tracking.track import Tracker
+from tracker.tracking.frame_loop import Tracker
 from tracker.viewer.scene import Frame, Scene, add_run_plots
 from tracker.viewer.timeline import Timeline
 
@@ -53,7 +53,7 @@ class Review(Timeline):
         background: Background | None = None,
     ):
         """``tracker``: one for the recording's cameras with the run's settings, which redoes each row's edge
-        search (:meth:`~tracker.tracking.track.Tracker.inspect`, which never moves it); ``background``: the run's
+        search (:meth:`~tracker.tracking.frame_loop.Tracker.inspect`, which never moves it); ``background``: the run's
         empty scene (``tracker track --background``), so the panels show and search the same difference images the
         tracker did; None: grey images."""
         super().__init__(scene.server, len(results["frame"]), recording.fps)

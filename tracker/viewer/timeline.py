@@ -1,5 +1,5 @@
 """Frame selection over a finished run, shared by the viewers that step through one (:mod:`.review`,
-:mod:`.points`): a frame slider, a thread-safe ``show`` that draws one row at a time, and ``record``,
+:mod:`.marker_view`): a frame slider, a thread-safe ``show`` that draws one row at a time, and ``record``,
 which writes every row as a .viser file.  What a row looks like is each viewer's own ``draw``."""
 
 from __future__ import annotations

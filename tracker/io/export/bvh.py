@@ -1,6 +1,6 @@
 """BVH export of the body model's skeleton and motion, for Blender and other animation tools.
 
-Format facts (as read by :mod:`tracker.io.bvh` and Blender's importer):
+Format facts (as read by :mod:`tracker.io.bvh_clip` and Blender's importer):
 
 * World: y up, the body faces +z at rest, x is the body's left (the usual BVH
   world).  The tracker's world is z up, so every position ``p`` is written as

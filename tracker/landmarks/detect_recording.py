@@ -1,0 +1,191 @@
+"""The detector over frames of a recording, one landmarker per camera, and the cache that keeps its output.
+
+A cache (``keypoints.npz``) belongs to one recording: its fingerprint names each camera's video by
+size and a hash of its first bytes.  A recording whose cameras' frames are paired by time (docs/sync.md)
+keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, its fingerprint naming the
+pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A cache of
+another recording, or made by another detector, is an error rather than something to overwrite silently; one that
+lacks some of the wanted frames is completed and written back
+with every frame it held.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+
+from tracker.errors import TrackerInputError
+from tracker.io.recording import Recording, frames
+from tracker.landmarks.crop import CROP, scaled
+from tracker.landmarks.detector import DETECTOR, Detection, Detector, detect_views, native_logs_muted
+from tracker.landmarks.store import Keypoints, load_keypoints, save_keypoints
+
+_HASHED = 1 << 16
+"""Bytes of each video (or first image) hashed into a recording's fingerprint."""
+
+
+def cache_file(folder: Path, recording: Recording) -> Path:
+    """Where the detections of ``recording`` are kept in the output ``folder``: keypoints.npz, or keypoints-paired.npz
+    when its cameras' frames are paired by time (module docstring), so that either set is kept."""
+    return folder / ("keypoints.npz" if not _paired(recording) else "keypoints-paired.npz")
+
+
+def _paired(recording: Recording) -> bool:
+    return recording.pairing is not None and not recording.pairing.identity
+
+
+def fingerprint(recording: Recording) -> str:
+    """The recording's identity for caches: per camera its name, its video's size and a hash of its start
+    (an image folder: its first image's), and a hash of the frames paired when its cameras' are paired by time."""
+    parts = []
+    for camera, source in zip(recording.cameras, recording.sources):
+        file = min(path for path in source.iterdir() if path.is_file()) if source.is_dir() else source
+        with open(file, "rb") as handle:
+            digest = hashlib.sha1(handle.read(_HASHED)).hexdigest()[:12]
+        parts.append(f"{camera.name}={file.stat().st_size}:{digest}")
+    if _paired(recording):
+        assert recording.pairing is not None  # paired
+        frames = np.ascontiguousarray(recording.pairing.frames, np.int64)
+        parts.append(f"paired={hashlib.sha1(frames.tobytes()).hexdigest()[:12]}")
+    return " ".join(parts)
+
+
+def _videos(fingerprint: str) -> str:
+    """The part of a :func:`fingerprint` that names the videos, without their pairing."""
+    return " ".join(part for part in fingerprint.split() if not part.startswith("paired="))
+
+
+def cached(path: Path, recording: Recording) -> Keypoints | None:
+    """The keypoints of ``recording`` held in ``path`` (None when there is no file, an unreadable one, or one of
+    the same videos paired otherwise); a file of another recording or another detector is a one-line error naming
+    the fix."""
+    if not path.is_file():
+        return None
+    try:
+        found = load_keypoints(path)
+    except TrackerInputError:
+        return None
+    names = tuple(camera.name for camera in recording.cameras)
+    now = fingerprint(recording)
+    if found.camera_names != names or (found.recording and _videos(found.recording) != _videos(now)):
+        raise TrackerInputError(
+            f"{path}: holds the keypoints of another recording (cameras {', '.join(found.camera_names)}); "
+            "delete it or choose another output folder"
+        )
+    if found.detector != DETECTOR:
+        raise TrackerInputError(
+            f"{path}: made by another detector ({found.detector}, this is {DETECTOR}); delete it to detect again"
+        )
+    if found.recording and found.recording != now:
+        return None  # the same videos paired otherwise (a new sync.toml): detected again, the file replaced
+    return found
+
+
+def holding(keypoints: Keypoints | None, wanted: np.ndarray) -> Keypoints | None:
+    """``keypoints`` cut to the frames ``wanted`` if it holds every one of them, else None."""
+    if keypoints is None or not np.isin(wanted, keypoints.frame).all():
+        return None
+    return keypoints.at_frames(wanted)
+
+
+def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
+    """The frames of both, sorted; ``new``'s rows where both hold a frame."""
+    if old is None:
+        return new
+    both = stacked([new, old.rows(~np.isin(old.frame, new.frame))])
+    return both.rows(np.argsort(both.frame, kind="stable"))
+
+
+def detections(recording: Recording, start: int, stop: int, *, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
+    """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
+    camera in video mode (so each follows its person from detected frame to detected frame).  MediaPipe's
+    native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a progress bar
+    over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
+    names = tuple(camera.name for camera in recording.cameras)
+    identity = fingerprint(recording)
+    with ExitStack() as stack:
+        stack.enter_context(native_logs_muted())  # the graphs' threads log while they run
+        detectors = [Detector() for _ in recording.cameras]
+        for detector in detectors:
+            stack.callback(detector.close)
+        for index, images in frames(recording, start, stop, colour=True, step=step):
+            yield (
+                index,
+                frame_keypoints(
+                    index, detect_views(detectors, images, cameras=recording.cameras), names=names, identity=identity
+                ),
+            )
+
+
+def frame_keypoints(
+    index: int, found: list[Detection], *, names: tuple[str, ...], identity: str, reduction: np.ndarray | None = None
+) -> Keypoints:
+    """One frame's keypoints from its views' detections; with ``reduction`` (one integer factor per camera) the
+    detections were made in images reduced by it (:func:`tracker.io.readers.reduced`), and their pixels are taken
+    back to full size, ``f p``: the detector gives a share of the image's width and height times that width and
+    height (:func:`tracker.landmarks.detector._read`), and the reduced image spans the full one's whole blocks."""
+    pixels = np.stack([detection.pixels for detection in found])
+    factors = np.ones(len(found)) if reduction is None else np.asarray(reduction, float)
+    mask = np.zeros((len(found), CROP, CROP), np.uint8)
+    square = np.full((len(found), 3), np.nan)
+    for view, (detection, factor) in enumerate(zip(found, factors)):
+        if detection.mask is not None and detection.square is not None:
+            mask[view] = detection.mask
+            placed = scaled(detection.square, factor)
+            square[view] = (*placed.centre, placed.side)
+    return Keypoints(
+        np.array([index]),
+        names,
+        (factors[:, None, None] * pixels)[None],
+        np.stack([detection.confidence for detection in found])[None],
+        np.stack([detection.world for detection in found])[None],
+        recording=identity,
+        mask=mask[None],
+        square=square[None],
+    )
+
+
+def stacked(rows: list[Keypoints]) -> Keypoints:
+    """One-frame (or several-frame) keypoints of the same cameras, one after the other."""
+    first = rows[0]
+    known = any(row.mask is not None for row in rows)
+    return Keypoints(
+        np.concatenate([row.frame for row in rows]),
+        first.camera_names,
+        np.concatenate([row.pixels for row in rows]),
+        np.concatenate([row.confidence for row in rows]),
+        np.concatenate([row.world for row in rows]),
+        first.detector,
+        first.recording,
+        np.concatenate([row.masks()[0] for row in rows]) if known else None,
+        np.concatenate([row.masks()[1] for row in rows]) if known else None,
+    )
+
+
+def detect_recording(
+    recording: Recording,
+    start: int = 0,
+    stop: int | None = None,
+    *,
+    step: int = 1,
+    cache: str | os.PathLike | None = None,
+    progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
+) -> tuple[Keypoints, bool]:
+    """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and
+    whether they came from ``cache`` (the recording's keypoints.npz holding those frames); otherwise they are
+    detected and, with ``cache``, written there beside the frames it already held.  ``progress(iterable,
+    total=)`` wraps the frames (e.g. a tqdm bar)."""
+    stop = recording.frame_count if stop is None else stop
+    old = cached(Path(cache), recording) if cache is not None else None
+    wanted = np.arange(start, stop, step)
+    if (reused := holding(old, wanted)) is not None:
+        return reused, True
+    keypoints = stacked([row for _, row in progress(detections(recording, start, stop, step=step), total=len(wanted))])
+    if cache is not None:
+        save_keypoints(cache, merged(old, keypoints))
+    return keypoints, False
