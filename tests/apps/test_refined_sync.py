@@ -2,10 +2,10 @@
 tracked in the other cameras."""
 
 import re
+import shutil
 
 import numpy as np
 import pytest
-from conftest import HUMAN, ROOT
 
 from tracker.apps.sync import REACH, _track
 from tracker.cli import main
@@ -20,7 +20,7 @@ SOURCE = (
 """A camera's line: its offset, its sigma, and the cue that decided it (with the other's offset)."""
 
 
-def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(tmp_path, capsys):
+def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(late_render, tmp_path, capsys):
     """End to end: a render whose cameras run 0.04 s late and 0.025 s early (athletic motion, patterned clothes, the
     room); each camera's offset refined by its edges against the body tracked in the two others.  Each camera's line
     says which cue decided its offset, and that offset is the one written: within a quarter of a frame (8 ms) of the
@@ -29,12 +29,11 @@ def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(tmp_path, cap
     the edges decide is a bar that this short render sits near (under OPENBLAS_CORETYPE=Haswell or on an AVX-512
     machine cam1's rise falls just short of it): where they do not, their least is bound only to lie among the
     offsets searched, REACH frames either side of the landmarks'."""
-    rec = tmp_path / "rec"
-    args = ["synth", "--model", str(HUMAN), "--calib", str(ROOT / "calib" / "demo3.toml"), "--out", str(rec)]
-    staging = ["--motion", "athletic", "--fps", "30", "--frames", "90", "--seed", "4", "--texture", "mixed"]
-    assert main(args + staging + ["--backdrop", "room", "--time-offsets", "cam1=0.04,cam2=-0.025", "--quiet"]) == 0
-    capsys.readouterr()
-    out = tmp_path / "out"
+    rec, out = tmp_path / "rec", tmp_path / "out"
+    shutil.copytree(late_render.render, rec)
+    out.mkdir()
+    shutil.copy2(late_render.out / "keypoints.npz", out / "keypoints.npz")
+    detected = (out / "keypoints.npz").stat()
     assert main(["sync", str(rec), "--refine", "--out", str(out), "--quiet"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("cam0  +0.0000 s  reference") and lines[-1] == f"wrote {rec / 'sync.toml'}"
@@ -49,7 +48,8 @@ def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(tmp_path, cap
     for left_out in ("cam1", "cam2"):
         poses = load_poses(out / "sync" / f"without-{left_out}" / "poses.npz")
         assert len(poses["frame"]) == 90 and np.isfinite(poses["poses"]).all()
-    assert (out / "keypoints.npz").is_file()
+    kept = (out / "keypoints.npz").stat()  # the detections reused, not made again
+    assert (kept.st_ino, kept.st_mtime_ns) == (detected.st_ino, detected.st_mtime_ns)
 
 
 def test_a_camera_is_timed_against_the_longest_run_of_frames_held(tmp_path):
