@@ -2,12 +2,17 @@
 check that bad input gets a one-line error, and perfect keypoint detections; where the tests' real data
 is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
 
+import contextlib
+import io
+import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tracker.camera import look_at_camera, save_calibration
+from tracker.cli import main
 from tracker.errors import TrackerInputError
 from tracker.synthetic.synth import synthesize
 
@@ -73,6 +78,34 @@ def tiny_recording(tmp_path_factory) -> Path:
     save_calibration(rig, folder / "rig.toml")
     synthesize(HUMAN, folder / "rig.toml", folder / "rec", motion="procedural", frames=6, seed=1)
     return folder / "rec"
+
+
+@dataclass(frozen=True)
+class Synced:
+    """A render and ``tracker sync`` of it: ``render`` as rendered; ``rec`` a copy of it that ``tracker sync REC --out
+    OUT`` (``out``) ran on, printing ``lines``."""
+
+    render: Path
+    rec: Path
+    out: Path
+    lines: list[str]
+
+
+@pytest.fixture(scope="session")
+def late_render(tmp_path_factory) -> Synced:
+    """Three seconds whose cam1 runs 0.04 s late and cam2 0.025 s early (athletic motion, patterned clothes, the room,
+    calib/demo3.toml at 30 fps), and ``tracker sync`` on a copy of it: rendered and detected once for the tests of
+    the landmarks' offsets and of their refinement by the edges (which reuses the detections)."""
+    folder = tmp_path_factory.mktemp("late")
+    render, rec, out = folder / "render", folder / "rec", folder / "out"
+    args = ["synth", "--model", str(HUMAN), "--calib", str(ROOT / "calib" / "demo3.toml"), "--out", str(render)]
+    staging = ["--motion", "athletic", "--fps", "30", "--frames", "90", "--seed", "4", "--texture", "mixed"]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(args + staging + ["--backdrop", "room", "--time-offsets", "cam1=0.04,cam2=-0.025", "--quiet"]) == 0
+    shutil.copytree(render, rec)
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        assert main(["sync", str(rec), "--out", str(out), "--quiet"]) == 0
+    return Synced(render, rec, out, printed.getvalue().splitlines())
 
 
 @pytest.fixture

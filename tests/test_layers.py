@@ -1,11 +1,12 @@
 """The package's layers: a module imports only from its own layer or the ones below, the import
 graph has no cycle, the tracking method never imports the rendered-data generator (not even through
-another module), and every module imports alone in a fresh interpreter; docs/layout.md names every module, and a
-module name means one thing across the package."""
+another module), and every module imports alone, with no other module of the package loaded; docs/layout.md names
+every module, and a module name means one thing across the package."""
 
 from __future__ import annotations
 
 import ast
+import json
 import re
 import subprocess
 import sys
@@ -190,10 +191,49 @@ def test_importing_the_tracking_method_loads_no_generator_module():
     assert done.stdout.split() == []
 
 
-@pytest.mark.parametrize("module", sorted(MODULES))
-def test_module_imports_alone(module):
-    done = subprocess.run([sys.executable, "-c", f"import {module}"], cwd=ROOT, capture_output=True, text=True)
+ALONE = """
+import importlib, json, sys
+failed = {}
+for module in sys.argv[1:]:
+    for loaded in [name for name in sys.modules if name == "tracker" or name.startswith("tracker.")]:
+        del sys.modules[loaded]
+    try:
+        importlib.import_module(module)
+    except Exception as error:
+        failed[module] = f"{type(error).__name__}: {error}"
+print(json.dumps(failed))
+"""
+"""Imports each module named on the command line with none of the package's modules loaded (each one before it
+dropped from sys.modules), and prints the failures as JSON: module -> error."""
+
+
+@pytest.fixture(scope="module")
+def alone_failures() -> dict[str, str]:
+    """Each module that fails to import alone, with its error: one interpreter imports them all in turn, each with
+    none of the package loaded before it (the packages it imports from elsewhere, numpy, numba, OpenCV, stay loaded:
+    they are not the package's layers, and loading them afresh for every module took most of this file's time)."""
+    done = subprocess.run([sys.executable, "-c", ALONE, *sorted(MODULES)], cwd=ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr.strip().splitlines()[-1:]
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def test_a_module_that_needs_another_loaded_first_fails_alone(tmp_path):
+    """The check itself: a module that uses a name its package sets only when another module is loaded imports
+    after that module, and fails alone."""
+    package = tmp_path / "tracker"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "first.py").write_text("import tracker\ntracker.ready = True\n")
+    (package / "second.py").write_text("import tracker\nassert tracker.ready\n")
+    modules = ["tracker.first", "tracker.second"]
+    together = subprocess.run([sys.executable, "-c", "import tracker.first, tracker.second"], cwd=tmp_path)
+    done = subprocess.run([sys.executable, "-c", ALONE, *modules], cwd=tmp_path, capture_output=True, text=True)
+    assert together.returncode == 0 and list(json.loads(done.stdout)) == ["tracker.second"]
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_module_imports_alone(module, alone_failures):
+    assert module not in alone_failures, alone_failures[module]
 
 
 LAYOUT = ROOT / "docs" / "layout.md"

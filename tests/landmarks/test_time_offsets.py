@@ -6,7 +6,6 @@ import shutil
 
 import numpy as np
 import pytest
-from conftest import HUMAN, ROOT
 
 from tracker.apps.sync import Refined
 from tracker.camera import look_at_camera
@@ -123,21 +122,15 @@ def test_the_pairs_shifts_are_joined_by_weighted_least_squares():
     assert chained.seconds[3] == pytest.approx(0.03) and np.isnan(chained.seconds[2])
 
 
-def test_tracker_sync_finds_the_offsets_of_a_render(tmp_path, capsys):
+def test_tracker_sync_finds_the_offsets_of_a_render(late_render):
     """End to end: a render whose cameras run 0.04 s late and 0.025 s early (athletic motion, patterned clothes, the
     room), detected and synced; the offsets written to REC/sync.toml.  The benchmark renders (docs/sync.md) come within
     2 ms; a test allows 8 ms (a quarter frame), since the detector's last bits differ between machines."""
-    rec = tmp_path / "rec"
-    args = ["synth", "--model", str(HUMAN), "--calib", str(ROOT / "calib" / "demo3.toml"), "--out", str(rec)]
-    staging = ["--motion", "athletic", "--fps", "30", "--frames", "90", "--seed", "4", "--texture", "mixed"]
-    assert main(args + staging + ["--backdrop", "room", "--time-offsets", "cam1=0.04,cam2=-0.025", "--quiet"]) == 0
-    capsys.readouterr()
-    assert main(["sync", str(rec), "--out", str(tmp_path / "detections"), "--quiet"]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    rec, lines = late_render.rec, late_render.lines
     assert lines[0].startswith("cam0  +0.0000 s  reference") and lines[-1] == f"wrote {rec / 'sync.toml'}"
     written = load_offsets(rec / "sync.toml", ["cam0", "cam1", "cam2"], 3.0)
     assert abs(written["cam1"] - 0.04) < 0.008 and abs(written["cam2"] + 0.025) < 0.008
-    assert (tmp_path / "detections" / "keypoints.npz").is_file()
+    assert (late_render.out / "keypoints.npz").is_file()
 
 
 def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_path, monkeypatch, capsys):

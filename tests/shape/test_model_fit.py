@@ -46,8 +46,9 @@ def reshaped_recording(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def short_recording(tmp_path_factory):
-    """:func:`reshaped`, a fifth of a second."""
-    return reshaped(tmp_path_factory.mktemp("short") / "rec", 12)
+    """:func:`reshaped`, a tenth of a second: the 6 frames that ``fit-model --frames 6`` fits, and that ``tracker
+    track`` without a model fits (all of a recording shorter than its 40)."""
+    return reshaped(tmp_path_factory.mktemp("short") / "rec", 6)
 
 
 def length_errors(document, truth):
