@@ -22,9 +22,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker fit-model``."""
     inputs = parser.add_argument_group("inputs")
     outputs = parser.add_argument_group("outputs")
-    inputs.add_argument(
-        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
-    )
+    options.add_recording_argument(inputs)
     outputs.add_argument("--out", required=True, help="model TOML to write")
     inputs.add_argument(
         "--model",

@@ -26,7 +26,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     inputs = parser.add_argument_group("inputs")
     outputs = parser.add_argument_group("outputs")
     viewer = parser.add_argument_group("viewer")
-    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    options.add_recording_argument(inputs)
     outputs.add_argument("--out", required=True, help="init.toml to write")
     inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     inputs.add_argument(

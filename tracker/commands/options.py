@@ -143,6 +143,13 @@ Options = argparse._ActionsContainer
 """Where a command's options are added: its parser, or one of the parser's argument groups (inputs, outputs, ...)."""
 
 
+def add_recording_argument(group) -> None:
+    """The recording folder a command works on, ``RECORDING``, in ``group`` (its inputs)."""
+    group.add_argument(
+        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
+    )
+
+
 def add_recording_options(inputs: Options) -> None:
     """``--cameras`` and ``--calib``: which cameras of a recording folder, and their calibration."""
     inputs.add_argument("--cameras", help="comma-separated camera names (default: every camera with a video)")

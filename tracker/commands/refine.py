@@ -22,7 +22,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker refine``."""
     inputs = parser.add_argument_group("inputs")
     outputs = parser.add_argument_group("outputs")
-    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    options.add_recording_argument(inputs)
     inputs.add_argument("--poses", help="poses.npz of a run on it (default: out/<recording name>/poses.npz)")
     inputs.add_argument("--model", help="body model TOML it was tracked with (default: the recording's model.toml)")
     outputs.add_argument("--out", required=True, help="calibration TOML to write")

@@ -29,9 +29,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     inputs = parser.add_argument_group("inputs")
     outputs = parser.add_argument_group("outputs")
     refining = parser.add_argument_group("refining by the edges (--refine)")
-    inputs.add_argument(
-        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
-    )
+    options.add_recording_argument(inputs)
     outputs.add_argument("--out", help="folder for the detections, OUT/keypoints.npz (default: out/<recording name>)")
     options.add_recording_options(inputs)
     parser.add_argument(

@@ -29,9 +29,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     inputs = parser.add_argument_group("inputs")
     outputs = parser.add_argument_group("outputs")
     viewer = parser.add_argument_group("viewer")
-    inputs.add_argument(
-        "recording", metavar="RECORDING", help="recording folder (calibration.toml and one video per camera)"
-    )
+    options.add_recording_argument(inputs)
     outputs.add_argument("--out", help="output folder (default: out/<recording name>)")
     options.add_tracking_options(parser, inputs=inputs)
     outputs.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -22,7 +22,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``tracker view``."""
     inputs = parser.add_argument_group("inputs")
     viewer = parser.add_argument_group("viewer")
-    inputs.add_argument("recording", metavar="RECORDING", help="recording folder")
+    options.add_recording_argument(inputs)
     inputs.add_argument("--poses", help="poses.npz to review (default: out/<recording name>/poses.npz)")
     inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     options.add_recording_options(inputs)
