@@ -259,7 +259,7 @@ def test_landmarks_bring_a_far_start_back_in_one_solve(demo_frame):
 
 def test_where_the_edges_do_not_hold_a_limb_its_landmarks_pull_from_the_floor_zone_without_fading(demo_frame):
     """A wrist detection far off its predicted image (beyond the fade) barely pulls while the forearm's
-    edges fit; when they fit worse than ``keypoint_edge_misfit``, it pulls at full strength."""
+    edges fit; when they fit worse than ``keypoints.edge_misfit``, it pulls at full strength."""
     import itertools
 
     from tracker.io.recording import frames
