@@ -294,7 +294,7 @@ def _files(
     from tracker.landmarks.detect_recording import cache_file
 
     files = [(out / "poses.npz", f"the pose of each of the {frames} frames: tracker view, eval and export read it")]
-    if not tracking.model and rec.model_path is None:  # as _model: fitted to the person
+    if _fitted(tracking.model, rec):
         files.append((out / "model.toml", "the body model fitted to the person: pass it with --model to reuse it"))
     keypoints = cache_file(out, rec)
     if tracking.keypoints and keypoints.is_file():
@@ -440,12 +440,17 @@ def _preparer(tracker, background, *, keep: bool):
     return [keeping_grey(camera) for camera in measured] if keep else list(measured)
 
 
+def _fitted(given: str | None, rec) -> bool:
+    """Whether a run fits the body model to the person: no ``--model`` (``given``) and no model.toml in ``rec``."""
+    return not given and rec.model_path is None
+
+
 def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
     """The body model: ``given`` (``--model``), else the recording's model.toml, else models/human.toml fitted to the
     person (:func:`tracker.shape.model_fit.fit_and_save`), written to OUT/model.toml."""
     from tracker.model import load_model
 
-    if given or rec.model_path is not None:
+    if not _fitted(given, rec):
         return load_model(given or rec.model_path)
     from tracker.atomic import ensure_writable_folder
     from tracker.landmarks.detect_recording import cache_file

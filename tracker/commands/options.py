@@ -174,6 +174,7 @@ def tuning_fields() -> dict[str, tuple[str, dataclasses.Field]]:
 
 
 KINDS: dict[str | None, Callable[[str], Any]] = {
+    "count": positive_int,
     "positive": positive_float,
     "whole": whole_number,
     "share": share,
@@ -201,15 +202,11 @@ def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] |
         if spec.metadata["choices"]:
             kwargs["choices"] = spec.metadata["choices"]
         else:
-            kwargs["type"] = (
-                positive_int
-                if kind == "positive" and isinstance(default, int) and not isinstance(default, bool)
-                else KINDS[kind]
-            )
+            kwargs["type"] = KINDS[kind]
             kwargs["metavar"] = {"on-off": "on|off"}.get(kind, spec.name.upper())
         groups[group].add_argument(flag, **kwargs)
-        if flag == "--dynamics":  # --motion names the rendered clip in `tracker synth`
-            groups[group].add_argument("--motion", **kwargs | renamed("--dynamics"))
+        if spec.metadata["renamed"]:
+            groups[group].add_argument(spec.metadata["renamed"], **kwargs | renamed(flag))
 
 
 def _shown(default: Any) -> str:

@@ -217,7 +217,6 @@ def _edge_rounds(
         tracker = Tracker(now.model, cameras, now.poses[0], SNAP.but(outline=dict(search_range=search)))
         scaled = tracker.settings.outline.search_range  # for the image size
         colours = tracker.cue(RegionCue)
-        assert isinstance(colours, RegionCue)
         for k, (pose, (images, _, _)) in enumerate(zip(now.poses, views)):
             colours.teach(
                 tracker, images, poses=pose, rate=1.0 / (k + 1), search_range=scaled

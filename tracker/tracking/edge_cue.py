@@ -77,6 +77,11 @@ class EdgeCue:
         return None
 
     def inspect(self, tracker: Tracker, work: Workspace) -> tuple[np.ndarray, np.ndarray]:
+        return self.read(work)
+
+    @staticmethod
+    def read(work: Workspace) -> tuple[np.ndarray, np.ndarray]:
+        """Each sample's edge offset (NaN: none) and IRLS weight in ``work``'s last search, copied."""
         n = work.samples.count
         return work.offset[:n].copy(), work.weight[:n].copy()
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
@@ -44,6 +45,8 @@ from tracker.tracking.rig import Rig
 from tracker.tracking.settings import DYNAMICS, Settings, scaled_to
 from tracker.tracking.solve import hold_kernel, narrowing, update_kernel
 from tracker.tracking.workspace import Inspection, Workspace
+
+C = TypeVar("C")
 
 
 @dataclass(frozen=True)
@@ -108,7 +111,7 @@ class Tracker:
         self.motion = self.dynamics.start(self)
         self.start = self.poses  # the poses the frame in hand started from: the last frame's (step)
 
-    def cue(self, kind: type) -> Cue:
+    def cue(self, kind: type[C]) -> C:
         """The tracker's cue of class ``kind``."""
         return next(cue for cue in self.cues if isinstance(cue, kind))
 
@@ -262,7 +265,8 @@ class Tracker:
         <tracker.tracking.workspace.Workspace.spare>`) and leaves the tracker as it was (its poses, the frame's
         images, its motion and what its cues learnt), so a viewer may inspect with the tracker it shows, also from a
         thread of its own while the tracker steps (given ``images`` and ``poses``)."""
-        return self.inspect_cues(images, smoothed=smoothed, poses=poses, search_range=search_range)["edges"]
+        work, _ = self._inspected(images, smoothed, poses, search_range)
+        return self._inspection(work, *EdgeCue.read(work))
 
     def inspect_cues(self, images=None, *, smoothed=False, poses=None, search_range=None) -> dict[str, Inspection]:
         """:meth:`inspect`, and from the same sampling each cue's reading of each sample in place of its edge

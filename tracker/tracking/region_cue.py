@@ -134,8 +134,7 @@ class RegionCue:
         s, n, st = work.samples, work.samples.count, self.settings
         offset, weight = np.full(n, np.nan), np.zeros(n)
         if self.active(work):
-            self.profile_lines(tracker, work)
-            self.add_lines(tracker, work, np.zeros((tracker.model.size, 6)), afresh=True)
+            self.read_afresh(tracker, work)
             offset = work.region_mean[:n].copy()
             read = np.isfinite(offset)
             variance = np.maximum(work.region_variance[:n][read], st.sigma**2)
@@ -156,9 +155,14 @@ class RegionCue:
         tracker.sample(work, tracker.poses, tracker.search_range(0) if search_range is None else search_range)
         work.region_mean[: work.samples.count] = np.nan
         if self.active(work):  # once colours are known, only the lines that agree with the outline teach
-            self.profile_lines(tracker, work)
-            self.add_lines(tracker, work, tracker.still, afresh=True)
+            self.read_afresh(tracker, work)
         self.learn_colours(tracker, rate)
+
+    def read_afresh(self, tracker: Tracker, work: Workspace) -> None:
+        """Score the lines of the samples just placed in ``work`` and read each one's mean and variance from them
+        (:meth:`profile_lines`, :meth:`add_lines` afresh, at the poses sampled)."""
+        self.profile_lines(tracker, work)
+        self.add_lines(tracker, work, tracker.still, afresh=True)
 
     def profile_lines(self, tracker: Tracker, work: Workspace) -> None:
         """Score the lines at the places just sampled, for this and the next iterations (:func:`line_profiles`)."""

@@ -3,9 +3,9 @@ the image sizes, the motion model, the frame's status, the keypoints and the col
 
 Each field carries its help in its metadata, says whether it is in pixels (``pixels``: "grows" with the image,
 "shrinks" with it as a grey-level derivative per pixel does, or "fixed"), and, when a command offers it, its flag
-(``flag``) and the kind of value it takes (``kind``: positive, whole, share or on/off).  :func:`scaled_to` scales by
-the ``pixels`` metadata, and :mod:`tracker.commands.options` builds the tuning flags, their help and their defaults
-from the same fields, so that each default is written once, here.
+(``flag``) and the kind of value it takes (``kind``: count, positive, whole, share or on/off).  :func:`scaled_to`
+scales by the ``pixels`` metadata, and :mod:`tracker.commands.options` builds the tuning flags, their help and their
+defaults from the same fields, so that each default is written once, here.
 """
 
 from __future__ import annotations
@@ -26,13 +26,15 @@ def setting(
     flag: str | None = None,
     kind: str | None = None,
     choices: tuple[str, ...] | None = None,
+    renamed: str | None = None,
 ) -> Any:
     """A settings field: its ``default``, its ``help``, how it scales with the image (``pixels``: "grows", "shrinks"
-    or "fixed"; an integer that grows is rounded and kept at ``least`` or more), and the ``flag``, ``kind`` and
-    ``choices`` of the command-line option that sets it, if any."""
+    or "fixed"; an integer that grows is rounded and kept at ``least`` or more), and the ``flag``, ``kind`` (count,
+    positive, whole, share or on-off) and ``choices`` of the command-line option that sets it, if any, with the
+    flag's old name, ``renamed``, still taken."""
     if pixels not in (None, "grows", "shrinks", "fixed"):
         raise ValueError(f"pixels must be grows, shrinks or fixed, got {pixels!r}")
-    metadata = dict(help=help, pixels=pixels, least=least, flag=flag, kind=kind, choices=choices)
+    metadata = dict(help=help, pixels=pixels, least=least, flag=flag, kind=kind, choices=choices, renamed=renamed)
     return field(default=default, metadata=metadata)
 
 
@@ -40,7 +42,7 @@ def setting(
 class SolveSettings:
     """the solve: iterations per frame, the robust weights and the prior about the predicted pose"""
 
-    iterations: int = setting(6, "solves per frame", flag="--iterations", kind="positive")
+    iterations: int = setting(6, "solves per frame", flag="--iterations", kind="count")
     robust_c: float = setting(
         2.0, "c of the robust weight 1 / (c + |offset|) of an edge sample or a landmark", pixels="fixed"
     )
@@ -70,7 +72,7 @@ class OutlineSettings:
         "pixels searched either side of the outline in a frame's first solve",
         pixels="grows",
         flag="--search-range",
-        kind="positive",
+        kind="count",
     )
     final_search_range: int = setting(
         6, "pixels searched in the last solve, narrowing from search_range; 0: always search_range", pixels="grows"
@@ -79,7 +81,7 @@ class OutlineSettings:
         3,
         "place the outline samples afresh every N-th solve, and slide them with their parts between (1: every solve)",
         flag="--resample-every",
-        kind="positive",
+        kind="count",
     )
     ownership: bool = setting(True, "cut each search half way to the next predicted edge of another part")
     capacity: int = setting(40000, "outline samples of all cameras together, at most")
@@ -119,6 +121,7 @@ class MotionSettings:
         "kalman (a Kalman filter per part, whose uncertainty also sets how firmly the prediction holds)",
         flag="--dynamics",
         choices=DYNAMICS,
+        renamed="--motion",  # the rendered clip's option in `tracker synth`
     )
     damping: float = setting(
         1.0,
