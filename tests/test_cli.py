@@ -295,6 +295,28 @@ def test_a_port_out_of_range_is_a_usage_error(tiny_recording, capsys):
     assert exit_info.value.code == 2 and "0-65535" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv, prog, said",
+    [
+        (["track", "rec", "--port", "abc"], "tracker track", "argument --port: invalid port value: 'abc'"),
+        (["track"], "tracker track", "the following arguments are required: RECORDING"),
+        (["track", "rec", "--bogus"], "tracker track", "unrecognized arguments: --bogus"),
+        (["--bogus", "eval", "a", "b"], "tracker", "unrecognized arguments: --bogus"),
+        (["bogus"], "tracker", "argument COMMAND: invalid choice: 'bogus'"),
+        (["suite", "run", "renders"], "tracker suite run", "the following arguments are required: results"),
+    ],
+)
+def test_a_usage_error_is_one_line_that_points_to_the_help(argv, prog, said, capsys):
+    """The parser of the command (or of the tracker) that the mistake is in says it in one line, without the usage
+    that --help shows, and exits with 2."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    printed = capsys.readouterr()
+    assert printed.out == "" and len(printed.err.splitlines()) == 1
+    assert printed.err.startswith(f"{prog}: error: {said}") and printed.err.endswith(f"; see {prog} --help\n")
+
+
 @pytest.mark.parametrize("option", [["--dynamics", "kalman"], ["--motion", "none"]])
 def test_motion_models_from_the_command_line(tiny_recording, tmp_path, option, capsys):
     """--dynamics picks the motion model; the old name --motion (which names the clip in synth) still works,

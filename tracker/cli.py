@@ -15,6 +15,7 @@ import io
 import os
 import sys
 import warnings
+from typing import NoReturn
 
 from tracker import __version__
 from tracker.commands import (
@@ -61,6 +62,21 @@ COMMANDS = {  # in the order a newcomer meets them: track, look, score, export; 
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """A parser whose usage error is one line, the error and the help to read (``tracker track: error: argument
+    --port: invalid port value: 'abc'; see tracker track --help``), exit code 2; a command's unknown arguments are
+    that command's error, not the main parser's."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        parsed, extra = super().parse_known_args(args, namespace)
+        if extra:
+            self.error(f"unrecognized arguments: {' '.join(extra)}")
+        return parsed, extra
+
+
 class _Paragraphs(argparse.HelpFormatter):
     """Help text as paragraphs split by blank lines: each filled to the terminal's width, except one with an indented
     line (an example command), which is kept as written."""
@@ -88,7 +104,7 @@ def _short_usage(parser: argparse.ArgumentParser) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``tracker`` parser: one subparser per command, whose ``run`` default is the command's body."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tracker",
         description=_opening(
             "Follow the 3-D pose of a person or other articulated body in calibrated multi-camera video: calibrate "

@@ -1,13 +1,20 @@
-"""The tuning options (tracker.commands.options): built from the settings' fields, one group per settings group,
-each flag's help ending with the field's default, and parsed back into the settings."""
+"""The options several commands share (tracker.commands.options): the tuning options, built from the settings'
+fields, one group per settings group, each flag's help ending with the field's default, and parsed back into the
+settings; ``--cache``, the keypoints' folder of the commands whose ``--out`` is a file."""
 
 import argparse
 import dataclasses
+from pathlib import Path
 
 import pytest
 
+from tracker.cli import main
 from tracker.commands import options
+from tracker.errors import TrackerInputError
+from tracker.landmarks import detect_recording
 from tracker.tracking.settings import Settings
+
+DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 
 
 def _parser(which=None) -> argparse.ArgumentParser:
@@ -87,3 +94,29 @@ def test_the_table_of_tuning_options_in_the_docs_shows_the_settings_defaults():
     for flag, (group, spec) in options.tuning_fields().items():
         assert flag in rows, flag
         assert rows[flag] == options._shown(getattr(getattr(Settings(), group), spec.name)), flag
+
+
+@pytest.mark.parametrize("command", ["fit-model", "init"])
+def test_the_cache_option_chooses_where_the_keypoints_are_kept(command, tmp_path, monkeypatch, capsys):
+    """fit-model and init, whose --out is a file, keep the detector's keypoints in --cache DIR, by default
+    out/<recording name>, where a pick of the cameras has a file of its own: `fit-model REC --cameras cam1,cam2`
+    then `fit-model REC` keep both.  Each run here stops at the file it chose, before detecting."""
+    rec = tmp_path / "demo"  # the demo without its init.toml, so that init fits the first pose to the keypoints
+    rec.mkdir()
+    for file in DEMO.iterdir():
+        if file.name != "init.toml":
+            (rec / file.name).symlink_to(file)
+    chosen = []
+    cache_file = detect_recording.cache_file
+
+    def stop(folder, recording):
+        chosen.append(cache_file(folder, recording))
+        raise TrackerInputError("stopped where the keypoints would be kept")
+
+    monkeypatch.setattr(detect_recording, "cache_file", stop)
+    monkeypatch.chdir(tmp_path)
+    for extra in (["--cameras", "cam1,cam2"], [], ["--cache", str(tmp_path / "kp")]):
+        assert main([command, str(rec), "--out", str(tmp_path / "out.toml"), *extra]) == 2
+        assert capsys.readouterr().err == "tracker: error: stopped where the keypoints would be kept\n"
+    kept = [Path("out/demo/keypoints-cam1,cam2.npz"), Path("out/demo/keypoints.npz"), tmp_path / "kp" / "keypoints.npz"]
+    assert chosen == kept and (tmp_path / "kp").is_dir()

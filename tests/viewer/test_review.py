@@ -1,3 +1,6 @@
+import hashlib
+from pathlib import Path
+
 import numpy as np
 
 from tracker.cli import main
@@ -82,6 +85,32 @@ def test_view_record_writes_the_session_and_says_only_that(tracked, tmp_path, ca
     assert printed.out == f"wrote {session}\n"
     assert "viser" not in printed.err and "http" not in printed.err
     assert session.stat().st_size > 6 * 5000
+
+
+def test_record_into_a_place_that_cannot_be_written_is_one_line_before_any_work(tmp_path, capsys):
+    """--record of view (and of track --view) into a folder that is a file: the one error line, before a server
+    starts or a frame is drawn or tracked (no banner, no progress bar, no "Server stopped"), and every file as it
+    was."""
+    demo = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+    with np.load(demo / "truth.npz") as truth:  # its first three frames, as tracked
+        poses = {key: truth[key][:3] for key in ("frame", "poses", "joints")} | {"joint_names": truth["joint_names"]}
+        poses |= {"component_names": truth["component_names"], "status": np.zeros(3, np.int8), "residual": np.zeros(3)}
+    np.savez(tmp_path / "poses.npz", **poses)
+    taken = tmp_path / "taken"
+    taken.write_bytes(b"a file where the session's folder would be")
+    given = (taken, tmp_path / "poses.npz", *demo.iterdir())
+    before = {path: hashlib.sha256(path.read_bytes()).hexdigest() for path in given}
+    session = str(taken / "review.viser")
+    for argv in (
+        ["view", str(demo), "--poses", str(tmp_path / "poses.npz"), "--record", session, "--port", "0"],
+        ["track", str(demo), "--out", str(tmp_path / "out"), "--view", "--record", session, "--port", "0"],
+    ):
+        assert main(argv) == 2
+        printed = capsys.readouterr()
+        assert printed.out == "" and len(printed.err.splitlines()) == 1
+        assert printed.err.startswith(f"tracker: error: {taken}: cannot write there")
+    assert {path: hashlib.sha256(path.read_bytes()).hexdigest() for path in before} == before
+    assert not (tmp_path / "out").exists()
 
 
 def test_record_without_view_is_refused(tiny_recording, tmp_path, capsys):

@@ -40,6 +40,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="fit left and right parts apart (default: one size for both)",
     )
     options.add_recording_options(inputs)
+    options.add_cache_option(outputs)
     outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     document = read_toml(start, "model", "pass --model with an existing models/*.toml")
     model_from_dict(document, start)  # a bad model is a one-line error before any detection
     require_detector()
-    cache = cache_file(ensure_writable_folder(options.output_folder(None, rec)), rec)
+    cache = cache_file(ensure_writable_folder(options.output_folder(args.cache, rec)), rec)
     fit_and_save(
         rec,
         document,

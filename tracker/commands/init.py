@@ -35,6 +35,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     inputs.add_argument("--start", type=int, default=0, help="the frame to place the pose in (default 0)")
     options.add_recording_options(inputs)
+    options.add_cache_option(outputs)
     options.add_viewer_options(viewer, record=False)
 
 
@@ -50,16 +51,16 @@ def run(args: argparse.Namespace) -> int:
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
     start = Path(args.init) if args.init else rec.init_path
-    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start)
+    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, args.cache)
     out = Path(args.out)
     Placement(scene(args, rec, model, settings=Settings()), rec, model, poses, out, frame=args.start)
     return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
 
 
-def keypoint_pose(rec, model, start: int) -> np.ndarray:
+def keypoint_pose(rec, model, start: int, cache: str | None = None) -> np.ndarray:
     """The pose fitted to the keypoints of the frames from ``start`` (docs/keypoints.md, "Automatic first pose"),
-    their detections cached in out/<recording name>/keypoints.npz; the rest pose where the cameras look when
-    the detector is not installed."""
+    their detections cached in the folder ``cache`` (``--cache``, default out/<recording name>); the rest pose where
+    the cameras look when the detector is not installed."""
     from tracker.atomic import ensure_writable_folder
     from tracker.landmarks.detect_recording import cache_file, detect_recording
     from tracker.landmarks.detector import missing
@@ -72,7 +73,7 @@ def keypoint_pose(rec, model, start: int) -> np.ndarray:
         print(f"starting from the rest pose: {reason}")
         return rest_poses(model, in_view(rec.cameras))
     stop = min(rec.frame_count, start + FRAMES)
-    cache = cache_file(ensure_writable_folder(options.output_folder(None, rec)), rec)
-    keypoints, _ = detect_recording(rec, start, stop, cache=cache)
-    print(f"starting from the pose fitted to the keypoints of frames {start}..{stop - 1} ({cache})")
+    path = cache_file(ensure_writable_folder(options.output_folder(cache, rec)), rec)
+    keypoints, _ = detect_recording(rec, start, stop, cache=path)
+    print(f"starting from the pose fitted to the keypoints of frames {start}..{stop - 1} ({path})")
     return first_pose(rec, model, keypoints)

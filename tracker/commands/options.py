@@ -160,6 +160,17 @@ def add_recording_options(inputs: Options) -> None:
     )
 
 
+def add_cache_option(outputs: Options) -> None:
+    """``--cache DIR``: the folder that keeps the keypoint detector's landmarks, for the commands whose ``--out`` is a
+    file (the others keep them in their ``--out`` folder)."""
+    outputs.add_argument(
+        "--cache",
+        metavar="DIR",
+        help="folder that keeps the keypoint detector's landmarks (keypoints.npz), which later runs reuse "
+        "(default: out/<recording name>)",
+    )
+
+
 def tuning_fields() -> dict[str, tuple[str, dataclasses.Field]]:
     """The settings fields that have a flag (:func:`tracker.tracking.settings.setting`), by flag: the group's name and
     the field, in the order the groups and their fields are declared."""
@@ -308,6 +319,17 @@ def add_viewer_options(viewer: Options, record: bool = True) -> None:
             help="also write the viewer session as a .viser file, which plays in a browser without the tracker "
             "(docs/viewer.md)",
         )
+
+
+def record_file(args: argparse.Namespace) -> Path | None:
+    """The file ``--record`` names (None when not given), its folder made and checked writable now: a place that
+    cannot be written is a one-line error before any viewer starts or any frame is drawn."""
+    from tracker.atomic import ensure_writable_folder
+
+    if not args.record:
+        return None
+    ensure_writable_folder(Path(args.record).parent)
+    return Path(args.record)
 
 
 def recording(args: argparse.Namespace):

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording, rig_names
     from tracker.io.sync_file import FILE, load_offsets, save_offsets
-    from tracker.landmarks.detect_recording import detect_recording
+    from tracker.landmarks.detect_recording import cache_file, detect_recording
     from tracker.landmarks.time_offsets import camera_offsets
 
     given = [option for option in ("model", "init", "frames") if getattr(args, option) is not None]
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             )
     out = ensure_writable_folder(options.output_folder(args.out, rec))
     keypoints, _ = detect_recording(
-        rec, 0, rec.frame_count, cache=out / "keypoints.npz", progress=options.bar(args, "detecting", "frame")
+        rec, 0, rec.frame_count, cache=cache_file(out, rec), progress=options.bar(args, "detecting", "frame")
     )
     found = camera_offsets(
         keypoints.pixels, keypoints.confidence, rec.cameras, fps=rec.fps, reach=min(args.reach, duration / 2)

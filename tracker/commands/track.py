@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import functools
 import sys
-from pathlib import Path
 
 from tracker.commands import options
 from tracker.commands.viewing import serve
@@ -50,9 +49,10 @@ def run(args: argparse.Namespace) -> int:
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec, tracking = options.tracking(args)
+    record = options.record_file(args)
     view = None
     if args.view:
-        view = Viewing(args.host, args.port, args.view_rate, Path(args.record) if args.record else None)
+        view = Viewing(args.host, args.port, args.view_rate, record)
     outcome = track(
         rec,
         tracking,

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from tracker.commands import options
 from tracker.commands.viewing import scene, serve
@@ -51,12 +50,13 @@ def run(args: argparse.Namespace) -> int:
 
         background = load_background(args.background, rec)
     truth = options.truth(rec)
+    record = options.record_file(args)
     tracker = Tracker(model, rec.cameras, results["poses"][0], settings)
-    shown = scene(args, rec, model, settings=settings, truth=truth, quiet=bool(args.record))
+    shown = scene(args, rec, model, settings=settings, truth=truth, quiet=record is not None)
     review = Review(shown, rec, tracker, results, truth, background)
     review.show(0)
-    if args.record:  # a file, not a viewer to open: the server that drew it goes without a word
-        review.record(Path(args.record), progress=not args.quiet)
+    if record is not None:  # a file, not a viewer to open: the server that drew it goes without a word
+        review.record(record, progress=not args.quiet)
         review.close()
         shown.server.stop()
         print(f"wrote {args.record}")

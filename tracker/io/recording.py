@@ -54,6 +54,7 @@ class Recording:
     timestamps_path: Path | None = None
     calibration_path: Path | None = None
     pairing: Pairing | None = None  # each camera's frame read for each frame, when the cameras are not frame-locked
+    picked: bool = False  # the cameras are a pick (--cameras), not every camera with a video in calibration order
 
 
 def open_recording(
@@ -136,6 +137,7 @@ def open_recording(
         fps=fps,
         sources=chosen_sources,
         timestamps_path=optional("timestamps.csv"),
+        picked=chosen != available,
     )
     return dataclasses.replace(recording, pairing=pairing(recording)) if paired else recording
 

@@ -3,7 +3,8 @@
 A cache (``keypoints.npz``) belongs to one recording: its fingerprint names each camera's video by
 size and a hash of its first bytes.  A recording whose cameras' frames are paired by time (docs/sync.md)
 keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, its fingerprint naming the
-pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A cache of
+pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A pick of
+the cameras (``--cameras cam1,cam2``) keeps its own, ``keypoints-cam1,cam2.npz``, beside every camera's.  A cache of
 another recording, or made by another detector, is an error rather than something to overwrite silently; one that
 lacks some of the wanted frames is completed and written back
 with every frame it held.
@@ -30,9 +31,13 @@ _HASHED = 1 << 16
 
 
 def cache_file(folder: Path, recording: Recording) -> Path:
-    """Where the detections of ``recording`` are kept in the output ``folder``: keypoints.npz, or keypoints-paired.npz
-    when its cameras' frames are paired by time (module docstring), so that either set is kept."""
-    return folder / ("keypoints.npz" if not _paired(recording) else "keypoints-paired.npz")
+    """Where the detections of ``recording`` are kept in the output ``folder``: keypoints.npz; keypoints-paired.npz
+    when its cameras' frames are paired by time; either with the cameras' names when they are a pick (``--cameras``)
+    other than every camera, e.g. keypoints-cam1,cam2.npz: each set of detections is kept apart (module docstring)."""
+    parts = ["keypoints", *(["paired"] if _paired(recording) else [])]
+    if recording.picked:
+        parts.append(",".join(camera.name for camera in recording.cameras))
+    return folder / f"{'-'.join(parts)}.npz"
 
 
 def _paired(recording: Recording) -> bool:
@@ -75,7 +80,7 @@ def cached(path: Path, recording: Recording) -> Keypoints | None:
     if found.camera_names != names or (found.recording and _videos(found.recording) != _videos(now)):
         raise TrackerInputError(
             f"{path}: holds the keypoints of another recording (cameras {', '.join(found.camera_names)}); "
-            "delete it or choose another output folder"
+            "delete it, or keep this one's in another folder: --out DIR (fit-model and init: --cache DIR)"
         )
     if found.detector != DETECTOR:
         raise TrackerInputError(
