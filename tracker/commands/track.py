@@ -46,10 +46,15 @@ def run(args: argparse.Namespace) -> int:
     """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
     130 after Ctrl-C with the frames done written."""
     from tracker.apps.track import Viewing, print_summary, track
+    from tracker.overwrite import keep_inputs
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec, tracking = options.tracking(args)
+    read = [(args.model, "the body model being read"), (args.init, "the first pose being read")]
+    read += options.recording_inputs(rec)
+    keep_inputs([args.overlay], read, "write the overlay video to another file")
+    keep_inputs([args.record], read, "write the viewer session to another file")
     view = None
     if args.view:
         view = Viewing(args.host, args.port, args.view_rate, Path(args.record) if args.record else None)
