@@ -1,8 +1,9 @@
-"""Shared fixtures: small rendered recordings with ground truth (made once per test session), the
-check that bad input gets a one-line error, and perfect keypoint detections; where the tests' real data
-is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
+"""Shared fixtures: small rendered recordings with ground truth (made once per test session), a small poses file,
+the check that bad input gets a one-line error, the hashes that show a command left a user's files alone, and perfect
+keypoint detections; where the tests' real data is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
 
 import contextlib
+import hashlib
 import io
 import shutil
 from dataclasses import dataclass
@@ -34,6 +35,13 @@ def needs_shared(*parts: str) -> pytest.MarkDecorator:
     )
 
 
+def file_hashes(*paths: Path) -> dict[Path, str]:
+    """The SHA-256 of every file at ``paths`` (a file, or every file in a folder), by path: equal before and after a
+    command when it changed no byte of them and added or removed no file."""
+    files = [file for path in paths for file in ([path] if path.is_file() else sorted(path.rglob("*")))]
+    return {file: hashlib.sha256(file.read_bytes()).hexdigest() for file in files if file.is_file()}
+
+
 @pytest.fixture
 def one_line_error():
     """Call a function that must raise TrackerInputError with a one-line message; returns the message."""
@@ -46,6 +54,16 @@ def one_line_error():
         return message
 
     return check
+
+
+@pytest.fixture
+def small_poses(tmp_path) -> Path:
+    """A poses file of three frames of two joints at 30 frames a second, in the test's folder (run/poses.npz)."""
+    path = tmp_path / "run" / "poses.npz"
+    path.parent.mkdir()
+    frame = np.arange(3)
+    np.savez(path, joint_names=np.array(["a", "b"]), joints=np.zeros((3, 2, 3)), frame=frame, time=frame / 30.0)
+    return path
 
 
 @pytest.fixture(scope="session")

@@ -2,11 +2,14 @@
 
 The content goes to a temporary file in the target's folder (same file system),
 is flushed to disk, then renamed over the target with ``os.replace``, which
-POSIX and Windows perform atomically.
+POSIX and Windows perform atomically. A write that fails is a one-line error
+naming the file and the fix its cause calls for: a full disk, a folder where
+the file goes, a file where a folder goes, a folder the user may not write to.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import secrets
 import tempfile
@@ -31,15 +34,16 @@ def ensure_writable_folder(folder: str | os.PathLike) -> Path:
             pass
     except OSError as error:
         raise TrackerInputError(
-            f"{folder}: cannot write there ({error.strerror or error}); choose a writable output folder"
+            f"{folder}: cannot write there ({error.strerror or error}); {_fix(folder, error)}"
         ) from None
     return folder
 
 
-def temporary_beside(path: Path) -> Path:
-    """A new hidden file name in ``path``'s folder (same file system), ending in ``path``'s suffix for
-    writers that pick the format by it, to write before :func:`replace_with`."""
-    return path.with_name(f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}.tmp{path.suffix}")
+def temporary_beside(path: Path, suffix: str | None = None) -> Path:
+    """A new hidden file name in ``path``'s folder (same file system), to write before :func:`replace_with`; it ends
+    in ``suffix`` (default ``path``'s suffix) for writers that pick the format by it or add it when missing."""
+    ending = path.suffix if suffix is None else suffix
+    return path.with_name(f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}.tmp{ending}")
 
 
 def replace_with(temp: Path, path: Path) -> None:
@@ -53,18 +57,38 @@ def replace_with(temp: Path, path: Path) -> None:
 
 
 def _cannot_write(path: Path, error: OSError) -> TrackerInputError:
-    return TrackerInputError(
-        f"{path}: cannot write ({error.strerror or error}); free disk space or choose a writable output folder"
-    )
+    return TrackerInputError(f"{path}: cannot write ({error.strerror or error}); {_fix(path, error)}")
+
+
+FULL = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)}
+"""The errors of a disk (or a quota) that is full."""
+
+
+def _fix(path: Path, error: OSError) -> str:
+    """What to do when writing ``path`` (a file, or a folder to write in) failed with ``error``."""
+    if error.errno in FULL:
+        return "free disk space or choose an output folder on another disk"
+    if error.errno == errno.EISDIR:
+        return "it is a folder; give the name of a file to write"
+    if error.errno in (errno.ENOTDIR, errno.EEXIST):  # mkdir met a file where a folder should be
+        return f"{_file_in_the_way(path)} is a file, not a folder; choose another output path"
+    if error.errno == errno.ENAMETOOLONG:
+        return "choose a shorter output path"
+    return "choose a writable output folder"  # permission denied, a read-only file system, and the rest
+
+
+def _file_in_the_way(path: Path) -> Path:
+    """The part of ``path`` that is a file where a folder should be (``path`` itself when none is found)."""
+    return next((part for part in (path, *path.parents) if part.exists() and not part.is_dir()), path)
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """For writers that only take a file name: yields a temporary path beside ``path`` that replaces it
-    when the block ends without error (and is removed otherwise)."""
+def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
+    """For writers that only take a file name: yields a temporary path beside ``path`` (ending in ``suffix``, see
+    :func:`temporary_beside`) that replaces it when the block ends without error (and is removed otherwise)."""
     path = Path(path)
     ensure_writable_folder(path.parent)
-    temp = temporary_beside(path)
+    temp = temporary_beside(path, suffix)
     try:
         yield temp
         replace_with(temp, path)

@@ -145,6 +145,15 @@ def test_c3d_round_trip_with_ezc3d(tracked: Path, truth: dict[str, np.ndarray]) 
     assert set(np.unique(residuals)) == {-1.0, 0.0}
 
 
+def test_c3d_to_a_name_without_its_suffix(tracked: Path, tmp_path: Path) -> None:
+    """ezc3d adds .c3d to a file name that does not end in it: the export still lands at the name given."""
+    names = ["poses", "poses.C3D"]
+    for name in names:
+        out = export(tracked, "c3d", tmp_path / "out" / name)
+        assert ezc3d.c3d(str(out))["header"]["points"]["last_frame"] == FRAMES - 1
+    assert sorted(path.name for path in (tmp_path / "out").iterdir()) == names  # no temporary file left
+
+
 def test_c3d_read_by_the_c3d_package(tracked: Path, truth: dict[str, np.ndarray]) -> None:
     out = export(tracked, "c3d")
     expected = expected_joints(truth)

@@ -118,10 +118,13 @@ def test_keypoints_file_round_trip_and_bad_files(tmp_path, demo_keypoints, one_l
     np.testing.assert_array_equal(loaded.pixels, demo_keypoints.pixels)
     np.testing.assert_array_equal(loaded.world, demo_keypoints.world)
     assert loaded.camera_names == ("cam0", "cam1", "cam2") and list(loaded.frame) == list(range(20))
-    assert "keypoints file not found" in one_line_error(lambda: load_keypoints(tmp_path / "none.npz"))
+    assert "none.npz: file not found" in one_line_error(lambda: load_keypoints(tmp_path / "none.npz"))
     broken = tmp_path / "broken.npz"
     broken.write_bytes(path.read_bytes()[:100])
-    assert "not a readable keypoints.npz" in one_line_error(lambda: load_keypoints(broken))
+    assert "not a readable .npz archive" in one_line_error(lambda: load_keypoints(broken))
+    broken.write_text("frame,x\n")
+    message = one_line_error(lambda: load_keypoints(broken))
+    assert message == f"{broken}: not a keypoints file (an .npz archive) but text; delete it to detect again"
     short = Keypoints(
         demo_keypoints.frame[:3],
         demo_keypoints.camera_names,

@@ -577,7 +577,11 @@ def test_synth_options_on_the_command_line(tmp_path, capsys):
     assert depth[:2] == pytest.approx([1.5 * d for d in depth[2:]])
     with np.load(out / "truth.npz") as truth:
         assert truth["joints"].shape == (2, 15, 3)
-    assert main(args + ["--frames", "3", "--time-offsets", "b=0.01, a=-0.02", "--quiet"]) == 0
+    assert main(args + ["--frames", "3", "--quiet"]) == 2  # a recording is there: synth's own, yet kept
+    assert capsys.readouterr().err.strip().endswith("write the render to another folder, or add --force to replace it")
+    assert main(args + ["--frames", "3", "--time-offsets", "b=0.01, a=-0.02", "--force", "--quiet"]) == 0
+    with np.load(out / "truth.npz") as truth:
+        assert truth["joints"].shape == (3, 15, 3)  # replaced
     with pytest.raises(SystemExit):  # argparse's usage error, exit code 2
         main(args + ["--time-offsets", "b=soon"])
     assert "CAMERA=SECONDS" in capsys.readouterr().err

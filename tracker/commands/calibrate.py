@@ -72,11 +72,17 @@ def run(args: argparse.Namespace) -> int:
     from tracker.calibrate.board import parse_board
     from tracker.calibrate.pipeline import calibrate
     from tracker.camera import save_calibration
+    from tracker.overwrite import keep_inputs
 
     if args.fix_intrinsics and args.intrinsics_only:
         raise TrackerInputError("--fix-intrinsics with --intrinsics-only leaves nothing to calibrate; drop one of them")
     if args.refine_intrinsics and args.fix_intrinsics:
         raise TrackerInputError("--refine-intrinsics contradicts --fix-intrinsics; drop one of them")
+    keep_inputs(
+        [args.out],
+        [(args.fix_intrinsics, "the calibration the intrinsics are taken from (--fix-intrinsics)")],
+        "write the new calibration to another file",
+    )
     board = parse_board(args.board, inverted=args.inverted)
     result = calibrate(
         args.folder,

@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.landmarks.detect_recording import cache_file
     from tracker.landmarks.detector import require_detector
     from tracker.model import model_from_dict
+    from tracker.overwrite import keep_inputs
     from tracker.shape.model_fit import GENERIC, fit_and_save
     from tracker.tomlfile import read_toml
 
@@ -57,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
     start = Path(args.model) if args.model else rec.model_path or GENERIC
     document = read_toml(start, "model", "pass --model with an existing models/*.toml")
     model_from_dict(document, start)  # a bad model is a one-line error before any detection
+    keep_inputs(
+        [args.out],
+        [(start, "the model the fit starts from"), *options.recording_inputs(rec)],
+        "write the fitted model to another file",
+    )
     require_detector()
     cache = cache_file(ensure_writable_folder(options.output_folder(args.cache, rec)), rec)
     fit_and_save(

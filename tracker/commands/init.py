@@ -42,6 +42,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Serve the placement until Ctrl-C (its save button writes ``--out``)."""
     from tracker.io.posefile import load_pose_file
+    from tracker.overwrite import keep_inputs
     from tracker.tracking.settings import Settings
     from tracker.viewer.placement import Placement
 
@@ -51,8 +52,14 @@ def run(args: argparse.Namespace) -> int:
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
     start = Path(args.init) if args.init else rec.init_path
-    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, args.cache)
     out = Path(args.out)
+    keep_inputs(
+        [out],
+        [(start, "the pose the placement starts from"), (args.model, "the body model being read")]
+        + options.recording_inputs(rec),
+        "save the placed pose to another file (and track with --init FILE)",
+    )
+    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, args.cache)
     Placement(scene(args, rec, model, settings=Settings()), rec, model, poses, out, frame=args.start)
     return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
 

@@ -377,6 +377,22 @@ def truth(rec):
     return load_poses(rec.truth_path) if rec.truth_path is not None else None
 
 
+def recording_inputs(rec) -> list[tuple[Path | None, str]]:
+    """The files of the recording ``rec`` that a command reads, each with what it is, for
+    :func:`tracker.overwrite.keep_inputs` (None for those it does not have)."""
+    return [
+        (rec.calibration_path, "the calibration being read"),
+        *(
+            (source, f"the footage of camera {camera.name} being read")
+            for camera, source in zip(rec.cameras, rec.sources)
+        ),
+        (rec.model_path, "the recording's body model"),
+        (rec.init_path, "the recording's first pose"),
+        (rec.truth_path, "the recording's true poses"),
+        (rec.timestamps_path, "the recording's capture times"),
+    ]
+
+
 def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     """The poses.npz a run of ``model`` on ``rec`` wrote (``given``, else out/<recording name>/poses.npz),
     loaded and checked against both; ``usable`` marks its frames with a finite pose that is not lost."""

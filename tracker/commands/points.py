@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tracker.io.markers import read_markers
     from tracker.io.poses import PosesWriter, load_poses
+    from tracker.overwrite import keep_inputs
     from tracker.physics.points import PointsSettings, load_points_model, start_frame, track
     from tracker.physics.shapes import ShapesWriter
     from tracker.status import LOST, TRACKED, UNCERTAIN
@@ -89,6 +90,11 @@ def run(args: argparse.Namespace) -> int:
     frames = range(first, len(points) if args.frames is None else min(len(points), first + args.frames), args.every)
     settings = PointsSettings(sigma=args.sigma, steps=args.steps, level=args.level, dynamics=args.fit)
     out = Path(args.out) if args.out else Path("out") / markers.path.stem
+    keep_inputs(
+        [out / "poses.npz", out / "shapes.npz", args.record],
+        [(args.markers, "the marker file being fitted"), (args.model, "the points model being read")],
+        "write the results elsewhere (--out, --record)",
+    )
     print(
         f"fitting {markers.path} frames {markers.first_frame + frames.start}..{markers.first_frame + frames[-1]} "
         f"(every {args.every}, "

@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.calibrate.refine import ROUNDS, refine_rig
     from tracker.camera import load_calibration, save_calibration
     from tracker.io.readers import grey
+    from tracker.overwrite import keep_inputs
     from tracker.tracking.edge_cue import smoother
     from tracker.tracking.foreground import camera_stacks, sample_indices
 
@@ -79,8 +80,16 @@ def run(args: argparse.Namespace) -> int:
             f"tracked ({', '.join(names)})"
         )
     out = Path(args.out)
-    if out.resolve() == rec.calibration_path.resolve():
-        raise TrackerInputError(f"{out}: is the calibration being refined; write the refined rig to another file")
+    keep_inputs(
+        [out],
+        [
+            (rec.calibration_path, "the calibration being refined"),
+            (poses_path, "the poses file the rig is refined to"),
+            (args.model, "the body model being read"),
+            *options.recording_inputs(rec),
+        ],
+        "write the refined rig to another file",
+    )
     ensure_writable_folder(out.parent)
     stop = rec.frame_count if args.frames is None else args.start + args.frames
     usable = results["usable"] & (results["frame"] >= args.start) & (results["frame"] < stop)

@@ -30,6 +30,11 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="bvh:PATH (a BVH clip, retargeted), procedural, athletic (hops, kicks, spins) or seated (at a desk)",
     )
     outputs.add_argument("--out", required=True, help="recording folder to write")
+    outputs.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the recording already in --out (its videos, calibration and truth); never the files read",
+    )
     parser.add_argument("--frames", type=positive_int, default=160, help="frames to render (default 160)")
     parser.add_argument("--start", type=int, default=0, help="first BVH frame (default 0)")
     parser.add_argument("--stride", type=positive_int, default=2, help="BVH frames per rendered frame (default 2)")
@@ -124,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         staging=staging,
         write_init=not args.no_init,
+        replace=args.force,
     )
     print(f"wrote recording {args.out}")
     return 0

@@ -45,10 +45,16 @@ def run(args: argparse.Namespace) -> int:
     """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
     130 after Ctrl-C with the frames done written."""
     from tracker.apps.track import Viewing, print_summary, track
+    from tracker.atomic import ensure_writable_folder
+    from tracker.overwrite import keep_inputs
 
     if args.record and not args.view:
         raise TrackerInputError(f"{args.record}: --record writes the viewer session; add --view")
     rec, tracking = options.tracking(args)
+    read = [(args.model, "the body model being read"), (args.init, "the first pose being read")]
+    read += options.recording_inputs(rec)
+    keep_inputs([args.overlay], read, "write the overlay video to another file")
+    keep_inputs([args.record], read, "write the viewer session to another file")
     record = options.record_file(args)
     view = None
     if args.view:
@@ -56,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     outcome = track(
         rec,
         tracking,
-        out=options.output_folder(args.out, rec),
+        out=ensure_writable_folder(options.output_folder(args.out, rec)),  # before any work, not at the first save
         overlay=args.overlay,
         view=view,
         bar=functools.partial(options.bar, args),

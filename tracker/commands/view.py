@@ -37,12 +37,19 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the review until Ctrl-C, or with ``--record`` write the session and return."""
+    from tracker.overwrite import keep_inputs
     from tracker.tracking.frame_loop import Tracker
     from tracker.tracking.settings import Settings
     from tracker.viewer.review import Review
 
     rec, model = options.opened(args)
     poses_path, results = options.tracked(args.poses, rec, model)
+    keep_inputs(
+        [args.record],
+        [(poses_path, "the poses file being reviewed"), (args.model, "the body model being read")]
+        + options.recording_inputs(rec),
+        "write the viewer session to another file",
+    )
     settings = Settings()
     background = None
     if args.background:

@@ -37,6 +37,7 @@ import numpy as np
 
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.errors import TrackerInputError
+from tracker.npzfile import read_npz
 from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
 _BUFFER = 256
@@ -237,18 +238,8 @@ def load_poses(path: str | os.PathLike) -> dict[str, np.ndarray]:
     Byte-string name arrays are decoded to unicode.
     """
     path = Path(path)
-    fix = "write it with numpy.savez, names as np.array(names, dtype=str)"
-    try:
-        npz = np.load(path, allow_pickle=False)
-        if not isinstance(npz, np.lib.npyio.NpzFile):
-            raise TrackerInputError(f"{path}: a single .npy array, not an .npz archive; {fix}")
-        with npz:
-            arrays = {key: npz[key] for key in npz.files}
-    except FileNotFoundError:
-        raise TrackerInputError(f"{path}: file not found; check the path") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
-        raise TrackerInputError(f"{path}: not a readable .npz of plain arrays ({error}); {fix}") from None
-    return _validated(path, arrays)
+    fix = "give the poses.npz that tracker track wrote, or a truth.npz"
+    return _validated(path, read_npz(path, "a poses or truth file", fix))
 
 
 def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -308,3 +308,18 @@ def _fit_size(file: Path, image: np.ndarray, camera: Camera) -> Camera:
         f"{file}: image size {width}x{height} differs from size {camera.size[0]}x{camera.size[1]} of camera "
         f"{camera.name!r} in calibration.toml; use the calibration made for these videos"
     )
+
+
+def recording_files(folder: str | os.PathLike) -> list[Path]:
+    """What makes ``folder`` a recording, if it is one: its calibration.toml and the cameras' videos in it (none when
+    it holds neither, or is not a folder; hidden files, such as a writer's unfinished ones, do not count)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(
+        path
+        for path in folder.iterdir()
+        if path.is_file()
+        and not path.name.startswith(".")
+        and (path.name == "calibration.toml" or path.suffix.lower() in VIDEO_SUFFIXES)
+    )

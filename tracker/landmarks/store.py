@@ -19,7 +19,6 @@ Written atomically and compressed (the masks are mostly zero); loads without pic
 from __future__ import annotations
 
 import os
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from tracker.errors import TrackerInputError
 from tracker.landmarks.body_landmarks import LANDMARKS
 from tracker.landmarks.crop import CROP
 from tracker.landmarks.detector import DETECTOR
+from tracker.npzfile import read_npz
 
 
 @dataclass(frozen=True)
@@ -97,13 +97,7 @@ def save_keypoints(path: str | os.PathLike, keypoints: Keypoints) -> None:
 def load_keypoints(path: str | os.PathLike) -> Keypoints:
     """Read a keypoints.npz, checking its arrays agree with each other; a bad file is a one-line error."""
     path = Path(path)
-    if not path.is_file():
-        raise TrackerInputError(f"{path}: keypoints file not found")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as error:
-        raise TrackerInputError(f"{path}: not a readable keypoints.npz ({error}); delete it to detect again") from None
+    arrays = read_npz(path, "a keypoints file", "delete it to detect again")
     missing = {"frame", "camera_names", "landmark_names", "pixels", "confidence", "world", "detector"} - set(arrays)
     if missing:
         raise TrackerInputError(f"{path}: no {', '.join(sorted(missing))}; delete it to detect again")

@@ -189,7 +189,8 @@ def make(
     frames: int | None = None,
     progress: bool = True,
 ) -> list[dict]:
-    """Render ``renders`` into ``out``/<name>/ (no init.toml; truth_init.toml holds the first true pose).
+    """Render ``renders`` into ``out``/<name>/ (no init.toml; truth_init.toml holds the first true pose), each
+    replacing the suite's render of that name made before.
 
     ``clips``: the folder holding :data:`CLIPS` (needed by the renders of CMU motion); ``frames``:
     render only the first ``frames`` of each (a quick look). Returns :func:`tracker.synthetic.synth.synthesize`'s
@@ -220,6 +221,7 @@ def make(
                 progress=progress,
                 staging=render.staging,
                 write_init=False,
+                replace=True,
             )
         )
     return summaries

@@ -32,7 +32,9 @@ from tracker.geometry import se3
 from tracker.io.avi import MjpegAviWriter
 from tracker.io.bvh_clip import load_bvh
 from tracker.io.posefile import save_pose_file
+from tracker.io.recording import recording_files
 from tracker.model import Model, joint_centres, load_model, model_from_dict, save_model
+from tracker.overwrite import keep_inputs
 from tracker.synthetic import texture as textures
 from tracker.synthetic.actor import actor_poses, capsule_body, stretched_body
 from tracker.synthetic.clips import (
@@ -412,6 +414,7 @@ def synthesize(
     progress: bool = True,
     staging: Staging = Staging(),
     write_init: bool = True,
+    replace: bool = False,
 ) -> dict:
     """Render a recording folder with ground truth (formats.md, "Recording folder").
 
@@ -431,8 +434,14 @@ def synthesize(
     (name -> bytes), seconds (render, total), render_ms_per_image, in_view
     (camera -> fraction of frames with the whole body inside the image) and unseen (the share of
     truth joints no camera sees).
+
+    It never writes over what it reads: a model, calibration or clip that is one of the files it would write in
+    ``out_dir`` is refused, ``replace`` or not. Nor does it replace a recording (a folder with a calibration.toml or
+    a camera's video, :func:`tracker.io.recording.recording_files`) unless ``replace``: whoever made it, for a render
+    kept (the demo recording is one) cannot be told from one about to be made again. A recording replaced loses the
+    files of the one before that this render does not write (:func:`_remove_stale`); the folder's other files stay.
     Raises TrackerInputError for bad inputs (missing BVH or joints, unreadable
-    files, unwritable folder, staging values out of range).
+    files, unwritable folder, staging values out of range, an output refused as above) before it renders.
     """
     from tqdm import tqdm
 
@@ -448,6 +457,21 @@ def synthesize(
     if staging.zoom != 1.0 or staging.distance != 1.0:
         cameras = moved_rig(cameras, zoom=staging.zoom, distance=staging.distance)
     poses, rate, bvh_path = motion_poses(model, motion, frames, start=start, stride=stride, fps=fps, seed=seed)
+    keep_inputs(
+        _written(out, cameras, codec, write_init, staging.body != "model"),
+        [
+            (calib_path, "the calibration being rendered from (--calib)"),
+            (model_path, "the body model being rendered (--model)"),
+            (bvh_path, "the motion clip being rendered (--motion)"),
+        ],
+        "write the recording to another folder",
+    )
+    held = recording_files(out)
+    if held and not replace:
+        raise TrackerInputError(
+            f"{out}: already holds a recording ({', '.join(path.name for path in held)}); write the render to "
+            "another folder, or add --force to replace it"
+        )
     body, shown = model, poses  # the body rendered and its poses
     actor = None  # the rendered body's model TOML document, when it is not the model
     if staging.body != "model":
@@ -547,6 +571,7 @@ def synthesize(
     ).encode()
 
     atomic_write(out / "README.md", lambda file: file.write(text))
+    _remove_stale(out, _written(out, cameras, codec, write_init, staging.body != "model"))
     files = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file() and not p.name.startswith(".")}
     in_view = visibility(body, shown, cameras).mean(axis=0)
     return {
@@ -560,6 +585,28 @@ def synthesize(
         "in_view": {cam.name: float(v) for cam, v in zip(cameras, in_view)},
         "unseen": float(1.0 - seen.mean()),
     }
+
+
+def _written(out: Path, cameras: list[Camera], codec: str, write_init: bool, body: bool) -> list[Path]:
+    """The files that :func:`synthesize` writes in ``out`` (``body``: the rendered body's model too)."""
+    made = ["calibration.toml", "model.toml", *(["body.toml"] if body else [])]
+    made.append("init.toml" if write_init else "truth_init.toml")
+    made += ["truth.npz", "README.md", *(f"{camera.name}{_CONTAINERS[codec]}" for camera in cameras)]
+    return [out / name for name in made]
+
+
+_STALE = ("init.toml", "truth_init.toml", "body.toml", "timestamps.csv", "sync.toml")
+"""Files of a recording folder that a render replacing one (``--force``) may not write, and that would otherwise be
+read with it: an old first pose, rendered body, capture times or camera offsets."""
+
+
+def _remove_stale(out: Path, written: list[Path]) -> None:
+    """Remove from ``out`` the recording's files that this render did not write (:data:`_STALE`, and the videos of
+    cameras it does not have), so that a replaced recording holds nothing of the one before."""
+    kept = {path.name for path in written}
+    for path in [*recording_files(out), *(out / name for name in _STALE)]:
+        if path.name not in kept:
+            path.unlink(missing_ok=True)
 
 
 def seen_joints(joints: np.ndarray, cameras: list[Camera], props: tuple[Box, ...] = ()) -> np.ndarray:

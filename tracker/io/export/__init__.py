@@ -26,6 +26,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.export.units import seconds
 from tracker.io.poses import load_poses
+from tracker.overwrite import keep_inputs
 from tracker.status import LOST, TRACKED
 
 FORMATS = ("trc", "c3d", "bvh", "csv")
@@ -144,8 +145,13 @@ def export(
             f"{poses}: BVH export needs the body model the poses were tracked with; "
             "pass --model (e.g. models/human.toml)"
         )
-    rows = regular_rows(load_poses(poses), poses, fps)
     target = Path(out) if out is not None else default_out(poses, fmt)
+    keep_inputs(
+        [target],
+        [(poses, "the poses file being exported"), (model, "the body model of the export")],
+        "write the export to another file",
+    )
+    rows = regular_rows(load_poses(poses), poses, fps)
     if fmt == "trc":
         from tracker.io.export.trc import write_trc
 

@@ -51,5 +51,5 @@ def write_c3d(
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"]["residuals"] = np.where(gap.T, -1.0, 0.0)[np.newaxis]
 
-    with atomic_path(path) as temp:  # ezc3d writes only to a file name
+    with atomic_path(path, ".c3d") as temp:  # ezc3d writes only to a file name, and adds .c3d to one without it
         c3d.write(str(temp))
