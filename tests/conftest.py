@@ -3,6 +3,7 @@ check that bad input gets a one-line error, and perfect keypoint detections; whe
 is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
 
 import contextlib
+import hashlib
 import io
 import shutil
 from dataclasses import dataclass
@@ -32,6 +33,16 @@ def needs_shared(*parts: str) -> pytest.MarkDecorator:
     return pytest.mark.skipif(
         not SHARED_DATA.joinpath(*parts).exists(), reason=f"{where} not present (data folder beside the repo)"
     )
+
+
+def file_hashes(folder: Path) -> dict[str, str]:
+    """The SHA-256 of every file under ``folder``, by its path there: a test compares them before and after a command
+    to show that no byte of the user's input changed."""
+    return {
+        str(path.relative_to(folder)): hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(folder.rglob("*"))
+        if path.is_file()
+    }
 
 
 @pytest.fixture

@@ -87,3 +87,11 @@ def test_the_table_of_tuning_options_in_the_docs_shows_the_settings_defaults():
     for flag, (group, spec) in options.tuning_fields().items():
         assert flag in rows, flag
         assert rows[flag] == options._shown(getattr(getattr(Settings(), group), spec.name)), flag
+
+
+def test_a_list_of_names_that_names_none_is_empty_not_absent():
+    """``--cameras ""`` and ``--cameras ","`` name no camera (open_recording refuses that), where leaving the option
+    out means every camera."""
+    assert options.camera_names(None) is None
+    assert options.camera_names("") == options.camera_names(",") == options.camera_names(" , ,") == []
+    assert options.camera_names("cam0, cam2,") == ["cam0", "cam2"]
