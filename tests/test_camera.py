@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 import tomli_w
-from conftest import TEST_DATA
+from conftest import SHARED_DATA, TEST_DATA, needs_shared
 
 from tracker.camera import Camera, load_calibration, look_at_camera, save_calibration
 from tracker.errors import TrackerInputError
@@ -155,7 +155,24 @@ BAD_TABLES = {
     "not numbers": (table(rotation=["a", "b", "c"]), "rotation"),
     "rotation matrix not orthonormal": (
         table(rotation=[[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]]),
-        "rotation",
+        "'rotation' is a 3x3 matrix but not a rotation (R^T R is 3 off the identity)",
+    ),
+    "rotation matrix a reflection": (
+        table(rotation=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]),
+        "'rotation' is a 3x3 matrix but not a rotation (its determinant is -1)",
+    ),
+    "negative focal length": (
+        table(matrix=[[-500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]]),
+        "focal lengths fx = -500, fy = 510, not both positive; use the calibration in OpenCV's convention",
+    ),
+    "negative fy": (table(matrix=[[500.0, 0.0, 320.0], [0.0, -510.0, 240.0], [0.0, 0.0, 1.0]]), "fy = -510"),
+    "principal point right of the image": (
+        table(matrix=[[500.0, 0.0, 640.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]]),
+        "principal point (cx, cy) = (640, 240) outside the 640x480 image; check that matrix and size belong",
+    ),
+    "principal point above the image": (
+        table(matrix=[[500.0, 0.0, 320.0], [0.0, 510.0, -0.6], [0.0, 0.0, 1.0]]),
+        "(cx, cy) = (320, -0.6) outside",
     ),
     "empty name": (table(name=""), "name"),
 }
@@ -207,6 +224,37 @@ def test_loads_the_real_pose2sim_rig() -> None:
     for camera in cameras:
         u, v = camera.project(np.array([[0.0, 0.0, 1.0]]))[0]
         assert 0 <= u < camera.size[0] and 0 <= v < camera.size[1]
+
+
+def test_a_camera_at_the_edges_of_what_is_one_loads(tmp_path: Path) -> None:
+    """The principal point on the image's outermost pixel centres' half-pixel border, and a 3x3 rotation written to six
+    decimals (R^T R off the identity by more than 1e-6), are a camera; the rotation is kept as written."""
+    rotation = np.round(cv2.Rodrigues(np.array([0.3, -1.2, 0.7]))[0], 6)
+    corner = table(matrix=[[500.0, 0.0, -0.5], [0.0, 510.0, 479.5], [0.0, 0.0, 1.0]], rotation=rotation.tolist())
+    (camera,) = load_calibration(write(tmp_path / "rig.toml", {"cam_0": corner}))
+    assert camera.matrix[0, 2] == -0.5 and camera.matrix[1, 2] == 479.5
+    assert np.array_equal(camera.rotation, rotation) and np.abs(rotation.T @ rotation - np.eye(3)).max() > 1e-6
+
+
+REPO = Path(__file__).resolve().parents[1]
+CALIBRATIONS = [
+    *sorted((REPO / "calib").glob("*.toml")),
+    REPO / "recordings" / "demo" / "calibration.toml",
+    TEST_DATA / "pose2sim" / "calibration.toml",
+]
+
+
+@pytest.mark.parametrize("path", CALIBRATIONS, ids=lambda path: str(path.relative_to(REPO)))
+def test_every_calibration_that_comes_with_the_tracker_loads(path: Path) -> None:
+    assert len(load_calibration(path)) >= 3
+
+
+@needs_shared()
+def test_every_calibration_of_the_real_data_loads() -> None:
+    """../shared/data's calibration.toml files (the Pose2Sim rig; caliscope's camera_array.toml is another format,
+    read by tests/test_calibrate.py)."""
+    found = sorted(SHARED_DATA.glob("*/calibration.toml"))
+    assert found and all(len(load_calibration(path)) == 4 for path in found)
 
 
 def test_look_at_camera_centres_target():

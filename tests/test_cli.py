@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
+from conftest import file_hashes
 
 from tracker.cli import COMMANDS, build_parser, main
 from tracker.evaluate import evaluate
@@ -50,8 +51,14 @@ def test_track_writes_poses_and_summary(tiny_recording, tmp_path, capsys):
 def test_track_summary_scores_the_frames_asked_for_and_says_what_it_left_out(tiny_recording, tmp_path, capsys):
     """With --start/--frames the summary's accuracy is over those frames, as eval scores the same poses against
     the same frames of the truth, and it names the truth's frames it leaves out; the files it lists are there."""
-    out = tmp_path / "out"
-    assert main(["track", str(tiny_recording), "--out", str(out), "--start", "1", "--frames", "3", "--quiet"]) == 0
+    from tracker.io.posefile import save_pose_file
+    from tracker.model import load_model
+
+    out, first = tmp_path / "out", tmp_path / "first.toml"
+    model = load_model(tiny_recording / "model.toml")
+    save_pose_file(first, model, load_poses(tiny_recording / "truth.npz")["poses"][1], frame=1)
+    args = ["track", str(tiny_recording), "--init", str(first), "--out", str(out), "--start", "1", "--frames", "3"]
+    assert main([*args, "--quiet"]) == 0
     printed = capsys.readouterr().out
     truth = load_poses(tiny_recording / "truth.npz")
     asked = {key: truth[key][1:4] for key in ("joints", "frame")} | {"joint_names": truth["joint_names"]}
@@ -233,6 +240,103 @@ def test_bad_input_is_one_line_exit_2(case, tiny_recording, tmp_path, capsys):
 def test_missing_recording_folder(tmp_path, capsys):
     assert main(["track", str(tmp_path / "nowhere"), "--quiet"]) == 2
     assert "nowhere" in _error_line(capsys)
+
+
+def _negative_focal(rec: Path) -> None:
+    document = tomllib.loads((rec / "calibration.toml").read_text())
+    document["cam_0"]["matrix"][0][0] = -280.0
+    (rec / "calibration.toml").write_text(tomli_w.dumps(document))
+
+
+def _init_of_frame_3(rec: Path) -> None:
+    text = (rec / "init.toml").read_text()
+    assert text.startswith("frame = 0\n")  # tracker synth writes the frame
+    (rec / "init.toml").write_text(text.replace("frame = 0\n", "frame = 3\n", 1))
+
+
+EDGES = {  # a user's mistake at the edges: how to make it, the arguments after RECORDING, the line it gets
+    "negative focal length": (
+        _negative_focal,
+        [],
+        "{rec}/calibration.toml: [cam_0] 'matrix' has focal lengths fx = -280, fy = 280, not both positive; use the "
+        "calibration in OpenCV's convention (x right, y down, z forward: fx, fy > 0 in pixels)",
+    ),
+    "camera list empty": (
+        None,
+        ["--cameras", ""],
+        "{rec}: the list of cameras names none; pick cameras with a video from: cam0, cam1, or leave --cameras out "
+        "to track them all",
+    ),
+    "camera list of commas": (
+        None,
+        ["--cameras", ","],
+        "{rec}: the list of cameras names none; pick cameras with a video from: cam0, cam1, or leave --cameras out "
+        "to track them all",
+    ),
+    "--init of another frame": (
+        None,
+        ["--start", "3", "--init", "{rec}/init.toml"],
+        "{rec}/init.toml: is the pose at frame 0, but the run starts at frame 3; pass --start 0, or --init with a "
+        "pose at frame 3, or no --init to find the first pose by itself",
+    ),
+    "--init of another frame, without --start": (
+        _init_of_frame_3,
+        ["--init", "{rec}/init.toml"],
+        "{rec}/init.toml: is the pose at frame 3, but the run starts at frame 0; pass --start 3, or --init with a "
+        "pose at frame 0, or no --init to find the first pose by itself",
+    ),
+    "the recording's init.toml of another frame, and no keypoints": (
+        None,
+        ["--start", "3", "--keypoints", "off"],
+        "{rec}/init.toml: is the pose at frame 0, but the run starts at frame 3, where it cannot find the first pose "
+        "by itself; pass --start 0, or --init with a pose at frame 3",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(EDGES))
+def test_a_mistake_at_the_edges_is_one_line_before_anything_runs(case, tiny_recording, tmp_path, capsys):
+    """Exit 2 and the one line that names the file and the fix, before any tracking: nothing written, the user's
+    files as they were."""
+    rec = _copy(tiny_recording, tmp_path)
+    make, extra, line = EDGES[case]
+    if make is not None:
+        make(rec)
+    before = file_hashes(rec)
+    args = ["track", str(rec), "--out", str(tmp_path / "out"), "--quiet", *(arg.format(rec=rec) for arg in extra)]
+    assert main(args) == 2
+    assert capsys.readouterr().err.splitlines() == [f"tracker: error: {line.format(rec=rec)}"]
+    assert file_hashes(rec) == before and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("case", ["a camera without a video", "the recording's init.toml of another frame"])
+def test_what_a_run_leaves_out_it_names_in_a_warning_and_goes_on(case, tiny_recording, tmp_path, capsys):
+    """A camera of the calibration without a video, and the recording's init.toml when the run starts at another
+    frame, are left out with a warning naming them; the run goes on to its next step (here a --model that is not
+    there, which stops it before any tracking)."""
+    rec = _copy(tiny_recording, tmp_path)
+    if case == "a camera without a video":
+        shutil.move(rec / "cam1.avi", tmp_path / "cam1.avi")
+        extra = []
+        warning = (
+            f"{rec}: camera cam1 has no video, leaving cam0 of calibration.toml; add <name>.mp4|.avi|.mkv or a folder "
+            "<name>/ of numbered images, or pick the cameras with --cameras to say so"
+        )
+    else:
+        extra = ["--start", "3"]
+        warning = (
+            f"ignoring {rec / 'init.toml'}, the pose at frame 0: the run starts at frame 3, where it finds the first "
+            "pose by itself"
+        )
+    before = file_hashes(rec)
+    nowhere = tmp_path / "nowhere.toml"
+    args = ["track", str(rec), "--model", str(nowhere), "--out", str(tmp_path / "out"), "--quiet", *extra]
+    assert main(args) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"tracker: warning: {warning}",
+        f"tracker: error: {nowhere}: model file not found; pass --model with an existing models/*.toml",
+    ]
+    assert file_hashes(rec) == before and not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize(

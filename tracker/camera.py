@@ -44,6 +44,7 @@ _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-
 _UNIT_TO_METRES = {"m": 1.0, "mm": 1e-3}
 _MM_GUESS_DISTANCE = 50.0  # a median camera distance above this many "metres" is surely millimetres
 _REQUIRED_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation")
+_ROTATION_TOLERANCE = 1e-5  # largest |R^T R - I| of a 3x3 rotation: rotations written to six decimals pass
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,8 +177,10 @@ def load_calibration(path: str | os.PathLike) -> list[Camera]:
 
     ``[metadata] units = "mm"`` converts translations to metres. Without a units
     key, a rig whose median camera distance |t| exceeds 50 is taken to be in
-    millimetres (with a warning). Every problem raises TrackerInputError naming
-    the file, the camera table and the fix.
+    millimetres (with a warning). Each camera must be one: finite numbers, positive
+    focal lengths, the principal point inside the image, a rotation (a Rodrigues
+    vector, or a 3x3 matrix with orthonormal rows and determinant +1). Every
+    problem raises TrackerInputError naming the file, the camera table and the fix.
     """
     path = Path(path)
     document = read_toml(path, "calibration", "give the path of a calibration.toml")
@@ -266,6 +269,18 @@ def _parse_camera(path: Path, table: str, values: dict[str, Any]) -> Camera:
             "'matrix' is not an invertible camera matrix with last row [0, 0, 1]",
             "write matrix = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
         )
+    if matrix[0, 0] <= 0 or matrix[1, 1] <= 0:
+        raise fail(
+            f"'matrix' has focal lengths fx = {matrix[0, 0]:g}, fy = {matrix[1, 1]:g}, not both positive",
+            "use the calibration in OpenCV's convention (x right, y down, z forward: fx, fy > 0 in pixels)",
+        )
+    width, height = size
+    if not (-0.5 <= matrix[0, 2] <= width - 0.5 and -0.5 <= matrix[1, 2] <= height - 0.5):
+        raise fail(
+            f"'matrix' puts the principal point (cx, cy) = ({matrix[0, 2]:g}, {matrix[1, 2]:g}) outside the "
+            f"{width:g}x{height:g} image",
+            "check that matrix and size belong to the same camera and image size (cx, cy in pixels, near the centre)",
+        )
 
     fisheye = values.get("fisheye", False)
     if not isinstance(fisheye, bool):
@@ -281,8 +296,15 @@ def _parse_camera(path: Path, table: str, values: dict[str, Any]) -> Camera:
     rotation = array("rotation", ((3,), (3, 3)), "write rotation as a Rodrigues vector [rx, ry, rz] (world -> camera)")
     if rotation.shape == (3,):
         rotation = cv2.Rodrigues(rotation)[0]
-    elif not (np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6) and np.linalg.det(rotation) > 0):
-        raise fail("'rotation' is a 3x3 matrix but not a rotation", "write rotation as a Rodrigues vector [rx, ry, rz]")
+    else:
+        off = float(np.abs(rotation.T @ rotation - np.eye(3)).max())
+        if off > _ROTATION_TOLERANCE or np.linalg.det(rotation) < 0:
+            problem = f"R^T R is {off:.2g} off the identity" if off > _ROTATION_TOLERANCE else "its determinant is -1"
+            raise fail(
+                f"'rotation' is a 3x3 matrix but not a rotation ({problem})",
+                "write rotation as a Rodrigues vector [rx, ry, rz], or a 3x3 matrix with orthonormal rows and "
+                "determinant +1 (world -> camera)",
+            )
 
     translation = array("translation", ((3,),), "write translation = [tx, ty, tz] (world -> camera)")
     return Camera(name, (int(size[0]), int(size[1])), matrix, distortions, rotation, translation, fisheye)

@@ -5,6 +5,7 @@ import re
 import shutil
 
 import pytest
+from conftest import file_hashes
 
 import tracker.apps.bench as bench
 from tracker.apps.bench import HUMAN, _copies, _side_by_side, detector_ms
@@ -109,6 +110,21 @@ def test_bench_on_a_folder_without_model_or_first_pose_is_one_line(tiny_recordin
     assert len(errors) == 1 and f"{folder}: no {missing}" in errors[0]
     option = "--model" if missing == "model.toml" else "--init"
     assert f"pass {option}" in errors[0]
+
+
+def test_bench_refuses_a_first_pose_of_another_frame_than_its_first(tiny_recording, tmp_path, capsys):
+    """Its runs start at frame 0: a pose of frame 3 is one line naming the file and the fix, before any timing, the
+    files as they were."""
+    folder = tmp_path / "rec"
+    shutil.copytree(tiny_recording, folder)
+    (folder / "init.toml").write_text((folder / "init.toml").read_text().replace("frame = 0\n", "frame = 3\n", 1))
+    before = file_hashes(folder)
+    assert main(["bench", str(folder), "--repeats", "1"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"tracker: error: {folder / 'init.toml'}: is the pose at frame 3, but tracker bench starts at frame 0; pass "
+        f"--init with a pose at frame 0 (tracker init {folder} --out FILE writes one)"
+    )
+    assert file_hashes(folder) == before
 
 
 def test_bench_takes_the_model_and_first_pose_from_elsewhere(tiny_recording, tmp_path, capsys):

@@ -120,3 +120,11 @@ def test_the_cache_option_chooses_where_the_keypoints_are_kept(command, tmp_path
         assert capsys.readouterr().err == "tracker: error: stopped where the keypoints would be kept\n"
     kept = [Path("out/demo/keypoints-cam1,cam2.npz"), Path("out/demo/keypoints.npz"), tmp_path / "kp" / "keypoints.npz"]
     assert chosen == kept and (tmp_path / "kp").is_dir()
+
+
+def test_a_list_of_names_that_names_none_is_empty_not_absent():
+    """``--cameras ""`` and ``--cameras ","`` name no camera (open_recording refuses that), where leaving the option
+    out means every camera."""
+    assert options.camera_names(None) is None
+    assert options.camera_names("") == options.camera_names(",") == options.camera_names(" , ,") == []
+    assert options.camera_names("cam0, cam2,") == ["cam0", "cam2"]

@@ -10,7 +10,7 @@ import pytest
 
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.io.posefile import load_pose_file, save_pose_file
+from tracker.io.posefile import load_pose_file, pose_frame, save_pose_file, starting_pose_file
 from tracker.model import load_model, poses_from_rotations, rest_poses
 
 HUMAN = Path(__file__).resolve().parents[2] / "models" / "human.toml"
@@ -55,9 +55,52 @@ def test_round_trip(tmp_path, human):
         poses = valid_poses(rng, human)
         assert max(joint_errors(human, poses)) < 1e-12
         path = tmp_path / f"init{trial}.toml"
-        save_pose_file(path, human, poses)
+        save_pose_file(path, human, poses, frame=0)
         loaded = load_pose_file(path, human)
         np.testing.assert_allclose(loaded, poses, rtol=0, atol=1e-12)
+
+
+def test_a_pose_file_says_its_frame(tmp_path, human):
+    """The writer records the frame; a file without one (written before the key) is the pose at frame 0; a frame that
+    is no frame number is a one-line error naming the file."""
+    poses = valid_poses(np.random.default_rng(3), human)
+    save_pose_file(tmp_path / "at150.toml", human, poses, frame=150)
+    assert pose_frame(tmp_path / "at150.toml") == 150
+    np.testing.assert_allclose(load_pose_file(tmp_path / "at150.toml", human), poses, rtol=0, atol=1e-12)
+    assert pose_frame(write(tmp_path / "old.toml", ROOT)) == 0
+    for written, read in (("-1", "-1"), ("1.5", "1.5"), ('"3"', "'3'"), ("true", "True")):
+        path = write(tmp_path / "bad.toml", f"frame = {written}\n" + ROOT)
+        with pytest.raises(TrackerInputError) as info:
+            pose_frame(path)
+        assert str(info.value) == (
+            f"{path}: frame = {read} is not a frame number; write frame = N, the recording's frame the pose is of"
+        )
+
+
+def test_a_run_starts_from_a_pose_file_only_at_its_frame(tmp_path):
+    """--init of another frame is refused in one line naming its frame and the fix; the recording's own init.toml of
+    another frame is passed over with a warning when the run can find its first pose by itself, else refused; at its
+    own frame either is used."""
+    given, found = write(tmp_path / "given.toml", "frame = 150\n" + ROOT), write(tmp_path / "init.toml", ROOT)
+    assert starting_pose_file(150, given, found) == given
+    assert starting_pose_file(0, None, found) == found and starting_pose_file(0, None, None) is None
+    with pytest.raises(TrackerInputError) as info:
+        starting_pose_file(0, given, found)
+    assert str(info.value) == (
+        f"{given}: is the pose at frame 150, but the run starts at frame 0; pass --start 150, or --init with a pose "
+        "at frame 0, or no --init to find the first pose by itself"
+    )
+    with pytest.warns(UserWarning) as caught:
+        assert starting_pose_file(150, None, found) is None
+    assert [str(warning.message) for warning in caught] == [
+        f"ignoring {found}, the pose at frame 0: the run starts at frame 150, where it finds the first pose by itself"
+    ]
+    with pytest.raises(TrackerInputError) as info:
+        starting_pose_file(150, None, found, by_itself=False)
+    assert str(info.value) == (
+        f"{found}: is the pose at frame 0, but the run starts at frame 150, where it cannot find the first pose by "
+        "itself; pass --start 0, or --init with a pose at frame 150"
+    )
 
 
 def test_round_trip_of_rotations_near_pi(tmp_path, human):
@@ -66,7 +109,7 @@ def test_round_trip_of_rotations_near_pi(tmp_path, human):
     for trial in range(10):
         poses = valid_poses(rng, human, max_angle=np.pi)
         path = tmp_path / f"init{trial}.toml"
-        save_pose_file(path, human, poses)
+        save_pose_file(path, human, poses, frame=0)
         np.testing.assert_allclose(load_pose_file(path, human), poses, rtol=0, atol=1e-12)
 
 

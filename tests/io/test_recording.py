@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import warnings
 from pathlib import Path
 
 import cv2
@@ -48,8 +49,13 @@ def make_recording(
 def test_happy_path_yields_grey_frames(tmp_path: Path) -> None:
     folder = make_recording(tmp_path / "rec")
     (folder / "model.toml").write_text('name = "x"\n')
-    recording = open_recording(folder)
-    assert [c.name for c in recording.cameras] == ["cam0", "cam1"]  # cam2 has no video
+    with pytest.warns(UserWarning) as caught:
+        recording = open_recording(folder)
+    assert [c.name for c in recording.cameras] == ["cam0", "cam1"]  # cam2 has no video: a warning names it
+    assert [str(warning.message) for warning in caught] == [
+        f"{folder}: camera cam2 has no video, leaving cam0, cam1 of calibration.toml; add <name>.mp4|.avi|.mkv or a "
+        "folder <name>/ of numbered images, or pick the cameras with --cameras to say so"
+    ]
     assert (recording.frame_count, recording.fps) == (COUNT, FPS)
     assert (
         recording.model_path == folder / "model.toml" and recording.init_path is None and recording.truth_path is None
@@ -123,6 +129,25 @@ def test_missing_calibration(tmp_path: Path) -> None:
 def test_missing_video(tmp_path: Path) -> None:
     expect_error(make_recording(tmp_path / "rec", videos=()), "rec", "no camera", "cam0")
     expect_error(make_recording(tmp_path / "rec2"), "cam2", "cam0, cam1", cameras=["cam2"])
+
+
+def test_every_camera_with_a_video_is_used_and_those_without_are_named(tmp_path: Path) -> None:
+    """Picked by name (each with a video), there is no warning; by default two cameras without a video are named in
+    one warning."""
+    folder = make_recording(tmp_path / "rec", videos=("cam1",))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert [camera.name for camera in open_recording(folder, cameras=["cam1"]).cameras] == ["cam1"]
+    with pytest.warns(UserWarning, match="^.*: cameras cam0, cam2 have no video, leaving cam1 of calibration.toml; "):
+        assert [camera.name for camera in open_recording(folder).cameras] == ["cam1"]
+
+
+def test_an_empty_camera_list_is_an_error(tmp_path: Path) -> None:
+    message = expect_error(make_recording(tmp_path / "rec"), cameras=[])
+    assert message == (
+        f"{tmp_path / 'rec'}: the list of cameras names none; pick cameras with a video from: cam0, cam1, or leave "
+        "--cameras out to track them all"
+    )
 
 
 def test_unknown_camera_name(tmp_path: Path) -> None:

@@ -2,13 +2,15 @@
 against a brute-force one, offsets found from landmarks seen at known capture times, a body standing still left
 undecided, and the pairs' shifts joined by least squares."""
 
+import dataclasses
 import shutil
 
 import numpy as np
 import pytest
+from conftest import file_hashes
 
 from tracker.apps.sync import Refined
-from tracker.camera import look_at_camera
+from tracker.camera import load_calibration, look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.io.recording import open_recording
 from tracker.io.sync_file import load_offsets
@@ -162,8 +164,53 @@ def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_pat
     assert load_offsets(rec / "sync.toml", ["cam0", "cam1"], 1.0)["cam1"] == -0.07
     assert main(["sync", str(rec), "--model", "m.toml", "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert "--model is for the tracks of --refine; add --refine" in capsys.readouterr().err
-    assert main(["sync", str(rec), "--cameras", "cam0", "--out", str(tmp_path / "out"), "--quiet"]) == 2
-    assert "also holds the offset of cam1, which --cameras leaves out" in capsys.readouterr().err
     (rec / "sync.toml").write_text("[offsets]\ncam1 = 'late'\n")
     assert main(["sync", str(rec), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert "the offset of cam1 is not a number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("case", ["--cameras cam0", "one camera's video", "--cameras cam0,cam1 of three"])
+def test_tracker_sync_refuses_before_any_detection(case, tiny_recording, tmp_path, monkeypatch, capsys):
+    """Fewer than two cameras have no offset between them, and a run that would drop an offset of sync.toml loses
+    it: one line naming the folder or file and the fix, exit 2, before any detection, the user's files as they
+    were and nothing written."""
+    rec = tmp_path / "rec"
+    shutil.copytree(tiny_recording, rec)
+    lines = []
+    if case == "--cameras cam0":
+        extra = ["--cameras", "cam0"]
+        lines.append(
+            f"{rec}: --cameras picks one camera (cam0), but tracker sync times cameras against one another; "
+            "pick two or more"
+        )
+    elif case == "one camera's video":
+        extra = []
+        shutil.move(rec / "cam1.avi", tmp_path / "cam1.avi")
+        lines.append(
+            f"tracker: warning: {rec}: camera cam1 has no video, leaving cam0 of calibration.toml; add "
+            "<name>.mp4|.avi|.mkv or a folder <name>/ of numbered images, or pick the cameras with --cameras to say so"
+        )
+        lines.append(
+            f"{rec}: only camera cam0 has a video, but tracker sync times cameras against one another; add "
+            "the other cameras' videos"
+        )
+    else:  # a third camera, whose offset sync.toml holds
+        cameras = load_calibration(rec / "calibration.toml")
+        save_calibration([*cameras, dataclasses.replace(cameras[1], name="cam2")], rec / "calibration.toml")
+        shutil.copyfile(rec / "cam1.avi", rec / "cam2.avi")
+        (rec / "sync.toml").write_text("[offsets]\ncam2 = 0.03\n")
+        extra = ["--cameras", "cam0,cam1"]
+        lines.append(
+            f"{rec / 'sync.toml'}: also holds the offset of cam2, which --cameras leaves out and this run would drop; "
+            "sync every camera, or move the file away to start afresh"
+        )
+    lines[-1] = f"tracker: error: {lines[-1]}"
+
+    def detect(*args, **kwargs):
+        raise AssertionError("detected")
+
+    monkeypatch.setattr("tracker.landmarks.detect_recording.detect_recording", detect)
+    before = file_hashes(rec)
+    assert main(["sync", str(rec), *extra, "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert capsys.readouterr().err.splitlines() == lines
+    assert file_hashes(rec) == before and not (tmp_path / "out").exists()

@@ -138,6 +138,8 @@ def test_run_tracks_with_the_options_given(tmp_path, capsys):
         ["suite", "score", "{tmp}/no-suite", "{tmp}"],  # suite folder missing
         ["suite", "score", "{out}", "{tmp}", "--only", "kick-spin-blur"],  # a render not made
         ["suite", "make", "{tmp}/x", "--only", "no-such-render"],
+        ["suite", "make", "{tmp}/x", "--only", ""],  # a list that names no render
+        ["suite", "make", "{tmp}/x", "--only", ","],
         ["suite", "make", "{tmp}/x", "--only", "far-walk"],  # a CMU render without --clips
         ["suite", "run", "{out}", "{tmp}/r", "--json", "--", "--init", "x"],  # suite option after RESULTS
         ["suite", "landmarks", "{out}", "{tmp}/no-keypoints"],

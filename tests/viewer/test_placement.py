@@ -3,7 +3,7 @@ import viser.transforms as vtf
 
 from tracker.cli import main
 from tracker.geometry import se3
-from tracker.io.posefile import load_pose_file
+from tracker.io.posefile import load_pose_file, pose_frame
 from tracker.io.recording import open_recording
 from tracker.model import joint_centres, load_model
 from tracker.viewer.placement import Placement, in_view, subtree
@@ -62,6 +62,9 @@ def test_gizmos_move_subtrees_snap_to_the_images_and_save_an_init_that_tracks(se
     assert "Snapped" in placement.message.content
 
     placement.save()
-    assert placement.saved.is_set() and out.is_file()
+    assert placement.saved.is_set() and out.is_file() and pose_frame(out) == 0
     np.testing.assert_allclose(load_pose_file(out, model), placement.poses, atol=1e-9)
     assert main(["track", str(tiny_recording), "--init", str(out), "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    placement.frame = 2  # placed in frame 2 (tracker init --start 2): the file says so
+    placement.save()
+    assert pose_frame(out) == 2

@@ -39,7 +39,7 @@ from tracker.apps.loop import Tracked, track_frames
 from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
-from tracker.io.posefile import load_pose_file
+from tracker.io.posefile import load_pose_file, pose_frame
 from tracker.io.poses import load_poses
 from tracker.io.readers import grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
@@ -151,7 +151,8 @@ def track_run(
 
 def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tuple[Recording, Model, np.ndarray]:
     """The recording at ``path``, the body model and the first pose (``model_path`` and ``init_path``, else the
-    recording's own); a one-line error naming the option when one is missing."""
+    recording's own; the pose at frame 0, where the runs start); a one-line error naming the option when one is
+    missing."""
     recording = open_recording(path)
     model_path = model_path or recording.model_path
     init_path = init_path or recording.init_path
@@ -162,6 +163,12 @@ def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tup
             "(tracker fit-model and tracker init write them)"
         )
     model = load_model(model_path)
+    frame = pose_frame(init_path)
+    if frame != 0:
+        raise TrackerInputError(
+            f"{init_path}: is the pose at frame {frame}, but tracker bench starts at frame 0; pass --init with a pose "
+            f"at frame 0 (tracker init {path} --out FILE writes one)"
+        )
     return recording, model, load_pose_file(init_path, model)
 
 

@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from tracker.apps.track import Bar, Tracking, track
-from tracker.errors import TrackerInputError
 from tracker.io.pairing import by_offsets
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.landmarks.time_offsets import RISE_SECONDS, UNDECIDED, Offsets, resampled_least, rises
@@ -52,11 +51,10 @@ class Refined:
 def refine_offsets(rec: Recording, found: Offsets, tracking: Tracking, *, out: Path, bar: Bar) -> Refined:
     """Refine the landmarks' offsets ``found`` of ``rec`` (read as recorded, unpaired) by the edges (module
     docstring), each camera's track written to OUT/without-<camera>/ (``out``) as ``tracking`` says; the body
-    model, when neither ``tracking`` nor the recording gives one, fitted once, in the first track."""
+    model, when neither ``tracking`` nor the recording gives one, fitted once, in the first track (``rec`` of two
+    cameras or more: ``tracker sync`` refuses fewer)."""
     names = [camera.name for camera in rec.cameras]
     count = len(names)
-    if count < 2:
-        raise TrackerInputError(f"{rec.path}: one camera has no offset to refine; pick two cameras or more")
     seconds, sigma = np.full(count, np.nan), np.full(count, np.inf)
     seconds[0], sigma[0] = 0.0, 0.0
     decided = np.zeros(count, bool)

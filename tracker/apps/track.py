@@ -119,7 +119,9 @@ def track(
 
     from tracker.apps.keypoint_stream import beside, tracked_frames
     from tracker.apps.loop import Tracked, track_frames
+    from tracker.atomic import ensure_writable_folder
     from tracker.evaluate import evaluate, truth_within
+    from tracker.io.posefile import starting_pose_file
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
@@ -135,9 +137,11 @@ def track(
         )
     stop = rec.frame_count if tracking.frames is None else min(rec.frame_count, start + tracking.frames)
     asked = range(start, stop)
+    pose_file = starting_pose_file(start, tracking.init, rec.init_path, by_itself=bool(step))
     model = _model(tracking.model, rec, out, step, bar)
     background = _background(tracking.background, rec, out, bar)
-    init, begin, back_to = _first_pose(tracking.init, start, rec, model, stop, out, settings, step)
+    init, begin, back_to = _first_pose(pose_file, start, rec, model, stop, out, settings, step)
+    ensure_writable_folder(out)  # a folder that cannot be written fails now, not at the first save
     print(
         f"tracking {rec.path} frames {back_to}..{stop - 1} with {len(rec.cameras)} camera(s) "
         f"({', '.join(c.name for c in rec.cameras)}), model {model.name!r} ({model.size} components)",
@@ -479,9 +483,10 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
     return load_model(path)
 
 
-def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
+def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
     """The pose at the first frame, that frame (``start``, or later) and the first frame to track back to from it:
-    ``given`` (``--init``), else the recording's init.toml, else fitted to the keypoints of the first frames
+    the pose in ``pose_file`` (``--init`` or the recording's init.toml, the pose at frame ``start``:
+    :func:`tracker.io.posefile.starting_pose_file`), else fitted to the keypoints of the first frames
     (:func:`tracker.seeding.first_pose.first_pose`, detections cached in OUT/keypoints.npz).  When they cannot place
     the body, the detector tries the next frames if it saw someone in them (a body cut by the borders, in one view
     only, or in views that face each other), else a second of frames later, and tracking starts where the body is
@@ -489,9 +494,8 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
     are tracked backwards from it (:func:`_tracked_back`)."""
     from tracker.io.posefile import load_pose_file
 
-    given = given or rec.init_path
-    if given is not None:
-        return load_pose_file(given, model), start, start
+    if pose_file is not None:
+        return load_pose_file(pose_file, model), start, start
     if not step:
         raise TrackerInputError(
             f"{rec.path}: no init.toml in the recording folder and --keypoints off; pass --init, or let the "
@@ -504,11 +508,11 @@ def _first_pose(given: str | None, start: int, rec, model, stop: int, out: Path,
     cache = cache_file(ensure_writable_folder(out), rec)
     last_begin = max(start, stop - FRAMES)
     begin, back_to = start, None  # back_to: the first frame someone was seen in, try after try up to now
+    lacking = "no init.toml" if rec.init_path is None else f"no init.toml of frame {start}"
     while True:
         last = min(stop, begin + FRAMES)
         print(
-            f"first pose: no init.toml, fitting the body to the keypoints of frames {begin}..{last - 1}",
-            file=sys.stderr,
+            f"first pose: {lacking}, fitting the body to the keypoints of frames {begin}..{last - 1}", file=sys.stderr
         )
         keypoints, _ = detect_recording(rec, begin, last, cache=cache)
         found = keypoints.frame[(keypoints.confidence > 0).any(axis=(1, 2))]

@@ -31,7 +31,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     inputs.add_argument("--model", help="body model TOML (default: the recording's model.toml)")
     inputs.add_argument(
         "--init",
-        help="pose to start from (default: the recording's init.toml, else the pose fitted to the keypoints)",
+        help="pose to start from, of the frame --start names (default: the recording's init.toml if it is of that "
+        "frame, else the pose fitted to the keypoints)",
     )
     inputs.add_argument("--start", type=int, default=0, help="the frame to place the pose in (default 0)")
     options.add_recording_options(inputs)
@@ -41,7 +42,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the placement until Ctrl-C (its save button writes ``--out``)."""
-    from tracker.io.posefile import load_pose_file
+    from tracker.io.posefile import load_pose_file, starting_pose_file
     from tracker.overwrite import keep_inputs
     from tracker.tracking.settings import Settings
     from tracker.viewer.placement import Placement
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         raise TrackerInputError(
             f"{rec.path}: --start {args.start} is outside its frames 0..{rec.frame_count - 1}; pick a frame inside them"
         )
-    start = Path(args.init) if args.init else rec.init_path
+    start = starting_pose_file(args.start, args.init, rec.init_path)
     out = Path(args.out)
     keep_inputs(
         [out],

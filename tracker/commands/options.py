@@ -126,8 +126,9 @@ def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = Non
 
 
 def camera_names(text: str | None) -> list[str] | None:
-    """The names in a comma-separated list of cameras (``--cameras``, ``--fix``); None when not given."""
-    return [c.strip() for c in text.split(",") if c.strip()] if text else None
+    """The names in a comma-separated list of cameras (``--cameras``, ``--fix``); None when not given, empty when
+    it names none (``""`` or ``","``)."""
+    return None if text is None else [c.strip() for c in text.split(",") if c.strip()]
 
 
 def choose(given: str | None, found: Path | None, *, what: str, option: str, rec: Path) -> Path:

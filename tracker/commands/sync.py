@@ -59,7 +59,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Detect the landmarks in every frame (or reuse OUT/keypoints.npz), estimate the offsets, print one line per
     camera and write REC/sync.toml; a camera whose offset the motion does not decide is a one-line error after the
-    others' lines, and nothing is written."""
+    others' lines, and nothing is written.  Fewer than two cameras is a one-line error before any detection."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording, rig_names
     from tracker.io.sync_file import FILE, load_offsets, save_offsets
@@ -73,6 +73,13 @@ def run(args: argparse.Namespace) -> int:
         )
     rec = open_recording(args.recording, options.camera_names(args.cameras), args.calib, paired=False)
     names = [camera.name for camera in rec.cameras]
+    if len(names) < 2:
+        alone, fix = (
+            (f"--cameras picks one camera ({names[0]})", "pick two or more")
+            if args.cameras is not None
+            else (f"only camera {names[0]} has a video", "add the other cameras' videos")
+        )
+        raise TrackerInputError(f"{rec.path}: {alone}, but tracker sync times cameras against one another; {fix}")
     duration = rec.frame_count / rec.fps
     target = rec.path / FILE
     before = None

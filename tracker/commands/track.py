@@ -45,7 +45,6 @@ def run(args: argparse.Namespace) -> int:
     """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
     130 after Ctrl-C with the frames done written."""
     from tracker.apps.track import Viewing, print_summary, track
-    from tracker.atomic import ensure_writable_folder
     from tracker.overwrite import keep_inputs
 
     if args.record and not args.view:
@@ -62,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     outcome = track(
         rec,
         tracking,
-        out=ensure_writable_folder(options.output_folder(args.out, rec)),  # before any work, not at the first save
+        out=options.output_folder(args.out, rec),
         overlay=args.overlay,
         view=view,
         bar=functools.partial(options.bar, args),

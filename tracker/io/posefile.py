@@ -1,10 +1,12 @@
 """Pose TOML files such as ``init.toml`` (formats.md, "Pose files").
 
-``[pose.<component>]`` gives the world-from-component ``rotation`` (Rodrigues)
-and, for the root, the world ``translation``.  Other components hang on their
-parent's joint; one missing from the file takes its rest orientation relative
-to its parent.  The result is projected onto the model's joints (coercion), so
-a hinge given a rotation off its axis keeps only the part about the axis.
+``frame`` is the recording's frame the pose is of (0 when the file does not say:
+files written before the key).  ``[pose.<component>]`` gives the world-from-component
+``rotation`` (Rodrigues) and, for the root, the world ``translation``.  Other components
+hang on their parent's joint; one missing from the file takes its rest orientation
+relative to its parent.  The result is projected onto the model's joints (coercion), so
+a hinge given a rotation off its axis keeps only the part about the axis.  A run starts
+from a pose file only at the file's frame (:func:`starting_pose_file`).
 """
 
 from __future__ import annotations
@@ -25,10 +27,50 @@ from tracker.tomlfile import read_toml
 _JOINT_TOLERANCE = 1e-3
 
 
+def pose_frame(path: str | os.PathLike) -> int:
+    """The frame the pose TOML at ``path`` is of: its ``frame``, 0 when it has none."""
+    path = Path(path)
+    frame = _read(path).get("frame", 0)
+    if isinstance(frame, bool) or not isinstance(frame, int) or frame < 0:
+        raise TrackerInputError(
+            f"{path}: frame = {frame!r} is not a frame number; write frame = N, the recording's frame the pose is of"
+        )
+    return frame
+
+
+def starting_pose_file(
+    start: int, given: str | os.PathLike | None, found: Path | None, *, by_itself: bool = True
+) -> Path | None:
+    """The pose file a run that starts at frame ``start`` starts from: ``given`` (``--init``), which must be the pose
+    at that frame, else ``found`` (the recording's init.toml) if it is, else None: the run finds its first pose by
+    itself.  A ``found`` file of another frame is passed over with a warning, or refused when the run cannot find its
+    first pose by itself (not ``by_itself``)."""
+    chosen = given if given is not None else found
+    if chosen is None:
+        return None
+    path = Path(chosen)
+    frame = pose_frame(path)
+    if frame == start:
+        return path
+    if given is None and by_itself:
+        warnings.warn(
+            f"ignoring {path}, the pose at frame {frame}: the run starts at frame {start}, "
+            "where it finds the first pose by itself",
+            stacklevel=2,
+        )
+        return None
+    alone = ", or no --init to find the first pose by itself" if by_itself else ""
+    where = "" if by_itself else ", where it cannot find the first pose by itself"
+    raise TrackerInputError(
+        f"{path}: is the pose at frame {frame}, but the run starts at frame {start}{where}; pass --start {frame}, "
+        f"or --init with a pose at frame {start}{alone}"
+    )
+
+
 def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
     """World poses (N,4,4) of every component from a pose TOML."""
     path = Path(path)
-    data = read_toml(path, "pose", "pass --init with an existing init.toml")
+    data = _read(path)
     table = data.get("pose")
     if not isinstance(table, dict) or not table:
         raise TrackerInputError(f"{path}: no [pose.<component>] tables; write at least the root's pose")
@@ -64,6 +106,11 @@ def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
     return model.coerce(poses)
 
 
+def _read(path: Path) -> dict:
+    """The pose TOML at ``path``, parsed."""
+    return read_toml(path, "pose", "pass --init with an existing init.toml")
+
+
 def _finite(value, name: str, key: str) -> np.ndarray:
     try:
         out = np.asarray(value, dtype=np.float64)
@@ -85,8 +132,8 @@ def pose_table(model: Model, poses: np.ndarray) -> dict:
     return {"pose": table}
 
 
-def save_pose_file(path: str | os.PathLike, model: Model, poses: np.ndarray) -> None:
-    """Write a pose TOML atomically."""
-    text = tomli_w.dumps(pose_table(model, poses)).encode()
+def save_pose_file(path: str | os.PathLike, model: Model, poses: np.ndarray, *, frame: int) -> None:
+    """Write a pose TOML of the recording's frame ``frame`` atomically."""
+    text = tomli_w.dumps({"frame": int(frame)} | pose_table(model, poses)).encode()
 
     atomic_write(path, lambda file: file.write(text))

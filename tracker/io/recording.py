@@ -7,11 +7,12 @@
     NAME/timestamps.csv                   optional: capture times (``tracker live --record``, caliscope)
     NAME/sync.toml                        optional: the cameras' time offsets (``tracker sync``)
 
-Every camera of the calibration that has a video is tracked, unless a list of
-camera names picks some. All videos must have the same number of frames and
-the image size the calibration gives.  A recording whose cameras are not
-frame-locked (sync.toml, else timestamps.csv) is read with each camera's frame
-nearest in time to each frame of the first camera (:mod:`tracker.io.pairing`).
+Every camera of the calibration that has a video is tracked (a warning names
+those without one), unless a list of camera names picks some. All videos must
+have the same number of frames and the image size the calibration gives.  A
+recording whose cameras are not frame-locked (sync.toml, else timestamps.csv) is
+read with each camera's frame nearest in time to each frame of the first camera
+(:mod:`tracker.io.pairing`).
 """
 
 from __future__ import annotations
@@ -66,8 +67,9 @@ def open_recording(
 ) -> Recording:
     """Open a recording folder, checking that its videos decode and agree with the calibration.
 
-    ``cameras`` picks cameras by name (in that order); by default every camera
-    in calibration.toml that has a video, in calibration order. The first frame
+    ``cameras`` picks cameras by name (in that order), each of which must have a
+    video; by default every camera in calibration.toml that has a video, in
+    calibration order, with a warning naming those that have none. The first frame
     of every video is decoded here, so a corrupt file fails now rather than
     mid-run. ``calibration`` replaces the folder's calibration.toml (e.g. a rig
     refined by ``tracker refine``). With ``paired`` (default) each camera's frames are paired with the first
@@ -97,10 +99,22 @@ def open_recording(
                 f"add <name>{'|'.join(VIDEO_SUFFIXES)} or a folder <name>/ of numbered images"
             )
         chosen = available
+        absent = [name for name in rig if sources[name] is None]
+        if absent:
+            which = f"camera {absent[0]} has" if len(absent) == 1 else f"cameras {', '.join(absent)} have"
+            warnings.warn(
+                f"{folder}: {which} no video, leaving {available_text} of {calibration.name}; add "
+                f"<name>{'|'.join(VIDEO_SUFFIXES)} or a folder <name>/ of numbered images, or pick the cameras with "
+                "--cameras to say so",
+                stacklevel=2,
+            )
     else:
         chosen = list(dict.fromkeys(cameras))
         if not chosen:
-            raise TrackerInputError(f"{folder}: the camera list is empty; pick from {available_text}")
+            raise TrackerInputError(
+                f"{folder}: the list of cameras names none; pick cameras with a video from: {available_text}, "
+                "or leave --cameras out to track them all"
+            )
         for name in chosen:
             if name not in rig:
                 raise TrackerInputError(

@@ -171,10 +171,12 @@ SUITE = (
 
 
 def select(names: list[str] | None) -> list[Render]:
-    """The renders named (all when None), in suite order; an unknown name is a TrackerInputError."""
+    """The renders named (all when None), in suite order; an unknown name, or none, is a TrackerInputError."""
     if names is None:
         return list(SUITE)
     known = {render.name for render in SUITE}
+    if not names:
+        raise TrackerInputError(f"the list of renders names none; pick from {', '.join(sorted(known))}")
     unknown = [name for name in names if name not in known]
     if unknown:
         raise TrackerInputError(f"no render {unknown[0]!r} in the suite; pick from {', '.join(sorted(known))}")

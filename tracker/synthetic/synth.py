@@ -563,7 +563,7 @@ def synthesize(
         save_model(
             out / "body.toml", actor, "The rendered body (tracker synth --body); model.toml is the tracking model."
         )
-    save_pose_file(out / ("init.toml" if write_init else "truth_init.toml"), model, shown[0])
+    save_pose_file(out / ("init.toml" if write_init else "truth_init.toml"), model, shown[0], frame=0)
     seen = seen_joints(joint_centres(shown), cameras, props)
     write_truth(out / "truth.npz", model, shown, seen=seen)
     text = _readme(

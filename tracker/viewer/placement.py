@@ -7,7 +7,8 @@ the joints are coerced exact and within their limits, so a hinge follows only th
 part of a turn about its axis.  "Snap to the images" runs tracking iterations on
 that frame from the current placement (no motion model), pulling a rough placement
 onto the edges;
-"Save" writes ``init.toml`` (formats.md), which ``tracker track --init`` takes.
+"Save" writes ``init.toml`` (formats.md), the pose at that frame, which
+``tracker track --init`` takes when it starts there.
 """
 
 from __future__ import annotations
@@ -132,7 +133,7 @@ class Placement:
 
     def save(self) -> None:
         with self.lock:
-            save_pose_file(self.out, self.model, self.poses)
+            save_pose_file(self.out, self.model, self.poses, frame=self.frame)
             self.message.content = f"Saved {self.out}."
             self.saved.set()
 
