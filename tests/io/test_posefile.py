@@ -101,6 +101,9 @@ def test_a_run_starts_from_a_pose_file_only_at_its_frame(tmp_path):
         f"{found}: is the pose at frame 0, but the run starts at frame 150, where it cannot find the first pose by "
         "itself; pass --start 0, or --init with a pose at frame 150"
     )
+    for empty in ("", " "):  # not the current folder, nor the recording's own init.toml
+        with pytest.raises(TrackerInputError, match="^--init '' names no file; give a pose file"):
+            starting_pose_file(0, empty, found)
 
 
 def test_round_trip_of_rotations_near_pi(tmp_path, human):

@@ -39,6 +39,18 @@ def test_review_draws_any_row_with_its_edge_search(server, tracked):
         review.close()
 
 
+def test_review_of_poses_without_status_or_residual_labels_the_frame_alone(server, tracked):
+    """A truth.npz holds poses but no status or residual: its rows are drawn, labelled with their frame only."""
+    recording, results = tracked
+    truth_like = {key: value for key, value in results.items() if key not in ("status", "residual")}
+    review, scene = _review(server, (recording, truth_like))
+    try:
+        review.show(2)
+        assert scene.status.content.endswith(f"frame {review.frames[2]}")
+    finally:
+        review.close()
+
+
 def test_record_writes_a_viser_file_growing_with_the_frames(server, tracked, tmp_path):
     review, _ = _review(server, tracked)
     try:

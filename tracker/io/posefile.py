@@ -45,6 +45,8 @@ def starting_pose_file(
     at that frame, else ``found`` (the recording's init.toml) if it is, else None: the run finds its first pose by
     itself.  A ``found`` file of another frame is passed over with a warning, or refused when the run cannot find its
     first pose by itself (not ``by_itself``)."""
+    if given is not None and not str(given).strip():
+        raise TrackerInputError("--init '' names no file; give a pose file (init.toml), or leave --init out")
     chosen = given if given is not None else found
     if chosen is None:
         return None

@@ -86,7 +86,7 @@ class Review(Timeline):
             add_run_plots(
                 gui,
                 frames=self.frames,
-                status=results.get("status", np.zeros(len(self.frames))),
+                status=results.get("status", unknown),
                 residual=results.get("residual", unknown),
                 elapsed=results.get("elapsed", unknown),
             )
@@ -103,8 +103,11 @@ class Review(Timeline):
             images = [self.background.difference(k, image) for k, image in enumerate(images)]
         poses = self.results["poses"][row]
         inspection = self.tracker.inspect(images, poses=poses)
-        status = NAMES[int(self.results["status"][row])]
-        label = f"frame {index}: {status}, residual {self.results['residual'][row]:.2f} px"
+        label = f"frame {index}"  # a poses file without a status or residual (a truth.npz) is shown with neither
+        if "status" in self.results:
+            label += f": {NAMES[int(self.results['status'][row])]}"
+        if "residual" in self.results:
+            label += f", residual {self.results['residual'][row]:.2f} px"
         truth = None if self.truth is None else self.truth[row]
         self.scene.show(Frame(poses, images, inspection, truth, label))
 
