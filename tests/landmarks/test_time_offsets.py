@@ -169,11 +169,13 @@ def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_pat
     assert "the offset of cam1 is not a number" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("case", ["--cameras cam0", "one camera's video", "--cameras cam0,cam1 of three"])
+@pytest.mark.parametrize(
+    "case", ["--cameras cam0", "one camera's video", "--cameras cam0,cam1 of three", "--init of another frame"]
+)
 def test_tracker_sync_refuses_before_any_detection(case, tiny_recording, tmp_path, monkeypatch, capsys):
     """Fewer than two cameras have no offset between them, and a run that would drop an offset of sync.toml loses
-    it: one line naming the folder or file and the fix, exit 2, before any detection, the user's files as they
-    were and nothing written."""
+    it, and the tracks of --refine start at frame 0: one line naming the folder or file and the fix, exit 2, before
+    any detection, the user's files as they were and nothing written."""
     rec = tmp_path / "rec"
     shutil.copytree(tiny_recording, rec)
     lines = []
@@ -193,6 +195,13 @@ def test_tracker_sync_refuses_before_any_detection(case, tiny_recording, tmp_pat
         lines.append(
             f"{rec}: only camera cam0 has a video, but tracker sync times cameras against one another; add "
             "the other cameras' videos"
+        )
+    elif case == "--init of another frame":
+        (rec / "init.toml").write_text((rec / "init.toml").read_text().replace("frame = 0", "frame = 7"))
+        extra = ["--refine", "--init", str(rec / "init.toml")]
+        lines.append(
+            f"{rec / 'init.toml'}: is the pose at frame 7, but the tracks of --refine start at frame 0; pass --init "
+            "with the pose at frame 0, or leave --init out to find the first pose by itself"
         )
     else:  # a third camera, whose offset sync.toml holds
         cameras = load_calibration(rec / "calibration.toml")

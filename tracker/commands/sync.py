@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     camera and write REC/sync.toml; a camera whose offset the motion does not decide is a one-line error after the
     others' lines, and nothing is written.  Fewer than two cameras is a one-line error before any detection."""
     from tracker.atomic import ensure_writable_folder
+    from tracker.io.posefile import pose_frame
     from tracker.io.recording import open_recording, rig_names
     from tracker.io.sync_file import FILE, load_offsets, save_offsets
     from tracker.landmarks.detect_recording import cache_file, detect_recording
@@ -80,6 +81,11 @@ def run(args: argparse.Namespace) -> int:
             else (f"only camera {names[0]} has a video", "add the other cameras' videos")
         )
         raise TrackerInputError(f"{rec.path}: {alone}, but tracker sync times cameras against one another; {fix}")
+    if args.init is not None and (frame := pose_frame(args.init)) != 0:
+        raise TrackerInputError(
+            f"{args.init}: is the pose at frame {frame}, but the tracks of --refine start at frame 0; pass --init "
+            "with the pose at frame 0, or leave --init out to find the first pose by itself"
+        )
     duration = rec.frame_count / rec.fps
     target = rec.path / FILE
     before = None
