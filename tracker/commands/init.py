@@ -60,12 +60,12 @@ def run(args: argparse.Namespace) -> int:
         + options.recording_inputs(rec),
         "save the placed pose to another file (and track with --init FILE)",
     )
-    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, args.cache)
+    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, cache=args.cache)
     Placement(scene(args, rec, model, settings=Settings()), rec, model, poses, out, frame=args.start)
     return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
 
 
-def keypoint_pose(rec, model, start: int, cache: str | None = None) -> np.ndarray:
+def keypoint_pose(rec, model, start: int, *, cache: str | None = None) -> np.ndarray:
     """The pose fitted to the keypoints of the frames from ``start`` (docs/keypoints.md, "Automatic first pose"),
     their detections cached in the folder ``cache`` (``--cache``, default out/<recording name>); the rest pose where
     the cameras look when the detector is not installed."""
