@@ -60,7 +60,9 @@ def run(args: argparse.Namespace) -> int:
         + options.recording_inputs(rec),
         "save the placed pose to another file (and track with --init FILE)",
     )
-    poses = load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, cache=args.cache)
+    poses = (
+        load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, cache=args.cache)
+    )
     Placement(scene(args, rec, model, settings=Settings()), rec, model, poses, out, frame=args.start)
     return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
 
