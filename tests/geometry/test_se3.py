@@ -138,3 +138,13 @@ def test_right_jacobian_matches_finite_differences(angle):
             - se3.log_so3(se3.exp_so3(w - step) @ se3.exp_so3(w).T)
         ) / (2 * h)
         np.testing.assert_allclose(left, jacobian.T[:, k], atol=1e-8)
+
+
+def test_cross_is_numpys_to_the_last_bit_when_broadcast():
+    """The Jacobians' cross product gives np.cross's very numbers (so that swapping one for the other changes no
+    fit), for one vector against many and for many against many broadcast."""
+    rng = np.random.default_rng(3)
+    one, many, grid = rng.normal(size=3), rng.normal(size=(5, 3)), rng.normal(size=(4, 1, 3))
+    for a, b in ((one, many), (many, one), (grid, many), (many * 1e-9, grid * 1e9)):
+        assert np.array_equal(se3.cross(a, b), np.cross(a, b))
+    assert np.array_equal(se3.cross([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]), [0.0, 0.0, 1.0])

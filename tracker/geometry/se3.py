@@ -9,7 +9,7 @@ another frame (``X_a = E_a_from_b X_b``).  A motion is a twist
     G4..G6: right-handed rotation about x, y, z   (G_{3+j}[0:3, 0:3] = [e_j]x)
 
 The kernels' functions are numba ``@njit`` so the per-frame kernels can call them; they
-work unchanged from Python on float64 arrays.  ``generators``, ``from_rotvec``,
+work unchanged from Python on float64 arrays.  ``generators``, ``cross``, ``from_rotvec``,
 ``from_rotation`` and ``rotation_angle`` are plain numpy, for Python callers.
 """
 
@@ -233,6 +233,16 @@ def point_velocity(x):
     out[0:3, 0:3] = np.eye(3)
     out[0:3, 3:6] = -skew(x)
     return out
+
+
+def cross(a, b) -> np.ndarray:
+    """a x b (..., 3) of 3-vectors along the last axis of ``a`` and ``b``, their leading axes broadcast: the
+    products and differences of ``np.cross`` in its order (the same numbers), without its axis handling, which
+    costs more than the arithmetic for the few vectors of a Jacobian's rows."""
+    a, b = np.asarray(a), np.asarray(b)
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def from_rotvec(rotvec, translation=(0.0, 0.0, 0.0)) -> np.ndarray:

@@ -197,7 +197,7 @@ class Body:
         out[0:3, 3:6] = np.eye(3)
         axes = se3.right_jacobian_so3(-parameters[3:6])  # its columns: J_l(dr) = J_r(-dr)
         out[3:6, 0:3] = axes.T
-        out[3:6, 3:6] = np.cross(poses[0, :3, 3], axes.T)
+        out[3:6, 3:6] = se3.cross(poses[0, :3, 3], axes.T)
         for i in range(1, model.size):
             at, kind = offsets[i], model.joint_type[i]
             rotation, centre = poses[i, :3, :3], poses[i, :3, 3]
@@ -215,7 +215,7 @@ class Body:
             else:
                 continue
             out[rows, 0:3] = axes.T
-            out[rows, 3:6] = np.cross(centre, axes.T)
+            out[rows, 3:6] = se3.cross(centre, axes.T)
         return out
 
     def landmark_jacobian(self, parameters: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -223,7 +223,7 @@ class Body:
         for landmarks the model has no point for."""
         twists = self.twists(parameters, poses)
         points = np.nan_to_num(self.landmark_points(poses))
-        velocity = np.cross(twists[None, :, 0:3], points[:, None, :]) + twists[None, :, 3:6]  # (33, P, 3)
+        velocity = se3.cross(twists[None, :, 0:3], points[:, None, :]) + twists[None, :, 3:6]  # (33, P, 3)
         return np.where(self.drives[..., None], velocity, 0.0).transpose(0, 2, 1)
 
     def penalty_jacobian(self, parameters: np.ndarray) -> np.ndarray:

@@ -134,7 +134,7 @@ def frame_rows(
     np.add.at(rows, (np.arange(len(rows))[:, None], columns), stretch)
     twists, moves = joint_twists(model, poses)
     point = np.einsum("sij,sj->si", rotation, seen.point) + poses[seen.component, :3, 3]
-    velocity = np.cross(twists[None, :, 0:3], point[:, None, :]) + twists[None, :, 3:6]
+    velocity = se3.cross(twists[None, :, 0:3], point[:, None, :]) + twists[None, :, 3:6]
     pose = np.einsum("si,spi->sp", world, velocity) * moves[:, seen.component].T
     return FrameRows(rows, pose, seen.offset, seen.weight, seen.component, seen.camera)
 
