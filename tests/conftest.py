@@ -1,10 +1,13 @@
 """Shared fixtures: small rendered recordings with ground truth (made once per test session), the
 check that bad input gets a one-line error, and perfect keypoint detections; where the tests' real data
-is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
+is (:data:`TEST_DATA`, :data:`SHARED_DATA`); a progress bar that stops the run with a signal
+(:func:`stopping_after`)."""
 
 import contextlib
 import io
+import os
 import shutil
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +35,31 @@ def needs_shared(*parts: str) -> pytest.MarkDecorator:
     return pytest.mark.skipif(
         not SHARED_DATA.joinpath(*parts).exists(), reason=f"{where} not present (data folder beside the repo)"
     )
+
+
+def stopping_after(frame: int, number: int, desc: str | None = None):
+    """A progress bar (``tracker.commands.options.bar``) that sends this process the signal ``number`` once the run has
+    done frame ``frame`` of the loop whose bar is ``desc`` (the tracked frames' by default), as a service manager
+    would."""
+    from tracker.commands import options
+
+    bar = options.bar
+
+    def stopping(args, shown, unit, *, leave=False):
+        wrap = bar(args, shown, unit, leave=leave)
+        if shown != desc:
+            return wrap
+
+        def items(iterable, total=None):
+            for item in wrap(iterable, total=total):
+                yield item  # the loop does the frame, then asks for the next
+                if item[0] == frame:
+                    assert signal.getsignal(number) not in (signal.SIG_DFL, signal.SIG_IGN), "it would end the tests"
+                    os.kill(os.getpid(), number)
+
+        return items
+
+    return stopping
 
 
 @pytest.fixture

@@ -17,7 +17,14 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 LAYERS = (
-    ("tracker.errors", "tracker.status", "tracker.atomic", "tracker.tomlfile", "tracker.geometry"),
+    (
+        "tracker.errors",
+        "tracker.status",
+        "tracker.atomic",
+        "tracker.tomlfile",
+        "tracker.stop_signals",
+        "tracker.geometry",
+    ),
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with
     ("tracker.model", "tracker.camera", "tracker.proportions", "tracker.evaluate"),
     ("tracker.raycast", "tracker.io"),  # the body's pixels in a camera; files and cameras in and out
