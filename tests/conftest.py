@@ -1,11 +1,14 @@
 """Shared fixtures: small rendered recordings with ground truth (made once per test session), a small poses file,
-the check that bad input gets a one-line error, the hashes that show a command left a user's files alone, and perfect
-keypoint detections; where the tests' real data is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
+the check that bad input gets a one-line error, the hashes that show a command left a user's files alone, perfect
+keypoint detections, and a progress bar that stops the run with a signal (:func:`stopping_after`); where the tests'
+real data is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
 
 import contextlib
 import hashlib
 import io
+import os
 import shutil
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,6 +43,31 @@ def file_hashes(*paths: Path) -> dict[Path, str]:
     command when it changed no byte of them and added or removed no file."""
     files = [file for path in paths for file in ([path] if path.is_file() else sorted(path.rglob("*")))]
     return {file: hashlib.sha256(file.read_bytes()).hexdigest() for file in files if file.is_file()}
+
+
+def stopping_after(frame: int, number: int, desc: str | None = None):
+    """A progress bar (``tracker.commands.options.bar``) that sends this process the signal ``number`` once the run has
+    done frame ``frame`` of the loop whose bar is ``desc`` (the tracked frames' by default), as a service manager
+    would."""
+    from tracker.commands import options
+
+    bar = options.bar
+
+    def stopping(args, shown, unit, *, leave=False):
+        wrap = bar(args, shown, unit, leave=leave)
+        if shown != desc:
+            return wrap
+
+        def items(iterable, total=None):
+            for item in wrap(iterable, total=total):
+                yield item  # the loop does the frame, then asks for the next
+                if item[0] == frame:
+                    assert signal.getsignal(number) not in (signal.SIG_DFL, signal.SIG_IGN), "it would end the tests"
+                    os.kill(os.getpid(), number)
+
+        return items
+
+    return stopping
 
 
 @pytest.fixture

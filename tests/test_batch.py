@@ -1,6 +1,7 @@
 """``tracker batch`` on a local two-worker Ray: the same results as ``tracker track`` alone, a bad folder reported
 while the others finish, a killed worker's recording tried again, an interrupted batch resumed without redoing
-anything; and one-line errors without Ray, for other options, and for a folder that is not the batch's."""
+anything (and, with Ray stood in for, a stop that keeps every row already in and no temporary file); and one-line
+errors without Ray, for other options, and for a folder that is not the batch's."""
 
 import csv
 import json
@@ -10,6 +11,7 @@ import socket
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -68,6 +70,12 @@ def _same_results(alone: Path, batched: Path) -> None:
         for key in one.files:
             if key != "elapsed":
                 assert one[key].tobytes() == other[key].tobytes(), key
+
+
+def _states(out: Path) -> dict[str, str]:
+    """Each recording's state in the batch's manifest, by its folder's name."""
+    recordings = json.loads((out / "manifest.json").read_text())["recordings"]
+    return {Path(path).name: entry["state"] for path, entry in recordings.items()}
 
 
 def _summary(out: Path) -> dict[str, dict]:
@@ -191,17 +199,17 @@ def test_a_killed_worker_is_tried_again_and_nothing_is_lost(recordings, tmp_path
 
 
 def test_an_interrupted_batch_resumes_without_redoing_what_was_finished(recordings, tmp_path):
+    """SIGTERM (``timeout``, a job scheduler) to the batch as it tracks: exit 143, no temporary file left behind (Ray
+    ends the tasks still running, perhaps amid a write), and run again it tracks only what had not finished."""
     out = tmp_path / "batch"
     batch = _batch(recordings, out)
     _first_finished(batch)
-    batch.send_signal(signal.SIGINT)
+    batch.send_signal(signal.SIGTERM)
     printed, errors = batch.communicate(timeout=600)
-    assert batch.returncode == 130, errors
+    assert batch.returncode == 143, errors
     assert "run the same command again to resume" in errors
-    states = {
-        Path(path).name: entry["state"]
-        for path, entry in json.loads((out / "manifest.json").read_text())["recordings"].items()
-    }
+    assert not [path for path in out.rglob("*") if ".tmp" in path.name]
+    states = _states(out)
     finished = sorted(name for name, state in states.items() if state == "done")
     assert finished and len(finished) < len(recordings)
     kept = {name: (out / name / "poses.npz").stat().st_mtime_ns for name in finished}
@@ -219,6 +227,79 @@ def test_an_interrupted_batch_resumes_without_redoing_what_was_finished(recordin
     for recording in recordings:
         with np.load(out / recording.name / "poses.npz") as poses, np.load(recording / "truth.npz") as truth:
             assert len(poses["frame"]) == len(truth["frame"])
+
+
+class _Ray:
+    """Ray as ``tracker batch`` uses it, without Ray: each task of a recording named in ``finishing`` returns its row,
+    the others never finish (a task writing poses.npz leaves its temporary file, as Ray ending it mid-write would);
+    ``ray.wait`` hands out the replies one by one, and the ``stop_at``-th call sends this process the signal ``stop``
+    instead.  ``init`` sets a SIGTERM handler that exits at once, as ray.init does."""
+
+    class exceptions:
+        RayError = RuntimeError
+
+    def __init__(self, finishing: set[str], *, stop: int = 0, stop_at: int = 0):
+        self.finishing, self.stop, self.stop_at = finishing, stop, stop_at
+        self.submitted: list[str] = []
+        self.waits = 0
+
+    def init(self, **options) -> None:
+        signal.signal(signal.SIGTERM, lambda number, frame: sys.exit(number))
+
+    def shutdown(self) -> None:
+        pass
+
+    def remote(self, **options):
+        return lambda function: SimpleNamespace(remote=self.submit)
+
+    def get(self, ref):
+        from tracker.io.batch_records import DONE, Row
+
+        recording, name = ref
+        return Row(recording, name, DONE, frames=8, fps=30.0, residual_px=0.5, lost=0, mpjpe_mm=9.0, seconds=1.0)
+
+    def wait(self, refs, num_returns=1, timeout=None):
+        ready = [ref for ref in refs if ref[1] in self.finishing]
+        if timeout == 0:  # the replies in already
+            return ready, [ref for ref in refs if ref not in ready]
+        self.waits += 1
+        if self.waits == self.stop_at:
+            os.kill(os.getpid(), self.stop)
+        return ready[:1], [ref for ref in refs if ref not in ready[:1]]
+
+    def submit(self, recording: str, name: str, out: str, *, chosen: dict):
+        """``task.remote(...)``: the task of one recording, which writes in its folder ``out``."""
+        self.submitted.append(name)
+        Path(out).mkdir(parents=True, exist_ok=True)
+        if name not in self.finishing:
+            (Path(out) / f".poses.{os.getpid()}.0123abcd.tmp.npz").touch()
+        return (recording, name)
+
+
+@pytest.mark.parametrize(("stop", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_stopped_batch_keeps_what_finished_and_no_temporary_file(stop, code, tmp_path, monkeypatch, capsys):
+    """Three recordings on two workers: r1 finishes, r3 is submitted, and the stop comes while the batch waits, r2's
+    row already in: r1 and r2 are done in the manifest, r3's temporary file is gone, the exit code is the signal's and
+    the handler the process had is back; run again, the batch tracks r3 alone."""
+    for name in ("r1", "r2", "r3"):
+        (tmp_path / name).mkdir()
+    out = tmp_path / "out"
+    command = ["batch", *(str(tmp_path / name) for name in ("r1", "r2", "r3")), "--out", str(out), "--workers", "2"]
+    ray = _Ray({"r1", "r2"}, stop=stop, stop_at=2)
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    before = signal.getsignal(signal.SIGTERM)
+    assert main([*command, "--quiet"]) == code
+    assert signal.getsignal(signal.SIGTERM) is before
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "tracker: interrupted: 2 of 3 recordings finished; run the same command again to resume"
+    )
+    assert _states(out) == {"r1": "done", "r2": "done", "r3": "started"} and ray.submitted == ["r1", "r2", "r3"]
+    assert [path.name for path in (out / "r3").iterdir()] == []
+
+    again = _Ray({"r1", "r2", "r3"})
+    monkeypatch.setitem(sys.modules, "ray", again)
+    assert main([*command, "--quiet"]) == 0
+    assert again.submitted == ["r3"]
 
 
 def test_without_ray_it_says_how_to_install_it(recordings, tmp_path, monkeypatch, capsys):

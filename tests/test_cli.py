@@ -1,9 +1,12 @@
-"""The command line: a tracked run end to end, and one-line errors with exit code 2 for bad input."""
+"""The command line: a tracked run end to end, one-line errors with exit code 2 for bad input, and a run stopped
+by a signal."""
 
 import argparse
+import os
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tomllib
@@ -12,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
-from conftest import file_hashes
+from conftest import file_hashes, stopping_after
 
 from tracker.cli import COMMANDS, build_parser, main
 from tracker.evaluate import evaluate
@@ -463,3 +466,39 @@ def test_output_cut_short_ends_quietly(tiny_recording):
     process.stdout.close()  # as head does after its lines
     _, err = process.communicate(timeout=60)
     assert process.returncode == 141 and b"Traceback" not in err and b"Exception ignored" not in err, err
+
+
+def test_sigterm_mid_run_keeps_every_frame_done(tmp_path, capsys, monkeypatch):
+    """``timeout``, systemd and Docker stop a run with SIGTERM: the demo's frames 0-3 done (and the detections the
+    tracker took, frames 0 and 4), exit 143 as a shell reports SIGTERM, one line saying so, and the handler the
+    process had before is back."""
+    from tracker.landmarks.store import load_keypoints
+
+    demo = Path(__file__).resolve().parents[1] / "recordings" / "demo"
+    monkeypatch.setattr("tracker.commands.options.bar", stopping_after(3, signal.SIGTERM))
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["track", str(demo), "--out", str(tmp_path), "--frames", "8", "--quiet"]) == 143
+    assert signal.getsignal(signal.SIGTERM) is before
+    printed = capsys.readouterr()
+    assert f"wrote {tmp_path / 'poses.npz'} (4 frames)" in printed.out
+    lines = printed.err.strip().splitlines()
+    assert lines[-1] == "tracker: interrupted: the frames done so far are saved"
+    assert sum("interrupted" in line or "warning" in line or "Traceback" in line for line in lines) == 1
+    assert list(load_poses(tmp_path / "poses.npz")["frame"]) == [0, 1, 2, 3]
+    assert {0, 4} <= set(load_keypoints(tmp_path / "keypoints.npz").frame)
+
+
+@pytest.mark.parametrize(("number", "code"), [(signal.SIGHUP, 129), (signal.SIGTERM, 143)])
+def test_a_stop_signal_reaching_the_command_line_is_one_line(number, code, tiny_recording, capsys, monkeypatch):
+    """A stop signal that no command catches (here while ``tracker eval`` runs) ends the run as Ctrl-C would."""
+    import tracker.commands.evaluate as command
+
+    def stopped(args):
+        os.kill(os.getpid(), number)
+        raise AssertionError("the signal did not stop the run")
+
+    monkeypatch.setattr(command, "run", stopped)
+    truth, before = str(tiny_recording / "truth.npz"), signal.getsignal(number)
+    assert main(["eval", truth, truth]) == code
+    assert capsys.readouterr().err == "tracker: interrupted\n"
+    assert signal.getsignal(number) is before

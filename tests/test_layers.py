@@ -24,6 +24,7 @@ LAYERS = (
         "tracker.overwrite",
         "tracker.tomlfile",
         "tracker.npzfile",
+        "tracker.stop_signals",
         "tracker.geometry",
     ),
     ("tracker.chain",),  # the joint algebra, which the model compiles its joints with

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import secrets
 import tempfile
 from collections.abc import Callable, Iterator
@@ -112,3 +113,15 @@ def atomic_write(path: str | os.PathLike, write_fn: Callable[[BinaryIO], object]
                 os.fsync(file.fileno())
         except OSError as error:
             raise _cannot_write(Path(path), error) from None
+
+
+_TEMPORARY = re.compile(r"\..*\.\d+\.[0-9a-f]{8}\.tmp(\.[^.]+)?")
+"""The names :func:`temporary_beside` gives."""
+
+
+def remove_temporaries(folder: str | os.PathLike) -> None:
+    """Remove the temporary files (:func:`temporary_beside`) left in ``folder`` and below it by writes that a killed
+    process could not finish or clean up; no process may be writing there."""
+    for path in Path(folder).rglob(".*"):
+        if _TEMPORARY.fullmatch(path.name) and path.is_file():
+            path.unlink(missing_ok=True)

@@ -1,7 +1,8 @@
 """The ``tracker`` command line (formats.md): parse, call, report; no algorithm here.
 
 Bad input raises :class:`TrackerInputError` and exits with code 2 and one line;
-an interrupted run (Ctrl-C) keeps the frames already written and exits 130; output whose reader
+an interrupted run (Ctrl-C, SIGTERM or SIGHUP: :mod:`tracker.stop_signals`) keeps the work already done and exits
+with 128 plus the signal's number (130, 143, 129); output whose reader
 stopped early (``| head``) ends the command quietly with 141, as a shell reports a broken pipe.
 Each subcommand's options, help and body are in its module under :mod:`tracker.commands`; every help opens with
 what the command does and an example.
@@ -17,7 +18,7 @@ import sys
 import warnings
 from typing import NoReturn
 
-from tracker import __version__
+from tracker import __version__, stop_signals
 from tracker.commands import (
     background,
     batch,
@@ -146,14 +147,22 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args = parser.parse_args(argv)
     warnings.showwarning = _show_warning
+    with stop_signals.like_ctrl_c() as received:  # SIGTERM and SIGHUP stop the run as Ctrl-C does
+        return received.exit_code(_run(args))
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command's exit code: its own, 2 after bad input, 130 after an interruption that reached here."""
     try:
         return args.run(args)
     except TrackerInputError as exc:
         print(f"tracker: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemError) as error:  # SystemError: a stop inside a numba kernel, as it reports it
+        if not stop_signals.stopped_within(error):
+            raise
         print("tracker: interrupted", file=sys.stderr)
-        return 130
+        return stop_signals.INTERRUPTED
     except BrokenPipeError:  # whatever read the output stopped early (tracker ... | head): no traceback
         with contextlib.suppress(OSError, ValueError, io.UnsupportedOperation):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor one when Python flushes it at exit

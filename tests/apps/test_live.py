@@ -8,7 +8,9 @@ messages of a dropped camera.
 
 import _thread
 import argparse
+import os
 import re
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -155,13 +157,32 @@ def test_ctrl_c_stops_after_the_frame_in_hand_with_every_output_agreeing(tmp_pat
         return Failing(source, 20, then=_thread.interrupt_main) if name == "cam0" else source
 
     summary = _live(DEMO, tmp_path, wrap=interrupt)
-    assert summary.interrupted and 1 <= summary.frames < 160
+    assert summary.interrupted == signal.SIGINT and 1 <= summary.frames < 160
     _consistent(summary.counts, summary.frames)
     live = load_poses(tmp_path / "out" / "poses.npz")
     assert len(live["frame"]) == summary.recorded == summary.frames
     assert open_recording(tmp_path / "rec").frame_count == summary.frames
     assert len((tmp_path / "rec" / "timestamps.csv").read_text().splitlines()) == summary.frames + 1
     _assert_same(live, _replayed(tmp_path / "rec", tmp_path / "replay"), summary.frames)
+
+
+def test_sigterm_stops_after_the_frame_in_hand_as_ctrl_c_does(tiny_recording, tmp_path):
+    """SIGTERM (a service manager stopping the run) at cam0's third frame: the run ends after the frame in hand, says
+    it was SIGTERM, and every output holds the same frames; the handler the process had is back."""
+
+    def stop() -> None:
+        assert signal.getsignal(signal.SIGTERM) not in (signal.SIG_DFL, signal.SIG_IGN), "it would end the tests"
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    def stopping(name, source):
+        return Failing(source, 2, then=stop) if name == "cam0" else source
+
+    before = signal.getsignal(signal.SIGTERM)
+    summary = _live(tiny_recording, tmp_path, wrap=stopping)
+    assert summary.interrupted == signal.SIGTERM and signal.getsignal(signal.SIGTERM) is before
+    _consistent(summary.counts, summary.frames)
+    assert len(load_poses(tmp_path / "out" / "poses.npz")["frame"]) == summary.recorded == summary.frames
+    assert open_recording(tmp_path / "rec").frame_count == summary.frames
 
 
 def test_a_missing_device_is_a_one_line_error(tiny_recording, tmp_path):

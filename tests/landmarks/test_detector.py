@@ -1,14 +1,16 @@
 """The keypoint detector: packaging (OpenCV stays headless), landmarks on the rendered demo, the
-keypoints.npz file and the command that writes and reuses it."""
+keypoints.npz file and the command that writes and reuses it, and goes on after a stop."""
 
 from __future__ import annotations
 
 import dataclasses
 import importlib.metadata
+import signal
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import stopping_after
 
 from tracker.camera import look_at_camera
 from tracker.cli import main
@@ -163,6 +165,48 @@ def test_command_writes_then_reuses_the_cache(tmp_path, capsys, monkeypatch):
     assert capsys.readouterr().out.startswith("reused")
     with pytest.raises(AssertionError, match="the detector ran"):
         main(["keypoints", str(DEMO), "--frames", "5", "--out", str(out), "--quiet"])
+
+
+def test_a_stopped_detection_keeps_its_frames_and_goes_on_from_them(tmp_path, capsys, monkeypatch):
+    """SIGTERM after frame 2 of 6: frames 0-2 are in the cache, with exit 143 and one line; run again, the detector
+    starts at frame 2, the last one saved (to follow the person on from it), and detects frames 3-5, the cache keeping
+    frames 0 and 1 as they were."""
+    out = tmp_path / "out"
+    command = ["keypoints", str(DEMO), "--frames", "6", "--out", str(out), "--quiet"]
+    monkeypatch.setattr("tracker.commands.options.bar", stopping_after(2, signal.SIGTERM, "detecting"))
+    assert main(command) == 143
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("tracker: interrupted: the frames detected so far are saved in") and "again" in line
+    first = load_keypoints(out / "keypoints.npz")
+    assert list(first.frame) == [0, 1, 2]
+
+    detected: list[int] = []
+    monkeypatch.undo()
+    monkeypatch.setattr("tracker.commands.options.bar", _counting(detected))
+    assert main(command) == 0
+    assert detected == [2, 3, 4, 5] and "2 of them there already" in capsys.readouterr().out
+    done = load_keypoints(out / "keypoints.npz")
+    assert list(done.frame) == list(range(6))
+    np.testing.assert_array_equal(done.pixels[:2], first.pixels[:2])
+
+
+def _counting(seen: list[int]):
+    """A progress bar (``tracker.commands.options.bar``) that notes the number of every frame it is given."""
+    from tracker.commands import options
+
+    bar = options.bar
+
+    def counting(args, desc, unit, *, leave=False):
+        wrap = bar(args, desc, unit, leave=leave)
+
+        def items(iterable, total=None):
+            for item in wrap(iterable, total=total):
+                seen.append(item[0])
+                yield item
+
+        return items
+
+    return counting
 
 
 def test_command_errors_are_one_line(tmp_path, capsys):

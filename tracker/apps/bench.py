@@ -118,11 +118,11 @@ def track_run(
     with ``keypoint_step`` the detector's worker on every keypoint_step-th frame beside them, started before the
     kernels load."""
     stream = _stream(recording, recording.frame_count, keypoint_step, settings)
-    tracker = Tracker(model, recording.cameras, start, settings)
-    tracker.warm_up()
-    tracker.work.times = StageTimes()
-    started = time.perf_counter()
     try:
+        tracker = Tracker(model, recording.cameras, start, settings)
+        tracker.warm_up()
+        tracker.work.times = StageTimes()
+        started = time.perf_counter()
         run = track_frames(
             tracker,
             tracked_frames(

@@ -18,16 +18,15 @@ it far better than one in every fourth.
 
 A cache (``keypoints.npz``, :mod:`tracker.landmarks.detect_recording`) that already holds the scheduled
 frames is used instead of the worker; otherwise what the worker detected is added to it when the
-stream closes, also after Ctrl-C.  Frames the cache holds are always taken from it, not from the
-worker (a landmarker in video mode reads a frame a little differently after other frames), so a
-second run over the same output folder gives the same result as the first.
+stream closes, also after Ctrl-C, SIGTERM or SIGHUP (the worker ignores them, :mod:`tracker.stop_signals`).  Frames
+the cache holds are always taken from it, not from the worker (a landmarker in video mode reads a frame a little
+differently after other frames), so a second run over the same output folder gives the same result as the first.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import queue
-import signal
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
 from pathlib import Path
@@ -35,6 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tracker import stop_signals
 from tracker.errors import TrackerInputError
 from tracker.io.readers import ColourCopies, WithColour
 from tracker.io.recording import Recording, frames
@@ -88,8 +88,9 @@ def schedule(start: int, stop: int, step: int) -> np.ndarray:
 def _work(recording: Recording, start: int, stop: int, step: int, results, fed=None, reduction=None) -> None:
     """The worker process: detect and check each scheduled frame, put (raw, checked) on ``results``, then
     None; an error is put instead and ends it.  With ``fed``, a queue, the frames are (index, images) taken
-    from it (reduced by ``reduction``) until None; else the worker reads them.  Ctrl-C is the parent's to handle."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from it (reduced by ``reduction``) until None; else the worker reads them.  The stop signals are the parent's to
+    handle (:mod:`tracker.stop_signals`)."""
+    stop_signals.ignore()
     try:
         with native_logs_muted():
             if fed is not None:
@@ -207,15 +208,16 @@ class KeypointStream:
             return
         require_detector()
         context = multiprocessing.get_context("spawn")
-        self.results = context.Queue()
-        self.fed = context.Queue() if reduction is not None and np.max(reduction) > 1 else None
-        self.worker = context.Process(
-            target=_work,
-            args=(recording, start, stop, step, self.results, self.fed, reduction),
-            name="keypoint detector",
-            daemon=True,
-        )
-        self.worker.start()
+        with stop_signals.held():
+            self.results = context.Queue()
+            self.fed = context.Queue() if reduction is not None and np.max(reduction) > 1 else None
+            self.worker = context.Process(
+                target=_work,
+                args=(recording, start, stop, step, self.results, self.fed, reduction),
+                name="keypoint detector",
+                daemon=True,
+            )
+            stop_signals.start(self.worker)
         self.finished = False
 
     def copies(self) -> list[ColourCopies] | None:
@@ -323,9 +325,7 @@ class KeypointStream:
     def close(self) -> None:
         """Stop the worker and add what it detected to the cache."""
         if self.worker is not None:
-            if self.worker.is_alive():
-                self.worker.terminate()
-            self.worker.join()
+            stop_signals.end(self.worker)
             self.worker = None
         if self.fed is not None:  # frames it will not take must not hold this process up, nor their memory
             self.fed.cancel_join_thread()

@@ -26,8 +26,9 @@ computes the same poses as the live run (which tracks the edges and the colours,
 needs every camera in every frame: when a camera drops, the recording ends there (tracking
 goes on), and it still replays identically.
 
-Ctrl-C stops the run after the frame in hand, so poses.npz, the videos and timestamps.csv hold the
-same frames, and exits with 130; a second Ctrl-C interrupts at once (the files are still valid).
+Ctrl-C (or SIGTERM, or SIGHUP: :mod:`tracker.stop_signals`) stops the run after the frame in hand, so poses.npz,
+the videos and timestamps.csv hold the same frames, and exits with 130 (143, 129); a second one interrupts at once
+(the files are still valid).
 """
 
 from __future__ import annotations
@@ -37,12 +38,14 @@ import signal
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
 import numpy as np
 
+from tracker import stop_signals
 from tracker.apps.loop import Tracked, track_frames
 from tracker.atomic import ensure_writable_folder
 from tracker.camera import Camera
@@ -167,31 +170,40 @@ class Recorder:
 @dataclass(frozen=True)
 class Summary:
     """How a live run went: frames tracked (rows of poses.npz), frames recorded, the capture counters,
-    seconds from the start of capture to the end, and whether Ctrl-C stopped it."""
+    seconds from the start of capture to the end, and the number of the stop signal that stopped it (SIGINT for
+    Ctrl-C; 0 when none did)."""
 
     frames: int
     recorded: int
     counts: Counts
     seconds: float
-    interrupted: bool
+    interrupted: int
 
 
 class _StopRequest:
-    """While active, the first Ctrl-C only asks the loop to stop after the frame in hand; a second one
-    raises KeyboardInterrupt as usual."""
+    """While active, the first stop signal (Ctrl-C, SIGTERM or SIGHUP: :mod:`tracker.stop_signals`) only asks the loop
+    to stop after the frame in hand, and :attr:`signal` is its number; a second one raises KeyboardInterrupt as
+    usual.  A SIGTERM or SIGHUP that the process ignores stays ignored."""
 
     def __enter__(self) -> _StopRequest:
-        self.requested = False
+        self.signal = 0
+        self.others = ExitStack()
+        self.others.enter_context(stop_signals.handling((signal.SIGTERM, signal.SIGHUP), self._handle))
         self.previous = signal.signal(signal.SIGINT, self._handle)
         return self
 
-    def _handle(self, signum, frame) -> None:
+    @property
+    def requested(self) -> bool:
+        return self.signal != 0
+
+    def _handle(self, number: int, frame) -> None:
         if self.requested:
-            raise KeyboardInterrupt
-        self.requested = True
+            raise KeyboardInterrupt if number == signal.SIGINT else stop_signals.Stopped(number)
+        self.signal = number
 
     def __exit__(self, *exc) -> None:
         signal.signal(signal.SIGINT, self.previous)
+        self.others.close()
 
 
 class _Status:
@@ -367,7 +379,7 @@ def track_live(
     detector: LiveDetector | None = None,
 ) -> Summary:
     """Track the sets ``capture`` delivers with ``tracker`` (at its first pose) until its sources end, no camera is
-    left, or Ctrl-C.
+    left, or a stop signal (Ctrl-C, SIGTERM, SIGHUP).
 
     ``cameras`` are the calibrated cameras of ``capture``'s sources, in the same order (``tracker``'s rig);
     ``recorder`` and ``view`` (a :class:`~tracker.viewer.live_view.LiveView`), if given, get every tracked frame (the
@@ -396,4 +408,5 @@ def track_live(
     finally:
         capture.close()  # also settles the counters
     recorded = recorder.frames if recorder is not None else 0
-    return Summary(run.frames, recorded, capture.counts(), seconds, stop.requested or run.interrupted)
+    stopped = stop.signal or (signal.SIGINT if run.interrupted else 0)
+    return Summary(run.frames, recorded, capture.counts(), seconds, stopped)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tracker import stop_signals
 from tracker.io.poses import PosesWriter
 from tracker.model import joint_centres
 from tracker.tracking.frame_loop import FrameResult, Tracker
@@ -52,8 +53,8 @@ class Tracked:
 @dataclass(frozen=True)
 class Loop:
     """What a run of :func:`track_frames` did: the frames tracked and written, the seconds it took (the last write
-    included), those of them spent on the rows (joint centres and the writer), and whether Ctrl-C stopped it (the
-    frames done are written all the same)."""
+    included), those of them spent on the rows (joint centres and the writer), and whether a stop signal (Ctrl-C,
+    SIGTERM, SIGHUP) stopped it (the frames done are written all the same)."""
 
     frames: int
     seconds: float
@@ -76,8 +77,8 @@ def track_frames(
     before: dict[str, np.ndarray] | None = None,
 ) -> Loop:
     """Track the ``frames`` with ``tracker`` and write each one's row to the poses.npz at ``path`` (frames at ``fps``)
-    as it is done: poses, joint centres, status, residual, seconds spent and capture time.  Ctrl-C ends the loop
-    with the frames done written (:attr:`Loop.interrupted`).
+    as it is done: poses, joint centres, status, residual, seconds spent and capture time.  Ctrl-C, SIGTERM or SIGHUP
+    (:mod:`tracker.stop_signals`) ends the loop with the frames done written (:attr:`Loop.interrupted`).
 
     ``frames`` yields (index, images), one image per camera of the tracker's rig, already :meth:`Tracker.smooth
     <tracker.tracking.frame_loop.Tracker.smooth>`-ed.  ``keypoints(index)``: the frame's landmarks, fused with the
@@ -130,6 +131,8 @@ def track_frames(
                 done, last = done + 1, at
                 if each is not None:
                     each(Tracked(index, images, result, spent))
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, SystemError) as error:  # SystemError: a stop inside a numba kernel, as it reports it
+            if not stop_signals.stopped_within(error):
+                raise
             interrupted = True
     return Loop(done, time.perf_counter() - started, writing, interrupted)

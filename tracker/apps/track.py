@@ -64,7 +64,7 @@ class Outcome:
     residual: float  # mean residual of the frames, pixels (NaN when no frame found an edge)
     counts: dict[int, int]  # frames per status (tracker.status)
     declined: int | None  # re-seeds the edges declined; None without the keypoint cue
-    interrupted: bool  # stopped by Ctrl-C: the frames done are written
+    interrupted: bool  # stopped by Ctrl-C, SIGTERM or SIGHUP: the frames done are written
     files: tuple[tuple[Path, str], ...]  # the files the run wrote, each with what it holds
     report: Report | None  # the accuracy against the recording's truth.npz over ``span``, when it has one
     span: range  # the frames asked for (--start, --frames): the frames of the truth the report scores
@@ -110,7 +110,8 @@ def track(
     bar: Bar | None = None,
 ) -> Outcome:
     """Track ``rec`` as ``tracking`` says and write OUT/poses.npz (``out``, with the model, keypoints and background
-    made on the way); after Ctrl-C, the frames done are written and the outcome says it was interrupted.
+    made on the way); after Ctrl-C, SIGTERM or SIGHUP (:mod:`tracker.stop_signals`), the frames done are written and
+    the outcome says it was interrupted.
 
     ``overlay``: also write a video of every camera with the tracked outlines and edge searches; ``view``: show
     the run in the browser viewer, which then reviews it (:attr:`Outcome.review`); ``bar(desc, unit, leave=)``
@@ -181,53 +182,53 @@ def track(
         step if stop > begin else 0,
         None if background is not None else reductions(settings, rec.cameras),
     )
-    recovery = None
-    if stream is not None:
-        from tracker.seeding.recovery import Recovery
-
-        recovery = Recovery(model, rec.cameras)
-    print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
-    tracker = Tracker(model, rec.cameras, init, settings)
-    tracker.warm_up()
-    truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
-    live = _live_view(view, rec, tracker, truth) if view is not None else None
     video = None
-    if overlay:
-        from tracker.viewer.overlay import OverlayVideo
+    try:  # the stream is closed however the run ends, keeping what its worker detected
+        recovery = None
+        if stream is not None:
+            from tracker.seeding.recovery import Recovery
 
-        video = OverlayVideo(Path(overlay), rec.cameras, rec.fps, model.size, settings.solve.robust_c)
-    # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
-    # reduced at HD, or colour differences)
-    shows = video is not None or live is not None
-    prepare = _preparer(tracker, background, keep=shows)
-    counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
-    residuals = []
-    if before is not None:
-        for status in before["status"]:
-            counts[int(status)] += 1
-        residuals.extend(before["residual"])
-    grey: Sequence[np.ndarray] = ()  # the frame in hand as recorded, for the overlay and the viewer
+            recovery = Recovery(model, rec.cameras)
+        print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
+        tracker = Tracker(model, rec.cameras, init, settings)
+        tracker.warm_up()
+        truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
+        live = _live_view(view, rec, tracker, truth) if view is not None else None
+        if overlay:
+            from tracker.viewer.overlay import OverlayVideo
 
-    def searched(read):
-        """The frames as the edge search reads them, the frames as recorded kept aside in ``grey``."""
-        nonlocal grey
-        for index, images in read:
-            if shows:
-                grey, images = zip(*(split_kept(image) for image in images))
-            yield index, images
+            video = OverlayVideo(Path(overlay), rec.cameras, rec.fps, model.size, settings.solve.robust_c)
+        # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
+        # reduced at HD, or colour differences)
+        shows = video is not None or live is not None
+        prepare = _preparer(tracker, background, keep=shows)
+        counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
+        residuals = []
+        if before is not None:
+            for status in before["status"]:
+                counts[int(status)] += 1
+            residuals.extend(before["residual"])
+        grey: Sequence[np.ndarray] = ()  # the frame in hand as recorded, for the overlay and the viewer
 
-    def counted_and_shown(frame: Tracked) -> None:
-        """Count the frame's status and residual, and draw it in the overlay and the viewer."""
-        images = grey if shows else frame.images
-        if live is not None:
-            live.offer(frame.index, images, frame.result, elapsed=frame.spent)
-        if video is not None:
-            video.write(images, tracker.inspect())
-        counts[frame.result.status] += 1
-        residuals.append(frame.result.residual)
+        def searched(read):
+            """The frames as the edge search reads them, the frames as recorded kept aside in ``grey``."""
+            nonlocal grey
+            for index, images in read:
+                if shows:
+                    grey, images = zip(*(split_kept(image) for image in images))
+                yield index, images
 
-    progress = bar(None, "frame", leave=True)
-    try:
+        def counted_and_shown(frame: Tracked) -> None:
+            """Count the frame's status and residual, and draw it in the overlay and the viewer."""
+            images = grey if shows else frame.images
+            if live is not None:
+                live.offer(frame.index, images, frame.result, elapsed=frame.spent)
+            if video is not None:
+                video.write(images, tracker.inspect())
+            counts[frame.result.status] += 1
+            residuals.append(frame.result.residual)
+
+        progress = bar(None, "frame", leave=True)
         read = tracked_frames(
             stream,
             rec,
@@ -393,9 +394,9 @@ def _tracked_back(
         )
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
-    stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
     recovery = None
     with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
+        stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
         try:
             if stream is not None:
                 from tracker.seeding.recovery import Recovery

@@ -6,7 +6,9 @@ parent), and submits one task per folder that is not finished according to the m
 its output going to the results folder's ``track.log``, and returns the recording's :class:`Row`. A one-line
 input error (a missing calibration, say) fails the recording at once; a crash (an exception, a worker that
 died) is tried again, up to :data:`RETRIES` times. Each finished recording is written to the manifest as it
-comes, so a batch stopped by Ctrl-C (or a driver that died) resumes where it was: run the same command again.
+comes, so a batch stopped by Ctrl-C, SIGTERM or SIGHUP (or a driver that died) resumes where it was: run the same
+command again.  Stopped, it writes the recordings whose tasks had finished, ends the others with Ray, and removes the
+temporary files their writes were cut off in.
 """
 
 from __future__ import annotations
@@ -18,11 +20,14 @@ import glob
 import logging
 import os
 import shutil
+import signal
 import socket
 import sys
 import time
 from pathlib import Path
 
+from tracker import stop_signals
+from tracker.atomic import remove_temporaries
 from tracker.commands import options
 from tracker.errors import TrackerInputError
 
@@ -162,7 +167,7 @@ def track_recording(recording: str, name: str, out: str, *, chosen: dict):
         except TrackerInputError as error:
             print(f"tracker: error: {error}", file=sys.stderr)
             return Row(recording, name, FAILED, seconds=time.perf_counter() - started, error=str(error))
-        if outcome.interrupted:  # Ctrl-C reached the worker too: not a finished recording
+        if outcome.interrupted:  # a stop reached the worker too: not a finished recording
             raise RuntimeError(f"{recording}: interrupted after {outcome.frames} frames")
         print_summary(outcome)
     return Row(
@@ -180,7 +185,8 @@ def track_recording(recording: str, name: str, out: str, *, chosen: dict):
 
 def run(args: argparse.Namespace) -> int:
     """Track the recordings not yet finished in ``--out`` and print and write the summary of all it finished; 1
-    when a recording failed, 130 after Ctrl-C (the finished ones kept, the batch resumable)."""
+    when a recording failed, 128 plus the signal's number after a stop signal (130 after Ctrl-C, 143 after SIGTERM,
+    129 after SIGHUP: the finished ones kept, the batch resumable)."""
     ray = _ray()
     from tracker.atomic import ensure_writable_folder
     from tracker.io.batch_records import FAILED, Manifest, format_summary, write_summary
@@ -201,18 +207,19 @@ def run(args: argparse.Namespace) -> int:
         before = len(everything) - len(todo)
         print(f"resuming: {before} of {len(everything)} recordings finished before", file=sys.stderr)
     manifest.start({str(job.recording): job.name for job in todo})
-    interrupted = _track_all(ray, args, todo, manifest) if todo else False
+    stopped = _track_all(ray, args, todo, manifest) if todo else 0
     rows = manifest.finished()
     print(format_summary(rows))
     write_summary(rows, out / "summary.csv")
     print(f"wrote {out / 'summary.csv'}")
-    if interrupted:
+    if stopped:
         done = sum(manifest.row(str(job.recording)) is not None for job in everything)
         print(
-            f"interrupted: {done} of {len(everything)} recordings finished; run the same command again to resume",
+            f"tracker: interrupted: {done} of {len(everything)} recordings finished; run the same command again to "
+            "resume",
             file=sys.stderr,
         )
-        return 130
+        return stop_signals.exit_code(stopped)
     failed = sum(row.state == FAILED for row in rows)
     if failed:
         print(f"{failed} of {len(rows)} recordings failed: their errors are in the summary", file=sys.stderr)
@@ -268,20 +275,33 @@ def _line(error: BaseException) -> str:
     return lines[-1] if lines else type(error).__name__
 
 
-def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool:
+def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> int:
     """Track ``todo`` on Ray, at most the workers' number at a time, each finished row written to ``manifest``
-    as it comes; a crashed try tried again up to :data:`RETRIES` times. Whether Ctrl-C stopped it."""
+    as it comes; a crashed try tried again up to :data:`RETRIES` times.  The number of the stop signal that stopped
+    it (:mod:`tracker.stop_signals`; 0 when none did): the tasks whose rows had come by then are written too, the
+    others end with Ray, and the temporary files their writes were cut off in are removed."""
     from tracker.io.batch_records import FAILED, Row
 
-    workers = _start(ray, args)
+    # Ray's own processes start with SIGINT and SIGHUP held, so that a terminal's Ctrl-C or hang-up stops the batch
+    # alone, which then ends them; not SIGTERM, with which Ray's shutdown ends them (before SIGKILL a second later).
+    # ray.init sets a SIGTERM handler of its own, which would exit at once
+    with stop_signals.held((signal.SIGINT, signal.SIGHUP)), stop_signals.kept():
+        workers = _start(ray, args)
+    stopped = 0
+    pending: dict = {}  # task -> (job, its try)
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(track_recording)
         chosen = manifest.options
         waiting = list(todo)
-        pending: dict = {}  # task -> (job, its try)
 
         def submit(job: Job, attempt: int) -> None:
             pending[task.remote(str(job.recording), job.name, str(job.out), chosen=chosen)] = (job, attempt)
+
+        def finish(row: Row) -> None:
+            manifest.finish(row)
+            progress.update(1)
+            progress.write(_finished(row), sys.stdout)
+            sys.stdout.flush()  # a line as each finishes, also through a pipe
 
         progress = options.bar(args, "recordings", "recording", leave=True)(total=len(todo))
         try:
@@ -299,17 +319,23 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> bool
                         submit(job, attempt + 1)
                         continue
                     row = Row(str(job.recording), job.name, FAILED, attempts=attempt, error=f"crashed: {_line(error)}")
-                manifest.finish(row)
-                progress.update(1)
-                progress.write(_finished(row), sys.stdout)
-                sys.stdout.flush()  # a line as each finishes, also through a pipe
-        except KeyboardInterrupt:  # ray.shutdown() below ends the job, and with it the tasks it owns: cancelling
-            return True  # them first races their replies and can abort the driver (Ray 2.60: 'not pending')
+                finish(row)
+        except KeyboardInterrupt as stop:
+            # ray.shutdown() below ends the job, and with it the tasks it owns: cancelling them first races their
+            # replies and can abort the driver (Ray 2.60: 'not pending'); the rows that came before the stop are kept
+            stopped = getattr(stop, "number", signal.SIGINT)
+            arrived = ray.wait(list(pending), num_returns=len(pending), timeout=0)[0] if pending else []
+            for ready in arrived:
+                job, attempt = pending.pop(ready)
+                with contextlib.suppress(ray.exceptions.RayError):  # a crash is tried again on resuming
+                    finish(dataclasses.replace(ray.get(ready), attempts=attempt))
         finally:
             progress.close()
     finally:
         ray.shutdown()
-    return False
+    for job, _ in pending.values():  # their tasks ended with Ray (locally, by the time it is shut down)
+        remove_temporaries(job.out)
+    return stopped
 
 
 def _finished(row) -> str:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
+from tracker import stop_signals
 from tracker.commands import options
 from tracker.errors import TrackerInputError
 
@@ -31,8 +33,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Detect (or reuse OUT/keypoints.npz when it holds the same frames, cameras and detector) and print
-    the time it took per view and how often a person was found per camera."""
+    """Detect (or reuse OUT/keypoints.npz when it holds the same frames, cameras and detector, or go on from where it
+    stops when it holds the first of them) and print the time it took per view and how often a person was found per
+    camera.  Interrupted (Ctrl-C, SIGTERM, SIGHUP), what was detected is kept in OUT/keypoints.npz and the
+    run returns 130 (the CLI reports the signal's own code)."""
     from tracker.atomic import ensure_writable_folder
     from tracker.io.recording import open_recording
     from tracker.landmarks.detect_recording import cache_file, detect_recording
@@ -46,13 +50,24 @@ def run(args: argparse.Namespace) -> int:
     out = ensure_writable_folder(options.output_folder(args.out, rec))
     path = cache_file(out, rec)
     started = time.perf_counter()
-    keypoints, reused = detect_recording(
-        rec, args.start, stop, cache=path, progress=options.bar(args, "detecting", "frame")
-    )
-    views = (stop - args.start) * len(rec.cameras)
-    spent = "" if reused else f", {1e3 * (time.perf_counter() - started) / views:.1f} ms per view with decoding"
+    try:
+        keypoints, detected = detect_recording(
+            rec, args.start, stop, cache=path, progress=options.bar(args, "detecting", "frame")
+        )
+    except KeyboardInterrupt:
+        print(
+            f"tracker: interrupted: the frames detected so far are saved in {path}; run it again for the rest",
+            file=sys.stderr,
+        )
+        return stop_signals.INTERRUPTED
+    spent = ""
+    if detected:
+        views = detected * len(rec.cameras)
+        held = f", {stop - args.start - detected} of them there already" if detected < stop - args.start else ""
+        spent = f"{held}, {1e3 * (time.perf_counter() - started) / views:.1f} ms per view with decoding"
     print(
-        f"{'reused' if reused else 'wrote'} {path} (frames {args.start}..{stop - 1}, {len(rec.cameras)} cameras{spent})"
+        f"{'wrote' if detected else 'reused'} {path} (frames {args.start}..{stop - 1}, {len(rec.cameras)} cameras"
+        f"{spent})"
     )
     found = (keypoints.confidence.max(axis=2) > 0).mean(axis=0)
     for name, share in zip(keypoints.camera_names, found):

@@ -13,6 +13,7 @@ import sys
 from contextlib import ExitStack
 from pathlib import Path
 
+from tracker import stop_signals
 from tracker.commands import options
 from tracker.errors import TrackerInputError
 
@@ -83,7 +84,8 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``tracker live``: 0 when the sources ended, 130 after Ctrl-C; TrackerInputError for bad input and
+    """``tracker live``: 0 when the sources ended, 128 plus the signal's number after a stop signal (130 after
+    Ctrl-C, 143 after SIGTERM, 129 after SIGHUP); TrackerInputError for bad input and
     when every camera stopped delivering (after the output is written)."""
     from tracker.apps.live import DEFAULT_OUT, Recorder, assign_cameras, drops, open_sources, track_live
     from tracker.camera import load_calibration
@@ -166,8 +168,8 @@ def run(args: argparse.Namespace) -> int:
             f"{detector.offered} frame sets offered"
         )
     if summary.interrupted:
-        print("interrupted: the frames done so far are saved", file=sys.stderr)
-        return 130
+        print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+        return stop_signals.exit_code(summary.interrupted)
     if not counts.live:
         raise TrackerInputError(
             f"every camera stopped delivering (see above); the {summary.frames} frames "

@@ -43,7 +43,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Track, write poses.npz and print the summary (and the evaluation against the recording's truth);
-    130 after Ctrl-C with the frames done written."""
+    130 after Ctrl-C, SIGTERM or SIGHUP with the frames done written (the CLI reports the signal's own code)."""
     from tracker.apps.track import Viewing, print_summary, track
     from tracker.overwrite import keep_inputs
 
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if outcome.interrupted:
         print(f"wrote {outcome.poses} ({outcome.frames} frames)")
-        print("interrupted: the frames done so far are saved", file=sys.stderr)
+        print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
         return 130
     print_summary(outcome)
     if outcome.review is None:

@@ -6,16 +6,19 @@ keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, it
 pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A pick of
 the cameras (``--cameras cam1,cam2``) keeps its own, ``keypoints-cam1,cam2.npz``, beside every camera's.  A cache of
 another recording, or made by another detector, is an error rather than something to overwrite silently; one that
-lacks some of the wanted frames is completed and written back
-with every frame it held.
+lacks some of the wanted frames is completed and written back with every frame it held.  The detector then starts at
+the last of the leading wanted frames the cache holds (at the first when it holds none), so that it follows the person
+on from a frame it has seen (a landmarker in video mode follows its person from frame to frame), and the cache keeps
+the frames before it.  What was detected is written also when the run is interrupted (Ctrl-C, SIGTERM), so that a
+run stopped partway goes on from where it stopped.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import ExitStack
+from collections.abc import Callable, Generator, Iterable
+from contextlib import ExitStack, closing
 from pathlib import Path
 
 import numpy as np
@@ -106,7 +109,9 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
     return both.rows(np.argsort(both.frame, kind="stable"))
 
 
-def detections(recording: Recording, start: int, stop: int, *, step: int = 1) -> Iterator[tuple[int, Keypoints]]:
+def detections(
+    recording: Recording, start: int, stop: int, *, step: int = 1
+) -> Generator[tuple[int, Keypoints], None, None]:
     """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
     camera in video mode (so each follows its person from detected frame to detected frame).  MediaPipe's
     native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a progress bar
@@ -180,17 +185,35 @@ def detect_recording(
     step: int = 1,
     cache: str | os.PathLike | None = None,
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
-) -> tuple[Keypoints, bool]:
-    """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and
-    whether they came from ``cache`` (the recording's keypoints.npz holding those frames); otherwise they are
-    detected and, with ``cache``, written there beside the frames it already held.  ``progress(iterable,
-    total=)`` wraps the frames (e.g. a tqdm bar)."""
+) -> tuple[Keypoints, int]:
+    """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and how many
+    of those frames the detector saw now: none when ``cache`` (the recording's keypoints.npz) holds them all;
+    otherwise the ones it lacks are detected (module docstring) and, with ``cache``, written there beside the frames it
+    already held, also when the detection is interrupted.  ``progress(iterable, total=)`` wraps the frames detected
+    (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
     old = cached(Path(cache), recording) if cache is not None else None
     wanted = np.arange(start, stop, step)
     if (reused := holding(old, wanted)) is not None:
-        return reused, True
-    keypoints = stacked([row for _, row in progress(detections(recording, start, stop, step=step), total=len(wanted))])
-    if cache is not None:
-        save_keypoints(cache, merged(old, keypoints))
-    return keypoints, False
+        return reused, 0
+    kept = _resumed_at(old, wanted)
+    rows: list[Keypoints] = []
+    try:
+        with closing(detections(recording, int(wanted[kept]), stop, step=step)) as found:
+            for _, row in progress(found, total=len(wanted) - kept):
+                rows.append(row)
+    finally:
+        if cache is not None and rows:
+            save_keypoints(cache, merged(old, stacked(rows)))
+    if old is None or not kept:
+        return stacked(rows), len(rows)
+    return stacked([old.at_frames(wanted[:kept]), *rows]), len(rows)
+
+
+def _resumed_at(old: Keypoints | None, wanted: np.ndarray) -> int:
+    """Where in ``wanted`` (frame numbers, not all of them in ``old``) the detector starts: at the last of the leading
+    frames ``old`` holds, or at the first when it holds none."""
+    if old is None:
+        return 0
+    leading = int(np.argmin(np.isin(wanted, old.frame)))  # the frames held before the first one lacking
+    return max(leading - 1, 0)

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import multiprocessing
 import queue
-import signal
 
 import cv2
 import numpy as np
 
+from tracker import stop_signals
 from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_world
@@ -37,8 +37,9 @@ _START_WAIT = 120.0
 
 def _work(cameras: list[Camera], jobs, results) -> None:
     """The worker process: detect every frame set taken from ``jobs`` (None ends it) and put (number, pixels,
-    confidence) of the checked landmarks on ``results``; an error is put instead and ends it."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    confidence) of the checked landmarks on ``results``; an error is put instead and ends it.  The stop signals are
+    the parent's to handle (:mod:`tracker.stop_signals`)."""
+    stop_signals.ignore()
     try:
         with native_logs_muted():
             detectors = [Detector() for _ in cameras]
@@ -66,12 +67,13 @@ class LiveDetector:
         require_detector()
         self.step = step
         context = multiprocessing.get_context("spawn")
-        self.jobs = context.Queue()
-        self.results = context.Queue()
-        self.worker = context.Process(
-            target=_work, args=(cameras, self.jobs, self.results), name="keypoint detector", daemon=True
-        )
-        self.worker.start()
+        with stop_signals.held():
+            self.jobs = context.Queue()
+            self.results = context.Queue()
+            self.worker = context.Process(
+                target=_work, args=(cameras, self.jobs, self.results), name="keypoint detector", daemon=True
+            )
+            stop_signals.start(self.worker)
         self.busy = False
         self.arrived: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.offered = self.taken = self.used = 0
@@ -128,9 +130,7 @@ class LiveDetector:
         """End the worker (it finishes the frame set in hand first, for a while)."""
         self.jobs.put(None)
         self.worker.join(_CLOSE_WAIT)
-        if self.worker.is_alive():
-            self.worker.terminate()
-            self.worker.join()
+        stop_signals.end(self.worker)
 
 
 def transferred(
