@@ -336,6 +336,16 @@ def test_a_pattern_that_matches_nothing_is_one_line(tmp_path, capsys):
     assert "nothing-*" in line and "matches no folder" in line
 
 
+@pytest.mark.parametrize("cameras", ["", ","])
+def test_a_camera_list_that_names_none_is_one_line_before_any_job(tmp_path, cameras, capsys):
+    assert main(["batch", str(tmp_path / "nothing-*"), "--out", str(tmp_path / "out"), "--cameras", cameras]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"tracker: error: --cameras {cameras!r} names no camera; name the cameras to track, or leave --cameras out to "
+        "track them all"
+    ]
+    assert not (tmp_path / "out").exists()
+
+
 def test_an_address_where_no_ray_answers_is_one_line(recordings, tmp_path, capsys):
     with socket.socket() as closed:  # a port bound but not listening: connections to it are refused
         closed.bind(("127.0.0.1", 0))

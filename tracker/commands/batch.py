@@ -187,6 +187,11 @@ def run(args: argparse.Namespace) -> int:
     """Track the recordings not yet finished in ``--out`` and print and write the summary of all it finished; 1
     when a recording failed, 128 plus the signal's number after a stop signal (130 after Ctrl-C, 143 after SIGTERM,
     129 after SIGHUP: the finished ones kept, the batch resumable)."""
+    if options.camera_names(args.cameras) == []:  # else each recording's job would fail with it, one by one
+        raise TrackerInputError(
+            f"--cameras {args.cameras!r} names no camera; name the cameras to track, or leave --cameras out to track "
+            "them all"
+        )
     ray = _ray()
     from tracker.atomic import ensure_writable_folder
     from tracker.io.batch_records import FAILED, Manifest, format_summary, write_summary
