@@ -53,8 +53,8 @@ def test_a_pick_of_the_cameras_keeps_its_own_cache_beside_every_cameras(tmp_path
     before = {path.name: _digest(path) for path in tmp_path.iterdir()}
     assert before["keypoints-cam2,cam0.npz"] == held
     for recording in (every, pick, every):
-        keypoints, reused = detect_recording(recording, 0, 3, cache=cache_file(tmp_path, recording))
-        assert reused and keypoints.camera_names == tuple(camera.name for camera in recording.cameras)
+        keypoints, detected = detect_recording(recording, 0, 3, cache=cache_file(tmp_path, recording))
+        assert detected == 0 and keypoints.camera_names == tuple(camera.name for camera in recording.cameras)
     assert {path.name: _digest(path) for path in tmp_path.iterdir()} == before
 
 
