@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 from dataclasses import replace
 from pathlib import Path
 
@@ -231,18 +233,25 @@ def test_every_other_frame_keeps_the_file_s_clock(tmp_path: Path) -> None:
     assert list(poses["frame"]) == [10, 12, 14] and np.allclose(poses["time"], [0.0, 0.02, 0.04])
 
 
-def test_ctrl_c_keeps_both_files_of_the_frames_done(tmp_path: Path, monkeypatch, capsys) -> None:
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_a_stop_keeps_both_files_of_the_frames_done(stop, tmp_path: Path, monkeypatch, capsys) -> None:
+    """Ctrl-C, or SIGTERM as a service manager sends it, after three frames: both files hold those frames, one line
+    says so, and the exit code is the signal's (130, 143)."""
     real_track = pts.track
 
     def interrupted(*args, **kwargs):
         for count, fitted in enumerate(real_track(*args, **kwargs)):
             if count == 3:
-                raise KeyboardInterrupt
+                if stop == "ctrl-c":
+                    raise KeyboardInterrupt
+                os.kill(os.getpid(), signal.SIGTERM)
             yield fitted
 
     monkeypatch.setattr(pts, "track", interrupted)
-    assert vicon_arm("--out", str(tmp_path), "--frames", "10", "--quiet") == 130
-    assert "interrupted after 3 frames" in capsys.readouterr().out
+    assert vicon_arm("--out", str(tmp_path), "--frames", "10", "--quiet") == (130 if stop == "ctrl-c" else 143)
+    printed = capsys.readouterr()
+    assert "interrupted after 3 frames" in printed.out
+    assert printed.err.splitlines()[-1] == "tracker: interrupted: the frames done so far are saved"
     poses, shapes = load_poses(tmp_path / "poses.npz"), np.load(tmp_path / "shapes.npz")
     assert list(poses["frame"]) == list(shapes["frame"]) == [0, 1, 2]
 

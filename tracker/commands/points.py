@@ -143,8 +143,11 @@ def run(args: argparse.Namespace) -> int:
                 )
         print(f"joint violation: max {final['violation'].max() * 1000.0:.3g} mm")
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
-    if interrupted or not done or not (args.view or args.record):
-        return 130 if interrupted else 0
+    if interrupted:
+        print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+        return 130
+    if not done or not (args.view or args.record):
+        return 0
     from tracker.viewer.marker_view import PointsView
     from tracker.viewer.scene import start_server
 
