@@ -11,6 +11,7 @@ import argparse
 import os
 import re
 import signal
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -102,9 +103,14 @@ def _live(rec: Path, tmp_path: Path, wrap=lambda camera, source: source, record:
 
 
 def test_a_live_run_records_what_it_tracked_and_tracker_track_replays_it(tiny_recording, tmp_path, capsys):
+    """The recording holds what the live run tracked, and `tracker track` replays it to the same poses: its
+    init.toml is the first pose given (here a pose file of another recording's frame 150) as that of its frame 0."""
     out, record = tmp_path / "out", tmp_path / "rec"
+    given = tmp_path / "given.toml"
+    given.write_text((tiny_recording / "init.toml").read_text().replace("frame = 0", "frame = 150"))
     cameras = [str(tiny_recording / "cam0.avi"), str(tiny_recording / "cam1.avi")]
-    assert run(_args(tiny_recording, cameras, "--out", str(out), "--record", str(record), "--iterations", "4")) == 0
+    extra = ("--out", str(out), "--record", str(record), "--iterations", "4", "--init", str(given))
+    assert run(_args(tiny_recording, cameras, *extra)) == 0
     paired, taken = (int(n) for n in re.findall(r"sets: (\d+) paired, (\d+) tracked", capsys.readouterr().out)[0])
     live = load_poses(out / "poses.npz")
     frames = len(live["frame"])
@@ -113,8 +119,10 @@ def test_a_live_run_records_what_it_tracked_and_tracker_track_replays_it(tiny_re
     np.testing.assert_array_equal(live["frame"], np.arange(frames))
     recording = open_recording(record)
     assert recording.frame_count == frames and [camera.name for camera in recording.cameras] == ["cam0", "cam1"]
-    for name in ("calibration.toml", "model.toml", "init.toml"):
+    for name in ("calibration.toml", "model.toml"):
         assert (record / name).read_bytes() == (tiny_recording / name).read_bytes()
+    first, held = tomllib.loads((record / "init.toml").read_text()), tomllib.loads(given.read_text())
+    assert first == held | {"frame": 0} and held["frame"] == 150
     rows = (record / "timestamps.csv").read_text().splitlines()
     assert rows[0] == "frame,cam0,cam1" and len(rows) == frames + 1
     # the time of every row is its capture time, whatever was dropped between rows

@@ -170,7 +170,14 @@ def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_pat
 
 
 @pytest.mark.parametrize(
-    "case", ["--cameras cam0", "one camera's video", "--cameras cam0,cam1 of three", "--init of another frame"]
+    "case",
+    [
+        "--cameras cam0",
+        "one camera's video",
+        "--cameras cam0,cam1 of three",
+        "the video of one of three missing",
+        "--init of another frame",
+    ],
 )
 def test_tracker_sync_refuses_before_any_detection(case, tiny_recording, tmp_path, monkeypatch, capsys):
     """Fewer than two cameras have no offset between them, and a run that would drop an offset of sync.toml loses
@@ -203,15 +210,23 @@ def test_tracker_sync_refuses_before_any_detection(case, tiny_recording, tmp_pat
             f"{rec / 'init.toml'}: is the pose at frame 7, but the tracks of --refine start at frame 0; pass --init "
             "with the pose at frame 0, or leave --init out to find the first pose by itself"
         )
-    else:  # a third camera, whose offset sync.toml holds
+    else:  # a third camera, whose offset sync.toml holds, left out by --cameras or without its video
         cameras = load_calibration(rec / "calibration.toml")
         save_calibration([*cameras, dataclasses.replace(cameras[1], name="cam2")], rec / "calibration.toml")
-        shutil.copyfile(rec / "cam1.avi", rec / "cam2.avi")
         (rec / "sync.toml").write_text("[offsets]\ncam2 = 0.03\n")
-        extra = ["--cameras", "cam0,cam1"]
+        if case == "--cameras cam0,cam1 of three":
+            shutil.copyfile(rec / "cam1.avi", rec / "cam2.avi")
+            extra, why = ["--cameras", "cam0,cam1"], "which --cameras leaves out"
+        else:
+            extra, why = [], "whose video is missing"
+            lines.append(
+                f"tracker: warning: {rec}: camera cam2 has no video, leaving cam0, cam1 of calibration.toml; add "
+                "<name>.mp4|.avi|.mkv or a folder <name>/ of numbered images, or pick the cameras with --cameras to "
+                "say so"
+            )
         lines.append(
-            f"{rec / 'sync.toml'}: also holds the offset of cam2, which --cameras leaves out and this run would drop; "
-            "sync every camera, or move the file away to start afresh"
+            f"{rec / 'sync.toml'}: also holds the offset of cam2, {why} and this run would drop; sync every camera, "
+            "or move the file away to start afresh"
         )
     lines[-1] = f"tracker: error: {lines[-1]}"
 

@@ -120,7 +120,10 @@ def test_record_into_a_place_that_cannot_be_written_is_one_line_before_any_work(
         assert main(argv) == 2
         printed = capsys.readouterr()
         assert printed.out == "" and len(printed.err.splitlines()) == 1
-        assert printed.err.startswith(f"tracker: error: {taken}: cannot write there")
+        assert printed.err == (
+            f"tracker: error: {taken}: cannot write there (File exists); {taken} is a file, not a folder; choose "
+            "another output path\n"
+        )
     assert {path: hashlib.sha256(path.read_bytes()).hexdigest() for path in before} == before
     assert not (tmp_path / "out").exists()
 

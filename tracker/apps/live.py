@@ -37,7 +37,7 @@ import shutil
 import signal
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -128,14 +128,17 @@ def open_sources(
 
 class Recorder:
     """Writes the sets the tracker took as a recording folder (module docstring); ``copies`` maps file names
-    in the folder (calibration.toml, model.toml, init.toml) to the files to copy there."""
+    in the folder (calibration.toml, model.toml, init.toml) to the files to copy there, or to their bytes."""
 
-    def __init__(self, folder: Path, cameras: list[Camera], fps: float, copies: dict[str, Path]):
+    def __init__(self, folder: Path, cameras: list[Camera], fps: float, copies: Mapping[str, Path | bytes]):
         if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
             raise TrackerInputError(f"{folder}: already exists; give a new folder for the recording")
         ensure_writable_folder(folder)
         for name, source in copies.items():
-            shutil.copyfile(source, folder / name)
+            if isinstance(source, bytes):
+                (folder / name).write_bytes(source)
+            else:
+                shutil.copyfile(source, folder / name)
         self.frames = 0
         self.videos = [MjpegAviWriter(folder / f"{camera.name}.avi", fps, camera.size) for camera in cameras]
         self.times = open(folder / "timestamps.csv", "w", buffering=1)

@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from tracker.apps.live import DEFAULT_OUT, Recorder, assign_cameras, drops, open_sources, track_live
     from tracker.camera import load_calibration
     from tracker.io.capture import Capture
-    from tracker.io.posefile import load_pose_file
+    from tracker.io.posefile import at_frame, load_pose_file
     from tracker.model import load_model
     from tracker.tracking.frame_loop import Tracker
 
@@ -122,10 +122,10 @@ def run(args: argparse.Namespace) -> int:
         )
         recorder = None
         if args.record:
-            copies = {
+            copies: dict[str, Path | bytes] = {
                 "calibration.toml": calibration_path,
                 "model.toml": Path(args.model),
-                "init.toml": Path(args.init),
+                "init.toml": at_frame(args.init, 0),  # the live run's first frame is the recording's frame 0
             }
             recorder = stack.enter_context(Recorder(Path(args.record), cameras, capture.fps, copies))
         view = None

@@ -93,9 +93,10 @@ def run(args: argparse.Namespace) -> int:
         before = load_offsets(target, rig_names(rec), duration)
         left_out = [name for name, offset in before.items() if offset != 0.0 and name not in names]
         if left_out:
+            why = "which --cameras leaves out" if rec.picked else "whose video is missing"
             raise TrackerInputError(
-                f"{target}: also holds the offset of {', '.join(left_out)}, which --cameras leaves out and this run "
-                "would drop; sync every camera, or move the file away to start afresh"
+                f"{target}: also holds the offset of {', '.join(left_out)}, {why} and this run would drop; sync "
+                "every camera, or move the file away to start afresh"
             )
     out = ensure_writable_folder(options.output_folder(args.out, rec))
     keypoints, _ = detect_recording(

@@ -108,6 +108,12 @@ def load_pose_file(path: str | os.PathLike, model: Model) -> np.ndarray:
     return model.coerce(poses)
 
 
+def at_frame(path: str | os.PathLike, frame: int) -> bytes:
+    """The pose TOML at ``path`` as the pose of the recording's frame ``frame``: its tables as they are (the same
+    numbers), its ``frame`` key set; for a copy that starts another recording (``tracker live --record``)."""
+    return tomli_w.dumps(_read(Path(path)) | {"frame": int(frame)}).encode()
+
+
 def _read(path: Path) -> dict:
     """The pose TOML at ``path``, parsed."""
     return read_toml(path, "pose", "pass --init with an existing init.toml")
