@@ -59,3 +59,29 @@ def test_the_fix_follows_the_cause(tmp_path, monkeypatch, one_line_error, code, 
     message = one_line_error(lambda: atomic_write(path, lambda file: file.write(b"after")))
     assert message == f"{path}: cannot write ({os.strerror(code)}); {fix}"
     assert path.read_bytes() == b"before" and [p.name for p in tmp_path.iterdir()] == ["poses.csv"]
+
+
+def test_an_output_file_is_checked_before_the_work(tmp_path, one_line_error):
+    """A command whose output comes at the end of long work (fit-model, calibrate, init, --record) checks first that
+    the file can be written there: its folder made, no folder in its place, no file in the folder's place."""
+    assert atomic.writable_file(tmp_path / "new" / "model.toml") == tmp_path / "new" / "model.toml"
+    assert (tmp_path / "new").is_dir() and not (tmp_path / "new" / "model.toml").exists()
+    (tmp_path / "taken").mkdir()
+    message = one_line_error(lambda: atomic.writable_file(tmp_path / "taken"))
+    assert message == f"{tmp_path / 'taken'}: is a folder; give the name of a file to write"
+    (tmp_path / "file").write_text("mine")
+    message = one_line_error(lambda: atomic.writable_file(tmp_path / "file" / "model.toml"))
+    assert message.startswith(f"{tmp_path / 'file'}: cannot write there") and (tmp_path / "file").read_text() == "mine"
+
+
+def test_fit_model_checks_its_output_before_any_detection(tiny_recording, tmp_path, monkeypatch, capsys):
+    def detect(*args, **kwargs):
+        raise AssertionError("detected")
+
+    monkeypatch.setattr("tracker.landmarks.detect_recording.detect_recording", detect)
+    (tmp_path / "taken").mkdir()
+    argv = ["fit-model", str(tiny_recording), "--out", str(tmp_path / "taken"), "--cache", str(tmp_path / "kp")]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"tracker: error: {tmp_path / 'taken'}: is a folder; give the name of a file to write"
+    ]

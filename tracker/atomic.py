@@ -40,6 +40,16 @@ def ensure_writable_folder(folder: str | os.PathLike) -> Path:
     return folder
 
 
+def writable_file(path: str | os.PathLike) -> Path:
+    """``path``, checked now that a file can be written there (its folder made if missing and writable, and no
+    folder in its place), so that a long run fails before it starts rather than at its end."""
+    path = Path(path)
+    ensure_writable_folder(path.parent)
+    if path.is_dir():
+        raise TrackerInputError(f"{path}: is a folder; give the name of a file to write")
+    return path
+
+
 def temporary_beside(path: Path, suffix: str | None = None) -> Path:
     """A new hidden file name in ``path``'s folder (same file system), to write before :func:`replace_with`; it ends
     in ``suffix`` (default ``path``'s suffix) for writers that pick the format by it or add it when missing."""

@@ -553,10 +553,12 @@ def _background(given: str, rec, out: Path, bar: Bar):
     under ``out``), or a folder."""
     if given == "none":
         return None
+    from tracker.atomic import ensure_writable_folder
     from tracker.tracking.foreground import SAMPLES, load_background, median_background, sample_indices, save_background
 
     if given != "median":
         return load_background(given, rec)
+    ensure_writable_folder(out)  # before the frames are read, not after
     background = median_background(rec, SAMPLES, bar("background", "frame"))
     folder = save_background(background, rec, out / "background")
     print(

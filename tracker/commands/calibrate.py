@@ -69,6 +69,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the calibration and print the per-camera RMS; returns 0 (errors raise TrackerInputError)."""
+    from tracker.atomic import writable_file
     from tracker.calibrate.board import parse_board
     from tracker.calibrate.pipeline import calibrate
     from tracker.camera import save_calibration
@@ -83,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         [(args.fix_intrinsics, "the calibration the intrinsics are taken from (--fix-intrinsics)")],
         "write the new calibration to another file",
     )
+    writable_file(args.out)  # before the videos are read, not after
     board = parse_board(args.board, inverted=args.inverted)
     result = calibrate(
         args.folder,

@@ -46,7 +46,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Fit, write ``--out`` and print what changed (docs/fit-model.md)."""
-    from tracker.atomic import ensure_writable_folder
+    from tracker.atomic import ensure_writable_folder, writable_file
     from tracker.landmarks.detect_recording import cache_file
     from tracker.landmarks.detector import require_detector
     from tracker.model import model_from_dict
@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         [(start, "the model the fit starts from"), *options.recording_inputs(rec)],
         "write the fitted model to another file",
     )
+    writable_file(args.out)  # before minutes of fitting, not after
     require_detector()
     cache = cache_file(ensure_writable_folder(options.output_folder(args.cache, rec)), rec)
     fit_and_save(

@@ -42,6 +42,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the placement until Ctrl-C (its save button writes ``--out``)."""
+    from tracker.atomic import writable_file
     from tracker.io.posefile import load_pose_file, starting_pose_file
     from tracker.overwrite import keep_inputs
     from tracker.tracking.settings import Settings
@@ -60,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
         + options.recording_inputs(rec),
         "save the placed pose to another file (and track with --init FILE)",
     )
+    writable_file(out)  # before the placement, whose save button would fail in the viewer's thread
     poses = (
         load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, cache=args.cache)
     )

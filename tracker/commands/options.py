@@ -325,12 +325,9 @@ def add_viewer_options(viewer: Options, record: bool = True) -> None:
 def record_file(args: argparse.Namespace) -> Path | None:
     """The file ``--record`` names (None when not given), its folder made and checked writable now: a place that
     cannot be written is a one-line error before any viewer starts or any frame is drawn."""
-    from tracker.atomic import ensure_writable_folder
+    from tracker.atomic import writable_file
 
-    if not args.record:
-        return None
-    ensure_writable_folder(Path(args.record).parent)
-    return Path(args.record)
+    return writable_file(args.record) if args.record else None
 
 
 def recording(args: argparse.Namespace):
