@@ -411,6 +411,10 @@ def test_a_port_out_of_range_is_a_usage_error(tiny_recording, capsys):
         (["--bogus", "eval", "a", "b"], "tracker", "unrecognized arguments: --bogus"),
         (["bogus"], "tracker", "argument COMMAND: invalid choice: 'bogus'"),
         (["suite", "run", "renders"], "tracker suite run", "the following arguments are required: results"),
+        (["track", "rec", "--init", ""], "tracker track", "argument --init: '' names no file or folder"),
+        (["sync", "rec", "--refine", "--init", ""], "tracker sync", "argument --init: '' names no file or folder"),
+        (["export", "p.npz", "--to", "csv", "--out", ""], "tracker export", "argument --out: '' names no file"),
+        (["view", "rec", "--poses", ""], "tracker view", "argument --poses: '' names no file or folder"),
     ],
 )
 def test_a_usage_error_is_one_line_that_points_to_the_help(argv, prog, said, capsys):

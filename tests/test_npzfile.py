@@ -47,6 +47,7 @@ def test_archives_that_cannot_be_read(tmp_path, one_line_error):
     np.savez(pickled, names=np.array(["a"], dtype=object))
     message = one_line_error(lambda: read_npz(pickled, "a poses file", "fix"))
     assert message.startswith(f"{pickled}: holds object arrays") and "np.array(names, dtype=str)" in message
+    assert message.endswith("); fix")
     assert (
         one_line_error(lambda: read_npz(tmp_path, "a poses file", "fix"))
         == f"{tmp_path}: is a folder, not a poses file; fix"

@@ -63,10 +63,15 @@ COMMANDS = {  # in the order a newcomer meets them: track, look, score, export; 
 }
 
 
+PATHS = frozenset({"init", "model", "calib", "poses", "background", "out", "record", "overlay", "cache"})
+"""The options that name a file or a folder: given empty (``--init ''``), one names none, which would otherwise
+read as the current folder."""
+
+
 class _Parser(argparse.ArgumentParser):
     """A parser whose usage error is one line, the error and the help to read (``tracker track: error: argument
     --port: invalid port value: 'abc'; see tracker track --help``), exit code 2; a command's unknown arguments are
-    that command's error, not the main parser's."""
+    that command's error, not the main parser's, and so is an option of :data:`PATHS` given empty."""
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
@@ -75,6 +80,9 @@ class _Parser(argparse.ArgumentParser):
         parsed, extra = super().parse_known_args(args, namespace)
         if extra:
             self.error(f"unrecognized arguments: {' '.join(extra)}")
+        for action in self._actions:
+            if action.dest in PATHS and action.option_strings and getattr(parsed, action.dest, None) == "":
+                self.error(f"argument {action.option_strings[0]}: '' names no file or folder; name one or leave it out")
         return parsed, extra
 
 

@@ -44,8 +44,8 @@ def read_npz(path: str | os.PathLike, what: str, fix: str) -> dict[str, np.ndarr
     except ValueError as error:
         if "Object arrays" in str(error) or "pickle" in str(error):
             raise TrackerInputError(
-                f"{path}: holds object arrays, which only pickle reads and the tracker never unpickles; write its "
-                "arrays with numpy.savez, names as np.array(names, dtype=str)"
+                f"{path}: holds object arrays, which only pickle reads and the tracker never unpickles (save names as "
+                f"np.array(names, dtype=str)); {fix}"
             ) from None
         raise TrackerInputError(f"{path}: not a readable .npz archive ({error}); {fix}") from None
     except (OSError, EOFError, zipfile.BadZipFile) as error:

@@ -45,8 +45,6 @@ def starting_pose_file(
     at that frame, else ``found`` (the recording's init.toml) if it is, else None: the run finds its first pose by
     itself.  A ``found`` file of another frame is passed over with a warning, or refused when the run cannot find its
     first pose by itself (not ``by_itself``)."""
-    if given is not None and not str(given).strip():
-        raise TrackerInputError("--init '' names no file; give a pose file (init.toml), or leave --init out")
     chosen = given if given is not None else found
     if chosen is None:
         return None
@@ -63,9 +61,11 @@ def starting_pose_file(
         return None
     alone = ", or no --init to find the first pose by itself" if by_itself else ""
     where = "" if by_itself else ", where it cannot find the first pose by itself"
+    unsaid = "frame" not in _read(path)  # written before pose files said their frame: perhaps of another
+    said = f" (it says no frame: add frame = {start} to it if it is the pose at frame {start})" if unsaid else ""
     raise TrackerInputError(
-        f"{path}: is the pose at frame {frame}, but the run starts at frame {start}{where}; pass --start {frame}, "
-        f"or --init with a pose at frame {start}{alone}"
+        f"{path}: is the pose at frame {frame}{said}, but the run starts at frame {start}{where}; pass --start "
+        f"{frame}, or --init with a pose at frame {start}{alone}"
     )
 
 
