@@ -75,9 +75,9 @@ with stop_signals.like_ctrl_c():
 
 
 def test_the_detector_worker_leaves_a_stop_to_the_run_which_keeps_its_detections(tiny_recording, tmp_path):
-    """SIGHUP to every process of a run with the detector's worker: the run keeps what the worker detected and ends it,
-    and exits 129 with no warning or error on standard error (the resource tracker, which SIGHUP would end, warns at exit that it
-    died; a worker that SIGHUP ended would stop the run with an error)."""
+    """SIGHUP to every process of a run with the detector's worker: the run keeps what the worker detected and ends
+    it, and exits 129 with no warning or error on standard error (the resource tracker, which SIGHUP would end, warns
+    at exit that it died; a worker that SIGHUP ended would stop the run with an error)."""
     cache = tmp_path / "keypoints.npz"
     ended = subprocess.run(
         [sys.executable, "-c", WORKER_STOPPED, str(tiny_recording), str(cache)],

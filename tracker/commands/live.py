@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
             f"{detector.offered} frame sets offered"
         )
     if summary.interrupted:
-        print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+        options.say_interrupted()
         return stop_signals.exit_code(summary.interrupted)
     if not counts.live:
         raise TrackerInputError(

@@ -421,6 +421,11 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     return path, results
 
 
+def say_interrupted() -> None:
+    """Tell on standard error that a run was stopped (Ctrl-C, SIGTERM, SIGHUP) with its frames done written."""
+    print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+
+
 def bar(args: argparse.Namespace, desc: str | None, unit: str, *, leave: bool = False):
     """A progress bar on the terminal's standard error (off with --quiet) to wrap an iterable in; it stays on the
     screen when done only with ``leave``.  It writes to its own copy of file descriptor 2, so it still shows

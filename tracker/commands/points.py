@@ -144,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"joint violation: max {final['violation'].max() * 1000.0:.3g} mm")
     print(f"wrote {out / 'poses.npz'} and {out / 'shapes.npz'}")
     if interrupted:
-        print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+        options.say_interrupted()
         return 130
     if not done or not (args.view or args.record):
         return 0

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import sys
 
 from tracker.commands import options
 from tracker.commands.viewing import serve
@@ -68,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if outcome.interrupted:
         print(f"wrote {outcome.poses} ({outcome.frames} frames)")
-        print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+        options.say_interrupted()
         return 130
     print_summary(outcome)
     if outcome.review is None:
