@@ -457,8 +457,9 @@ def synthesize(
     if staging.zoom != 1.0 or staging.distance != 1.0:
         cameras = moved_rig(cameras, zoom=staging.zoom, distance=staging.distance)
     poses, rate, bvh_path = motion_poses(model, motion, frames, start=start, stride=stride, fps=fps, seed=seed)
+    written = _written(out, cameras, codec, write_init=write_init, body=staging.body != "model")
     keep_inputs(
-        _written(out, cameras, codec, write_init, staging.body != "model"),
+        written,
         [
             (calib_path, "the calibration being rendered from (--calib)"),
             (model_path, "the body model being rendered (--model)"),
@@ -571,7 +572,7 @@ def synthesize(
     ).encode()
 
     atomic_write(out / "README.md", lambda file: file.write(text))
-    _remove_stale(out, _written(out, cameras, codec, write_init, staging.body != "model"))
+    _remove_stale(out, written)
     files = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file() and not p.name.startswith(".")}
     in_view = visibility(body, shown, cameras).mean(axis=0)
     return {
@@ -587,7 +588,7 @@ def synthesize(
     }
 
 
-def _written(out: Path, cameras: list[Camera], codec: str, write_init: bool, body: bool) -> list[Path]:
+def _written(out: Path, cameras: list[Camera], codec: str, *, write_init: bool, body: bool) -> list[Path]:
     """The files that :func:`synthesize` writes in ``out`` (``body``: the rendered body's model too)."""
     made = ["calibration.toml", "model.toml", *(["body.toml"] if body else [])]
     made.append("init.toml" if write_init else "truth_init.toml")
