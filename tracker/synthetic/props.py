@@ -57,13 +57,15 @@ def cast_boxes(boxes: list[Box], camera: Camera, xy: np.ndarray) -> tuple[np.nda
             high = (box.half - origin) / direction
         near_each = np.where(np.isnan(low), -np.inf, np.minimum(low, high))  # a ray parallel to a slab
         far_each = np.where(np.isnan(high), np.inf, np.maximum(low, high))
-        near, far = near_each.max(axis=1), far_each.min(axis=1)
+        near = np.maximum(np.maximum(near_each[:, 0], near_each[:, 1]), near_each[:, 2])  # by columns: a reduction
+        far = np.minimum(np.minimum(far_each[:, 0], far_each[:, 1]), far_each[:, 2])  # along 3 is slow in numpy
         hit = (near <= far) & (near > 0.0) & (near < depth)
-        axis = near_each.argmax(axis=1)
-        face = np.zeros((len(xy), 3))
-        face[np.arange(len(xy)), axis] = -np.sign(direction[np.arange(len(xy)), axis])  # against the ray
-        depth[hit], index[hit] = near[hit], k
-        normal[hit] = face[hit] @ camera_from_box[0:3, 0:3].T
+        rows = np.flatnonzero(hit)
+        axis = np.where(near_each[rows, 1] > near_each[rows, 0], 1, 0)  # the first axis attaining the max
+        axis = np.where(near_each[rows, 2] > near_each[rows, axis], 2, axis)
+        towards = -np.sign(direction[rows, axis])  # the face's normal in the box frame is +-1 along that axis
+        depth[rows], index[rows] = near[rows], k
+        normal[rows] = towards[:, None] * camera_from_box[0:3, 0:3].T[axis]
     return depth, index, normal
 
 
