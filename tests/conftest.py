@@ -1,14 +1,16 @@
 """Shared fixtures: small rendered recordings with ground truth (made once per test session), a small poses file,
 the check that bad input gets a one-line error, the hashes that show a command left a user's files alone, perfect
-keypoint detections, and a progress bar that stops the run with a signal (:func:`stopping_after`); where the tests'
-real data is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
+keypoint detections, a progress bar that stops the run with a signal (:func:`stopping_after`) and a terminal that
+closes (:func:`closing_terminal`); where the tests' real data is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
 
 import contextlib
+import errno
 import hashlib
 import io
 import os
 import shutil
 import signal
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,10 +47,10 @@ def file_hashes(*paths: Path) -> dict[Path, str]:
     return {file: hashlib.sha256(file.read_bytes()).hexdigest() for file in files if file.is_file()}
 
 
-def stopping_after(frame: int, number: int, desc: str | None = None):
+def stopping_after(frame: int, number: int, desc: str | None = None, *, then=None):
     """A progress bar (``tracker.commands.options.bar``) that sends this process the signal ``number`` once the run has
     done frame ``frame`` of the loop whose bar is ``desc`` (the tracked frames' by default), as a service manager
-    would."""
+    would; ``then()``, if given, is called just before (:func:`closing_terminal`'s close, with SIGHUP)."""
     from tracker.commands import options
 
     bar = options.bar
@@ -63,11 +65,29 @@ def stopping_after(frame: int, number: int, desc: str | None = None):
                 yield item  # the loop does the frame, then asks for the next
                 if item[0] == frame:
                     assert signal.getsignal(number) not in (signal.SIG_DFL, signal.SIG_IGN), "it would end the tests"
+                    if then is not None:
+                        then()
                     os.kill(os.getpid(), number)
 
         return items
 
     return stopping
+
+
+def closing_terminal(monkeypatch):
+    """Standard output and error on a terminal (stand-ins for them), and the function that closes it: from then on
+    writing to either fails with EIO, as it does once a terminal has hung up (SIGHUP)."""
+    closed = []
+
+    class Terminal(io.StringIO):
+        def write(self, text: str) -> int:
+            if closed:
+                raise OSError(errno.EIO, os.strerror(errno.EIO))
+            return super().write(text)
+
+    monkeypatch.setattr(sys, "stdout", Terminal())
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    return lambda: closed.append(True)
 
 
 @pytest.fixture

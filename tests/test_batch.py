@@ -1,7 +1,8 @@
 """``tracker batch`` on a local two-worker Ray: the same results as ``tracker track`` alone, a bad folder reported
 while the others finish, a killed worker's recording tried again, an interrupted batch resumed without redoing
-anything (and, with Ray stood in for, a stop that keeps every row already in and no temporary file); and one-line
-errors without Ray, for other options, and for a folder that is not the batch's."""
+anything (and, with Ray stood in for, a stop that keeps every row already in, the detections of the recordings it
+tracks again and no temporary file, also when the terminal closed); and one-line errors without Ray, for other
+options, and for a folder that is not the batch's."""
 
 import csv
 import json
@@ -15,7 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import HUMAN
+from conftest import HUMAN, closing_terminal
 
 from tracker.camera import look_at_camera, save_calibration
 from tracker.cli import main
@@ -231,17 +232,32 @@ def test_an_interrupted_batch_resumes_without_redoing_what_was_finished(recordin
 
 class _Ray:
     """Ray as ``tracker batch`` uses it, without Ray: each task of a recording named in ``finishing`` returns its row,
-    the others never finish (a task writing poses.npz leaves its temporary file, as Ray ending it mid-write would);
-    ``ray.wait`` hands out the replies one by one, and the ``stop_at``-th call sends this process the signal ``stop``
-    instead.  ``init`` sets a SIGTERM handler that exits at once, as ray.init does."""
+    but the first try of one in ``crashing``, which crashes, and the others never finish; a task that does not finish
+    leaves in its folder what a stopped ``tracker track`` leaves (its log, the detections it saved, and the temporary
+    file of a poses.npz it was writing, as Ray ending it mid-write would).  ``ray.wait`` hands out the replies one by
+    one.  The ``stop_at``-th call of ``stop_in`` (its ``wait`` or its
+    ``get``) sends this process the signal ``stop`` first, and ``hung_up``, if given, is called then (the terminal
+    closed).  ``init`` sets a SIGTERM handler that exits at once, as ray.init does.  ``found`` holds what each task
+    found in its folder when it was submitted."""
 
     class exceptions:
         RayError = RuntimeError
 
-    def __init__(self, finishing: set[str], *, stop: int = 0, stop_at: int = 0):
-        self.finishing, self.stop, self.stop_at = finishing, stop, stop_at
+    def __init__(
+        self,
+        finishing: set[str],
+        *,
+        crashing: frozenset[str] = frozenset(),
+        stop: int = 0,
+        stop_in: str = "wait",
+        stop_at: int = 0,
+        hung_up=None,
+    ):
+        self.finishing, self.crashing = finishing, crashing
+        self.stop, self.stop_in, self.stop_at, self.hung_up = stop, stop_in, stop_at, hung_up
         self.submitted: list[str] = []
-        self.waits = 0
+        self.found: dict[str, list[str]] = {}
+        self.calls = {"wait": 0, "get": 0}
 
     def init(self, **options) -> None:
         signal.signal(signal.SIGTERM, lambda number, frame: sys.exit(number))
@@ -252,39 +268,57 @@ class _Ray:
     def remote(self, **options):
         return lambda function: SimpleNamespace(remote=self.submit)
 
+    def _called(self, name: str) -> None:
+        self.calls[name] += 1
+        if name == self.stop_in and self.calls[name] == self.stop_at:
+            if self.hung_up is not None:
+                self.hung_up()
+            os.kill(os.getpid(), self.stop)
+
     def get(self, ref):
         from tracker.io.batch_records import DONE, Row
 
+        self._called("get")
         recording, name = ref
+        if name in self.crashing and self.submitted.count(name) == 1:
+            raise RuntimeError("the worker died")
         return Row(recording, name, DONE, frames=8, fps=30.0, residual_px=0.5, lost=0, mpjpe_mm=9.0, seconds=1.0)
 
     def wait(self, refs, num_returns=1, timeout=None):
         ready = [ref for ref in refs if ref[1] in self.finishing]
         if timeout == 0:  # the replies in already
             return ready, [ref for ref in refs if ref not in ready]
-        self.waits += 1
-        if self.waits == self.stop_at:
-            os.kill(os.getpid(), self.stop)
+        self._called("wait")
         return ready[:1], [ref for ref in refs if ref not in ready[:1]]
 
     def submit(self, recording: str, name: str, out: str, *, chosen: dict):
         """``task.remote(...)``: the task of one recording, which writes in its folder ``out``."""
         self.submitted.append(name)
-        Path(out).mkdir(parents=True, exist_ok=True)
-        if name not in self.finishing:
-            (Path(out) / f".poses.{os.getpid()}.0123abcd.tmp.npz").touch()
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+        first = name not in self.found
+        self.found[name] = sorted(path.name for path in folder.iterdir())
+        if name not in self.finishing or (name in self.crashing and first):
+            for file in ("track.log", "keypoints.npz", f".poses.{os.getpid()}.0123abcd.tmp.npz"):
+                (folder / file).write_text(name)
         return (recording, name)
+
+
+def _three(tmp_path: Path) -> tuple[list[str], Path]:
+    """``tracker batch`` of three recording folders r1, r2 and r3 on two workers, and its output folder."""
+    for name in ("r1", "r2", "r3"):
+        (tmp_path / name).mkdir()
+    out = tmp_path / "out"
+    return ["batch", *(str(tmp_path / name) for name in ("r1", "r2", "r3")), "--out", str(out), "--workers", "2"], out
 
 
 @pytest.mark.parametrize(("stop", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_stopped_batch_keeps_what_finished_and_no_temporary_file(stop, code, tmp_path, monkeypatch, capsys):
     """Three recordings on two workers: r1 finishes, r3 is submitted, and the stop comes while the batch waits, r2's
     row already in: r1 and r2 are done in the manifest, r3's temporary file is gone, the exit code is the signal's and
-    the handler the process had is back; run again, the batch tracks r3 alone."""
-    for name in ("r1", "r2", "r3"):
-        (tmp_path / name).mkdir()
-    out = tmp_path / "out"
-    command = ["batch", *(str(tmp_path / name) for name in ("r1", "r2", "r3")), "--out", str(out), "--workers", "2"]
+    the handler the process had is back; run again, the batch tracks r3 alone, in its folder emptied but for the
+    detections the stopped task saved."""
+    command, out = _three(tmp_path)
     ray = _Ray({"r1", "r2"}, stop=stop, stop_at=2)
     monkeypatch.setitem(sys.modules, "ray", ray)
     before = signal.getsignal(signal.SIGTERM)
@@ -294,12 +328,47 @@ def test_a_stopped_batch_keeps_what_finished_and_no_temporary_file(stop, code, t
         "tracker: interrupted: 2 of 3 recordings finished; run the same command again to resume"
     )
     assert _states(out) == {"r1": "done", "r2": "done", "r3": "started"} and ray.submitted == ["r1", "r2", "r3"]
-    assert [path.name for path in (out / "r3").iterdir()] == []
+    assert sorted(path.name for path in (out / "r3").iterdir()) == ["keypoints.npz", "track.log"]
 
     again = _Ray({"r1", "r2", "r3"})
     monkeypatch.setitem(sys.modules, "ray", again)
     assert main([*command, "--quiet"]) == 0
-    assert again.submitted == ["r3"]
+    assert again.submitted == ["r3"] and again.found["r3"] == ["keypoints.npz"]
+    assert (out / "r3" / "keypoints.npz").read_text() == "r3"
+
+
+def test_a_crashed_try_is_tried_again_with_the_detections_it_saved(tmp_path, monkeypatch, capsys):
+    """r1's first try crashes (its worker died) after saving detections: the second try starts in r1's folder emptied
+    but for them, and finishes."""
+    command, out = _three(tmp_path)
+    ray = _Ray({"r1", "r2", "r3"}, crashing=frozenset({"r1"}))
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    assert main([*command, "--quiet"]) == 0
+    assert "r1: try 1 crashed (the worker died); trying again" in capsys.readouterr().err
+    assert ray.submitted == ["r1", "r2", "r1", "r3"] and ray.found["r1"] == ["keypoints.npz"]
+    assert _summary(out)["r1"]["attempts"] == "2"
+
+
+def test_a_stop_while_a_reply_is_taken_keeps_that_reply(tmp_path, monkeypatch):
+    """SIGTERM while the batch takes r1's row from Ray (``ray.get``): r1 is done in the manifest all the same, as is
+    r2, whose reply had come too."""
+    command, out = _three(tmp_path)
+    monkeypatch.setitem(sys.modules, "ray", _Ray({"r1", "r2"}, stop=signal.SIGTERM, stop_in="get", stop_at=1))
+    assert main([*command, "--quiet"]) == 143
+    assert _states(out) == {"r1": "done", "r2": "done", "r3": "started"}
+
+
+def test_a_batch_whose_terminal_closed_keeps_its_rows_and_its_summary(tmp_path, monkeypatch):
+    """SIGHUP from a terminal that closed while the batch waits, r2's reply in, writing to the terminal failing from
+    then on: r1 and r2 are done in the manifest and in summary.csv, r3's temporary file is gone, and the batch exits 129
+    without an error of its own."""
+    command, out = _three(tmp_path)
+    ray = _Ray({"r1", "r2"}, stop=signal.SIGHUP, stop_at=2, hung_up=closing_terminal(monkeypatch))
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    assert main([*command, "--quiet"]) == 129
+    assert _states(out) == {"r1": "done", "r2": "done", "r3": "started"}
+    assert sorted(_summary(out)) == ["r1", "r2"]
+    assert sorted(path.name for path in (out / "r3").iterdir()) == ["keypoints.npz", "track.log"]
 
 
 def test_without_ray_it_says_how_to_install_it(recordings, tmp_path, monkeypatch, capsys):

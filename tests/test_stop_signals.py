@@ -1,6 +1,7 @@
 """SIGTERM and SIGHUP stop a run as Ctrl-C does (its handlers in force only while it runs, a signal ignored left
-ignored), a stop inside a numba kernel is told from an error, and the keypoint detector's worker and multiprocessing's
-resource tracker leave a stop to the run: no warning when every process of the run gets it."""
+ignored), a stop inside a numba kernel is told from an error, the keypoint detector's worker and multiprocessing's
+resource tracker leave a stop to the run (no warning when every process of the run gets it), and a run whose terminal
+closed ends without an error, its work saved."""
 
 import os
 import signal
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import closing_terminal, stopping_after
 
 from tracker import stop_signals
 from tracker.landmarks.store import load_keypoints
@@ -91,3 +93,16 @@ def test_the_detector_worker_leaves_a_stop_to_the_run_which_keeps_its_detections
     complaints = ("leaked", "resource_tracker", "Traceback", "Error", "warning")  # not a library's own log lines
     assert not [line for line in ended.stderr.splitlines() if any(word in line for word in complaints)], ended.stderr
     assert np.isin([0, 1], load_keypoints(cache).frame).all()
+
+
+def test_a_run_whose_terminal_closed_keeps_its_frames_and_exits_129(tiny_recording, tmp_path, monkeypatch):
+    """SIGHUP from a terminal that closed after frame 2, writing to it failing from then on: the frames done are
+    saved, and the run exits 129 without an error of its own (its last lines go nowhere)."""
+    from tracker.cli import main
+    from tracker.io.poses import load_poses
+
+    close = closing_terminal(monkeypatch)
+    monkeypatch.setattr("tracker.commands.options.bar", stopping_after(2, signal.SIGHUP, then=close))
+    out = tmp_path / "out"
+    assert main(["track", str(tiny_recording), "--out", str(out), "--keypoints", "off", "--quiet"]) == 129
+    assert list(load_poses(out / "poses.npz")["frame"]) == [0, 1, 2]

@@ -2,7 +2,8 @@
 
 Bad input raises :class:`TrackerInputError` and exits with code 2 and one line;
 an interrupted run (Ctrl-C, SIGTERM or SIGHUP: :mod:`tracker.stop_signals`) keeps the work already done and exits
-with 128 plus the signal's number (130, 143, 129); output whose reader
+with 128 plus the signal's number (130, 143, 129), quietly when the terminal it wrote to has closed (SIGHUP, after
+which writing there fails); output whose reader
 stopped early (``| head``) ends the command quietly with 141, as a shell reports a broken pipe.
 Each subcommand's options, help and body are in its module under :mod:`tracker.commands`; every help opens with
 what the command does and an example.
@@ -12,8 +13,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import io
 import os
+import signal
 import sys
 import warnings
 from typing import NoReturn
@@ -156,10 +159,24 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     warnings.showwarning = _show_warning
     with stop_signals.like_ctrl_c() as received:  # SIGTERM and SIGHUP stop the run as Ctrl-C does
-        return received.exit_code(_run(args))
+        return received.exit_code(_run(args, received))
 
 
-def _run(args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace, received: stop_signals.Received) -> int:
+    """The command's exit code (:func:`_reported`); that of an interruption (130, reported as SIGHUP's 129) for a
+    run stopped by SIGHUP (``received``) whose output then failed with EIO, as writing to a terminal that has closed
+    does: its output goes nowhere from then on, what the command had still to say is lost, and no traceback ends a
+    run whose work is saved."""
+    try:
+        return _reported(args)
+    except OSError as error:
+        if error.errno != errno.EIO or received.number != signal.SIGHUP:
+            raise
+        _to_nowhere(sys.stdout, sys.stderr)
+        return stop_signals.INTERRUPTED
+
+
+def _reported(args: argparse.Namespace) -> int:
     """The command's exit code: its own, 2 after bad input, 130 after an interruption that reached here."""
     try:
         return args.run(args)
@@ -172,9 +189,20 @@ def _run(args: argparse.Namespace) -> int:
         print("tracker: interrupted", file=sys.stderr)
         return stop_signals.INTERRUPTED
     except BrokenPipeError:  # whatever read the output stopped early (tracker ... | head): no traceback
-        with contextlib.suppress(OSError, ValueError, io.UnsupportedOperation):
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor one when Python flushes it at exit
+        _to_nowhere(sys.stdout)  # nor one when Python flushes it at exit
         return 141
+
+
+def _to_nowhere(*streams) -> None:
+    """Point the file descriptors of ``streams`` (standard output or error) at /dev/null, so that what they still hold
+    is flushed there at exit without an error; a stream without one (captured) is left as it is."""
+    nowhere = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for stream in streams:
+            with contextlib.suppress(OSError, ValueError, io.UnsupportedOperation):
+                os.dup2(nowhere, stream.fileno())
+    finally:
+        os.close(nowhere)
 
 
 if __name__ == "__main__":

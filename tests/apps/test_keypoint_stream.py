@@ -4,8 +4,12 @@ reused, and a cache of another recording is refused; `tracker track --keypoints`
 from __future__ import annotations
 
 import dataclasses
+import os
+import queue
 import shutil
+import signal
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -286,3 +290,87 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
     with KeypointStream(recording, 0, 5, 4, cache) as stream:
         stream.get(0)
         assert stream.person(0) is None
+
+
+def _worker_ahead(monkeypatch) -> None:
+    """The detector's worker stood in for, without a process: started, it has already put every frame it is to detect
+    on its queue (nobody found in any), ahead of the tracker, then its end."""
+    from tracker.apps.keypoint_stream import schedule
+    from tracker.landmarks.store import Keypoints
+
+    def process(target, args, name, daemon):
+        recording, start, stop, step, results = args[:5]
+        count = len(recording.cameras)
+
+        def start_worker() -> None:
+            for frame in schedule(start, stop, step):
+                nobody = Keypoints(
+                    np.array([frame]),
+                    tuple(camera.name for camera in recording.cameras),
+                    np.full((1, count, 33, 2), np.nan),
+                    np.zeros((1, count, 33)),
+                    np.full((1, count, 33, 3), np.nan),
+                    recording=fingerprint(recording),
+                )
+                results.put((nobody, nobody))
+            results.put(None)
+
+        return SimpleNamespace(start=start_worker, kill=lambda: None, join=lambda: None, is_alive=lambda: True)
+
+    context = SimpleNamespace(Queue=queue.Queue, Process=process)
+    monkeypatch.setattr(stream_module, "multiprocessing", SimpleNamespace(get_context=lambda method: context))
+    monkeypatch.setattr(stream_module, "require_detector", lambda: None)
+
+
+def test_closing_keeps_what_the_worker_detected_ahead_of_the_tracker(tmp_path, monkeypatch):
+    """A run stopped (Ctrl-C, SIGTERM, SIGHUP) once the tracker has taken frame 0, the worker having detected frames 4
+    and 8 as well: the stream's close adds all three to the cache."""
+    _worker_ahead(monkeypatch)
+    cache = tmp_path / "keypoints.npz"
+    with KeypointStream(open_recording(DEMO), 0, 9, 4, cache) as stream:
+        assert stream.get(0) is not None
+    assert list(load_keypoints(cache).frame) == [0, 4, 8]
+
+
+def test_an_overlay_that_cannot_be_written_leaves_the_keypoints_saved(tiny_recording, tmp_path, monkeypatch, capsys):
+    """The overlay video's close fails (a full disk): the one-line error, and the detections are saved all the same."""
+    from tracker.errors import TrackerInputError
+    from tracker.viewer.overlay import OverlayVideo
+
+    _worker_ahead(monkeypatch)
+    video = tmp_path / "overlay.avi"
+    close = OverlayVideo.close
+
+    def full(self) -> None:
+        close(self)
+        raise TrackerInputError(f"{video}: cannot write (No space left on device); free disk space")
+
+    monkeypatch.setattr(OverlayVideo, "close", full)
+    out = tmp_path / "out"
+    command = ["track", str(tiny_recording), "--frames", "3", "--out", str(out), "--overlay", str(video), "--quiet"]
+    assert main(command) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert list(load_keypoints(out / "keypoints.npz").frame) == [0, 2]
+
+
+def test_a_stop_once_tracked_back_keeps_the_frames_tracked_back(tiny_recording, tmp_path, monkeypatch, capsys):
+    """The first pose placed at frame 2 (its pose the recording's init.toml), frames 1 and 0 tracked back from it;
+    SIGTERM while the landmarks of frame 2 are asked for to judge the settled pose, after the backward run: exit 143,
+    and the frames tracked back are in poses.npz."""
+    import tracker.apps.track as app
+
+    first_pose = app._first_pose
+    monkeypatch.setattr(app, "_first_pose", lambda *args: (first_pose(*args)[0], 2, 0))
+    _worker_ahead(monkeypatch)
+    get = KeypointStream.get
+
+    def stopped(self, frame, *, settle=False):
+        if frame == 2 and not settle:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return get(self, frame, settle=settle)
+
+    monkeypatch.setattr(KeypointStream, "get", stopped)
+    out = tmp_path / "out"
+    assert main(["track", str(tiny_recording), "--frames", "4", "--out", str(out), "--quiet"]) == 143
+    assert "tracker: interrupted: the frames done so far are saved" in capsys.readouterr().err
+    assert list(np.load(out / "poses.npz")["frame"]) == [0, 1]

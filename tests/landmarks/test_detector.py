@@ -169,8 +169,9 @@ def test_command_writes_then_reuses_the_cache(tmp_path, capsys, monkeypatch):
 
 def test_a_stopped_detection_keeps_its_frames_and_goes_on_from_them(tmp_path, capsys, monkeypatch):
     """SIGTERM after frame 2 of 6: frames 0-2 are in the cache, with exit 143 and one line; run again, the detector
-    starts at frame 2, the last one saved (to follow the person on from it), and detects frames 3-5, the cache keeping
-    frames 0 and 1 as they were."""
+    starts at frame 2, the last one saved (to follow the person on from it), and adds frames 3-5, saying the 3 others
+    were there already; the cache keeps frames 0-2 as they were, frame 2's row too (moved a pixel in the file to tell
+    it from the detector's new reading of it)."""
     out = tmp_path / "out"
     command = ["keypoints", str(DEMO), "--frames", "6", "--out", str(out), "--quiet"]
     monkeypatch.setattr("tracker.commands.options.bar", stopping_after(2, signal.SIGTERM, "detecting"))
@@ -179,15 +180,17 @@ def test_a_stopped_detection_keeps_its_frames_and_goes_on_from_them(tmp_path, ca
     assert line.startswith("tracker: interrupted: the frames detected so far are saved in") and "again" in line
     first = load_keypoints(out / "keypoints.npz")
     assert list(first.frame) == [0, 1, 2]
+    first.pixels[2] += 1.0
+    save_keypoints(out / "keypoints.npz", first)
 
     detected: list[int] = []
     monkeypatch.undo()
     monkeypatch.setattr("tracker.commands.options.bar", _counting(detected))
     assert main(command) == 0
-    assert detected == [2, 3, 4, 5] and "2 of them there already" in capsys.readouterr().out
+    assert detected == [2, 3, 4, 5] and "3 of them there already" in capsys.readouterr().out
     done = load_keypoints(out / "keypoints.npz")
     assert list(done.frame) == list(range(6))
-    np.testing.assert_array_equal(done.pixels[:2], first.pixels[:2])
+    np.testing.assert_array_equal(done.pixels[:3], first.pixels)
 
 
 def _counting(seen: list[int]):

@@ -1,8 +1,11 @@
-"""The hard suite: its definition covers every hardship, and make / run / score work end to end."""
+"""The hard suite: its definition covers every hardship, make / run / score work end to end, and a stopped run lets
+the render being tracked save its frames."""
 
 from __future__ import annotations
 
 import json
+import signal
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +14,7 @@ from conftest import SHARED_DATA, needs_shared
 
 from tracker.camera import load_calibration
 from tracker.cli import main
+from tracker.commands import suite as suite_command
 from tracker.io.poses import PosesWriter, load_poses
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
 from tracker.landmarks.store import Keypoints, save_keypoints
@@ -129,6 +133,45 @@ def test_run_tracks_with_the_options_given(tmp_path, capsys):
     row = json.loads(capsys.readouterr().out)["renders"][0]
     assert row["frames"] == 2 and row["lost_frames"] == 0 and row["mpjpe_mm"] < 50.0  # edges from the true start
     assert len(load_poses(results / SMALL / "poses.npz")["frame"]) == 2
+
+
+STOPPED_TRACK = """
+import os, signal, sys
+from pathlib import Path
+
+number, out = int(sys.argv[1]), Path(sys.argv[sys.argv.index("--out") + 1])
+stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+for stop in stops:
+    signal.signal(stop, signal.SIG_DFL)
+signal.pthread_sigmask(signal.SIG_BLOCK, stops)
+os.kill(os.getppid(), number)  # the suite is stopped while this tracks
+got = signal.sigtimedwait(stops, 60)
+if got is None:
+    sys.exit("the stop was not passed on")
+(out / "poses.npz").write_text(signal.Signals(got.si_signo).name)
+print(f"wrote {out / 'poses.npz'} (3 frames)")
+print("tracker: interrupted: the frames done so far are saved", file=sys.stderr)
+sys.exit(128 + got.si_signo)
+"""
+
+
+@pytest.mark.parametrize("number", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_stopped_run_passes_the_stop_on_and_waits_for_the_render_tracked(number, tmp_path, monkeypatch, capsys):
+    """Ctrl-C, SIGTERM or SIGHUP while ``tracker track`` (stood in for) tracks a render: the child gets the same
+    signal (SIGINT for Ctrl-C) and saves its frames, its log is written, and the suite stops with the signal's code."""
+    out, results = tmp_path / "suite", tmp_path / "results"
+    (out / SMALL).mkdir(parents=True)
+    np.savez(out / SMALL / "truth.npz", joint_names=np.array(["pelvis"]), joints=np.zeros((1, 1, 3)))
+    monkeypatch.setattr(suite_command, "TRACK", (sys.executable, "-c", STOPPED_TRACK, str(int(number))))
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C raises KeyboardInterrupt
+    try:
+        assert main(["suite", "run", "--quiet", str(out), str(results)]) == 128 + number
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    assert capsys.readouterr().err == "tracker: interrupted\n"
+    assert (results / SMALL / "poses.npz").read_text() == signal.Signals(number).name
+    log = (results / SMALL / "track.log").read_text()
+    assert "(3 frames)" in log and "tracker: interrupted: the frames done so far are saved" in log
 
 
 @pytest.mark.parametrize(

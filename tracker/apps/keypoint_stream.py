@@ -316,17 +316,38 @@ class KeypointStream:
         elif isinstance(item, BaseException):
             self.finished = True
             raise item
-        elif int(item[0].frame[0]) not in self.checked:
-            raw, checked = item
+        else:
+            self._keep(item)
+
+    def _keep(self, item: tuple[Keypoints, Keypoints]) -> None:
+        """Keep a frame's landmarks from the worker, (raw, checked), unless the cache held that frame."""
+        raw, checked = item
+        if int(raw.frame[0]) not in self.checked:
             self.raw.append(raw)
             self.checked[int(raw.frame[0])] = checked
             self.detected[int(raw.frame[0])] = raw
 
+    def _drain(self) -> None:
+        """Keep the frames the worker has put on the queue ahead of the tracker, without waiting for more (its end
+        and its error, the tracker's to raise, are left)."""
+        while True:
+            try:
+                item = self.results.get_nowait()
+            except queue.Empty:
+                return
+            if item is None or isinstance(item, BaseException):
+                return
+            self._keep(item)
+
     def close(self) -> None:
-        """Stop the worker and add what it detected to the cache."""
+        """Stop the worker and add what it detected to the cache: also the frames it detected ahead of the tracker
+        (a run stopped by Ctrl-C, SIGTERM or SIGHUP keeps them)."""
         if self.worker is not None:
-            stop_signals.end(self.worker)
-            self.worker = None
+            try:
+                self._drain()
+            finally:
+                stop_signals.end(self.worker)
+                self.worker = None
         if self.fed is not None:  # frames it will not take must not hold this process up, nor their memory
             self.fed.cancel_join_thread()
             self.fed.close()

@@ -6,6 +6,7 @@ prints the :class:`Outcome` with :func:`print_summary`.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import sys
@@ -183,9 +184,10 @@ def track(
         None if background is not None else reductions(settings, rec.cameras),
     )
     video = None
-    try:  # the stream is closed however the run ends, keeping what its worker detected
+    with contextlib.ExitStack() as closing:  # each closed however the run ends, the stream keeping what was detected
         recovery = None
         if stream is not None:
+            closing.callback(stream.close)
             from tracker.seeding.recovery import Recovery
 
             recovery = Recovery(model, rec.cameras)
@@ -194,10 +196,13 @@ def track(
         tracker.warm_up()
         truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
         live = _live_view(view, rec, tracker, truth) if view is not None else None
+        if live is not None:
+            closing.callback(live.close)
         if overlay:
             from tracker.viewer.overlay import OverlayVideo
 
             video = OverlayVideo(Path(overlay), rec.cameras, rec.fps, model.size, settings.solve.robust_c)
+            closing.callback(video.close)
         # the overlay and the viewer draw on the frames as they are, not on what the edge search reads (smoothed,
         # reduced at HD, or colour differences)
         shows = video is not None or live is not None
@@ -250,13 +255,6 @@ def track(
             each=counted_and_shown,
             before=before,
         )
-    finally:
-        if video is not None:
-            video.close()
-        if stream is not None:
-            stream.close()
-    if live is not None:
-        live.close()
     done = run.frames + (0 if before is None else len(before["frame"]))
     poses = out / "poses.npz"
     results = load_poses(poses) if not run.interrupted and (truth is not None or live is not None) else None
@@ -354,7 +352,8 @@ def _tracked_back(
     given the capture times ``times(index)`` (a live recording's) negated, so that its steps are forward in that
     time, and the rows get them back; so is each view's lateness ``late(index)`` there (a camera late is early in
     that time).  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on
-    keeps them."""
+    keeps them; so does a stop (Ctrl-C, SIGTERM, SIGHUP) between the backward run and that write, while the
+    detector's landmarks of the first pose's frame are waited for or the detector is closed."""
     import tempfile
 
     import numpy as np
@@ -394,31 +393,38 @@ def _tracked_back(
         )
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
-    recovery = None
+    recovery, judged = None, None
     with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
+        path = Path(folder) / "poses.npz"
         stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
         try:
-            if stream is not None:
-                from tracker.seeding.recovery import Recovery
+            try:
+                if stream is not None:
+                    from tracker.seeding.recovery import Recovery
 
-                recovery = Recovery(model, rec.cameras)
-            tracker = Tracker(model, rec.cameras, init, settings)
-            tracker.warm_up()
-            prepare = _preparer(tracker, background, keep=False)
-            chroma = tracker.bin_colours if settings.region.on and background is None else False
-            run = tracked(settling(), Path(folder) / "settled.npz", settled - begin, 1)
-            if not run.interrupted:
-                tracker.restart(tracker.poses)  # the motion so far points the other way
-                run = tracked(backwards(), Path(folder) / "poses.npz", settled - 1 - first, -1)
-            judged = None if stream is None or run.interrupted else stream.get(begin)
-        finally:
-            if stream is not None:
-                stream.close()
-        path = Path(folder) / "poses.npz"
+                    recovery = Recovery(model, rec.cameras)
+                tracker = Tracker(model, rec.cameras, init, settings)
+                tracker.warm_up()
+                prepare = _preparer(tracker, background, keep=False)
+                chroma = tracker.bin_colours if settings.region.on and background is None else False
+                run = tracked(settling(), Path(folder) / "settled.npz", settled - begin, 1)
+                if not run.interrupted:
+                    tracker.restart(tracker.poses)  # the motion so far points the other way
+                    run = tracked(backwards(), path, settled - 1 - first, -1)
+                interrupted = run.interrupted
+                if stream is not None and not interrupted:
+                    judged = stream.get(begin)
+            finally:
+                if stream is not None:
+                    stream.close()
+        except KeyboardInterrupt:  # a stop once tracked back (waiting for the detector, closing it): the frames kept
+            if not path.is_file():
+                raise
+            interrupted = True
         found = load_poses(path) if path.is_file() else None
     declined = 0 if recovery is None else recovery.declined
     if found is None or not (found["frame"] < begin).any():
-        return TrackedBack(None, declined, run.interrupted)
+        return TrackedBack(None, declined, interrupted)
     at = np.flatnonzero(found["frame"] == begin)
     mended = found["poses"][at[0]] if len(at) else None
     if mended is not None and judged is not None:
@@ -428,7 +434,7 @@ def _tracked_back(
     rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}
     rows["time"] = -rows["time"]
     track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=times, before=rows)
-    return TrackedBack(rows, declined, run.interrupted, mended)
+    return TrackedBack(rows, declined, interrupted, mended)
 
 
 def _preparer(tracker, background, *, keep: bool):

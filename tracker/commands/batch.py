@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import fnmatch
 import glob
 import logging
 import os
@@ -207,15 +208,17 @@ def run(args: argparse.Namespace) -> int:
                 raise TrackerInputError(
                     f"{job.out}: already exists and is not from this batch; pick another --out or move it away"
                 )
-            shutil.rmtree(job.out)
+            _cleared(job.out)
     if len(todo) < len(everything):
         before = len(everything) - len(todo)
         print(f"resuming: {before} of {len(everything)} recordings finished before", file=sys.stderr)
     manifest.start({str(job.recording): job.name for job in todo})
-    stopped = _track_all(ray, args, todo, manifest) if todo else 0
-    rows = manifest.finished()
+    try:
+        stopped = _track_all(ray, args, todo, manifest) if todo else 0
+    finally:  # written before anything is printed: a terminal that hung up (SIGHUP) fails the printing
+        rows = manifest.finished()
+        write_summary(rows, out / "summary.csv")
     print(format_summary(rows))
-    write_summary(rows, out / "summary.csv")
     print(f"wrote {out / 'summary.csv'}")
     if stopped:
         done = sum(manifest.row(str(job.recording)) is not None for job in everything)
@@ -230,6 +233,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"{failed} of {len(rows)} recordings failed: their errors are in the summary", file=sys.stderr)
         return 1
     return 0
+
+
+def _cleared(folder: Path) -> None:
+    """Empty the results ``folder`` (if there is one) of a recording's unfinished try but for the keypoint detector's
+    files (keypoints*.npz): the frames it detected before it stopped are not detected again (a file names the
+    recording it holds, :func:`tracker.landmarks.detect_recording.cached`)."""
+    for path in folder.iterdir() if folder.is_dir() else ():
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        elif not fnmatch.fnmatch(path.name, "keypoints*.npz"):
+            path.unlink()
 
 
 def _ray():
@@ -284,17 +298,18 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> int:
     """Track ``todo`` on Ray, at most the workers' number at a time, each finished row written to ``manifest``
     as it comes; a crashed try tried again up to :data:`RETRIES` times.  The number of the stop signal that stopped
     it (:mod:`tracker.stop_signals`; 0 when none did): the tasks whose rows had come by then are written too, the
-    others end with Ray, and the temporary files their writes were cut off in are removed."""
+    others end with Ray, and the temporary files their writes were cut off in are removed.  A task stays pending
+    until its row is written, so that a stop in between writes it all the same."""
     from tracker.io.batch_records import FAILED, Row
 
-    # Ray's own processes start with SIGINT and SIGHUP held, so that a terminal's Ctrl-C or hang-up stops the batch
-    # alone, which then ends them; not SIGTERM, with which Ray's shutdown ends them (before SIGKILL a second later).
-    # ray.init sets a SIGTERM handler of its own, which would exit at once
-    with stop_signals.held((signal.SIGINT, signal.SIGHUP)), stop_signals.kept():
-        workers = _start(ray, args)
     stopped = 0
     pending: dict = {}  # task -> (job, its try)
     try:
+        # Ray's own processes start with SIGINT and SIGHUP held, so that a terminal's Ctrl-C or hang-up stops the
+        # batch alone, which then ends them; not SIGTERM, with which Ray's shutdown ends them (before SIGKILL a second
+        # later).  ray.init sets a SIGTERM handler of its own, which would exit at once
+        with stop_signals.held((signal.SIGINT, signal.SIGHUP)), stop_signals.kept():
+            workers = _start(ray, args)
         task = ray.remote(num_cpus=1, max_retries=0)(track_recording)
         chosen = manifest.options
         waiting = list(todo)
@@ -302,8 +317,13 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> int:
         def submit(job: Job, attempt: int) -> None:
             pending[task.remote(str(job.recording), job.name, str(job.out), chosen=chosen)] = (job, attempt)
 
-        def finish(row: Row) -> None:
+        def kept(ready, row: Row) -> Row:
+            """``row``, the reply of the task ``ready``, written to the manifest, the task no longer pending."""
             manifest.finish(row)
+            del pending[ready]
+            return row
+
+        def say(row: Row) -> None:
             progress.update(1)
             progress.write(_finished(row), sys.stdout)
             sys.stdout.flush()  # a line as each finishes, also through a pipe
@@ -314,32 +334,36 @@ def _track_all(ray, args: argparse.Namespace, todo: list[Job], manifest) -> int:
                 while waiting and len(pending) < workers:
                     submit(waiting.pop(0), 1)
                 [ready], _ = ray.wait(list(pending), num_returns=1)
-                job, attempt = pending.pop(ready)
+                job, attempt = pending[ready]
                 try:
                     row = dataclasses.replace(ray.get(ready), attempts=attempt)
                 except ray.exceptions.RayError as error:
                     if attempt <= RETRIES:
                         progress.write(f"{job.name}: try {attempt} crashed ({_line(error)}); trying again", sys.stderr)
-                        shutil.rmtree(job.out, ignore_errors=True)
+                        _cleared(job.out)
+                        del pending[ready]
                         submit(job, attempt + 1)
                         continue
                     row = Row(str(job.recording), job.name, FAILED, attempts=attempt, error=f"crashed: {_line(error)}")
-                finish(row)
+                say(kept(ready, row))
         except KeyboardInterrupt as stop:
             # ray.shutdown() below ends the job, and with it the tasks it owns: cancelling them first races their
-            # replies and can abort the driver (Ray 2.60: 'not pending'); the rows that came before the stop are kept
+            # replies and can abort the driver (Ray 2.60: 'not pending'); the rows that came before the stop are kept,
+            # every one before any is said
             stopped = getattr(stop, "number", signal.SIGINT)
             arrived = ray.wait(list(pending), num_returns=len(pending), timeout=0)[0] if pending else []
+            rows = []
             for ready in arrived:
-                job, attempt = pending.pop(ready)
                 with contextlib.suppress(ray.exceptions.RayError):  # a crash is tried again on resuming
-                    finish(dataclasses.replace(ray.get(ready), attempts=attempt))
+                    rows.append(kept(ready, dataclasses.replace(ray.get(ready), attempts=pending[ready][1])))
+            for row in rows:
+                say(row)
         finally:
             progress.close()
     finally:
         ray.shutdown()
-    for job, _ in pending.values():  # their tasks ended with Ray (locally, by the time it is shut down)
-        remove_temporaries(job.out)
+        for job, _ in pending.values():  # their tasks ended with Ray (locally, by the time it is shut down)
+            remove_temporaries(job.out)
     return stopped
 
 

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -20,6 +22,9 @@ ABOUT = (
     " detector's landmarks on them (landmarks)."
 )
 EXAMPLE = "tracker suite make out/suite"
+
+TRACK = (sys.executable, "-m", "tracker.cli", "track")
+"""The command that tracks each render, in a child process (:func:`_track`)."""
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
@@ -119,16 +124,39 @@ def _landmarks(args: argparse.Namespace) -> int:
 
 def _track(recording: Path, results: Path, extra: list[str]) -> None:
     """Run ``tracker track recording --out results --quiet extra`` ({rec} in ``extra`` -> ``recording``) in a
-    child process, its output kept in results/track.log; a failure is a one-line error naming the log."""
+    child process, its output kept in results/track.log; a failure is a one-line error naming the log.  A stop
+    (Ctrl-C, SIGTERM, SIGHUP) is passed on to the child (:func:`_finished`), which saves what it tracked; its log is
+    written, and then the stop goes on, stopping the suite."""
     from tracker.atomic import atomic_write
 
     results.mkdir(parents=True, exist_ok=True)
-    command = [sys.executable, "-m", "tracker.cli", "track", str(recording), "--out", str(results), "--quiet"]
+    command = [*TRACK, str(recording), "--out", str(results), "--quiet"]
     command += [word.replace("{rec}", str(recording)) for word in extra]
-    done = subprocess.run(command, capture_output=True, text=True)
+    texts = []
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        code, stop = _finished(subprocess.Popen(command, stdout=out, stderr=err, process_group=0))
+        for stream in (out, err):
+            stream.seek(0)
+            texts.append(stream.read().decode(errors="replace"))
+    said, errors = texts
     log = results / "track.log"
-    text = f"$ {' '.join(command)}\n{done.stdout}{done.stderr}".encode()
+    text = f"$ {' '.join(command)}\n{said}{errors}".encode()
     atomic_write(log, lambda file: file.write(text))
-    if done.returncode != 0:
-        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
-        raise TrackerInputError(f"{recording.name}: tracker track exited with {done.returncode} ({last}); see {log}")
+    if stop is not None:
+        raise stop
+    if code != 0:
+        last = (errors.strip().splitlines() or ["no message"])[-1]
+        raise TrackerInputError(f"{recording.name}: tracker track exited with {code} ({last}); see {log}")
+
+
+def _finished(child: subprocess.Popen) -> tuple[int, KeyboardInterrupt | None]:
+    """The exit code of the ``child`` process, once it has ended, and the stop that came meanwhile (None if none
+    did).  A stop is passed on to the child as its signal (SIGINT for Ctrl-C), once: the child runs in a process group
+    of its own, which a terminal's Ctrl-C or hang-up does not reach."""
+    stop = None
+    while True:
+        try:
+            return child.wait(), stop
+        except KeyboardInterrupt as error:
+            stop = error
+            child.send_signal(getattr(error, "number", signal.SIGINT))

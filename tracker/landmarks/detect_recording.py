@@ -6,11 +6,12 @@ keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, it
 pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A pick of
 the cameras (``--cameras cam1,cam2``) keeps its own, ``keypoints-cam1,cam2.npz``, beside every camera's.  A cache of
 another recording, or made by another detector, is an error rather than something to overwrite silently; one that
-lacks some of the wanted frames is completed and written back with every frame it held.  The detector then starts at
-the last of the leading wanted frames the cache holds (at the first when it holds none), so that it follows the person
-on from a frame it has seen (a landmarker in video mode follows its person from frame to frame), and the cache keeps
-the frames before it.  What was detected is written also when the run is interrupted (Ctrl-C, SIGTERM), so that a
-run stopped partway goes on from where it stopped.
+lacks some of the wanted frames is completed and written back with every frame it held, as it held them.  The
+detector then starts at the last of the leading wanted frames the cache holds (at the first when it holds none), so
+that it follows the person on from a frame it has seen (a landmarker in video mode follows its person from frame to
+frame); its new reading of that frame, or of any other the cache holds, replaces nothing.  What was detected is written
+also when the run is interrupted (Ctrl-C, SIGTERM, SIGHUP), so that a run stopped partway goes on from where it
+stopped.
 """
 
 from __future__ import annotations
@@ -102,10 +103,10 @@ def holding(keypoints: Keypoints | None, wanted: np.ndarray) -> Keypoints | None
 
 
 def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
-    """The frames of both, sorted; ``new``'s rows where both hold a frame."""
+    """The frames of both, sorted; ``old``'s rows where both hold a frame (what a cache holds is never replaced)."""
     if old is None:
         return new
-    both = stacked([new, old.rows(~np.isin(old.frame, new.frame))])
+    both = stacked([new.rows(~np.isin(new.frame, old.frame)), old])
     return both.rows(np.argsort(both.frame, kind="stable"))
 
 
@@ -187,10 +188,10 @@ def detect_recording(
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
 ) -> tuple[Keypoints, int]:
     """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and how many
-    of those frames the detector saw now: none when ``cache`` (the recording's keypoints.npz) holds them all;
+    of those frames were detected now: none when ``cache`` (the recording's keypoints.npz) holds them all;
     otherwise the ones it lacks are detected (module docstring) and, with ``cache``, written there beside the frames it
-    already held, also when the detection is interrupted.  ``progress(iterable, total=)`` wraps the frames detected
-    (e.g. a tqdm bar)."""
+    already held, which stay as they were, also when the detection is interrupted.  ``progress(iterable, total=)``
+    wraps the frames detected (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
     old = cached(Path(cache), recording) if cache is not None else None
     wanted = np.arange(start, stop, step)
@@ -205,9 +206,10 @@ def detect_recording(
     finally:
         if cache is not None and rows:
             save_keypoints(cache, merged(old, stacked(rows)))
-    if old is None or not kept:
-        return stacked(rows), len(rows)
-    return stacked([old.at_frames(wanted[:kept]), *rows]), len(rows)
+    new = stacked(rows)
+    every = merged(old, new)
+    added = len(new.frame) if old is None else int((~np.isin(new.frame, old.frame)).sum())
+    return every.rows(np.isin(every.frame, wanted)), added
 
 
 def _resumed_at(old: Keypoints | None, wanted: np.ndarray) -> int:
