@@ -6,10 +6,10 @@ keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, it
 pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A pick of
 the cameras (``--cameras cam1,cam2``) keeps its own, ``keypoints-cam1,cam2.npz``, beside every camera's.  A cache of
 another recording, or made by another detector, is an error rather than something to overwrite silently; one that
-lacks some of the wanted frames is completed and written back with every frame it held, as it held them.  The
-detector then starts at the last of the leading wanted frames the cache holds (at the first when it holds none), so
-that it follows the person on from a frame it has seen (a landmarker in video mode follows its person from frame to
-frame); its new reading of that frame, or of any other the cache holds, replaces nothing.  What was detected is written
+lacks some of the wanted frames is completed and written back with every frame it held.  The detector then starts at
+the last of the leading wanted frames the cache holds (at the first when it holds none), so that it follows the person
+on from a frame it has seen (a landmarker in video mode follows its person from frame to frame); its new reading of
+that frame replaces nothing, while the frames it detects after it are its own.  What was detected is written
 also when the run is interrupted (Ctrl-C, SIGTERM, SIGHUP), so that a run stopped partway goes on from where it
 stopped.
 """
@@ -103,10 +103,10 @@ def holding(keypoints: Keypoints | None, wanted: np.ndarray) -> Keypoints | None
 
 
 def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
-    """The frames of both, sorted; ``old``'s rows where both hold a frame (what a cache holds is never replaced)."""
+    """The frames of both, sorted; ``new``'s rows where both hold a frame."""
     if old is None:
         return new
-    both = stacked([new.rows(~np.isin(new.frame, old.frame)), old])
+    both = stacked([new, old.rows(~np.isin(old.frame, new.frame))])
     return both.rows(np.argsort(both.frame, kind="stable"))
 
 
@@ -189,9 +189,10 @@ def detect_recording(
 ) -> tuple[Keypoints, int]:
     """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and how many
     of those frames were detected now: none when ``cache`` (the recording's keypoints.npz) holds them all;
-    otherwise the ones it lacks are detected (module docstring) and, with ``cache``, written there beside the frames it
-    already held, which stay as they were, also when the detection is interrupted.  ``progress(iterable, total=)``
-    wraps the frames detected (e.g. a tqdm bar)."""
+    otherwise they are detected from the last of the leading frames it holds on (module docstring) and, with ``cache``,
+    written there beside the frames it held, also when the detection is interrupted: a frame detected again replaces
+    the file's row, but for the one re-read only to follow the person on from it, which keeps the file's.
+    ``progress(iterable, total=)`` wraps the frames detected (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
     old = cached(Path(cache), recording) if cache is not None else None
     wanted = np.arange(start, stop, step)
@@ -201,8 +202,9 @@ def detect_recording(
     rows: list[Keypoints] = []
     try:
         with closing(detections(recording, int(wanted[kept]), stop, step=step)) as found:
-            for _, row in progress(found, total=len(wanted) - kept):
-                rows.append(row)
+            for index, row in progress(found, total=len(wanted) - kept):
+                if not (kept and index == wanted[kept]):  # re-read to follow the person on: the file's row stays
+                    rows.append(row)
     finally:
         if cache is not None and rows:
             save_keypoints(cache, merged(old, stacked(rows)))
