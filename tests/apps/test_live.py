@@ -165,7 +165,7 @@ def test_ctrl_c_stops_after_the_frame_in_hand_with_every_output_agreeing(tmp_pat
         return Failing(source, 20, then=_thread.interrupt_main) if name == "cam0" else source
 
     summary = _live(DEMO, tmp_path, wrap=interrupt)
-    assert summary.interrupted == signal.SIGINT and 1 <= summary.frames < 160
+    assert summary.stopped_by == signal.SIGINT and 1 <= summary.frames < 160
     _consistent(summary.counts, summary.frames)
     live = load_poses(tmp_path / "out" / "poses.npz")
     assert len(live["frame"]) == summary.recorded == summary.frames
@@ -187,7 +187,7 @@ def test_sigterm_stops_after_the_frame_in_hand_as_ctrl_c_does(tiny_recording, tm
 
     before = signal.getsignal(signal.SIGTERM)
     summary = _live(tiny_recording, tmp_path, wrap=stopping)
-    assert summary.interrupted == signal.SIGTERM and signal.getsignal(signal.SIGTERM) is before
+    assert summary.stopped_by == signal.SIGTERM and signal.getsignal(signal.SIGTERM) is before
     _consistent(summary.counts, summary.frames)
     assert len(load_poses(tmp_path / "out" / "poses.npz")["frame"]) == summary.recorded == summary.frames
     assert open_recording(tmp_path / "rec").frame_count == summary.frames

@@ -180,7 +180,7 @@ class Summary:
     recorded: int
     counts: Counts
     seconds: float
-    interrupted: int
+    stopped_by: int
 
 
 class _StopRequest:

@@ -398,8 +398,9 @@ def _tracked_back(
         path = Path(folder) / "poses.npz"
         stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
         try:
-            try:
+            with contextlib.ExitStack() as closing:
                 if stream is not None:
+                    closing.callback(stream.close)
                     from tracker.seeding.recovery import Recovery
 
                     recovery = Recovery(model, rec.cameras)
@@ -414,9 +415,6 @@ def _tracked_back(
                 interrupted = run.interrupted
                 if stream is not None and not interrupted:
                     judged = stream.get(begin)
-            finally:
-                if stream is not None:
-                    stream.close()
         except KeyboardInterrupt:  # a stop once tracked back (waiting for the detector, closing it): the frames kept
             if not path.is_file():
                 raise

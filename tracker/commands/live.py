@@ -167,9 +167,9 @@ def run(args: argparse.Namespace) -> int:
             f"keypoints: {detector.used} detections fused; the detector took {detector.taken} of the "
             f"{detector.offered} frame sets offered"
         )
-    if summary.interrupted:
+    if summary.stopped_by:
         options.say_interrupted()
-        return stop_signals.exit_code(summary.interrupted)
+        return stop_signals.exit_code(summary.stopped_by)
     if not counts.live:
         raise TrackerInputError(
             f"every camera stopped delivering (see above); the {summary.frames} frames "
