@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import HUMAN, closing_terminal
+from conftest import HUMAN, closing_terminal, file_hashes
 
 from tracker.camera import look_at_camera, save_calibration
 from tracker.cli import main
@@ -321,6 +321,8 @@ def test_a_stopped_batch_keeps_what_finished_and_no_temporary_file(stop, code, t
     command, out = _three(tmp_path)
     ray = _Ray({"r1", "r2"}, stop=stop, stop_at=2)
     monkeypatch.setitem(sys.modules, "ray", ray)
+    recordings = [tmp_path / name for name in ("r1", "r2", "r3")]
+    given = file_hashes(*recordings)
     before = signal.getsignal(signal.SIGTERM)
     assert main([*command, "--quiet"]) == code
     assert signal.getsignal(signal.SIGTERM) is before
@@ -329,6 +331,7 @@ def test_a_stopped_batch_keeps_what_finished_and_no_temporary_file(stop, code, t
     )
     assert _states(out) == {"r1": "done", "r2": "done", "r3": "started"} and ray.submitted == ["r1", "r2", "r3"]
     assert sorted(path.name for path in (out / "r3").iterdir()) == ["keypoints.npz", "track.log"]
+    assert file_hashes(*recordings) == given and all(not any(folder.iterdir()) for folder in recordings)
 
     again = _Ray({"r1", "r2", "r3"})
     monkeypatch.setitem(sys.modules, "ray", again)

@@ -480,8 +480,9 @@ def test_sigterm_mid_run_keeps_every_frame_done(tmp_path, capsys, monkeypatch):
 
     demo = Path(__file__).resolve().parents[1] / "recordings" / "demo"
     monkeypatch.setattr("tracker.commands.options.bar", stopping_after(3, signal.SIGTERM))
-    before = signal.getsignal(signal.SIGTERM)
+    before, given = signal.getsignal(signal.SIGTERM), file_hashes(demo)
     assert main(["track", str(demo), "--out", str(tmp_path), "--frames", "8", "--quiet"]) == 143
+    assert file_hashes(demo) == given
     assert signal.getsignal(signal.SIGTERM) is before
     printed = capsys.readouterr()
     assert f"wrote {tmp_path / 'poses.npz'} (4 frames)" in printed.out

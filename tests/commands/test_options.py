@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import pytest
+from conftest import file_hashes
 
 from tracker.cli import main
 from tracker.commands import options
@@ -115,11 +116,13 @@ def test_the_cache_option_chooses_where_the_keypoints_are_kept(command, tmp_path
 
     monkeypatch.setattr(detect_recording, "cache_file", stop)
     monkeypatch.chdir(tmp_path)
+    given = file_hashes(DEMO)
     for extra in (["--cameras", "cam1,cam2"], [], ["--cache", str(tmp_path / "kp")]):
         assert main([command, str(rec), "--out", str(tmp_path / "out.toml"), *extra]) == 2
         assert capsys.readouterr().err == "tracker: error: stopped where the keypoints would be kept\n"
     kept = [Path("out/demo/keypoints-cam1,cam2.npz"), Path("out/demo/keypoints.npz"), tmp_path / "kp" / "keypoints.npz"]
     assert chosen == kept and (tmp_path / "kp").is_dir()
+    assert file_hashes(DEMO) == given
 
 
 def test_a_list_of_names_that_names_none_is_empty_not_absent():

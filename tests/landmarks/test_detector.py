@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import stopping_after
+from conftest import file_hashes, stopping_after
 
 from tracker.camera import look_at_camera
 from tracker.cli import main
@@ -175,7 +175,9 @@ def test_a_stopped_detection_keeps_its_frames_and_goes_on_from_them(tmp_path, ca
     out = tmp_path / "out"
     command = ["keypoints", str(DEMO), "--frames", "6", "--out", str(out), "--quiet"]
     monkeypatch.setattr("tracker.commands.options.bar", stopping_after(2, signal.SIGTERM, "detecting"))
+    given = file_hashes(DEMO)
     assert main(command) == 143
+    assert file_hashes(DEMO) == given
     [line] = capsys.readouterr().err.strip().splitlines()
     assert line.startswith("tracker: interrupted: the frames detected so far are saved in") and "again" in line
     first = load_keypoints(out / "keypoints.npz")
