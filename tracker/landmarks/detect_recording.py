@@ -27,7 +27,7 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording, frames
 from tracker.landmarks.crop import CROP, scaled
-from tracker.landmarks.detector import DETECTOR, Detection, Detector, detect_views, native_logs_muted
+from tracker.landmarks.detector import COMPLEXITY, DETECTOR, Detection, Detector, detect_views, native_logs_muted
 from tracker.landmarks.store import Keypoints, load_keypoints, save_keypoints
 
 _HASHED = 1 << 16
@@ -111,17 +111,18 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
 
 
 def detections(
-    recording: Recording, start: int, stop: int, *, step: int = 1
+    recording: Recording, start: int, stop: int, *, step: int = 1, complexity: int = COMPLEXITY
 ) -> Generator[tuple[int, Keypoints], None, None]:
     """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
-    camera in video mode (so each follows its person from detected frame to detected frame).  MediaPipe's
+    camera in video mode (so each follows its person from detected frame to detected frame), running the landmark
+    model ``complexity`` (:data:`tracker.landmarks.detector.COMPLEXITY`).  MediaPipe's
     native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a progress bar
     over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
     names = tuple(camera.name for camera in recording.cameras)
     identity = fingerprint(recording)
     with ExitStack() as stack:
         stack.enter_context(native_logs_muted())  # the graphs' threads log while they run
-        detectors = [Detector() for _ in recording.cameras]
+        detectors = [Detector(complexity=complexity) for _ in recording.cameras]
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):

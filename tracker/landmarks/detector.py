@@ -180,13 +180,18 @@ def _read(pose, rgb: np.ndarray) -> Detection:
     return Detection(pixels, confidence, world, mask, square)
 
 
-def _landmarker(min_confidence: float):
-    """MediaPipe's pose landmarker with the "full" model in video mode: each call is the next image, and
-    after finding a person it follows them by their last landmarks, without its person detector."""
+COMPLEXITY = 1
+"""The landmark model a :class:`Detector` runs by default: MediaPipe's ``model_complexity`` (0 lite, 1 full, 2 heavy)."""
+
+
+def _landmarker(min_confidence: float, complexity: int = COMPLEXITY):
+    """MediaPipe's pose landmarker with the landmark model ``complexity`` (0 lite, 1 full, 2 heavy) in video mode:
+    each call is the next image, and after finding a person it follows them by their last landmarks, without its
+    person detector."""
     with native_logs_muted():
         return pose_solution().Pose(
             static_image_mode=False,
-            model_complexity=1,
+            model_complexity=complexity,
             smooth_landmarks=False,
             enable_segmentation=True,
             smooth_segmentation=False,
@@ -236,13 +241,14 @@ def _in_squares(crops, rgb: np.ndarray) -> Detection:
 
 class Detector:
     """BlazePose for one camera's stream of images (video mode: each call is the next frame), with the
-    crops that follow and search for a body the whole image does not show it in (see the module)."""
+    crops that follow and search for a body the whole image does not show it in (see the module); ``complexity``
+    picks the landmark model (:data:`COMPLEXITY`)."""
 
-    def __init__(self, min_confidence: float = 0.5) -> None:
+    def __init__(self, min_confidence: float = 0.5, *, complexity: int = COMPLEXITY) -> None:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
         require_detector()
-        self._min_confidence = min_confidence
-        self._pose = _landmarker(min_confidence)
+        self._min_confidence, self._complexity = min_confidence, complexity
+        self._pose = _landmarker(min_confidence, complexity)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
         self._guided = False  # whether the crops' landmarker last read a guided square and found the body
@@ -310,7 +316,7 @@ class Detector:
     def _cropper(self):
         """The crops' landmarker (video mode), made when first needed."""
         if self._crops is None:
-            self._crops = _landmarker(self._min_confidence)
+            self._crops = _landmarker(self._min_confidence, self._complexity)
         return self._crops
 
     def close(self) -> None:
