@@ -34,16 +34,25 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker.apps.keypoint_stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
+from tracker.apps.keypoint_stream import (
+    KeypointStream,
+    beside,
+    default_step,
+    schedule,
+    schedule_words,
+    tracked_frames,
+)
 from tracker.apps.loop import Tracked, track_frames
 from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file, pose_frame
 from tracker.io.poses import load_poses
-from tracker.io.readers import grey_frames, reduced
+from tracker.io.readers import ColourCopies, grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
-from tracker.landmarks.detector import Detector
+from tracker.landmarks.consistency import consistent
+from tracker.landmarks.detect_recording import frame_keypoints
+from tracker.landmarks.detector import COMPLEXITY, Detector, detect_views, native_logs_muted
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
@@ -61,6 +70,14 @@ class TrackRun:
     stage_ms: dict  # stage -> milliseconds per frame
     iterations: int
     views: int
+    frames: int = 0
+    seconds: float = 0.0  # the loop's
+    first: float = 0.0  # seconds from the start of the loop until the first frame's landmarks came (0 without them)
+
+    @property
+    def fps_after_first(self) -> float:
+        """Frames a second from the first frame's landmarks on: the loop's pace once the detector's worker is up."""
+        return self.frames / (self.seconds - self.first)
 
 
 def _median(values) -> float:
@@ -103,25 +120,54 @@ def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> fl
     return 1e3 * _median(seconds)
 
 
-def _stream(recording: Recording, stop: int, keypoint_step: int, settings: Settings) -> KeypointStream | None:
-    """The detector beside the tracker on frames 0..stop-1, fed the tracker's images as ``tracker track`` feeds
-    it, or None for ``keypoint_step`` 0."""
+def _stream(
+    recording: Recording,
+    stop: int,
+    keypoint_step: int,
+    settings: Settings,
+    *,
+    cache: Path | None = None,
+    complexity: int = COMPLEXITY,
+) -> KeypointStream | None:
+    """The detector (landmark model ``complexity``) beside the tracker on frames 0..stop-1, fed the tracker's images
+    as ``tracker track`` feeds it, its detections kept in ``cache`` if given; None for ``keypoint_step`` 0."""
     if not keypoint_step:
         return None
-    return KeypointStream(recording, 0, stop, keypoint_step, reduction=reductions(settings, recording.cameras))
+    reduction = reductions(settings, recording.cameras)
+    return KeypointStream(recording, 0, stop, keypoint_step, cache, reduction, complexity=complexity)
 
 
 def track_run(
-    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, out: Path, keypoint_step: int = 0
+    recording: Recording,
+    model: Model,
+    start: np.ndarray,
+    *,
+    settings: Settings,
+    out: Path,
+    keypoint_step: int = 0,
+    complexity: int = COMPLEXITY,
+    cache: Path | None = None,
 ) -> TrackRun:
     """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
-    with ``keypoint_step`` the detector's worker on every keypoint_step-th frame beside them, started before the
-    kernels load."""
-    stream = _stream(recording, recording.frame_count, keypoint_step, settings)
+    with ``keypoint_step`` the detector's worker (landmark model ``complexity``) on every keypoint_step-th frame beside
+    them, started before the kernels load, its detections kept in ``cache`` if given (a cache that holds them is read
+    instead: no worker)."""
+    stream = _stream(recording, recording.frame_count, keypoint_step, settings, cache=cache, complexity=complexity)
+    first: list[float] = []
     try:
         tracker = Tracker(model, recording.cameras, start, settings)
         tracker.warm_up()
         tracker.work.times = StageTimes()
+        landmarks = None if stream is None else beside(stream, tracker)
+
+        def timed(index: int) -> tuple[np.ndarray, np.ndarray] | None:
+            """The frame's landmarks, the time the first came noted."""
+            assert landmarks is not None
+            found = landmarks(index)
+            if not first:
+                first.append(time.perf_counter() - started)
+            return found
+
         started = time.perf_counter()
         run = track_frames(
             tracker,
@@ -135,7 +181,7 @@ def track_run(
             ),
             out / "poses.npz",
             fps=recording.fps,
-            keypoints=None if stream is None else beside(stream, tracker),
+            keypoints=None if landmarks is None else timed,
         )
     finally:
         if stream is not None:
@@ -146,7 +192,99 @@ def track_run(
     count = recording.frame_count
     stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.work.times.seconds.items()}
     stage_ms["output"] = run.writing * 1e3 / count
-    return TrackRun(count / elapsed, stage_ms, settings.solve.iterations, len(recording.cameras))
+    views = len(recording.cameras)
+    return TrackRun(count / elapsed, stage_ms, settings.solve.iterations, views, count, elapsed, (first or [0.0])[0])
+
+
+CHUNK = 50
+"""Frames read into memory at a time when the tracker is timed alone (:func:`track_fps`)."""
+
+
+def track_fps(
+    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int, cache: Path
+) -> float:
+    """Frames a second of the tracker alone with the keypoint cue: the frames read beforehand, :data:`CHUNK` at a time
+    (not timed), as ``tracker track``'s readers give them, and the landmarks of every keypoint_step-th frame read from
+    ``cache`` (a keypoints.npz that holds them), so that neither decoding nor detection runs beside it."""
+    tracker = Tracker(model, recording.cameras, start, settings)
+    tracker.warm_up()
+    chroma = tracker.bin_colours if settings.region.on else False
+    seconds = 0.0
+    with (
+        tempfile.TemporaryDirectory() as folder,
+        KeypointStream(recording, 0, recording.frame_count, keypoint_step, cache) as stream,
+    ):
+        if stream.reused is None:
+            raise RuntimeError(f"{cache} does not hold the landmarks the tracker is timed with")
+        landmarks = beside(stream, tracker)
+        done: list = []
+        for first in range(0, recording.frame_count, CHUNK):
+            last = min(recording.frame_count, first + CHUNK)
+            chunk = list(frames(recording, first, last, prepare=tracker.smooth, chroma=chroma))
+            started = time.perf_counter()
+            run = track_frames(
+                tracker, chunk, Path(folder) / f"{first}.npz", fps=recording.fps, keypoints=landmarks, each=done.append
+            )
+            seconds += time.perf_counter() - started
+            if run.interrupted:
+                raise KeyboardInterrupt  # the benchmark stops at Ctrl-C
+    return len(done) / seconds
+
+
+def read_fps(recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int) -> float:
+    """Frames a second of ``tracker track``'s reader threads alone: each frame decoded, smoothed and its colours
+    binned, and every keypoint_step-th frame's colour copy made for a fed detector (views the edge search reduces),
+    nothing tracked."""
+    tracker = Tracker(model, recording.cameras, start, settings)
+    reduction = reductions(settings, recording.cameras)
+    copies = None
+    if keypoint_step and reduction.max() > 1:
+        wanted = frozenset(int(frame) for frame in schedule(0, recording.frame_count, keypoint_step))
+        copies = [ColourCopies(wanted, int(factor)) for factor in reduction]
+    chroma = tracker.bin_colours if settings.region.on else False
+    started = time.perf_counter()
+    count = sum(1 for _ in frames(recording, prepare=tracker.smooth, chroma=chroma, copies=copies))
+    return count / (time.perf_counter() - started)
+
+
+LANDMARK_MODELS = ("lite", "full", "heavy")
+"""MediaPipe's landmark models by ``model_complexity`` (0, 1, 2)."""
+
+SETS = 30
+"""Frame sets the detector is timed on alone (:func:`detect_fps`), after the first."""
+
+
+def installed_models() -> list[int]:
+    """The landmark models (their complexity) whose weights are installed: the detector never fetches one."""
+    import mediapipe
+
+    folder = Path(mediapipe.__file__).parent / "modules" / "pose_landmark"
+    return [k for k, name in enumerate(LANDMARK_MODELS) if (folder / f"pose_landmark_{name}.tflite").is_file()]
+
+
+def detect_fps(recording: Recording, settings: Settings, keypoint_step: int, complexity: int) -> float:
+    """Frames a second of the detector alone (landmark model ``complexity``) at ``keypoint_step``: every view of up to
+    :data:`SETS` + 1 of the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge
+    search reduces them), detected and checked across the views as the worker does, in this process; the first set
+    (the landmarkers' start and a first search for the body) is not timed."""
+    reduction = reductions(settings, recording.cameras)  # all 1 where the worker reads the videos itself
+    read = frames(recording, 0, min(recording.frame_count, (SETS + 1) * keypoint_step), colour=True, step=keypoint_step)
+    sets = [[reduced(image, int(factor)) for image, factor in zip(images, reduction)] for _, images in read]
+    detectors = [Detector(complexity=complexity) for _ in recording.cameras]
+    try:
+        with native_logs_muted():
+            seconds = 0.0
+            for count, images in enumerate(sets):
+                started = time.perf_counter()
+                found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction)
+                names = tuple(camera.name for camera in recording.cameras)
+                raw = frame_keypoints(0, found, names=names, identity="", reduction=reduction)
+                consistent(raw, recording.cameras)
+                seconds += (time.perf_counter() - started) if count else 0.0
+    finally:
+        for detector in detectors:
+            detector.close()
+    return keypoint_step * (len(sets) - 1) / seconds if len(sets) > 1 else float("nan")
 
 
 def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tuple[Recording, Model, np.ndarray]:
@@ -180,25 +318,39 @@ def run(
     keypoint_step: int | None = None,
     model_path: Path | None = None,
     init_path: Path | None = None,
+    complexity: int = COMPLEXITY,
 ) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
-    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate).  The body
-    model and the first pose are ``model_path`` and ``init_path``, else the recording's own."""
+    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate), with the landmark
+    model ``complexity`` beside the tracker (the detector alone is timed with every model installed).  The body
+    model and the first pose are ``model_path`` and ``init_path``, else the recording's own.  The passes of the
+    figures compared are taken in turn, one of each per repeat, so that a machine whose load drifts weighs on all
+    alike."""
     every, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
         keypoint_step = default_step(every.fps)
     first = open_recording(path, [every.cameras[0].name])
+    decode_ms, floor_all, floor_one, read = [], [], [], []
+    runs_all, runs_one, runs_cue, alone = [], [], [], []
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
-        decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
-        floor_all = [decode_only_fps(every) for _ in range(repeats)]
-        floor_one = [decode_only_fps(first) for _ in range(repeats)]
-        runs_all = [track_run(every, model, start, settings=settings, out=out) for _ in range(repeats)]
-        runs_one = [track_run(first, model, start, settings=settings, out=out) for _ in range(repeats)]
-        runs_cue = [
-            track_run(every, model, start, settings=settings, out=out, keypoint_step=keypoint_step)
-            for _ in range(repeats if keypoint_step else 0)
-        ]
+        cache = out / "keypoints.npz"  # the last pass's detections: the landmarks the tracker is timed alone with
+        for repeat in range(repeats):
+            decode_ms.append(decode_cpu_ms(every))
+            floor_all.append(decode_only_fps(every))
+            floor_one.append(decode_only_fps(first))
+            runs_all.append(track_run(every, model, start, settings=settings, out=out))
+            runs_one.append(track_run(first, model, start, settings=settings, out=out))
+            if keypoint_step:
+                kept = cache if repeat == repeats - 1 else None
+                cue = dict(keypoint_step=keypoint_step, complexity=complexity, cache=kept)
+                runs_cue.append(track_run(every, model, start, settings=settings, out=out, **cue))
+                read.append(read_fps(every, model, start, settings=settings, keypoint_step=keypoint_step))
+        if keypoint_step:
+            alone = [
+                track_fps(every, model, start, settings=settings, keypoint_step=keypoint_step, cache=cache)
+                for _ in range(repeats)
+            ]
         detector = detector_ms(every, settings) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
@@ -207,7 +359,7 @@ def run(
     core = sum(stage_ms[s] for s in ("outline", "ownership", "measure", "solve"))
     fps_all = _median([r.fps for r in runs_all])
     decode_all = _median(floor_all)
-    return {
+    result = {
         "recording": str(path),
         "views": len(every.cameras),
         "frames": every.frame_count,
@@ -226,6 +378,23 @@ def run(
         "keypoint_step": keypoint_step,
         "detector_ms_per_view": detector,
         "fps_all_views_with_keypoints": _median([r.fps for r in runs_cue]) if runs_cue else float("nan"),
+    }
+    if not keypoint_step:
+        return result
+    models = sorted(set(installed_models()) | {complexity})
+    detect = {LANDMARK_MODELS[k]: detect_fps(every, settings, keypoint_step, k) for k in models}
+    stages = {"read": _median(read), "detect": detect[LANDMARK_MODELS[complexity]], "track": _median(alone)}
+    overlapped = result["fps_all_views_with_keypoints"]
+    return result | {
+        "landmark_model": LANDMARK_MODELS[complexity],
+        "stage_fps_with_keypoints": {"decode_only": decode_all, "read": stages["read"], "detect": detect}
+        | {"track": stages["track"]},
+        "bound_serial_fps": 1.0 / sum(1.0 / fps for fps in stages.values()),
+        "bound_slowest_stage_fps": min(stages.values()),
+        "slowest_stage": min(stages, key=lambda name: stages[name]),
+        "first_landmarks_s": _median([r.first for r in runs_cue]),
+        "fps_all_views_with_keypoints_after_first": _median([r.fps_after_first for r in runs_cue]),
+        "ratio_with_keypoints": overlapped / decode_all,
     }
 
 
@@ -396,8 +565,37 @@ def format_table(result: dict) -> str:
             f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on "
             f"{schedule_words(result['keypoint_step'])} beside the tracker (a worker process, its start-up included), "
             f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
+            "",
+            *format_stages(result),
         ]
     return "\n".join(lines)
+
+
+def format_stages(result: dict) -> list[str]:
+    """The lines of :func:`run`'s table of the stages with the keypoint cue: each alone, and all three overlapped."""
+    stages, every = result["stage_fps_with_keypoints"], schedule_words(result["keypoint_step"])
+    model = result["landmark_model"]
+    rows = [
+        ("decode only (the floor)", stages["decode_only"]),
+        ("read: decode, smoothing, colours and the detector's copies, as the tracker's readers do", stages["read"]),
+        *(
+            (f"detect {every}, {name} model{' (beside the tracker)' if name == model else ''}", fps)
+            for name, fps in stages["detect"].items()
+        ),
+        ("track with the landmarks (frames and landmarks read beforehand)", stages["track"]),
+        (f"one after the other (read, detect with the {model} model, track)", result["bound_serial_fps"]),
+        (f"the slowest stage ({result['slowest_stage']})", result["bound_slowest_stage_fps"]),
+        ("overlapped, the worker's start-up included", result["fps_all_views_with_keypoints"]),
+        (
+            f"overlapped, from the first landmarks on ({result['first_landmarks_s']:.2f} s into the loop)",
+            result["fps_all_views_with_keypoints_after_first"],
+        ),
+    ]
+    return [
+        "| with the keypoint cue, all views | frames per second | / decode only |",
+        "| --- | --- | --- |",
+        *(f"| {name} | {fps:.1f} | {fps / stages['decode_only']:.2f} |" for name, fps in rows),
+    ]
 
 
 def _copies(data: dict, copies: int, keep=None) -> dict:

@@ -39,8 +39,8 @@ import numpy as np
 from tracker import stop_signals
 from tracker.errors import TrackerInputError
 from tracker.io.readers import ColourCopies, WithColour
-from tracker.io.shared_frames import SharedFrames
 from tracker.io.recording import Recording, frames
+from tracker.io.shared_frames import SharedFrames
 from tracker.landmarks.consistency import CONFIDENT, consistent, sided_with
 from tracker.landmarks.detect_recording import (
     cached,

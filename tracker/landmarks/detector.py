@@ -181,7 +181,8 @@ def _read(pose, rgb: np.ndarray) -> Detection:
 
 
 COMPLEXITY = 1
-"""The landmark model a :class:`Detector` runs by default: MediaPipe's ``model_complexity`` (0 lite, 1 full, 2 heavy)."""
+"""The landmark model a :class:`Detector` runs by default: MediaPipe's ``model_complexity`` (0 lite, 1 full, 2
+heavy)."""
 
 
 def _landmarker(min_confidence: float, complexity: int = COMPLEXITY):
