@@ -28,9 +28,11 @@ differently after other frames), so a second run over the same output folder giv
 from __future__ import annotations
 
 import multiprocessing
+import os
 import queue
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
+from concurrent.futures import Executor, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -104,20 +106,25 @@ def _work(
     signals are the parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
-        with native_logs_muted():
+        with native_logs_muted(), ThreadPoolExecutor(_threads(recording), "view") as pool:
             if fed is not None:
-                _detect_fed(recording, fed, reduction, results, complexity)
+                _detect_fed(recording, fed, reduction, results, complexity, pool)
             else:
                 runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
                 for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-                    for _, raw in detections(recording, first, last, step=every, complexity=complexity):
+                    for _, raw in detections(recording, first, last, step=every, complexity=complexity, pool=pool):
                         results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
 
 
-def _detect_fed(recording: Recording, fed, reduction, results, complexity: int) -> None:
+def _threads(recording: Recording) -> int:
+    """Threads a worker reads the views of a frame in, side by side: one per view, as many as the machine has cores."""
+    return max(1, min(len(recording.cameras), os.cpu_count() or 1))
+
+
+def _detect_fed(recording: Recording, fed, reduction, results, complexity: int, pool: Executor) -> None:
     """Detect in the frame sets named on ``fed`` (index, slot, :attr:`SharedFrames.spec
     <tracker.io.shared_frames.SharedFrames.spec>`), read in place in shared memory (one landmarker per camera, in
     video mode), until None; a set's result is put only once its images are no longer read, so that the tracker may
@@ -126,11 +133,13 @@ def _detect_fed(recording: Recording, fed, reduction, results, complexity: int) 
     detectors = [Detector(complexity=complexity) for _ in recording.cameras]
     shared: SharedFrames | None = None
     try:
+        list(pool.map(Detector.warm_up, detectors))  # while the tracker's kernels load and its readers start
         while (item := fed.get()) is not None:
             index, slot, spec = item
             if shared is None:
                 shared = SharedFrames.attach(spec)
-            found = detect_views(detectors, shared.images(slot), cameras=recording.cameras, reduction=reduction)
+            images = shared.images(slot)
+            found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
             raw = frame_keypoints(index, found, names=names, identity=identity, reduction=reduction)
             results.put((raw, consistent(raw, recording.cameras)[0]))
     finally:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import os
 from collections.abc import Callable, Generator, Iterable
+from concurrent.futures import Executor
 from contextlib import ExitStack, closing
 from pathlib import Path
 
@@ -111,11 +112,18 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
 
 
 def detections(
-    recording: Recording, start: int, stop: int, *, step: int = 1, complexity: int = COMPLEXITY
+    recording: Recording,
+    start: int,
+    stop: int,
+    *,
+    step: int = 1,
+    complexity: int = COMPLEXITY,
+    pool: Executor | None = None,
 ) -> Generator[tuple[int, Keypoints], None, None]:
     """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
     camera in video mode (so each follows its person from detected frame to detected frame), running the landmark
-    model ``complexity`` (:data:`tracker.landmarks.detector.COMPLEXITY`).  MediaPipe's
+    model ``complexity`` (:data:`tracker.landmarks.detector.COMPLEXITY`), the views side by side in ``pool``'s
+    threads if given (:func:`tracker.landmarks.detector.detect_views`).  MediaPipe's
     native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a progress bar
     over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
     names = tuple(camera.name for camera in recording.cameras)
@@ -129,7 +137,10 @@ def detections(
             yield (
                 index,
                 frame_keypoints(
-                    index, detect_views(detectors, images, cameras=recording.cameras), names=names, identity=identity
+                    index,
+                    detect_views(detectors, images, cameras=recording.cameras, pool=pool),
+                    names=names,
+                    identity=identity,
                 ),
             )
 
