@@ -28,7 +28,6 @@ differently after other frames), so a second run over the same output folder giv
 from __future__ import annotations
 
 import multiprocessing
-import os
 import queue
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
@@ -53,7 +52,14 @@ from tracker.landmarks.detect_recording import (
     merged,
     stacked,
 )
-from tracker.landmarks.detector import COMPLEXITY, Detector, detect_views, native_logs_muted, require_detector
+from tracker.landmarks.detector import (
+    COMPLEXITY,
+    Detector,
+    detect_views,
+    native_logs_muted,
+    require_detector,
+    view_threads,
+)
 from tracker.landmarks.hips import lowered, proportions
 from tracker.landmarks.store import Keypoints, save_keypoints
 
@@ -106,7 +112,7 @@ def _work(
     signals are the parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
-        with native_logs_muted(), ThreadPoolExecutor(_threads(recording), "view") as pool:
+        with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
             if fed is not None:
                 _detect_fed(recording, fed, reduction, results, complexity, pool)
             else:
@@ -117,11 +123,6 @@ def _work(
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
-
-
-def _threads(recording: Recording) -> int:
-    """Threads a worker reads the views of a frame in, side by side: one per view, as many as the machine has cores."""
-    return max(1, min(len(recording.cameras), os.cpu_count() or 1))
 
 
 def _detect_fed(recording: Recording, fed, reduction, results, complexity: int, pool: Executor) -> None:

@@ -333,6 +333,12 @@ class Detector:
                 self._crops.close()
 
 
+def view_threads(views: int) -> int:
+    """Threads that read ``views`` views side by side (:func:`detect_views`' ``pool``): one per view, no more than the
+    machine has cores."""
+    return max(1, min(views, os.cpu_count() or 1))
+
+
 def detect_views(
     detectors: list[Detector],
     images: list[np.ndarray | None],
