@@ -15,6 +15,10 @@ from tracker.model import model_from_dict
 from tracker.tracking.settings import Settings
 
 KEYS = {
+    "stage_fps_with_keypoints",
+    "bound_serial_fps",
+    "bound_slowest_stage_fps",
+    "ratio_with_keypoints",
     "fps_one_view",
     "fps_all_views",
     "decode_only_fps_all_views",
@@ -39,6 +43,15 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0  # the default at the recording's 60 fps
     assert result["fps_all_views_with_keypoints"] > 0
     assert set(result["stage_ms_per_frame_with_keypoints"]) >= {"outline", "measure", "region", "solve", "output"}
+    stages = result["stage_fps_with_keypoints"]
+    assert stages["decode_only"] == result["decode_only_fps_all_views"] and result["landmark_model"] == "full"
+    assert set(stages["detect"]) >= {"full"} and all(fps > 0 for fps in stages["detect"].values())
+    alone = {"read": stages["read"], "detect": stages["detect"]["full"], "track": stages["track"]}
+    assert all(fps > 0 for fps in alone.values())
+    assert result["bound_slowest_stage_fps"] == min(alone.values()) == alone[result["slowest_stage"]]
+    assert abs(1 / result["bound_serial_fps"] - sum(1 / fps for fps in alone.values())) < 1e-9
+    assert result["ratio_with_keypoints"] == result["fps_all_views_with_keypoints"] / stages["decode_only"]
+    assert 0 < result["first_landmarks_s"] and result["fps_all_views_with_keypoints_after_first"] > 0
 
 
 def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording, monkeypatch):
@@ -86,6 +99,19 @@ def test_bench_table_is_printed(tiny_recording, capsys):
     assert float(re.findall(r"([\d.]+) ms per view per IRLS iteration", out)[0]) > 0
     detector, with_cue = re.findall(r"the detector takes ([\d.]+) ms per view;.*?, ([\d.]+) frames per second", out)[0]
     assert float(detector) > 0 and float(with_cue) > 0
+    stages = dict(
+        (name, (float(fps), float(ratio)))
+        for name, fps, ratio in re.findall(
+            r"^\| ([a-z][^|]*?) \| ([\d.]+) \| ([\d.]+) \|$", out.split("| with the keypoint cue, all views |")[1], re.M
+        )
+    )
+    floor = stages["decode only (the floor)"][0]
+    assert stages["decode only (the floor)"][1] == 1.0 and any(
+        name.startswith("detect one frame in 4, full") for name in stages
+    )
+    for name in ("read", "track", "one after the other", "the slowest stage", "overlapped, the worker's start-up"):
+        fps, ratio = next(value for row, value in stages.items() if row.startswith(name))
+        assert fps > 0 and abs(ratio - fps / floor) <= 0.005 + 0.05 / floor  # printed to 0.1 frame and 0.01
 
 
 def test_bodies_side_by_side_for_the_scaling_table():
