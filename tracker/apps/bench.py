@@ -343,8 +343,18 @@ def run(
             runs_one.append(track_run(first, model, start, settings=settings, out=out))
             if keypoint_step:
                 kept = cache if repeat == repeats - 1 else None
-                cue = dict(keypoint_step=keypoint_step, complexity=complexity, cache=kept)
-                runs_cue.append(track_run(every, model, start, settings=settings, out=out, **cue))
+                runs_cue.append(
+                    track_run(
+                        every,
+                        model,
+                        start,
+                        settings=settings,
+                        out=out,
+                        keypoint_step=keypoint_step,
+                        complexity=complexity,
+                        cache=kept,
+                    )
+                )
                 read.append(read_fps(every, model, start, settings=settings, keypoint_step=keypoint_step))
         if keypoint_step:
             alone = [
@@ -384,7 +394,7 @@ def run(
     models = sorted(set(installed_models()) | {complexity})
     detect = {LANDMARK_MODELS[k]: detect_fps(every, settings, keypoint_step, k) for k in models}
     stages = {"read": _median(read), "detect": detect[LANDMARK_MODELS[complexity]], "track": _median(alone)}
-    overlapped = result["fps_all_views_with_keypoints"]
+    overlapped = _median([r.fps for r in runs_cue])
     return result | {
         "landmark_model": LANDMARK_MODELS[complexity],
         "stage_fps_with_keypoints": {"decode_only": decode_all, "read": stages["read"], "detect": detect}

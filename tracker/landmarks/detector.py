@@ -59,7 +59,7 @@ import dataclasses
 import os
 import sys
 import types
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 
@@ -341,7 +341,7 @@ def view_threads(views: int) -> int:
 
 def detect_views(
     detectors: list[Detector],
-    images: list[np.ndarray | None],
+    images: Sequence[np.ndarray | None],
     *,
     cameras: list[Camera],
     reduction: np.ndarray | None = None,
