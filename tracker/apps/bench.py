@@ -28,6 +28,7 @@ import tempfile
 import time
 import tomllib
 from collections.abc import Generator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,7 +53,7 @@ from tracker.io.readers import ColourCopies, grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.landmarks.consistency import consistent
 from tracker.landmarks.detect_recording import frame_keypoints
-from tracker.landmarks.detector import COMPLEXITY, Detector, detect_views, native_logs_muted
+from tracker.landmarks.detector import COMPLEXITY, Detector, detect_views, native_logs_muted, view_threads
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
@@ -265,18 +266,18 @@ def installed_models() -> list[int]:
 def detect_fps(recording: Recording, settings: Settings, keypoint_step: int, complexity: int) -> float:
     """Frames a second of the detector alone (landmark model ``complexity``) at ``keypoint_step``: every view of up to
     :data:`SETS` + 1 of the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge
-    search reduces them), detected and checked across the views as the worker does, in this process; the first set
-    (the landmarkers' start and a first search for the body) is not timed."""
+    search reduces them), detected (the views side by side in threads) and checked across the views as the worker
+    does, in this process; the first set (the landmarkers' start and a first search for the body) is not timed."""
     reduction = reductions(settings, recording.cameras)  # all 1 where the worker reads the videos itself
     read = frames(recording, 0, min(recording.frame_count, (SETS + 1) * keypoint_step), colour=True, step=keypoint_step)
     sets = [[reduced(image, int(factor)) for image, factor in zip(images, reduction)] for _, images in read]
     detectors = [Detector(complexity=complexity) for _ in recording.cameras]
     try:
-        with native_logs_muted():
+        with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
             seconds = 0.0
             for count, images in enumerate(sets):
                 started = time.perf_counter()
-                found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction)
+                found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
                 names = tuple(camera.name for camera in recording.cameras)
                 raw = frame_keypoints(0, found, names=names, identity="", reduction=reduction)
                 consistent(raw, recording.cameras)
