@@ -81,6 +81,34 @@ class TrackRun:
         return self.frames / (self.seconds - self.first)
 
 
+@dataclass
+class Stage:
+    """A stage of the loop timed alone: the frames it went through, and the wall and CPU seconds (this process's, all
+    its threads) that took."""
+
+    frames: int = 0
+    seconds: float = 0.0
+    cpu: float = 0.0
+
+    @contextlib.contextmanager
+    def timing(self, frames: int) -> Generator[None, None, None]:
+        """Count ``frames`` and the seconds the block takes."""
+        wall, cpu = time.perf_counter(), time.process_time()
+        yield
+        self.seconds += time.perf_counter() - wall
+        self.cpu += time.process_time() - cpu
+        self.frames += frames
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("nan")
+
+    @property
+    def cpu_ms(self) -> float:
+        """CPU milliseconds a frame."""
+        return 1e3 * self.cpu / self.frames if self.frames else float("nan")
+
+
 def _median(values) -> float:
     return float(statistics.median(values))
 
@@ -94,11 +122,17 @@ def decode_cpu_ms(recording: Recording) -> float:
     return (time.perf_counter() - started) * 1e3 / recording.frame_count
 
 
+def decode_only(recording: Recording) -> Stage:
+    """The reader threads alone (all of the recording's cameras), decoding to grey."""
+    stage = Stage()
+    with stage.timing(recording.frame_count):
+        sum(1 for _ in frames(recording))
+    return stage
+
+
 def decode_only_fps(recording: Recording) -> float:
     """Frames per second of the reader threads alone (all of the recording's cameras)."""
-    started = time.perf_counter()
-    count = sum(1 for _ in frames(recording))
-    return count / (time.perf_counter() - started)
+    return decode_only(recording).fps
 
 
 def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> float:
@@ -198,19 +232,19 @@ def track_run(
 
 
 CHUNK = 50
-"""Frames read into memory at a time when the tracker is timed alone (:func:`track_fps`)."""
+"""Frames read into memory at a time when the tracker is timed alone (:func:`track_stage`)."""
 
 
-def track_fps(
+def track_stage(
     recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int, cache: Path
-) -> float:
-    """Frames a second of the tracker alone with the keypoint cue: the frames read beforehand, :data:`CHUNK` at a time
-    (not timed), as ``tracker track``'s readers give them, and the landmarks of every keypoint_step-th frame read from
-    ``cache`` (a keypoints.npz that holds them), so that neither decoding nor detection runs beside it."""
+) -> Stage:
+    """The tracker alone with the keypoint cue: the frames read beforehand, :data:`CHUNK` at a time (not timed), as
+    ``tracker track``'s readers give them, and the landmarks of every keypoint_step-th frame read from ``cache`` (a
+    keypoints.npz that holds them), so that neither decoding nor detection runs beside it."""
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     chroma = tracker.bin_colours if settings.region.on else False
-    seconds = 0.0
+    stage = Stage()
     with (
         tempfile.TemporaryDirectory() as folder,
         KeypointStream(recording, 0, recording.frame_count, keypoint_step, cache) as stream,
@@ -218,24 +252,24 @@ def track_fps(
         if stream.reused is None:
             raise RuntimeError(f"{cache} does not hold the landmarks the tracker is timed with")
         landmarks = beside(stream, tracker)
-        done: list = []
         for first in range(0, recording.frame_count, CHUNK):
             last = min(recording.frame_count, first + CHUNK)
             chunk = list(frames(recording, first, last, prepare=tracker.smooth, chroma=chroma))
-            started = time.perf_counter()
-            run = track_frames(
-                tracker, chunk, Path(folder) / f"{first}.npz", fps=recording.fps, keypoints=landmarks, each=done.append
-            )
-            seconds += time.perf_counter() - started
+            with stage.timing(len(chunk)):
+                run = track_frames(
+                    tracker, chunk, Path(folder) / f"{first}.npz", fps=recording.fps, keypoints=landmarks
+                )
             if run.interrupted:
                 raise KeyboardInterrupt  # the benchmark stops at Ctrl-C
-    return len(done) / seconds
+    return stage
 
 
-def read_fps(recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int) -> float:
-    """Frames a second of ``tracker track``'s reader threads alone: each frame decoded, smoothed and its colours
-    binned, and every keypoint_step-th frame's colour copy made for a fed detector (views the edge search reduces),
-    nothing tracked."""
+def read_stage(
+    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int
+) -> Stage:
+    """``tracker track``'s reader threads alone: each frame decoded, smoothed and its colours binned, and every
+    keypoint_step-th frame's colour copy made for a fed detector (views the edge search reduces), nothing tracked."""
+    stage = Stage()
     tracker = Tracker(model, recording.cameras, start, settings)
     reduction = reductions(settings, recording.cameras)
     copies = None
@@ -243,16 +277,16 @@ def read_fps(recording: Recording, model: Model, start: np.ndarray, *, settings:
         wanted = frozenset(int(frame) for frame in schedule(0, recording.frame_count, keypoint_step))
         copies = [ColourCopies(wanted, int(factor)) for factor in reduction]
     chroma = tracker.bin_colours if settings.region.on else False
-    started = time.perf_counter()
-    count = sum(1 for _ in frames(recording, prepare=tracker.smooth, chroma=chroma, copies=copies))
-    return count / (time.perf_counter() - started)
+    with stage.timing(recording.frame_count):
+        sum(1 for _ in frames(recording, prepare=tracker.smooth, chroma=chroma, copies=copies))
+    return stage
 
 
 LANDMARK_MODELS = ("lite", "full", "heavy")
 """MediaPipe's landmark models by ``model_complexity`` (0, 1, 2)."""
 
 SETS = 30
-"""Frame sets the detector is timed on alone (:func:`detect_fps`), after the first."""
+"""Frame sets the detector is timed on alone (:func:`detect_stage`), after the first."""
 
 
 def installed_models() -> list[int]:
@@ -263,29 +297,29 @@ def installed_models() -> list[int]:
     return [k for k, name in enumerate(LANDMARK_MODELS) if (folder / f"pose_landmark_{name}.tflite").is_file()]
 
 
-def detect_fps(recording: Recording, settings: Settings, keypoint_step: int, complexity: int) -> float:
-    """Frames a second of the detector alone (landmark model ``complexity``) at ``keypoint_step``: every view of up to
-    :data:`SETS` + 1 of the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge
-    search reduces them), detected (the views side by side in threads) and checked across the views as the worker
-    does, in this process; the first set (the landmarkers' start and a first search for the body) is not timed."""
+def detect_stage(recording: Recording, settings: Settings, keypoint_step: int, complexity: int) -> Stage:
+    """The detector alone (landmark model ``complexity``) at ``keypoint_step``: every view of up to :data:`SETS` + 1 of
+    the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge search reduces them),
+    detected (the views side by side in threads) and checked across the views as the worker does, in this process,
+    each set counting for the ``keypoint_step`` frames it stands for; the first set (the landmarkers' start and a first
+    search for the body) is not timed."""
     reduction = reductions(settings, recording.cameras)  # all 1 where the worker reads the videos itself
     read = frames(recording, 0, min(recording.frame_count, (SETS + 1) * keypoint_step), colour=True, step=keypoint_step)
     sets = [[reduced(image, int(factor)) for image, factor in zip(images, reduction)] for _, images in read]
+    names = tuple(camera.name for camera in recording.cameras)
     detectors = [Detector(complexity=complexity) for _ in recording.cameras]
+    stage, untimed = Stage(), Stage()
     try:
         with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
-            seconds = 0.0
             for count, images in enumerate(sets):
-                started = time.perf_counter()
-                found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
-                names = tuple(camera.name for camera in recording.cameras)
-                raw = frame_keypoints(0, found, names=names, identity="", reduction=reduction)
-                consistent(raw, recording.cameras)
-                seconds += (time.perf_counter() - started) if count else 0.0
+                with (stage if count else untimed).timing(keypoint_step):
+                    found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
+                    raw = frame_keypoints(0, found, names=names, identity="", reduction=reduction)
+                    consistent(raw, recording.cameras)
     finally:
         for detector in detectors:
             detector.close()
-    return keypoint_step * (len(sets) - 1) / seconds if len(sets) > 1 else float("nan")
+    return stage
 
 
 def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tuple[Recording, Model, np.ndarray]:
@@ -331,14 +365,14 @@ def run(
     if keypoint_step is None:
         keypoint_step = default_step(every.fps)
     first = open_recording(path, [every.cameras[0].name])
-    decode_ms, floor_all, floor_one, read = [], [], [], []
+    decode_ms, floors, floor_one, read = [], [], [], []
     runs_all, runs_one, runs_cue, alone = [], [], [], []
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
         cache = out / "keypoints.npz"  # the last pass's detections: the landmarks the tracker is timed alone with
         for repeat in range(repeats):
             decode_ms.append(decode_cpu_ms(every))
-            floor_all.append(decode_only_fps(every))
+            floors.append(decode_only(every))
             floor_one.append(decode_only_fps(first))
             runs_all.append(track_run(every, model, start, settings=settings, out=out))
             runs_one.append(track_run(first, model, start, settings=settings, out=out))
@@ -356,10 +390,10 @@ def run(
                         cache=kept,
                     )
                 )
-                read.append(read_fps(every, model, start, settings=settings, keypoint_step=keypoint_step))
+                read.append(read_stage(every, model, start, settings=settings, keypoint_step=keypoint_step))
         if keypoint_step:
             alone = [
-                track_fps(every, model, start, settings=settings, keypoint_step=keypoint_step, cache=cache)
+                track_stage(every, model, start, settings=settings, keypoint_step=keypoint_step, cache=cache)
                 for _ in range(repeats)
             ]
         detector = detector_ms(every, settings) if keypoint_step else float("nan")
@@ -369,7 +403,7 @@ def run(
     stage_cue = {stage: _median([r.stage_ms[stage] for r in runs_cue]) for stage in (*STAGES, "output") if runs_cue}
     core = sum(stage_ms[s] for s in ("outline", "ownership", "measure", "solve"))
     fps_all = _median([r.fps for r in runs_all])
-    decode_all = _median(floor_all)
+    decode_all = _median([floor.fps for floor in floors])
     result = {
         "recording": str(path),
         "views": len(every.cameras),
@@ -393,16 +427,31 @@ def run(
     if not keypoint_step:
         return result
     models = sorted(set(installed_models()) | {complexity})
-    detect = {LANDMARK_MODELS[k]: detect_fps(every, settings, keypoint_step, k) for k in models}
-    stages = {"read": _median(read), "detect": detect[LANDMARK_MODELS[complexity]], "track": _median(alone)}
+    detect = {LANDMARK_MODELS[k]: detect_stage(every, settings, keypoint_step, k) for k in models}
+    stages = {"read": read, "detect": [detect[LANDMARK_MODELS[complexity]]], "track": alone}
+    fps = {name: _median([stage.fps for stage in timed]) for name, timed in stages.items()}
+    cpu_ms = {name: _median([stage.cpu_ms for stage in timed]) for name, timed in stages.items()}
+    cores = os.cpu_count() or 1
     overlapped = _median([r.fps for r in runs_cue])
     return result | {
         "landmark_model": LANDMARK_MODELS[complexity],
-        "stage_fps_with_keypoints": {"decode_only": decode_all, "read": stages["read"], "detect": detect}
-        | {"track": stages["track"]},
-        "bound_serial_fps": 1.0 / sum(1.0 / fps for fps in stages.values()),
-        "bound_slowest_stage_fps": min(stages.values()),
-        "slowest_stage": min(stages, key=lambda name: stages[name]),
+        "stage_fps_with_keypoints": {
+            "decode_only": decode_all,
+            "read": fps["read"],
+            "detect": {name: stage.fps for name, stage in detect.items()},
+            "track": fps["track"],
+        },
+        "stage_cpu_ms_per_frame_with_keypoints": {
+            "decode_only": _median([floor.cpu_ms for floor in floors]),
+            "read": cpu_ms["read"],
+            "detect": {name: stage.cpu_ms for name, stage in detect.items()},
+            "track": cpu_ms["track"],
+        },
+        "cores": cores,
+        "bound_serial_fps": 1.0 / sum(1.0 / value for value in fps.values()),
+        "bound_cores_fps": 1e3 * cores / sum(cpu_ms.values()),
+        "bound_slowest_stage_fps": min(fps.values()),
+        "slowest_stage": min(fps, key=lambda name: fps[name]),
         "first_landmarks_s": _median([r.first for r in runs_cue]),
         "fps_all_views_with_keypoints_after_first": _median([r.fps_after_first for r in runs_cue]),
         "ratio_with_keypoints": overlapped / decode_all,
@@ -583,29 +632,43 @@ def format_table(result: dict) -> str:
 
 
 def format_stages(result: dict) -> list[str]:
-    """The lines of :func:`run`'s table of the stages with the keypoint cue: each alone, and all three overlapped."""
-    stages, every = result["stage_fps_with_keypoints"], schedule_words(result["keypoint_step"])
-    model = result["landmark_model"]
+    """The lines of :func:`run`'s table of the stages with the keypoint cue: each alone, the bounds they set, and all
+    three overlapped."""
+    fps, cpu = result["stage_fps_with_keypoints"], result["stage_cpu_ms_per_frame_with_keypoints"]
+    every, model, floor = schedule_words(result["keypoint_step"]), result["landmark_model"], fps["decode_only"]
     rows = [
-        ("decode only (the floor)", stages["decode_only"]),
-        ("read: decode, smoothing, colours and the detector's copies, as the tracker's readers do", stages["read"]),
-        *(
-            (f"detect {every}, {name} model{' (beside the tracker)' if name == model else ''}", fps)
-            for name, fps in stages["detect"].items()
+        ("decode only (the floor)", fps["decode_only"], cpu["decode_only"]),
+        (
+            "read: decode, smoothing, colours and the detector's copies, as the tracker's readers do",
+            fps["read"],
+            cpu["read"],
         ),
-        ("track with the landmarks (frames and landmarks read beforehand)", stages["track"]),
-        (f"one after the other (read, detect with the {model} model, track)", result["bound_serial_fps"]),
-        (f"the slowest stage ({result['slowest_stage']})", result["bound_slowest_stage_fps"]),
-        ("overlapped, the worker's start-up included", result["fps_all_views_with_keypoints"]),
+        *(
+            (
+                f"detect {every}, {name} model{' (beside the tracker)' if name == model else ''}",
+                rate,
+                cpu["detect"][name],
+            )
+            for name, rate in fps["detect"].items()
+        ),
+        ("track with the landmarks (frames and landmarks read beforehand)", fps["track"], cpu["track"]),
+        (f"bound: read, detect ({model}) and track one after the other", result["bound_serial_fps"], None),
+        (f"bound: the {result['cores']} cores over the three stages' CPU", result["bound_cores_fps"], None),
+        (f"bound: the slowest stage ({result['slowest_stage']})", result["bound_slowest_stage_fps"], None),
+        ("overlapped, the worker's start-up included", result["fps_all_views_with_keypoints"], None),
         (
             f"overlapped, from the first landmarks on ({result['first_landmarks_s']:.2f} s into the loop)",
             result["fps_all_views_with_keypoints_after_first"],
+            None,
         ),
     ]
     return [
-        "| with the keypoint cue, all views | frames per second | / decode only |",
-        "| --- | --- | --- |",
-        *(f"| {name} | {fps:.1f} | {fps / stages['decode_only']:.2f} |" for name, fps in rows),
+        "| with the keypoint cue, all views | frames per second | CPU ms a frame | / decode only |",
+        "| --- | --- | --- | --- |",
+        *(
+            f"| {name} | {rate:.1f} | {'' if ms is None else f'{ms:.1f}'} | {rate / floor:.2f} |"
+            for name, rate, ms in rows
+        ),
     ]
 
 
