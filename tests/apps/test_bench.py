@@ -56,6 +56,7 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     spent = cpu["read"] + cpu["detect"]["full"] + cpu["track"]
     assert set(cpu["detect"]) == set(stages["detect"]) and all(ms > 0 for ms in cpu["detect"].values())
     assert cpu["decode_only"] > 0 and abs(result["bound_cores_fps"] - 1e3 * result["cores"] / spent) < 1e-9
+    assert abs(result["ratio_bound_cores"] - cpu["decode_only"] / spent) < 1e-9
     assert result["ratio_with_keypoints"] == result["fps_all_views_with_keypoints"] / stages["decode_only"]
     assert 0 < result["first_landmarks_s"] and result["fps_all_views_with_keypoints_after_first"] > 0
 
@@ -105,28 +106,23 @@ def test_bench_table_is_printed(tiny_recording, capsys):
     assert float(re.findall(r"([\d.]+) ms per view per IRLS iteration", out)[0]) > 0
     detector, with_cue = re.findall(r"the detector takes ([\d.]+) ms per view;.*?, ([\d.]+) frames per second", out)[0]
     assert float(detector) > 0 and float(with_cue) > 0
-    stages = dict(
-        (name, (float(fps), float(ratio)))
-        for name, fps, ratio in re.findall(
-            r"^\| ([a-z][^|]*?) \| ([\d.]+) \| [\d.]* \| ([\d.]+) \|$",
+    stages = {
+        name: (float(fps), float(ms) if ms else None, float(ratio))
+        for name, fps, ms, ratio in re.findall(
+            r"^\| ([a-z][^|]*?) \| ([\d.]+) \| ([\d.]*) \| ([\d.]+) \|$",
             out.split("| with the keypoint cue, all views |")[1],
             re.M,
         )
-    )
-    floor = stages["decode only (the floor)"][0]
-    assert stages["decode only (the floor)"][1] == 1.0 and any(
-        name.startswith("detect one frame in 4, full") for name in stages
-    )
-    for name in (
-        "read",
-        "track",
-        "bound: read",
-        "bound: the \\d+ cores",
-        "bound: the slowest",
-        "overlapped, the worker",
-    ):
-        fps, ratio = next(value for row, value in stages.items() if re.match(name, row))
+    }
+    floor, decoding, shown = stages["decode only (the floor)"]
+    assert shown == 1.0 and decoding > 0 and any(name.startswith("detect one frame in 4, full") for name in stages)
+    found = {}
+    for name in ("read", "detect one frame in 4, full", "track", "bound: read", "bound: the slowest", "overlapped"):
+        fps, ms, ratio = found[name] = next(value for row, value in stages.items() if row.startswith(name))
         assert fps > 0 and abs(ratio - fps / floor) <= 0.005 + 0.05 / floor  # printed to 0.1 frame and 0.01
+    cores, spent, share = next(value for row, value in stages.items() if re.match(r"bound: the \d+ cores", row))
+    assert abs(spent - sum(found[name][1] for name in ("read", "detect one frame in 4, full", "track"))) <= 0.16
+    assert abs(share - decoding / spent) <= 0.005 + 0.05 * decoding / spent**2 + 0.05 / spent  # by CPU, not fps
 
 
 def test_bodies_side_by_side_for_the_scaling_table():
