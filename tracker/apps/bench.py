@@ -14,7 +14,11 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
   in this process, reduced as the tracker feeds them to its worker), and frames per second end to
   end with the detector beside the tracker at its default rate (a worker process started afresh in
-  each pass, as ``tracker track`` does, so its start-up counts);
+  each pass, as ``tracker track`` does, so its start-up counts; and from its first landmarks on);
+* the loop's three stages with the cue, each alone (:class:`Stage`: frames a second and CPU milliseconds a frame):
+  the tracker's readers, the detector with each landmark model installed, the tracker with landmarks read
+  beforehand; and the bounds they set: one after the other, the cores over their CPU, the slowest
+  (docs/speed.md, "Overlap");
 * a long run (:func:`long_run`): thousands of frames, the recording read in a loop, and the resident
   memory before, after the first :data:`SETTLED` frames and at the end (a live session must not grow).
 """
