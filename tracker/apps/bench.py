@@ -12,7 +12,8 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * decode only: frames per second of the same reader threads with no tracking,
   the floor that tracking is compared with (``ratio_all_views``);
 * the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
-  in this process, reduced as the tracker feeds them to its worker), and frames per second end to
+  in this process, reduced as the tracker feeds them to its worker) with the landmark model of the run and with
+  ``tracker live``'s (:data:`tracker.landmarks.landmark_models.LIVE`), and frames per second end to
   end with the detector beside the tracker at its default rate (a worker process started afresh in
   each pass, as ``tracker track`` does, so its start-up counts);
 * a long run (:func:`long_run`): thousands of frames, the recording read in a loop, and the resident
@@ -22,6 +23,7 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import statistics
 import tempfile
@@ -44,6 +46,7 @@ from tracker.io.poses import load_poses
 from tracker.io.readers import grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.landmarks.detector import Detector
+from tracker.landmarks.landmark_models import LIVE
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
@@ -83,14 +86,16 @@ def decode_only_fps(recording: Recording) -> float:
     return count / (time.perf_counter() - started)
 
 
-def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> float:
-    """Median milliseconds per image of the keypoint detector's pass on the whole image, which every view gets,
-    over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the tracker's
+def detector_ms(recording: Recording, settings: Settings, landmark_model: str, count: int = 40) -> float:
+    """Median milliseconds per image of the keypoint detector's pass on the whole image with ``landmark_model``, which
+    every view gets, over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the
+    tracker's
     worker runs them), each image reduced as the tracker's readers reduce what they feed the worker
     (:func:`tracker.tracking.frame_loop.reductions`: a 1080x1920 view at half size)."""
     seconds = []
     for source, factor in zip(recording.sources, reductions(settings, recording.cameras)):
-        detector, images = Detector(), grey_frames(source, range(min(count, recording.frame_count)), colour=True)
+        detector = Detector(landmark_model=landmark_model)
+        images = grey_frames(source, range(min(count, recording.frame_count)), colour=True)
         try:
             for image in images:
                 image = reduced(image, int(factor))
@@ -103,21 +108,31 @@ def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> fl
     return 1e3 * _median(seconds)
 
 
-def _stream(recording: Recording, stop: int, keypoint_step: int, settings: Settings) -> KeypointStream | None:
-    """The detector beside the tracker on frames 0..stop-1, fed the tracker's images as ``tracker track`` feeds
-    it, or None for ``keypoint_step`` 0."""
+def _stream(
+    recording: Recording, stop: int, keypoint_step: int, settings: Settings, landmark_model: str
+) -> KeypointStream | None:
+    """The detector (``landmark_model``) beside the tracker on frames 0..stop-1, fed the tracker's images as
+    ``tracker track`` feeds it, or None for ``keypoint_step`` 0."""
     if not keypoint_step:
         return None
-    return KeypointStream(recording, 0, stop, keypoint_step, reduction=reductions(settings, recording.cameras))
+    reduction = reductions(settings, recording.cameras)
+    return KeypointStream(recording, 0, stop, keypoint_step, reduction=reduction, landmark_model=landmark_model)
 
 
 def track_run(
-    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, out: Path, keypoint_step: int = 0
+    recording: Recording,
+    model: Model,
+    start: np.ndarray,
+    *,
+    settings: Settings,
+    out: Path,
+    keypoint_step: int = 0,
+    landmark_model: str,
 ) -> TrackRun:
     """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
-    with ``keypoint_step`` the detector's worker on every keypoint_step-th frame beside them, started before the
-    kernels load."""
-    stream = _stream(recording, recording.frame_count, keypoint_step, settings)
+    with ``keypoint_step`` the detector's worker (``landmark_model``) on every keypoint_step-th frame beside them,
+    started before the kernels load."""
+    stream = _stream(recording, recording.frame_count, keypoint_step, settings, landmark_model)
     try:
         tracker = Tracker(model, recording.cameras, start, settings)
         tracker.warm_up()
@@ -178,12 +193,14 @@ def run(
     *,
     repeats: int = 3,
     keypoint_step: int | None = None,
+    landmark_model: str,
     model_path: Path | None = None,
     init_path: Path | None = None,
 ) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
-    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate).  The body
-    model and the first pose are ``model_path`` and ``init_path``, else the recording's own."""
+    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate) with
+    ``landmark_model``, the detector's time also with ``tracker live``'s model.  The body model and the first pose
+    are ``model_path`` and ``init_path``, else the recording's own."""
     every, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
         keypoint_step = default_step(every.fps)
@@ -193,13 +210,23 @@ def run(
         decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
         floor_all = [decode_only_fps(every) for _ in range(repeats)]
         floor_one = [decode_only_fps(first) for _ in range(repeats)]
-        runs_all = [track_run(every, model, start, settings=settings, out=out) for _ in range(repeats)]
-        runs_one = [track_run(first, model, start, settings=settings, out=out) for _ in range(repeats)]
+        edges = functools.partial(track_run, settings=settings, out=out, landmark_model=landmark_model)  # no detector
+        runs_all = [edges(every, model, start) for _ in range(repeats)]
+        runs_one = [edges(first, model, start) for _ in range(repeats)]
         runs_cue = [
-            track_run(every, model, start, settings=settings, out=out, keypoint_step=keypoint_step)
+            track_run(
+                every,
+                model,
+                start,
+                settings=settings,
+                out=out,
+                keypoint_step=keypoint_step,
+                landmark_model=landmark_model,
+            )
             for _ in range(repeats if keypoint_step else 0)
         ]
-        detector = detector_ms(every, settings) if keypoint_step else float("nan")
+        timed = dict.fromkeys((landmark_model, LIVE)) if keypoint_step else {}
+        by_model = {name: detector_ms(every, settings, name) for name in timed}
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
@@ -224,7 +251,9 @@ def run(
         "ratio_one_view": _median([r.fps for r in runs_one]) / _median(floor_one),
         "ratio_all_views": fps_all / decode_all,
         "keypoint_step": keypoint_step,
-        "detector_ms_per_view": detector,
+        "landmark_model": landmark_model,
+        "detector_ms_per_view": by_model.get(landmark_model, float("nan")),
+        "detector_ms_per_view_by_model": by_model,
         "fps_all_views_with_keypoints": _median([r.fps for r in runs_cue]) if runs_cue else float("nan"),
     }
 
@@ -248,22 +277,23 @@ def long_run(
     settings: Settings = Settings(),
     *,
     keypoint_step: int | None = None,
+    landmark_model: str,
     model_path: Path | None = None,
     init_path: Path | None = None,
     progress=lambda iterable, total=None: iterable,
 ) -> dict:
     """A long run for memory: ``total`` frames tracked and written to a poses.npz, the recording read again
-    and again from its first frame (each pass with a fresh keypoint worker, at ``keypoint_step``: 0 for none,
-    None for the default), and this process's resident memory before the first frame, after frame
-    :data:`SETTLED` and at the end.  The body jumps where a pass starts again, as a cut in a live session
-    would make it; the figures are about memory and the file, not accuracy."""
+    and again from its first frame (each pass with a fresh keypoint worker of ``landmark_model``, at
+    ``keypoint_step``: 0 for none, None for the default), and this process's resident memory before the first
+    frame, after frame :data:`SETTLED` and at the end.  The body jumps where a pass starts again, as a cut in a live
+    session would make it; the figures are about memory and the file, not accuracy."""
     recording, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
         keypoint_step = default_step(recording.fps)
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     memory = {"start": resident_mb(), "settled": float("nan")}
-    passes = _Passes(recording, total, keypoint_step, tracker)
+    passes = _Passes(recording, total, keypoint_step, tracker, landmark_model)
     bar = iter(progress(range(total), total=total))
 
     def counted(frame: Tracked) -> None:
@@ -286,6 +316,7 @@ def long_run(
         "frames_written": written,
         "fps": run.frames / run.seconds,
         "keypoint_step": keypoint_step,
+        "landmark_model": landmark_model,
         "resident_mb_start": memory["start"],
         "settled_frame": SETTLED,
         "resident_mb_settled": memory["settled"],
@@ -297,13 +328,14 @@ def long_run(
 @dataclass
 class _Passes:
     """The frames of a long run: ``total`` frames numbered 0, 1, ..., the recording read again and again from its
-    first frame (read as ``tracker`` reads them), each pass with a fresh keypoint worker at ``keypoint_step`` (0:
-    none) beside it."""
+    first frame (read as ``tracker`` reads them), each pass with a fresh keypoint worker (``landmark_model``) at
+    ``keypoint_step`` (0: none) beside it."""
 
     recording: Recording
     total: int
     keypoint_step: int
     tracker: Tracker
+    landmark_model: str
     stream: KeypointStream | None = None  # the pass's worker
     first: int = 0  # the number of the pass's first frame
 
@@ -313,7 +345,8 @@ class _Passes:
         while done < self.total:
             stop = min(self.recording.frame_count, self.total - done)
             tracker = self.tracker
-            self.stream, self.first = _stream(self.recording, stop, self.keypoint_step, tracker.settings), done
+            self.stream = _stream(self.recording, stop, self.keypoint_step, tracker.settings, self.landmark_model)
+            self.first = done
             try:
                 for _, images in tracked_frames(
                     self.stream,
@@ -336,7 +369,7 @@ class _Passes:
 
 def format_long(result: dict) -> str:
     """A Markdown table of :func:`long_run`'s figures."""
-    cue = schedule_words(result["keypoint_step"]) if result["keypoint_step"] else "off"
+    cue = f"{schedule_words(result['keypoint_step'])}, {result['landmark_model']}" if result["keypoint_step"] else "off"
     return "\n".join(
         [
             f"Recording `{result['recording']}` read in a loop: {result['views']} views, {result['frames']} frames "
@@ -391,9 +424,12 @@ def format_table(result: dict) -> str:
         "per IRLS iteration.",
     ]
     if result["keypoint_step"]:
+        model, by_model = result["landmark_model"], result["detector_ms_per_view_by_model"]
+        live = "".join(f" ({name}, tracker live's: {ms:.1f} ms)" for name, ms in by_model.items() if name != model)
         lines += [
             "",
-            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on "
+            f"Keypoint cue: the detector ({model}) takes {result['detector_ms_per_view']:.1f} ms per view{live}; "
+            "with it on "
             f"{schedule_words(result['keypoint_step'])} beside the tracker (a worker process, its start-up included), "
             f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
         ]

@@ -85,8 +85,11 @@ def schedule(start: int, stop: int, step: int) -> np.ndarray:
     return np.unique(np.r_[np.arange(start, stop, step), stop - 1])
 
 
-def _work(recording: Recording, start: int, stop: int, step: int, results, fed=None, reduction=None) -> None:
-    """The worker process: detect and check each scheduled frame, put (raw, checked) on ``results``, then
+def _work(
+    recording: Recording, start: int, stop: int, step: int, results, fed=None, reduction=None, *, landmark_model: str
+) -> None:
+    """The worker process: detect (with ``landmark_model``) and check each scheduled frame, put (raw, checked) on
+    ``results``, then
     None; an error is put instead and ends it.  With ``fed``, a queue, the frames are (index, images) taken
     from it (reduced by ``reduction``) until None; else the worker reads them.  The stop signals are the parent's to
     handle (:mod:`tracker.stop_signals`)."""
@@ -94,21 +97,22 @@ def _work(recording: Recording, start: int, stop: int, step: int, results, fed=N
     try:
         with native_logs_muted():
             if fed is not None:
-                _detect_fed(recording, fed, reduction, results)
+                _detect_fed(recording, fed, reduction, results, landmark_model)
             else:
                 runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
                 for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-                    for _, raw in detections(recording, first, last, step=every):
+                    for _, raw in detections(recording, first, last, step=every, landmark_model=landmark_model):
                         results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
 
 
-def _detect_fed(recording: Recording, fed, reduction, results) -> None:
-    """Detect in the frames put on ``fed`` (one landmarker per camera, in video mode) until None."""
+def _detect_fed(recording: Recording, fed, reduction, results, landmark_model: str) -> None:
+    """Detect in the frames put on ``fed`` (one landmarker of ``landmark_model`` per camera, in video mode) until
+    None."""
     names, identity = tuple(camera.name for camera in recording.cameras), fingerprint(recording)
-    detectors = [Detector() for _ in recording.cameras]
+    detectors = [Detector(landmark_model=landmark_model) for _ in recording.cameras]
     try:
         while (item := fed.get()) is not None:
             index, images = item
@@ -117,6 +121,7 @@ def _detect_fed(recording: Recording, fed, reduction, results) -> None:
                 detect_views(detectors, images, cameras=recording.cameras, reduction=reduction),
                 names=names,
                 identity=identity,
+                landmark_model=landmark_model,
                 reduction=reduction,
             )
             results.put((raw, consistent(raw, recording.cameras)[0]))
@@ -166,7 +171,8 @@ def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Ite
 
 
 class KeypointStream:
-    """Checked landmarks of the scheduled frames, from the cache or from a worker process: one that reads the
+    """Checked landmarks by ``landmark_model`` of the scheduled frames, from the cache or from a worker process: one
+    that reads the
     recording, or, with ``reduction`` (the tracker's, one factor per camera) that reduces some camera's images,
     one fed by the tracker's readers (the frame loop reads through :func:`tracked_frames`).
 
@@ -182,15 +188,17 @@ class KeypointStream:
         step: int,
         cache: Path | None = None,
         reduction: np.ndarray | None = None,
+        *,
+        landmark_model: str,
     ):
-        self.recording, self.cache = recording, cache
+        self.recording, self.cache, self.landmark_model = recording, cache, landmark_model
         self.wanted = schedule(start, stop, step)
         self.lead = step + LAG
         self.reduction = reduction
         self.fed = None
         self.to_feed: frozenset[int] = frozenset()  # the frames the readers give a fed worker (:meth:`copies`)
         self.sent: set[int] = set()
-        self.old = cached(cache, recording) if cache is not None else None
+        self.old = cached(cache, recording, landmark_model) if cache is not None else None
         self.raw: list[Keypoints] = []
         self.detected: dict[int, Keypoints] = {}  # each scheduled frame's landmarks as detected, before the check
         self.checked: dict[int, Keypoints] = {}
@@ -206,7 +214,7 @@ class KeypointStream:
             self.detected = {int(frame): detected.at_frames(np.array([frame])) for frame in held}
         if self.reused is not None:
             return
-        require_detector()
+        require_detector(landmark_model)
         context = multiprocessing.get_context("spawn")
         with stop_signals.held():
             self.results = context.Queue()
@@ -214,6 +222,7 @@ class KeypointStream:
             self.worker = context.Process(
                 target=_work,
                 args=(recording, start, stop, step, self.results, self.fed, reduction),
+                kwargs=dict(landmark_model=landmark_model),
                 name="keypoint detector",
                 daemon=True,
             )

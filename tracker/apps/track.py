@@ -36,6 +36,7 @@ class Tracking:
 
     settings: Settings  # the tracker's settings, its frame rate the recording's
     keypoints: int  # the keypoint detector runs on every keypoints-th frame beside the tracker; 0: off
+    landmark_model: str  # the detector's landmark model: lite, full or heavy (tracker.landmarks.landmark_models)
     start: int = 0  # first frame
     frames: int | None = None  # frames to track (None: to the end)
     model: str | None = None  # body model TOML (None: the recording's model.toml, else models/human.toml fitted)
@@ -140,9 +141,9 @@ def track(
     stop = rec.frame_count if tracking.frames is None else min(rec.frame_count, start + tracking.frames)
     asked = range(start, stop)
     pose_file = starting_pose_file(start, tracking.init, rec.init_path, by_itself=bool(step))
-    model = _model(tracking.model, rec, out, step, bar)
+    model = _model(tracking.model, rec, out, step, bar, tracking.landmark_model)
     background = _background(tracking.background, rec, out, bar)
-    init, begin, back_to = _first_pose(pose_file, start, rec, model, stop, out, settings, step)
+    init, begin, back_to = _first_pose(pose_file, start, rec, model, stop, out, settings, step, tracking.landmark_model)
     ensure_writable_folder(out)  # a folder that cannot be written fails now, not at the first save
     print(
         f"tracking {rec.path} frames {back_to}..{stop - 1} with {len(rec.cameras)} camera(s) "
@@ -182,6 +183,7 @@ def track(
         out,
         step if stop > begin else 0,
         None if background is not None else reductions(settings, rec.cameras),
+        tracking.landmark_model,
     )
     video = None
     with contextlib.ExitStack() as closing:  # each closed however the run ends, the stream keeping what was detected
@@ -299,7 +301,7 @@ def _files(
     files = [(out / "poses.npz", f"the pose of each of the {frames} frames: tracker view, eval and export read it")]
     if _fitted(tracking.model, rec):
         files.append((out / "model.toml", "the body model fitted to the person: pass it with --model to reuse it"))
-    keypoints = cache_file(out, rec)
+    keypoints = cache_file(out, rec, tracking.landmark_model)
     if tracking.keypoints and keypoints.is_file():
         files.append((keypoints, "the keypoint detector's landmarks, reused when this recording is tracked again"))
     if tracking.background == "median":
@@ -396,7 +398,7 @@ def _tracked_back(
     recovery, judged = None, None
     with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
         path = Path(folder) / "poses.npz"
-        stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
+        stream = _keypoints(rec, first, settled, out, tracking.keypoints, None, tracking.landmark_model)
         try:
             with contextlib.ExitStack() as closing:
                 if stream is not None:
@@ -454,9 +456,10 @@ def _fitted(given: str | None, rec) -> bool:
     return not given and rec.model_path is None
 
 
-def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
+def _model(given: str | None, rec, out: Path, step: int, bar: Bar, landmark_model: str):
     """The body model: ``given`` (``--model``), else the recording's model.toml, else models/human.toml fitted to the
-    person (:func:`tracker.shape.model_fit.fit_and_save`), written to OUT/model.toml."""
+    person (:func:`tracker.shape.model_fit.fit_and_save`, with the landmarks of ``landmark_model``), written to
+    OUT/model.toml."""
     from tracker.model import load_model
 
     if not _fitted(given, rec):
@@ -480,7 +483,8 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
         read_toml(GENERIC, "model", "reinstall the tracker: models/human.toml is part of it"),
         path,
         source=str(GENERIC),
-        cache=cache_file(path.parent, rec),
+        cache=cache_file(path.parent, rec, landmark_model),
+        landmark_model=landmark_model,
         progress=bar("fitting the model", "step"),
         say=lambda line: print(line, file=sys.stderr),
     )
@@ -488,15 +492,17 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
     return load_model(path)
 
 
-def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
+def _first_pose(
+    pose_file: Path | None, start: int, rec, model, stop: int, out: Path, settings, step: int, landmark_model: str
+):
     """The pose at the first frame, that frame (``start``, or later) and the first frame to track back to from it:
     the pose in ``pose_file`` (``--init`` or the recording's init.toml, the pose at frame ``start``:
     :func:`tracker.io.posefile.starting_pose_file`), else fitted to the keypoints of the first frames
-    (:func:`tracker.seeding.first_pose.first_pose`, detections cached in OUT/keypoints.npz).  When they cannot place
-    the body, the detector tries the next frames if it saw someone in them (a body cut by the borders, in one view
-    only, or in views that face each other), else a second of frames later, and tracking starts where the body is
-    first placed; the frames before it back to the first of those in which someone was seen, one try after another,
-    are tracked backwards from it (:func:`_tracked_back`)."""
+    (:func:`tracker.seeding.first_pose.first_pose`, detections by ``landmark_model`` cached in OUT/keypoints.npz).
+    When they cannot place the body, the detector tries the next frames if it saw someone in them (a body cut by the
+    borders, in one view only, or in views that face each other), else a second of frames later, and tracking starts
+    where the body is first placed; the frames before it back to the first of those in which someone was seen, one
+    try after another, are tracked backwards from it (:func:`_tracked_back`)."""
     from tracker.io.posefile import load_pose_file
 
     if pose_file is not None:
@@ -510,7 +516,7 @@ def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: 
     from tracker.landmarks.detect_recording import cache_file, detect_recording
     from tracker.seeding.first_pose import FRAMES, first_pose
 
-    cache = cache_file(ensure_writable_folder(out), rec)
+    cache = cache_file(ensure_writable_folder(out), rec, landmark_model)
     last_begin = max(start, stop - FRAMES)
     begin, back_to = start, None  # back_to: the first frame someone was seen in, try after try up to now
     lacking = "no init.toml" if rec.init_path is None else f"no init.toml of frame {start}"
@@ -519,7 +525,7 @@ def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: 
         print(
             f"first pose: {lacking}, fitting the body to the keypoints of frames {begin}..{last - 1}", file=sys.stderr
         )
-        keypoints, _ = detect_recording(rec, begin, last, cache=cache)
+        keypoints, _ = detect_recording(rec, begin, last, cache=cache, landmark_model=landmark_model)
         found = keypoints.frame[(keypoints.confidence > 0).any(axis=(1, 2))]
         seen = len(found) > 0
         if not seen:  # nobody here: nothing before to track back to
@@ -536,19 +542,21 @@ def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: 
             print(f"first pose: {error}; trying again {when}", file=sys.stderr)
 
 
-def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):
-    """The detector's stream of every ``step``-th frame (``--keypoints``; cached in OUT/keypoints.npz), or None
-    (off); fed the tracker's images, reduced by ``reduction``, unless that is None."""
+def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction, landmark_model: str):
+    """The detector's stream of every ``step``-th frame (``--keypoints``) by ``landmark_model``, cached in
+    OUT/keypoints.npz (:func:`tracker.landmarks.detect_recording.cache_file`), or None (off); fed the tracker's
+    images, reduced by ``reduction``, unless that is None."""
     if not step:
         return None
     from tracker.apps.keypoint_stream import KeypointStream, schedule_words
     from tracker.atomic import ensure_writable_folder
     from tracker.landmarks.detect_recording import cache_file
 
-    stream = KeypointStream(rec, begin, stop, step, cache_file(ensure_writable_folder(out), rec), reduction)
+    cache = cache_file(ensure_writable_folder(out), rec, landmark_model)
+    stream = KeypointStream(rec, begin, stop, step, cache, reduction, landmark_model=landmark_model)
     every = schedule_words(step)
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
-    print(f"keypoints: {every}, {source}", file=sys.stderr)
+    print(f"keypoints: {every}, {source} (BlazePose {landmark_model})", file=sys.stderr)
     return stream
 
 

@@ -79,6 +79,9 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "offer every N-th frame set to the 2-D keypoint detector, a worker process that takes one when it is free "
         "(the tracker never waits), and fuse its landmarks with the edges",
     )
+    from tracker.landmarks.landmark_models import LIVE
+
+    options.add_landmark_model_option(parser, LIVE)
     options.add_live_view_options(viewer, "while it tracks")
     options.add_viewer_options(viewer, record=False)
 
@@ -144,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         if step:
             from tracker.landmarks.live_detection import LiveDetector
 
-            detector = LiveDetector(cameras, step)
+            detector = LiveDetector(cameras, step, landmark_model=args.landmark_model)
             stack.callback(detector.close)
             print("starting the keypoint detector...", file=sys.stderr, flush=True)
             detector.wait_until_ready()

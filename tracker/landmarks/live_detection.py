@@ -22,7 +22,7 @@ from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_world
 from tracker.landmarks.consistency import consistent
-from tracker.landmarks.detector import Detector, detect_views, native_logs_muted, require_detector
+from tracker.landmarks.detector import Detector, detect_views, detector_name, native_logs_muted, require_detector
 from tracker.landmarks.store import Keypoints
 
 _CLOSE_WAIT = 2.0
@@ -35,14 +35,15 @@ _START_WAIT = 120.0
 """Seconds the worker may take to load its landmarkers."""
 
 
-def _work(cameras: list[Camera], jobs, results) -> None:
-    """The worker process: detect every frame set taken from ``jobs`` (None ends it) and put (number, pixels,
+def _work(cameras: list[Camera], jobs, results, landmark_model: str) -> None:
+    """The worker process: detect (with ``landmark_model``) every frame set taken from ``jobs`` (None ends it) and put
+    (number, pixels,
     confidence) of the checked landmarks on ``results``; an error is put instead and ends it.  The stop signals are
     the parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
         with native_logs_muted():
-            detectors = [Detector() for _ in cameras]
+            detectors = [Detector(landmark_model=landmark_model) for _ in cameras]
             names = tuple(camera.name for camera in cameras)
             results.put(READY)
             while (job := jobs.get()) is not None:
@@ -53,7 +54,9 @@ def _work(cameras: list[Camera], jobs, results) -> None:
                 for camera, found in enumerate(detect_views(detectors, images, cameras=cameras)):
                     pixels[camera], confidence[camera] = found.pixels, found.confidence
                 world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
-                raw = Keypoints(np.array([number]), names, pixels[None], confidence[None], world)
+                raw = Keypoints(
+                    np.array([number]), names, pixels[None], confidence[None], world, detector_name(landmark_model)
+                )
                 checked = consistent(raw, cameras)[0]
                 results.put((number, checked.pixels[0], checked.confidence[0]))
     except BaseException as error:  # handed to the tracker, raised there
@@ -61,17 +64,21 @@ def _work(cameras: list[Camera], jobs, results) -> None:
 
 
 class LiveDetector:
-    """A worker process detecting the frame sets offered to it when it is free (module docstring)."""
+    """A worker process detecting the frame sets offered to it when it is free, with ``landmark_model`` (module
+    docstring)."""
 
-    def __init__(self, cameras: list[Camera], step: int):
-        require_detector()
+    def __init__(self, cameras: list[Camera], step: int, *, landmark_model: str):
+        require_detector(landmark_model)
         self.step = step
         context = multiprocessing.get_context("spawn")
         with stop_signals.held():
             self.jobs = context.Queue()
             self.results = context.Queue()
             self.worker = context.Process(
-                target=_work, args=(cameras, self.jobs, self.results), name="keypoint detector", daemon=True
+                target=_work,
+                args=(cameras, self.jobs, self.results, landmark_model),
+                name="keypoint detector",
+                daemon=True,
             )
             stop_signals.start(self.worker)
         self.busy = False
