@@ -77,7 +77,7 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
 def _seen_in_cam0_alone(recording: Path, out: Path, frames_alone: range) -> None:
     """OUT/keypoints.npz with the detector's landmarks of the recording's first 15 frames, those of cam1 and cam2 taken
     out in ``frames_alone``: there cam0 alone sees him, and the images are as they were."""
-    found, _ = detect_recording(open_recording(recording), 0, 15)
+    found, _ = detect_recording(open_recording(recording), 0, 15, landmark_model="full")
     alone = np.isin(found.frame, frames_alone)[:, None] & (np.arange(len(found.camera_names)) > 0)[None]
     out.mkdir()
     save_keypoints(

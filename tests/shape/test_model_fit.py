@@ -72,7 +72,9 @@ def test_the_fit_finds_a_reshaped_body(reshaped_recording, tmp_path):
     millimetres, where the model was 2-3 cm off on average; the radii closer too."""
     generic = read_toml(HUMAN, "model", "")
     truth = read_toml(reshaped_recording / "body.toml", "model", "")
-    fit = fit_shape(open_recording(reshaped_recording), generic, frames=24, cache=tmp_path / "keypoints.npz")
+    fit = fit_shape(
+        open_recording(reshaped_recording), generic, frames=24, cache=tmp_path / "keypoints.npz", landmark_model="full"
+    )
     before, after = np.abs(length_errors(generic, truth)), np.abs(length_errors(fit.document, truth))
     assert before.mean() > 20 and after.mean() < 5 and after.max() < 10
     radii = [
@@ -96,7 +98,9 @@ def test_patterned_clothes_are_fitted_by_their_colours(tmp_path):
     recording = reshaped(tmp_path / "rec", 120, "mixed", seed=22)
     generic = read_toml(HUMAN, "model", "")
     truth = read_toml(recording / "body.toml", "model", "")
-    fit = fit_shape(open_recording(recording), generic, frames=40, cache=tmp_path / "keypoints.npz")
+    fit = fit_shape(
+        open_recording(recording), generic, frames=40, cache=tmp_path / "keypoints.npz", landmark_model="full"
+    )
     errors = np.abs(length_errors(fit.document, truth))
     radii = [
         abs(got.metres / want.metres - 1.0)
@@ -250,7 +254,7 @@ def test_legs_behind_tables_keep_the_given_proportions(tmp_path):
         staging=Staging(body="stretched", jitter=0.15, face=True, tables=("all",)),
     )
     generic, truth = read_toml(HUMAN, "model", ""), read_toml(folder / "body.toml", "model", "")
-    fit = fit_shape(open_recording(folder), generic, frames=20, cache=tmp_path / "keypoints.npz")
+    fit = fit_shape(open_recording(folder), generic, frames=20, cache=tmp_path / "keypoints.npz", landmark_model="full")
     measured = {name for name, seen in zip(fit.layout.names, fit.measured()) if seen}
     legs = {f"{part}_{side}" for part in ("thigh", "shin", "foot") for side in "lr"}
     assert not measured & legs and {"pelvis", "torso", "head", "upperarm_l", "forearm_l"} <= measured
