@@ -11,6 +11,7 @@ import tracker.apps.bench as bench
 from tracker.apps.bench import HUMAN, _copies, _side_by_side, detector_ms
 from tracker.cli import main
 from tracker.io.recording import open_recording
+from tracker.landmarks.landmark_models import LIVE, RECORDED
 from tracker.model import model_from_dict
 from tracker.tracking.settings import Settings
 
@@ -37,6 +38,10 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert abs(result["ratio_all_views"] - result["fps_all_views"] / result["decode_only_fps_all_views"]) < 1e-9
     assert set(result["stage_ms_per_frame_all_views"]) >= {"decode", "outline", "measure", "solve", "output"}
     assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0  # the default at the recording's 60 fps
+    assert result["landmark_model"] == RECORDED  # the default of the commands on recorded folders, and live's beside it
+    by_model = result["detector_ms_per_view_by_model"]
+    assert set(by_model) == {RECORDED, LIVE} and by_model[RECORDED] == result["detector_ms_per_view"]
+    assert by_model[LIVE] > 0
     assert result["fps_all_views_with_keypoints"] > 0
     assert set(result["stage_ms_per_frame_with_keypoints"]) >= {"outline", "measure", "region", "solve", "output"}
 
@@ -47,6 +52,9 @@ def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording
     shapes = []
 
     class Seen:
+        def __init__(self, *, landmark_model):
+            assert landmark_model == "full"
+
         def whole(self, image):
             shapes.append(image.shape)
 
@@ -84,8 +92,13 @@ def test_bench_table_is_printed(tiny_recording, capsys):
         assert fps > 0 and decode_fps > 0
         assert (fps - 0.5) / (decode_fps + 0.5) - 0.005 <= shown <= (fps + 0.5) / max(decode_fps - 0.5, 0.5) + 0.005
     assert float(re.findall(r"([\d.]+) ms per view per IRLS iteration", out)[0]) > 0
-    detector, with_cue = re.findall(r"the detector takes ([\d.]+) ms per view;.*?, ([\d.]+) frames per second", out)[0]
-    assert float(detector) > 0 and float(with_cue) > 0
+    found = re.findall(
+        r"the detector \((\w+)\) takes ([\d.]+) ms per view \((\w+), tracker live's: ([\d.]+) ms\);"
+        r".*?, ([\d.]+) frames per second",
+        out,
+    )
+    model, detector, live, live_ms, with_cue = found[0]
+    assert (model, live) == (RECORDED, LIVE) and float(detector) > 0 and float(live_ms) > 0 and float(with_cue) > 0
 
 
 def test_bodies_side_by_side_for_the_scaling_table():

@@ -20,6 +20,7 @@ from tracker.cli import main
 from tracker.io.pairing import by_offsets
 from tracker.io.recording import frames, open_recording
 from tracker.landmarks.detect_recording import cached, detect_recording, fingerprint
+from tracker.landmarks.detector import detector_name
 from tracker.landmarks.store import load_keypoints, save_keypoints
 from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
@@ -65,10 +66,20 @@ def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
     save_keypoints(cache, dataclasses.replace(keypoints, recording="cam0=1:0 cam1=1:0 cam2=1:0"))
     message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache, landmark_model="full"))
     assert str(cache) in message and "another recording" in message and "delete it" in message
-    other = dataclasses.replace(keypoints, detector="mediapipe 0.9 pose_landmark_lite")
-    save_keypoints(cache, other)
-    message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache, landmark_model="full"))
-    assert "made by another detector (mediapipe 0.9 pose_landmark_lite" in message and "delete it" in message
+
+
+def test_a_cache_of_another_detector_is_detected_again_and_replaced(tmp_path):
+    """A file an older version of the detector wrote (another detector string) is not reused, nor an error: the
+    stream detects the frames and the file then holds this detector's."""
+    recording = open_recording(DEMO)
+    cache = tmp_path / "keypoints.npz"
+    keypoints = detect_recording(recording, 0, 1, landmark_model="full")[0]
+    save_keypoints(cache, dataclasses.replace(keypoints, detector="mediapipe 0.9 pose_landmark_full"))
+    with KeypointStream(recording, 0, 4, 2, cache, landmark_model="full") as stream:
+        assert stream.reused is None and stream.old is None
+        assert stream.get(3) is not None
+    again = load_keypoints(cache)
+    assert again.detector == detector_name("full") and list(again.frame) == [0, 2, 3]
 
 
 def test_a_cache_of_the_same_videos_paired_otherwise_is_detected_again(tmp_path):
@@ -212,7 +223,6 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     on: asked in frame order, the stream gives cam1's disputed landmarks of frames 2-4 back, never cam0's; asked for
     frame 4 first, it has no last frame to go by and gives nothing back, and neither does it unless asked to settle."""
     from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
-    from tracker.landmarks.detector import detector_name
     from tracker.landmarks.store import Keypoints
     from tracker.model import load_model
 
@@ -232,7 +242,7 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     held = Keypoints(frames_held, names, pixels, confidence, np.zeros((3, 3, len(LANDMARKS), 3)), detector_name("full"))
     cache = tmp_path / "keypoints.npz"
     save_keypoints(cache, dataclasses.replace(held, recording=fingerprint(recording)))
-    monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
+    monkeypatch.setattr(stream_module, "require_detector", lambda model: pytest.fail("the cache holds every frame"))
     with KeypointStream(recording, 0, 5, 2, cache, landmark_model="full") as stream:
         got = {frame: stream.get(frame, settle=True) for frame in range(5)}
     assert all((got[frame][1][1, seen] >= 0.5).all() for frame in range(5))
@@ -249,7 +259,6 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
     none in frame 4, frames 1-3 none; a cache without masks gives none.  beside() hands them to the tracker."""
     from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
     from tracker.landmarks.crop import CROP
-    from tracker.landmarks.detector import detector_name
     from tracker.landmarks.store import Keypoints
     from tracker.model import load_model
 
@@ -273,7 +282,7 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
     held = Keypoints(
         np.array([0, 4]), names, pixels, confidence, np.zeros((2, 3, len(LANDMARKS), 3)), detector_name("full")
     )
-    monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
+    monkeypatch.setattr(stream_module, "require_detector", lambda model: pytest.fail("the cache holds every frame"))
     cache = tmp_path / "keypoints.npz"
     identity = fingerprint(recording)
     save_keypoints(cache, dataclasses.replace(held, recording=identity, mask=mask, square=square))
@@ -306,7 +315,7 @@ def _worker_ahead(monkeypatch) -> None:
     from tracker.apps.keypoint_stream import schedule
     from tracker.landmarks.store import Keypoints
 
-    def process(target, args, name, daemon):
+    def process(target, args, kwargs, name, daemon):
         recording, start, stop, step, results = args[:5]
         count = len(recording.cameras)
 
@@ -318,6 +327,7 @@ def _worker_ahead(monkeypatch) -> None:
                     np.full((1, count, 33, 2), np.nan),
                     np.zeros((1, count, 33)),
                     np.full((1, count, 33, 3), np.nan),
+                    detector_name(kwargs["landmark_model"]),
                     recording=fingerprint(recording),
                 )
                 results.put((nobody, nobody))
@@ -327,7 +337,7 @@ def _worker_ahead(monkeypatch) -> None:
 
     context = SimpleNamespace(Queue=queue.Queue, Process=process)
     monkeypatch.setattr(stream_module, "multiprocessing", SimpleNamespace(get_context=lambda method: context))
-    monkeypatch.setattr(stream_module, "require_detector", lambda: None)
+    monkeypatch.setattr(stream_module, "require_detector", lambda landmark_model: None)
 
 
 def test_closing_keeps_what_the_worker_detected_ahead_of_the_tracker(tmp_path, monkeypatch):
