@@ -239,3 +239,33 @@ def test_main_installs_from_a_tarball_and_says_so(tmp_path, package, fake_files,
         f"tracker: error: {folder / 'pose_landmark_full.tflite'}: the full landmark model is not installed; run make "
         "setup, or python -m tracker.landmarks.landmark_models install"
     ]
+
+
+def test_a_model_is_read_once_per_process(tmp_path, package, fake_files, monkeypatch):
+    path, integrity = package
+    folder = tmp_path / "pose_landmark"
+    install(folder, integrity=integrity, tarball=path)
+    landmark_models._checked.cache_clear()
+    read = []
+    monkeypatch.setattr(landmark_models, "sha256_of", lambda file: read.append(file) or SPECS["lite"].sha256)
+    for _ in range(3):
+        check_model("lite", folder)
+    assert read == [folder / SPECS["lite"].file]
+
+
+def test_a_command_whose_model_is_missing_stops_in_one_line_before_detecting(tmp_path, monkeypatch, capsys):
+    from pathlib import Path
+
+    from tracker.cli import main
+
+    demo = Path(__file__).resolve().parents[2] / "recordings" / "demo"
+    monkeypatch.setattr(landmark_models, "model_folder", lambda: tmp_path / "empty")
+    landmark_models._checked.cache_clear()
+    out = tmp_path / "out"
+    assert main(["keypoints", str(demo), "--frames", "1", "--out", str(out), "--landmark-model", "heavy"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"tracker: error: {tmp_path / 'empty' / 'pose_landmark_heavy.tflite'}: the heavy landmark model is not "
+        "installed; run make setup, or python -m tracker.landmarks.landmark_models install"
+    )
+    assert not list(out.glob("keypoints*"))
+    landmark_models._checked.cache_clear()
