@@ -45,7 +45,7 @@ RECORDED = "heavy"
 """The model of the commands that read recorded folders (track, keypoints, fit-model, sync, init, batch, bench):
 the most accurate (docs/keypoints.md, "Three models")."""
 
-LIVE = "full"
+LIVE = "lite"
 """The model of ``tracker live``, which must keep up with the cameras (docs/keypoints.md, "Three models")."""
 
 
