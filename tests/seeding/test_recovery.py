@@ -55,7 +55,7 @@ def demo_pngs(tmp_path_factory) -> Path:
 
 def test_track_without_a_first_pose_fits_one_to_the_keypoints(demo_pngs, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 0
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     assert "first pose: no init.toml, fitting the body to the keypoints of frames 0..4" in capsys.readouterr().err
     error = _errors(out)
     assert np.median(error) < 0.02 and error.max() < 0.06, error.round(3)
@@ -66,7 +66,7 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
     folder = _demo_copy(tmp_path / "rec", black=range(8))
     later = round(open_recording(folder).fps)  # an image folder's rate
     out = tmp_path / "out"
-    assert main(["track", str(folder), "--out", str(out), "--quiet"]) == 0
+    assert main(["track", str(folder), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     err = capsys.readouterr().err
     assert "no person found by the keypoint detector in two views in frames 0..4" in err and "trying again" in err
     assert f"fitting the body to the keypoints of frames {later}..{later + 4}" in err
@@ -75,13 +75,13 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
 
 
 def _seen_in_cam0_alone(recording: Path, out: Path, frames_alone: range) -> None:
-    """OUT/keypoints.npz with the detector's landmarks of the recording's first 15 frames, those of cam1 and cam2 taken
-    out in ``frames_alone``: there cam0 alone sees him, and the images are as they were."""
+    """OUT/keypoints-full.npz with the full landmark model's landmarks of the recording's first 15 frames, those of cam1
+    and cam2 taken out in ``frames_alone``: there cam0 alone sees him, and the images are as they were."""
     found, _ = detect_recording(open_recording(recording), 0, 15, landmark_model="full")
     alone = np.isin(found.frame, frames_alone)[:, None] & (np.arange(len(found.camera_names)) > 0)[None]
     out.mkdir()
     save_keypoints(
-        out / "keypoints.npz",
+        out / "keypoints-full.npz",
         dataclasses.replace(
             found,
             pixels=np.where(alone[..., None, None], np.nan, found.pixels),
@@ -103,7 +103,7 @@ def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tr
     recording = _demo_copy(tmp_path / "rec", black=range(nobody)) if nobody else demo_pngs
     out = tmp_path / "out"
     _seen_in_cam0_alone(recording, out, range(5))
-    assert main(["track", str(recording), "--out", str(out), "--quiet"]) == 0
+    assert main(["track", str(recording), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     err = capsys.readouterr().err
     assert "in frames 0..4" in err and "trying again with the next frames, where someone was seen" in err
     assert "fitting the body to the keypoints of frames 5..9" in err
@@ -150,7 +150,7 @@ def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(at, kept, demo
 
     monkeypatch.setattr(app, "BACK_CHUNK", 2)
     monkeypatch.setattr(stream, "tracked_frames", stopped)
-    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 130
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 130
     assert "interrupted: the frames done so far are saved" in capsys.readouterr().err
     settled_then_back = [5, 12, 10, 8, 6, 4, 2, 0]  # settled on frames 5..14, then back from frame 13
     assert starts[: settled_then_back.index(at) + 1] == settled_then_back[: settled_then_back.index(at) + 1]
@@ -222,7 +222,7 @@ def test_a_body_lost_to_half_a_second_of_noise_is_found_again(tmp_path):
 
     def errors(*extra: str) -> np.ndarray:
         out = tmp_path / "out"
-        assert main(["track", str(folder), "--out", str(out), "--quiet", *extra]) == 0
+        assert main(["track", str(folder), "--out", str(out), "--quiet", *extra, "--landmark-model", "full"]) == 0
         poses = load_poses(out / "poses.npz")
         shutil.rmtree(out)
         return np.linalg.norm(poses["joints"] - truth["joints"][poses["frame"]], axis=2).mean(axis=1)

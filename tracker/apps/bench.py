@@ -12,8 +12,8 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * decode only: frames per second of the same reader threads with no tracking,
   the floor that tracking is compared with (``ratio_all_views``);
 * the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
-  in this process, reduced as the tracker feeds them to its worker) with the landmark model of the run and with
-  ``tracker live``'s (:data:`tracker.landmarks.landmark_models.LIVE`), and frames per second end to
+  in this process, reduced as the tracker feeds them to its worker) with each landmark model (the run's, and the
+  others beside it: ``tracker live`` runs :data:`tracker.landmarks.landmark_models.LIVE`), and frames per second end to
   end with the detector beside the tracker at its default rate (a worker process started afresh in
   each pass, as ``tracker track`` does, so its start-up counts);
 * a long run (:func:`long_run`): thousands of frames, the recording read in a loop, and the resident
@@ -46,7 +46,7 @@ from tracker.io.poses import load_poses
 from tracker.io.readers import grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.landmarks.detector import Detector
-from tracker.landmarks.landmark_models import LIVE
+from tracker.landmarks.landmark_models import LIVE, MODELS
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
@@ -199,7 +199,7 @@ def run(
 ) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
     cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate) with
-    ``landmark_model``, the detector's time also with ``tracker live``'s model.  The body model and the first pose
+    ``landmark_model``, the detector's time also with the other models.  The body model and the first pose
     are ``model_path`` and ``init_path``, else the recording's own."""
     every, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
@@ -225,8 +225,7 @@ def run(
             )
             for _ in range(repeats if keypoint_step else 0)
         ]
-        timed = dict.fromkeys((landmark_model, LIVE)) if keypoint_step else {}
-        by_model = {name: detector_ms(every, settings, name) for name in timed}
+        by_model = {name: detector_ms(every, settings, name) for name in (MODELS if keypoint_step else ())}
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
@@ -425,11 +424,11 @@ def format_table(result: dict) -> str:
     ]
     if result["keypoint_step"]:
         model, by_model = result["landmark_model"], result["detector_ms_per_view_by_model"]
-        live = "".join(f" ({name}, tracker live's: {ms:.1f} ms)" for name, ms in by_model.items() if name != model)
+        others = ", ".join(f"{name} {ms:.1f} ms" for name, ms in by_model.items() if name != model)
         lines += [
             "",
-            f"Keypoint cue: the detector ({model}) takes {result['detector_ms_per_view']:.1f} ms per view{live}; "
-            "with it on "
+            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view with the {model} "
+            f"landmark model ({others}; tracker live runs {LIVE}); with it on "
             f"{schedule_words(result['keypoint_step'])} beside the tracker (a worker process, its start-up included), "
             f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
         ]
