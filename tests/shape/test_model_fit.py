@@ -113,7 +113,8 @@ def test_patterned_clothes_are_fitted_by_their_colours(tmp_path):
 def test_fit_model_writes_a_model_and_says_what_changed(short_recording, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "fitted.toml"
-    assert main(["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet", "--landmark-model", "full"]) == 0
+    argv = ["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet", "--landmark-model", "full"]
+    assert main(argv) == 0
     printed = capsys.readouterr()
     assert f"wrote {out}" in printed.out and "length to forearm_l" in printed.err
     document = read_toml(out, "model", "")
@@ -129,7 +130,8 @@ def test_track_without_a_model_fits_one_first(short_recording, tmp_path, capsys)
     shutil.copytree(short_recording, rec)
     for name in ("model.toml", "body.toml", "init.toml"):
         (rec / name).unlink()
-    code = main(["track", str(rec), "--out", str(tmp_path / "out"), "--frames", "6", "--quiet", "--landmark-model", "full"])
+    argv = ["track", str(rec), "--out", str(tmp_path / "out"), "--frames", "6", "--quiet", "--landmark-model", "full"]
+    code = main(argv)
     assert code == 0
     err = capsys.readouterr().err
     assert "fitting human.toml to the person" in err and "wrote" in err
