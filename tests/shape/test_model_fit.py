@@ -113,8 +113,8 @@ def test_patterned_clothes_are_fitted_by_their_colours(tmp_path):
 def test_fit_model_writes_a_model_and_says_what_changed(short_recording, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "fitted.toml"
-    argv = ["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet", "--landmark-model", "full"]
-    assert main(argv) == 0
+    argv = ["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet"]
+    assert main([*argv, "--landmark-model", "full"]) == 0
     printed = capsys.readouterr()
     assert f"wrote {out}" in printed.out and "length to forearm_l" in printed.err
     document = read_toml(out, "model", "")
