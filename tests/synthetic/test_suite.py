@@ -104,6 +104,13 @@ def test_make_then_score_known_errors(tmp_path, capsys):
     row = json.loads(capsys.readouterr().out)[0]
     assert row["name"] == SMALL and row["median"] == 0.0 and row["wrong"] == 0.0 and row["swapped"] == 0.0
     assert row["views"] == row["found"] == row["on_body"] == 12 and 12 * 9 <= row["scored"] < 12 * 12  # cam0's table
+    assert row["triangulated_mm"] == pytest.approx(0.0, abs=1e-6) and row["coverage"] == 1.0  # every known joint, true
+    assert main(["suite", "landmarks", str(out), str(tmp_path / "kp"), "--landmark-model", "lite"]) == 2  # none made
+    lite = tmp_path / "kp" / SMALL / "keypoints-lite.npz"
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"tracker: error: {lite}: not found; detect it with tracker keypoints {out / SMALL} --out {lite.parent} "
+        "--landmark-model lite"
+    )
     # the same landmarks beside the results: triangulated frame by frame they are the true joints, so the
     # baseline is 0 mm while the tracker, 70 mm off (then 200 mm: every frame beyond 150 mm), keeps its number
     save_keypoints(results / SMALL / "keypoints.npz", found)
