@@ -66,7 +66,7 @@ def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording
     assert detector_ms(recording, Settings().but(images=dict(work_side=120)), landmark_model="full", count=2) >= 0
     assert shapes == [(120, 160, 3)] * 4
     shapes.clear()
-    detector_ms(recording, Settings(), "full", count=2)
+    detector_ms(recording, Settings(), landmark_model="full", count=2)
     assert shapes == [(240, 320, 3)] * 4
 
 

@@ -86,7 +86,7 @@ def decode_only_fps(recording: Recording) -> float:
     return count / (time.perf_counter() - started)
 
 
-def detector_ms(recording: Recording, settings: Settings, landmark_model: str, count: int = 40) -> float:
+def detector_ms(recording: Recording, settings: Settings, *, landmark_model: str, count: int = 40) -> float:
     """Median milliseconds per image of the keypoint detector's pass on the whole image with ``landmark_model``, which
     every view gets, over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the
     tracker's
@@ -225,7 +225,8 @@ def run(
             )
             for _ in range(repeats if keypoint_step else 0)
         ]
-        by_model = {name: detector_ms(every, settings, name) for name in (MODELS if keypoint_step else ())}
+        timed = MODELS if keypoint_step else ()
+        by_model = {name: detector_ms(every, settings, landmark_model=name) for name in timed}
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
