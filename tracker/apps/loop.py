@@ -77,7 +77,7 @@ def track_frames(
     before: dict[str, np.ndarray] | None = None,
 ) -> Loop:
     """Track the ``frames`` with ``tracker`` and write each one's row to the poses.npz at ``path`` (frames at ``fps``)
-    as it is done: poses, joint centres, status, residual, seconds spent and capture time.  Ctrl-C, SIGTERM or SIGHUP
+    as it is done: poses, joint centres, status, which parts the images hold, residual, seconds spent and capture time.  Ctrl-C, SIGTERM or SIGHUP
     (:mod:`tracker.stop_signals`) ends the loop with the frames done written (:attr:`Loop.interrupted`).
 
     ``frames`` yields (index, images), one image per camera of the tracker's rig, already :meth:`Tracker.smooth
@@ -88,7 +88,7 @@ def track_frames(
     frame-locked).
     ``retarget(tracker)``: before each frame, the tracker to track it with (``tracker live`` rebuilds it for the
     cameras still delivering).  ``each``: called with every frame once its row is written.  ``before``: rows of a
-    poses.npz (its arrays: frame, poses, joints, status, residual, elapsed, time) written first, in their order, as the
+    poses.npz (its arrays: frame, poses, joints, status, held, residual, elapsed, time) written first, in their order, as the
     frames tracked back from the first pose of ``frames`` (:func:`tracker.apps.track.track`); not counted in the loop.
     """
     done, writing, interrupted, last = 0, 0.0, False, None
@@ -104,6 +104,7 @@ def track_frames(
                     residual=float(before["residual"][row]),
                     elapsed=float(before["elapsed"][row]),
                     time=None if times is None else float(before["time"][row]),
+                    held=before["held"][row],
                 )
         try:
             for index, images in frames:
@@ -126,6 +127,7 @@ def track_frames(
                     residual=result.residual,
                     elapsed=spent,
                     time=at,
+                    held=result.held,
                 )
                 writing += time.perf_counter() - begun - spent
                 done, last = done + 1, at

@@ -12,8 +12,9 @@ of its predicted covariance, at least P), solves the whole tree for one twist pe
 ``E_i <- E_i exp(alpha_i)`` and coerces the joints exact (section 5) (:mod:`tracker.tracking.solve`).  The search
 range shrinks from iteration to iteration (coarse to fine).  With landmarks, a limb they place far from where the
 edges left it is moved to them and the frame tracked again (:mod:`tracker.tracking.lead`), and a frame whose edges
-dragged the body off them keeps the poses it started from.  The frame's status comes from the share of samples
-that found an edge and their robust mean offset.  Where the cameras are not frame-locked, each view sees the poses
+dragged the body off them keeps the poses it started from.  Each part is then held by the images, or only by the
+prior and the joints (:mod:`tracker.tracking.held`), and the frame's status comes from the share of the parts held
+and their edges' robust mean offset.  Where the cameras are not frame-locked, each view sees the poses
 moved on to its own capture time, to first order (:meth:`Tracker.seen`, docs/sync.md).
 """
 
@@ -29,11 +30,12 @@ import numpy as np
 from tracker.io.readers import WithChroma, reduced
 from tracker.landmarks.body_landmarks import TRUNK_TURN, trunk
 from tracker.model import Model
-from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.status import HELD, LOST, TRACKED, UNCERTAIN
 from tracker.tracking.colours import colour_bins, colour_grids, colour_reduction
 from tracker.tracking.cue import Cue, Frame, Iteration
 from tracker.tracking.cues import CUES
 from tracker.tracking.edge_cue import EdgeCue, reductions, smooth
+from tracker.tracking.held import Surfaces, held_codes
 from tracker.tracking.keypoint_cue import KeypointCue
 from tracker.tracking.lead import Lead
 from tracker.tracking.measure import Statistics
@@ -51,11 +53,16 @@ C = TypeVar("C")
 
 @dataclass(frozen=True)
 class FrameResult:
+    """A frame's tracked ``poses`` (N, 4, 4), its ``status`` (:mod:`tracker.status`), the robust mean offset
+    ``residual`` (pixels) and the ``share`` of its ``samples`` that found an edge, all of them; and which parts the
+    images hold, ``held`` (N,) int8 (:data:`tracker.status.HELD`, ...; :mod:`tracker.tracking.held`)."""
+
     poses: np.ndarray
     status: int
     residual: float
     share: float
     samples: int
+    held: np.ndarray
 
 
 class Tracker:
@@ -81,6 +88,7 @@ class Tracker:
         self.retry = self.work.spare(self.work.images)  # a lead's try (Lead.retry): the same images, colours, clock
         self.retry.bins, self.retry.times = self.work.bins, self.work.times
         self.hidden = np.zeros(n, bool)  # the parts hidden from every view in this frame (step)
+        self.surfaces = Surfaces.of(model)  # what each part shows the images (tracking.held)
         self.still = np.zeros((n, 6))
         self.lateness = np.zeros(len(cameras))  # frames each view of this frame was captured after it (step)
         self.poses = model.coerce(initial_poses)
@@ -190,8 +198,19 @@ class Tracker:
         twist = self.still if resampled else motion_since(self.sampled_poses, self.poses)
         now = Iteration(iteration, count, search_range, resampled, twist)
         started = time.perf_counter()
+        work.information[:] = 0.0
+        work.eta[:] = 0.0
+        if now.last:
+            work.evidence[:] = 0.0
+            work.seen[:] = False
         for cue in self.cues:
+            before = work.information.copy() if now.last else None
             cue.add(self, work, now)
+            if before is not None:
+                evidence = cue.evidence(self, work, work.information - before)
+                work.seen |= evidence.any(axis=(1, 2))
+                if cue.places:
+                    work.evidence += evidence
             started = work.times.add(cue.stage, started)
         self.poses = self.solved(work.information, work.eta, prior=self.prior, poses=self.poses)
         work.times.add("solve", started)
@@ -280,9 +299,10 @@ class Tracker:
         """The frame's result at ``poses`` as they stand, without moving them: one measurement of their outlines in
         ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
         edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
-        _, stats = self._inspected(images, smoothed, poses, None)
-        share, status = self.judge(stats)
-        return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible)
+        work, stats = self._inspected(images, smoothed, poses, None)
+        held = self.held(work.information, poses, seen=work.information.any(axis=(1, 2)))
+        share, status = self.judge(stats, work, held)
+        return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible, held)
 
     def _inspected(self, images, smoothed: bool, poses, search_range) -> tuple[Workspace, Statistics]:
         """A spare workspace in which the outlines at ``poses`` (else the current ones) are sampled and their edges
@@ -344,23 +364,40 @@ class Tracker:
             self.poses = self.anchor.copy()
         self.dynamics.correct(self, predicted)
         self.motion = dataclasses.replace(self.motion, previous=current)
-        share, status = self.judge(stats)
+        held = self.held(self.work.evidence, self.poses, seen=self.work.seen)
+        share, status = self.judge(stats, self.work, held)
         if dragged and status == TRACKED:
             status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
         for cue in self.cues:
             cue.learn(self, status, kept=not dragged)
-        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
+        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible, held)
 
-    def judge(self, stats: Statistics) -> tuple[float, int]:
-        """The share of the samples that found an edge in the measurement ``stats`` and the frame status it and
-        their residual give (:meth:`status`)."""
+    def held(self, evidence: np.ndarray, poses: np.ndarray, *, seen: np.ndarray) -> np.ndarray:
+        """Which parts at ``poses`` the evidence (N, 6, 6) of the cues that place them holds, the parts ``seen`` (N,)
+        bool by any cue (N,) int8 (:func:`tracker.tracking.held.held_codes`)."""
+        within = self.settings.status.held_within
+        return held_codes(evidence, self.surfaces, poses=poses, rig=self.rig, within=within, seen=seen)
+
+    def judge(self, stats: Statistics, work: Workspace, held: np.ndarray) -> tuple[float, int]:
+        """The share of all the samples that found an edge in the measurement ``stats`` (of ``work``), and the frame
+        status that the parts ``held`` (N,) by the images give: how many of the parts they are, and the robust mean
+        offset of their samples' edges (:meth:`status`).  The parts the images do not hold (a leg behind a table)
+        are left to the prior and do not judge the frame."""
         share = stats.found / stats.visible if stats.visible else 0.0
-        return share, self.status(share, stats.residual)
+        count = work.samples.count
+        chosen = held[work.samples.component[:count]] == HELD
+        offset, weight = work.offset[:count][chosen], work.weight[:count][chosen]
+        found = ~np.isnan(offset)
+        sum_w = weight[found].sum()
+        residual = float((weight[found] * np.abs(offset[found])).sum() / sum_w) if sum_w > 0 else float("nan")
+        return share, self.status(float(np.mean(held == HELD)) if len(held) else 0.0, residual)
 
-    def status(self, share: float, residual: float) -> int:
+    def status(self, parts: float, residual: float) -> int:
+        """The frame's status from the share of the ``parts`` the images hold and their edges' robust mean offset
+        ``residual`` (pixels; NaN: none found) (:class:`~tracker.tracking.settings.StatusSettings`)."""
         st = self.settings.status
-        if share < st.lost_share or not residual <= st.lost_residual:
+        if parts < st.lost_held or not residual <= st.lost_residual:
             return LOST
-        if share < st.uncertain_share or residual > st.uncertain_residual:
+        if parts < st.uncertain_held or residual > st.uncertain_residual:
             return UNCERTAIN
         return TRACKED
