@@ -300,7 +300,7 @@ class Tracker:
         ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
         edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
         work, stats = self._inspected(images, smoothed, poses, None)
-        held = self.held(work.information, poses, seen=work.information.any(axis=(1, 2)))
+        held = self.held(work.information, poses, seen=np.asarray(work.information.any(axis=(1, 2))))
         share, status = self.judge(stats, work, held)
         return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible, held)
 

@@ -1,5 +1,5 @@
 """Which parts the images hold in a frame, and which only the prior and the joints carry (docs/method-tracking.md,
-section 7).
+section 6, "Which parts the images hold").
 
 Each cue's readings of a frame give each component ``i`` an information ``E_i`` (6 x 6) about its body twist
 ``alpha = (v, w)`` (:meth:`tracker.tracking.cue.Cue.evidence`): the edges' and colour lines' ``sum w L^T L``, the

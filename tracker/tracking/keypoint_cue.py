@@ -283,7 +283,9 @@ class KeypointCue:
             none = (np.zeros(len(LANDMARKS)), np.full(len(LANDMARKS), np.inf))
             pixels, confidence = self.frame
             scratch = np.zeros_like(work.eta), np.empty_like(work.misfit)
-            self.pull(tracker, pixels, confidence, zone=none, information=information, eta=scratch[0], misfit=scratch[1])
+            self.pull(
+                tracker, pixels, confidence, zone=none, information=information, eta=scratch[0], misfit=scratch[1]
+            )
         return information
 
     def inspect(self, tracker: Tracker, work: Workspace) -> None:

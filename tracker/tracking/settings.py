@@ -155,8 +155,8 @@ class StatusSettings:
         "least-seen direction (tracking.held); the others are left to the prior and do not judge the frame",
         pixels="grows",
     )
-    uncertain_held: float = setting(0.5, "share of the parts held by the images below which a frame is uncertain")
-    lost_held: float = setting(0.2, "... and lost")
+    uncertain_held: float = setting(0.3, "share of the parts held by the images below which a frame is uncertain")
+    lost_held: float = setting(0.15, "... and lost")
     uncertain_residual: float = setting(
         3.0, "robust mean offset of the held parts' edges above which a frame is uncertain, pixels", pixels="grows"
     )
