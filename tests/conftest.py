@@ -199,11 +199,12 @@ def person_masks():
 @pytest.fixture(scope="session")
 def behind_a_table(tmp_path_factory) -> Path:
     """Eight frames at 30 fps of the human model seated behind a table that hides its pelvis and legs from both
-    cameras, on plain backgrounds without noise (two 320x240 views, from 1.7 m up)."""
+    cameras, on plain backgrounds without noise (three 320x240 views, from 1.7 m up)."""
     folder = tmp_path_factory.mktemp("table")
     rig = [
         look_at_camera("a", (0.4, -2.6, 1.7), (0.0, 0.0, 0.75), size=(320, 240), focal=280.0),
         look_at_camera("b", (-2.4, -1.2, 1.7), (0.0, 0.0, 0.75), size=(320, 240), focal=280.0),
+        look_at_camera("c", (2.4, -1.2, 1.7), (0.0, 0.0, 0.75), size=(320, 240), focal=280.0),
     ]
     save_calibration(rig, folder / "rig.toml")
     synthesize(

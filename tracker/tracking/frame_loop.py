@@ -13,8 +13,8 @@ of its predicted covariance, at least P), solves the whole tree for one twist pe
 range shrinks from iteration to iteration (coarse to fine).  With landmarks, a limb they place far from where the
 edges left it is moved to them and the frame tracked again (:mod:`tracker.tracking.lead`), and a frame whose edges
 dragged the body off them keeps the poses it started from.  Each part is then held by the images, or only by the
-prior and the joints (:mod:`tracker.tracking.held`), and the frame's status comes from the share of the parts held
-and their edges' robust mean offset.  Where the cameras are not frame-locked, each view sees the poses
+prior and the joints (:mod:`tracker.tracking.held`), and the frame's status comes from the parts held: the share of
+their samples that found an edge, those edges' robust mean offset, and how many of the parts they are.  Where the cameras are not frame-locked, each view sees the poses
 moved on to its own capture time, to first order (:meth:`Tracker.seen`, docs/sync.md).
 """
 
@@ -35,7 +35,7 @@ from tracker.tracking.colours import colour_bins, colour_grids, colour_reduction
 from tracker.tracking.cue import Cue, Frame, Iteration
 from tracker.tracking.cues import CUES
 from tracker.tracking.edge_cue import EdgeCue, reductions, smooth
-from tracker.tracking.held import Surfaces, held_codes
+from tracker.tracking.held import held_codes, outline_motion
 from tracker.tracking.keypoint_cue import KeypointCue
 from tracker.tracking.lead import Lead
 from tracker.tracking.measure import Statistics
@@ -88,7 +88,6 @@ class Tracker:
         self.retry = self.work.spare(self.work.images)  # a lead's try (Lead.retry): the same images, colours, clock
         self.retry.bins, self.retry.times = self.work.bins, self.work.times
         self.hidden = np.zeros(n, bool)  # the parts hidden from every view in this frame (step)
-        self.surfaces = Surfaces.of(model)  # what each part shows the images (tracking.held)
         self.still = np.zeros((n, 6))
         self.lateness = np.zeros(len(cameras))  # frames each view of this frame was captured after it (step)
         self.poses = model.coerce(initial_poses)
@@ -300,7 +299,7 @@ class Tracker:
         ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
         edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
         work, stats = self._inspected(images, smoothed, poses, None)
-        held = self.held(work.information, poses, seen=np.asarray(work.information.any(axis=(1, 2))))
+        held = self.held(work.information, work, seen=np.asarray(work.information.any(axis=(1, 2))))
         share, status = self.judge(stats, work, held)
         return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible, held)
 
@@ -364,7 +363,7 @@ class Tracker:
             self.poses = self.anchor.copy()
         self.dynamics.correct(self, predicted)
         self.motion = dataclasses.replace(self.motion, previous=current)
-        held = self.held(self.work.evidence, self.poses, seen=self.work.seen)
+        held = self.held(self.work.evidence, self.work, seen=self.work.seen)
         share, status = self.judge(stats, self.work, held)
         if dragged and status == TRACKED:
             status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
@@ -372,32 +371,38 @@ class Tracker:
             cue.learn(self, status, kept=not dragged)
         return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible, held)
 
-    def held(self, evidence: np.ndarray, poses: np.ndarray, *, seen: np.ndarray) -> np.ndarray:
-        """Which parts at ``poses`` the evidence (N, 6, 6) of the cues that place them holds, the parts ``seen`` (N,)
-        bool by any cue (N,) int8 (:func:`tracker.tracking.held.held_codes`)."""
-        within = self.settings.status.held_within
-        return held_codes(evidence, self.surfaces, poses=poses, rig=self.rig, within=within, seen=seen)
+    def held(self, evidence: np.ndarray, work: Workspace, *, seen: np.ndarray) -> np.ndarray:
+        """Which parts the evidence (N, 6, 6) of the cues that place them holds, per the motion of their outline
+        samples in ``work``, the parts ``seen`` (N,) bool by any cue (N,) int8
+        (:func:`tracker.tracking.held.held_codes`)."""
+        s = work.samples
+        assert work.lo is not None and work.hi is not None  # set by sample()
+        motion = outline_motion(s.jacobian, s.component, work.lo, work.hi, s.count, self.model.size)
+        return held_codes(evidence, motion, within=self.settings.status.held_within, seen=seen)
 
     def judge(self, stats: Statistics, work: Workspace, held: np.ndarray) -> tuple[float, int]:
         """The share of all the samples that found an edge in the measurement ``stats`` (of ``work``), and the frame
-        status that the parts ``held`` (N,) by the images give: how many of the parts they are, and the robust mean
-        offset of their samples' edges (:meth:`status`).  The parts the images do not hold (a leg behind a table)
-        are left to the prior and do not judge the frame."""
+        status that the parts ``held`` (N,) by the images give: the share of their samples that found an edge, the
+        robust mean offset of those edges and how many of the parts they are (:meth:`status`).  The parts the images
+        do not hold (a leg behind a table) are left to the prior and do not judge the frame."""
         share = stats.found / stats.visible if stats.visible else 0.0
         count = work.samples.count
         chosen = held[work.samples.component[:count]] == HELD
         offset, weight = work.offset[:count][chosen], work.weight[:count][chosen]
         found = ~np.isnan(offset)
+        found_share = float(found.mean()) if len(found) else 0.0
         sum_w = weight[found].sum()
         residual = float((weight[found] * np.abs(offset[found])).sum() / sum_w) if sum_w > 0 else float("nan")
-        return share, self.status(float(np.mean(held == HELD)) if len(held) else 0.0, residual)
+        parts = float(np.mean(held == HELD)) if len(held) else 0.0
+        return share, self.status(found_share, residual, parts=parts)
 
-    def status(self, parts: float, residual: float) -> int:
-        """The frame's status from the share of the ``parts`` the images hold and their edges' robust mean offset
-        ``residual`` (pixels; NaN: none found) (:class:`~tracker.tracking.settings.StatusSettings`)."""
+    def status(self, share: float, residual: float, *, parts: float = 1.0) -> int:
+        """The frame's status from the ``share`` of the held parts' samples that found an edge, the robust mean offset
+        ``residual`` (pixels; NaN: none found) of those edges and the share of the ``parts`` the images hold
+        (:class:`~tracker.tracking.settings.StatusSettings`)."""
         st = self.settings.status
-        if parts < st.lost_held or not residual <= st.lost_residual:
+        if share < st.lost_share or not residual <= st.lost_residual or parts < st.lost_held:
             return LOST
-        if parts < st.uncertain_held or residual > st.uncertain_residual:
+        if share < st.uncertain_share or residual > st.uncertain_residual or parts < st.uncertain_held:
             return UNCERTAIN
         return TRACKED
