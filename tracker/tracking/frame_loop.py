@@ -14,8 +14,9 @@ range shrinks from iteration to iteration (coarse to fine).  With landmarks, a l
 edges left it is moved to them and the frame tracked again (:mod:`tracker.tracking.lead`), and a frame whose edges
 dragged the body off them keeps the poses it started from.  Each part is then held by the images, or only by the
 prior and the joints (:mod:`tracker.tracking.held`), and the frame's status comes from the parts held: the share of
-their samples that found an edge, those edges' robust mean offset, and how many of the parts they are.  Where the cameras are not frame-locked, each view sees the poses
-moved on to its own capture time, to first order (:meth:`Tracker.seen`, docs/sync.md).
+their samples that found an edge, those edges' robust mean offset, and how many of the parts they are.  Where the
+cameras are not frame-locked, each view sees the poses moved on to its own capture time, to first order
+(:meth:`Tracker.seen`, docs/sync.md).
 """
 
 from __future__ import annotations
