@@ -7,7 +7,7 @@ from conftest import tracked_behind
 
 from tracker.io.poses import load_poses
 from tracker.status import HELD, LOOSE, TRACKED, UNSEEN
-from tracker.tracking.held import firmness, held_codes, outline_motion
+from tracker.tracking.held import held_codes, holds, outline_motion
 
 
 def test_the_outline_motion_is_the_mean_over_the_searched_samples_of_l_l():
@@ -22,18 +22,24 @@ def test_the_outline_motion_is_the_mean_over_the_searched_samples_of_l_l():
     assert not motion[2].any()
 
 
-def test_firmness_is_the_least_information_per_outline_motion_over_the_directions_the_views_show():
+def test_a_part_holds_where_its_least_information_per_outline_motion_reaches_the_bound():
     """A cone's outline does not move when it turns about its axis: G has rank 5 here, and the evidence is judged
-    over the other five directions alone; the evidence 7 G holds by 7 in every one, evidence along one direction
-    holds it in none."""
+    over the other five directions alone.  The evidence 7 G reaches 7 in every one and no more (to a part in a
+    thousand), whatever it adds along the direction no sample moves; evidence along one direction holds in none;
+    evidence 1 G with one camera's depth, a thousandth of the other directions' motion, seen at half of that holds
+    at 0.49 and not at 0.51."""
     rng = np.random.default_rng(3)
     rows = rng.normal(size=(40, 6))
     rows[:, 5] = 0.0  # no sample moves with the last twist coordinate
     motion = (rows.T @ rows / len(rows))[None]
-    np.testing.assert_allclose(firmness(7.0 * motion, motion), [7.0], rtol=1e-9)
-    np.testing.assert_allclose(firmness(7.0 * motion + np.diag([0.0] * 5 + [1e9])[None], motion), [7.0], rtol=1e-9)
-    assert firmness(1e6 * np.diag([1.0, 0, 0, 0, 0, 0])[None], motion)[0] < 1e-6
-    assert firmness(np.zeros((1, 6, 6)), motion)[0] == 0.0 and firmness(motion, np.zeros((1, 6, 6)))[0] == 0.0
+    assert holds(7.0 * motion, motion, 6.99)[0] and not holds(7.0 * motion, motion, 7.01)[0]
+    rolled = 7.0 * motion + np.diag([0.0] * 5 + [1e9])[None]
+    assert holds(rolled, motion, 6.99)[0] and not holds(rolled, motion, 7.01)[0]
+    assert not holds(1e6 * np.diag([1.0, 0, 0, 0, 0, 0])[None], motion, 1e-3)[0]
+    assert not holds(np.zeros((1, 6, 6)), motion, 0.0)[0]
+    depth = np.diag([1.0, 1.0, 1e-3, 1.0, 1.0, 0.0])[None]
+    evidence = np.diag([1.0, 1.0, 0.5e-3, 1.0, 1.0, 0.0])[None]
+    assert holds(evidence, depth, 0.49)[0] and not holds(evidence, depth, 0.51)[0]
 
 
 def test_the_codes_place_the_outline_within_the_threshold_in_pixels():

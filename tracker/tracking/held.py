@@ -15,7 +15,9 @@ direction by
     lambda_i = min over alpha in range(G_i) of  alpha^T E_i alpha / alpha^T G_i alpha,
 
 their information per pixel^2 of that motion: ``1 / sqrt(lambda_i)`` is how far (pixels, root mean square over its
-outline) the part can move in that direction for the cost of one well-fitting sample.  Depth seen from one camera
+outline) the part can move in that direction for the cost of one well-fitting sample.  Whether lambda_i reaches a
+bound ``l`` is whether ``E_i - l G_i`` is positive semi-definite (the two share the null space, being sums over the
+same rows), which one Cholesky factorisation of a 6 x 6 says (:func:`holds`).  Depth seen from one camera
 alone moves the outline little, and counts by the little it moves it.  A part is :data:`HELD` (:mod:`tracker.status`)
 when that is at most ``held_within`` pixels, :data:`UNSEEN` when no cue reads anything of it (hidden from every view,
 no edge found, no landmark on it), and :data:`LOOSE` between: the images see it, or the detector places a landmark
@@ -29,8 +31,10 @@ from numba import njit
 
 from tracker.status import HELD, LOOSE, UNSEEN
 
-SEEN = 1e-9
-"""The share of a part's largest outline motion below which a direction is one no view shows (the range of G_i)."""
+ROUNDING = 1e-12
+"""The share of the largest diagonal element of E_i + least G_i added to E_i - least G_i before it is factorised
+(:func:`holds`): above the rounding of a direction that neither moves (a cone turned about its axis), far below the
+outline motion of any direction a view shows (one camera's depth: a thousandth of the others)."""
 
 
 @njit(cache=True, nogil=True)
@@ -56,25 +60,48 @@ def outline_motion(jacobian, component, lo, hi, count, n_components):
     return out
 
 
-def firmness(evidence: np.ndarray, motion: np.ndarray) -> np.ndarray:
-    """lambda_i (N,): the least information ``evidence`` (N, 6, 6) gives per pixel^2 of mean squared outline motion
-    ``motion`` (N, 6, 6), over the range of each G_i (module docstring); 0 where either is nothing."""
-    out = np.zeros(len(evidence))
-    for i, (e, g) in enumerate(zip(evidence, motion)):
-        if not e.any() or not g.any():
+@njit(cache=True, nogil=True)
+def holds(evidence, motion, least):
+    """Whether each component's lambda_i (module docstring) is at least ``least`` (N,) bool: whether E_i - least
+    G_i is positive semi-definite, ``evidence`` E (N, 6, 6) and ``motion`` G (N, 6, 6), by a Cholesky factorisation
+    of it with :data:`ROUNDING` of its diagonal's largest added (a direction neither moves, a cone turned about its
+    axis, is then as good as held, and the others decide); False where E_i is nothing."""
+    n = evidence.shape[0]
+    out = np.zeros(n, np.bool_)
+    m = np.empty((6, 6))
+    for i in range(n):
+        if not evidence[i].any():
             continue
-        values, vectors = np.linalg.eigh(g)
-        kept = values > SEEN * values[-1]
-        basis = vectors[:, kept] / np.sqrt(values[kept])  # G_i is the identity on it
-        out[i] = max(float(np.linalg.eigvalsh(basis.T @ e @ basis)[0]), 0.0)
+        scale = 0.0
+        for a in range(6):
+            scale = max(scale, evidence[i, a, a] + least * motion[i, a, a])
+        for a in range(6):
+            for b in range(6):
+                m[a, b] = evidence[i, a, b] - least * motion[i, a, b]
+            m[a, a] += ROUNDING * scale
+        ok = True
+        for j in range(6):  # Cholesky, in place in the lower triangle
+            d = m[j, j]
+            for k in range(j):
+                d -= m[j, k] * m[j, k]
+            if d <= 0.0:
+                ok = False
+                break
+            m[j, j] = np.sqrt(d)
+            for r in range(j + 1, 6):
+                v = m[r, j]
+                for k in range(j):
+                    v -= m[r, k] * m[j, k]
+                m[r, j] = v / m[j, j]
+        out[i] = ok
     return out
 
 
 def held_codes(evidence: np.ndarray, motion: np.ndarray, *, within: float, seen: np.ndarray) -> np.ndarray:
     """Each component's code (N,) int8: :data:`HELD` where ``evidence`` (N, 6, 6) places its outline within
-    ``within`` pixels in its least-seen direction of ``motion`` (N, 6, 6) (lambda_i >= 1 / within^2),
+    ``within`` pixels in its least-seen direction of ``motion`` (N, 6, 6) (lambda_i >= 1 / within^2, :func:`holds`),
     :data:`UNSEEN` where it is nothing and the part is not ``seen`` (N,) bool by any other cue, :data:`LOOSE`
     otherwise (module docstring)."""
-    codes = np.where(firmness(evidence, motion) * within * within >= 1.0, HELD, LOOSE).astype(np.int8)
+    codes = np.where(holds(evidence, motion, 1.0 / (within * within)), HELD, LOOSE).astype(np.int8)
     codes[~seen & ~evidence.any(axis=(1, 2))] = UNSEEN
     return codes
