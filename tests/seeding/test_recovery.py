@@ -28,6 +28,11 @@ DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 COUNT = 70
 
 
+def _held(poses: np.ndarray) -> np.ndarray:
+    """Every part of ``poses`` held by the images, as a hand-made result says."""
+    return np.zeros(len(poses), np.int8)
+
+
 def _errors(out: Path) -> np.ndarray:
     """Per frame, the mean distance (m) of the tracked joints from the truth."""
     poses, truth = load_poses(out / "poses.npz"), load_poses(DEMO / "truth.npz")
@@ -275,7 +280,7 @@ def _tried(monkeypatch, recovery: Recovery, keypoints, start: np.ndarray, snappe
 
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
     tracker = Tracker(recovery.model, recovery.cameras, start)
-    tracked = FrameResult(start, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(start, 0, 1.0, 0.8, 1000, _held(start))
     for _ in range(WINDOW):
         result = recovery(tracker, None, keypoints, tracked)
     return result, tracked, tracker
@@ -316,10 +321,10 @@ def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch,
     keypoints = true_landmarks(recovery, truth)
     tries = []
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
-    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
+    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000, _held(truth))
     swung = _swung_arm(model, truth)
     tracker = Tracker(model, recovery.cameras, swung)
-    tracked = FrameResult(swung, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(swung, 0, 1.0, 0.8, 1000, _held(swung))
     counts = []
     for _ in range(PERSISTENCE + 1):
         recovery(tracker, None, keypoints, tracked)
@@ -339,7 +344,7 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     result, tracked, tracker = _tried(
-        monkeypatch, recovery, keypoints, moved, FrameResult(truth, 0, 1.0, snapped_share, 1000)
+        monkeypatch, recovery, keypoints, moved, FrameResult(truth, 0, 1.0, snapped_share, 1000, _held(truth))
     )
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
@@ -359,7 +364,9 @@ def test_a_re_seed_no_nearer_the_landmarks_than_the_tracked_pose_is_declined(
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     seed = _moved(moved) if farther else truth
-    result, tracked, tracker = _tried(monkeypatch, recovery, keypoints, moved, FrameResult(seed, 0, 1.0, 0.95, 1000))
+    result, tracked, tracker = _tried(
+        monkeypatch, recovery, keypoints, moved, FrameResult(seed, 0, 1.0, 0.95, 1000, _held(seed))
+    )
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
@@ -375,7 +382,9 @@ def test_a_pending_re_seed_is_judged_by_the_image_alone(monkeypatch, true_landma
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     recovery.pending = True
-    _, _, tracker = _tried(monkeypatch, recovery, keypoints, truth, FrameResult(moved, 0, 1.0, 0.95, 1000))
+    _, _, tracker = _tried(
+        monkeypatch, recovery, keypoints, truth, FrameResult(moved, 0, 1.0, 0.95, 1000, _held(moved))
+    )
     assert (recovery.declined, recovery.reseeded) == (0, 1)
     assert np.allclose(tracker.poses, moved, atol=1e-6)
 
@@ -386,7 +395,10 @@ def test_the_noise_of_two_shares_is_their_difference_s_spread():
     from tracker.seeding.recovery import _noise
     from tracker.tracking.frame_loop import FrameResult
 
-    one, other = FrameResult(np.eye(4)[None], 0, 1.0, 0.7, 400), FrameResult(np.eye(4)[None], 0, 1.0, 0.6, 900)
+    one, other = (
+        FrameResult(np.eye(4)[None], 0, 1.0, 0.7, 400, _held(np.eye(4)[None])),
+        FrameResult(np.eye(4)[None], 0, 1.0, 0.6, 900, _held(np.eye(4)[None])),
+    )
     rng = np.random.default_rng(7)
     drawn = rng.binomial(400, 0.7, 20000) / 400 - rng.binomial(900, 0.6, 20000) / 900
     assert _noise(one, other) == pytest.approx(drawn.std(), rel=0.02)
@@ -405,11 +417,13 @@ def test_a_re_seed_on_the_persons_mask_is_taken_though_it_finds_fewer_edges(
     model, truth, recovery = _at_truth()
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(truth, 0, 1.0, 0.7, 1000))
+    monkeypatch.setattr(
+        recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(truth, 0, 1.0, 0.7, 1000, _held(truth))
+    )
     tracker = Tracker(model, recovery.cameras, moved)
     if masked:
         tracker.see_person(person_masks(model, recovery.cameras, truth))
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000, _held(moved))
     for _ in range(WINDOW):
         recovery(tracker, None, keypoints, tracked)
     assert (recovery.declined, recovery.reseeded) == ((0, 1) if masked else (1, 0))
@@ -428,11 +442,14 @@ def test_a_snap_that_takes_the_re_seed_off_the_persons_mask_gives_way_to_the_see
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     monkeypatch.setattr(recovery, "fitted", lambda start: truth)
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(moved, 0, 1.0, 0.9, 1000))
+    monkeypatch.setattr(
+        recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(moved, 0, 1.0, 0.9, 1000, _held(moved))
+    )
     tracker = Tracker(model, recovery.cameras, _swung_arm(model, truth))
     tracker.see_person(person_masks(model, recovery.cameras, truth))
     images = [tracker.smooth(image) for image in next(iter(frames(open_recording(DEMO), 0, 1)))[1]]
-    tracked = FrameResult(_swung_arm(model, truth), 0, 1.0, 0.8, 1000)
+    swung = _swung_arm(model, truth)
+    tracked = FrameResult(swung, 0, 1.0, 0.8, 1000, _held(swung))
     for _ in range(PERSISTENCE):
         result = recovery(tracker, images, keypoints, tracked)
     assert recovery.reseeded == 1 and result.status == RESEEDED and result.share > 0.8
@@ -449,11 +466,11 @@ def test_a_frame_without_the_persons_mask_waits_for_one_with_it(monkeypatch, tru
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     tries = []
-    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
+    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000, _held(truth))
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
     tracker = Tracker(model, recovery.cameras, moved)
     masks = person_masks(model, recovery.cameras, truth)
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000, _held(moved))
     counts = []
     for masked in [True] + [False] * WINDOW + [True]:
         tracker.see_person(masks if masked else None)
@@ -475,7 +492,7 @@ def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkey
     fits = []
     monkeypatch.setattr(recovery, "fitted", lambda start: fits.append(1))
     tracker = Tracker(model, recovery.cameras, moved)
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000, _held(moved))
     counts = []
     for _ in range(WINDOW + 2 * WINDOW + WINDOW + 2):
         assert recovery(tracker, None, keypoints, tracked) is tracked

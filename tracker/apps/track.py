@@ -65,6 +65,8 @@ class Outcome:
     fps: float  # frames per second of the tracking loop (decoding included, start-up not)
     residual: float  # mean residual of the frames, pixels (NaN when no frame found an edge)
     counts: dict[int, int]  # frames per status (tracker.status)
+    parts: tuple[str, ...]  # the model's components
+    held: np.ndarray  # frames (N,) in which the images held each component (tracker.status.HELD)
     declined: int | None  # re-seeds the edges declined; None without the keypoint cue
     interrupted: bool  # stopped by Ctrl-C, SIGTERM or SIGHUP: the frames done are written
     files: tuple[tuple[Path, str], ...]  # the files the run wrote, each with what it holds
@@ -88,6 +90,8 @@ def print_summary(outcome: Outcome) -> None:
         declined = f"{outcome.declined} declined by the image or the landmarks"
         reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({declined})"
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
+    if outcome.frames:
+        print(held_summary(outcome.parts, outcome.held, outcome.frames))
     if outcome.report is not None:
         scored = f"accuracy against the recording's truth.npz over frames {outcome.span.start}..{outcome.span.stop - 1}"
         if outcome.unscored:
@@ -100,6 +104,20 @@ def print_summary(outcome: Outcome) -> None:
     print("files of this run:")
     for path, holds in outcome.files:
         print(f"  {str(path):<{width}}  {holds}")
+
+
+def held_summary(parts: Sequence[str], held: np.ndarray, frames: int) -> str:
+    """One line on the parts the images held over a run of ``frames`` frames, given the frames (N,) in which they
+    held each of ``parts``: their share of all the parts' frames, and the parts left to the prior and the joints
+    in half the frames or more, the most often first, each with its frames."""
+    share = float(held.sum()) / (len(parts) * frames) if parts else 0.0
+    line = f"parts held by the images: {100.0 * share:.0f} % of {len(parts)} parts x {frames} frames"
+    left = [(frames - int(count), name) for name, count in zip(parts, held) if 2 * (frames - count) >= frames]
+    if not left:
+        return line
+    left.sort(key=lambda item: -item[0])
+    named = ", ".join(f"{name} {count}" for count, name in left)
+    return f"{line}; by the prior only in half the frames or more: {named} (frames)"
 
 
 def track(
@@ -128,7 +146,7 @@ def track(
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
-    from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
+    from tracker.status import HELD, LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.tracking.edge_cue import reductions
     from tracker.tracking.frame_loop import Tracker
 
@@ -210,10 +228,12 @@ def track(
         shows = video is not None or live is not None
         prepare = _preparer(tracker, background, keep=shows)
         counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
+        held = np.zeros(model.size, np.int64)
         residuals = []
         if before is not None:
             for status in before["status"]:
                 counts[int(status)] += 1
+            held += (before["held"] == HELD).sum(axis=0)
             residuals.extend(before["residual"])
         grey: Sequence[np.ndarray] = ()  # the frame in hand as recorded, for the overlay and the viewer
 
@@ -231,8 +251,9 @@ def track(
             if live is not None:
                 live.offer(frame.index, images, frame.result, elapsed=frame.spent)
             if video is not None:
-                video.write(images, tracker.inspect())
+                video.write(images, tracker.inspect(), frame.result.held)
             counts[frame.result.status] += 1
+            held[:] += frame.result.held == HELD
             residuals.append(frame.result.residual)
 
         progress = bar(None, "frame", leave=True)
@@ -281,6 +302,8 @@ def track(
         fps=run.frames / run.seconds if run.seconds > 0 else float("inf"),
         residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
         counts=counts,
+        parts=model.names,
+        held=held,
         declined=None if recovery is None else recovery.declined + back.declined,
         interrupted=run.interrupted or back.interrupted,
         files=_files(rec, tracking, out, frames=done, overlay=overlay, view=view),
@@ -431,7 +454,8 @@ def _tracked_back(
         mended = nearer_landmarks(tracker, mended, fitted=init, keypoints=judged)
     kept = np.flatnonzero(found["frame"] < begin)
     kept = kept[np.argsort(found["frame"][kept])]
-    rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}
+    keys = ("frame", "poses", "joints", "status", "held", "residual", "elapsed", "time")
+    rows = {key: found[key][kept] for key in keys}
     rows["time"] = -rows["time"]
     track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=times, before=rows)
     return TrackedBack(rows, declined, interrupted, mended)

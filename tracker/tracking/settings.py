@@ -147,14 +147,24 @@ class MotionSettings:
 
 @dataclass(frozen=True)
 class StatusSettings:
-    """the frame's status: when it is tracked, uncertain or lost"""
+    """the frame's status: which parts the images hold, and when a frame is tracked, uncertain or lost"""
 
-    uncertain_share: float = setting(0.6, "share of the samples that found an edge below which a frame is uncertain")
+    held_within: float = setting(
+        1.0,
+        "a part is held by the images when the edges and colours along its outline place it within this many pixels "
+        "in its least-seen direction (tracking.held); the others are left to the prior and do not judge the frame",
+        pixels="grows",
+    )
+    uncertain_share: float = setting(
+        0.6, "share of the held parts' outline samples that found an edge below which a frame is uncertain"
+    )
     lost_share: float = setting(0.3, "... and lost")
     uncertain_residual: float = setting(
-        3.0, "robust mean offset above which a frame is uncertain, pixels", pixels="grows"
+        3.0, "robust mean offset of the held parts' edges above which a frame is uncertain, pixels", pixels="grows"
     )
     lost_residual: float = setting(6.0, "... and lost, pixels", pixels="grows")
+    uncertain_held: float = setting(0.5, "share of the parts held by the images below which a frame is uncertain")
+    lost_held: float = setting(0.2, "... and lost")
 
 
 @dataclass(frozen=True)
