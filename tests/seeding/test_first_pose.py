@@ -292,8 +292,8 @@ def test_no_hips_is_a_one_line_error(demo, one_line_error):
 def test_tracker_init_starts_from_the_fit_to_the_detector(demo, tmp_path, monkeypatch, capsys):
     """``tracker init`` without an init file: the detector's landmarks in the demo's frames 0-4 (cam1 follows a
     basketball player in the background photo, cam0 reads the shoulders and wrists swapped in frame 0),
-    cached in out/demo/keypoints-full.npz (the full model's file); the snapped pose is within a centimetre of the true first pose
-    (measured: docs/keypoints.md, "Automatic first pose").  The cache serves any frames it holds."""
+    cached in out/demo/keypoints-full.npz (the full model's file); the snapped pose is within a centimetre of the true
+    first pose (measured: docs/keypoints.md, "Automatic first pose").  The cache serves any frames it holds."""
     recording, model, truth = demo
     monkeypatch.chdir(tmp_path)
     poses = keypoint_pose(recording, model, 0, landmark_model="full")
