@@ -45,7 +45,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     run = actions.add_parser(
         "run",
         help="track every render (tracker track OUT/<name> --out RESULTS/<name> TRACK OPTIONS), then score",
-        usage="tracker suite run [--only NAMES] [--json] [--quiet] OUT RESULTS [-- TRACK OPTIONS]",
+        usage="tracker suite run [--only NAMES] [--landmark-model M] [--json] [--quiet] OUT RESULTS [-- TRACK OPTIONS]",
     )
     _only(run)
     _landmark_model(run, "that tracker track runs, and whose detections are scored")
