@@ -17,6 +17,7 @@ from tracker.cli import main
 from tracker.commands import suite as suite_command
 from tracker.io.poses import PosesWriter, load_poses
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.landmark_models import RECORDED
 from tracker.landmarks.store import Keypoints, save_keypoints
 from tracker.model import load_model
 from tracker.synthetic import suite
@@ -140,6 +141,7 @@ def test_run_tracks_with_the_options_given(tmp_path, capsys):
     row = json.loads(capsys.readouterr().out)["renders"][0]
     assert row["frames"] == 2 and row["lost_frames"] == 0 and row["mpjpe_mm"] < 50.0  # edges from the true start
     assert len(load_poses(results / SMALL / "poses.npz")["frame"]) == 2
+    assert (results / SMALL / "track.log").read_text().splitlines()[0].endswith(f"--landmark-model {RECORDED}")
 
 
 STOPPED_TRACK = """
@@ -192,6 +194,7 @@ def test_a_stopped_run_passes_the_stop_on_and_waits_for_the_render_tracked(numbe
         ["suite", "make", "{tmp}/x", "--only", ","],
         ["suite", "make", "{tmp}/x", "--only", "far-walk"],  # a CMU render without --clips
         ["suite", "run", "{out}", "{tmp}/r", "--json", "--", "--init", "x"],  # suite option after RESULTS
+        ["suite", "run", "{out}", "{tmp}/r", "--", "--landmark-model", "lite"],  # it names the detections scored too
         ["suite", "landmarks", "{out}", "{tmp}/no-keypoints"],
     ],
 )
