@@ -11,11 +11,17 @@ import tracker.apps.bench as bench
 from tracker.apps.bench import HUMAN, _copies, _side_by_side, detector_ms
 from tracker.cli import main
 from tracker.io.recording import open_recording
-from tracker.landmarks.landmark_models import LIVE, MODELS, RECORDED
+from tracker.landmarks.landmark_models import MODELS, RECORDED
 from tracker.model import model_from_dict
 from tracker.tracking.settings import Settings
 
 KEYS = {
+    "stage_fps_with_keypoints",
+    "stage_cpu_ms_per_frame_with_keypoints",
+    "bound_cores_fps",
+    "bound_serial_fps",
+    "bound_slowest_stage_fps",
+    "ratio_with_keypoints",
     "fps_one_view",
     "fps_all_views",
     "decode_only_fps_all_views",
@@ -39,11 +45,21 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert set(result["stage_ms_per_frame_all_views"]) >= {"decode", "outline", "measure", "solve", "output"}
     assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0  # the default at the recording's 60 fps
     assert result["landmark_model"] == RECORDED  # the default of the commands on recorded folders, and live's beside it
-    by_model = result["detector_ms_per_view_by_model"]  # every model timed, the run's as detector_ms_per_view
-    assert list(by_model) == list(MODELS) and by_model[RECORDED] == result["detector_ms_per_view"]
-    assert all(ms > 0 for ms in by_model.values())
     assert result["fps_all_views_with_keypoints"] > 0
     assert set(result["stage_ms_per_frame_with_keypoints"]) >= {"outline", "measure", "region", "solve", "output"}
+    stages = result["stage_fps_with_keypoints"]
+    assert stages["decode_only"] == result["decode_only_fps_all_views"]
+    assert set(stages["detect"]) == set(MODELS) and all(fps > 0 for fps in stages["detect"].values())
+    alone = {"read": stages["read"], "detect": stages["detect"][RECORDED], "track": stages["track"]}
+    assert all(fps > 0 for fps in alone.values())
+    assert result["bound_slowest_stage_fps"] == min(alone.values()) == alone[result["slowest_stage"]]
+    assert abs(1 / result["bound_serial_fps"] - sum(1 / fps for fps in alone.values())) < 1e-9
+    cpu = result["stage_cpu_ms_per_frame_with_keypoints"]
+    spent = cpu["read"] + cpu["detect"][RECORDED] + cpu["track"]
+    assert set(cpu["detect"]) == set(stages["detect"]) and all(ms > 0 for ms in cpu["detect"].values())
+    assert cpu["decode_only"] > 0 and abs(result["bound_cores_fps"] - 1e3 * result["cores"] / spent) < 1e-9
+    assert result["ratio_with_keypoints"] == result["fps_all_views_with_keypoints"] / stages["decode_only"]
+    assert 0 < result["first_landmarks_s"] and result["fps_all_views_with_keypoints_after_first"] > 0
 
 
 def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording, monkeypatch):
@@ -92,14 +108,30 @@ def test_bench_table_is_printed(tiny_recording, capsys):
         assert fps > 0 and decode_fps > 0
         assert (fps - 0.5) / (decode_fps + 0.5) - 0.005 <= shown <= (fps + 0.5) / max(decode_fps - 0.5, 0.5) + 0.005
     assert float(re.findall(r"([\d.]+) ms per view per IRLS iteration", out)[0]) > 0
-    found = re.findall(
-        r"the detector takes ([\d.]+) ms per view with the (\w+) landmark model "
-        r"\((\w+) ([\d.]+) ms, (\w+) ([\d.]+) ms; tracker live runs (\w+)\).*?, ([\d.]+) frames per second",
-        out,
+    detector, with_cue = re.findall(r"the detector takes ([\d.]+) ms per view;.*?, ([\d.]+) frames per second", out)[0]
+    assert float(detector) > 0 and float(with_cue) > 0
+    stages = dict(
+        (name, (float(fps), float(ratio)))
+        for name, fps, ratio in re.findall(
+            r"^\| ([a-z][^|]*?) \| ([\d.]+) \| [\d.]* \| ([\d.]+) \|$",
+            out.split("| with the keypoint cue, all views |")[1],
+            re.M,
+        )
     )
-    detector, model, first, first_ms, second, second_ms, live, with_cue = found[0]
-    assert model == RECORDED and live == LIVE and {model, first, second} == set(MODELS)
-    assert float(detector) > 0 and float(first_ms) > 0 and float(second_ms) > 0 and float(with_cue) > 0
+    floor = stages["decode only (the floor)"][0]
+    assert stages["decode only (the floor)"][1] == 1.0 and any(
+        name.startswith(f"detect one frame in 4, {RECORDED}") for name in stages
+    )
+    for name in (
+        "read",
+        "track",
+        "bound: read",
+        "bound: the \\d+ cores",
+        "bound: the slowest",
+        "overlapped, the worker",
+    ):
+        fps, ratio = next(value for row, value in stages.items() if re.match(name, row))
+        assert fps > 0 and abs(ratio - fps / floor) <= 0.005 + 0.05 / floor  # printed to 0.1 frame and 0.01
 
 
 def test_bodies_side_by_side_for_the_scaling_table():

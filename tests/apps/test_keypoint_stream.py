@@ -218,6 +218,57 @@ def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
     assert not [thread for thread in threading.enumerate() if thread.name.startswith("reader ")]
 
 
+def test_a_fed_worker_given_more_frames_than_its_slots_answers_for_each_in_order(tmp_path):
+    """Frame sets fed faster than the worker detects them: with two slots of shared memory, the third set waits for
+    the first's answer and the fourth for the second's; every frame's landmarks come back, in frame order, each those
+    of its own images (the same as a stream whose answers are taken as each set is fed)."""
+    from tracker.io.readers import reduced
+
+    recording = open_recording(DEMO)
+    read = [(index, [reduced(image, 2) for image in images]) for index, images in frames(recording, 0, 13, colour=True)]
+    got = {}
+    for name in ("crowded", "roomy"):
+        with KeypointStream(recording, 0, 13, 4, tmp_path / f"{name}.npz", np.full(3, 2)) as stream:
+            if name == "crowded":
+                stream.slots, stream.free = 2, [0, 1]
+            arrived, answered = [], []
+            keep = stream._keep
+            stream._keep = lambda item, arrived=arrived, keep=keep: arrived.append(int(item[0].frame[0])) or keep(item)
+            for index, images in read:
+                if index in stream.wanted:
+                    stream.feed(index, images)
+                    answered.append(len(arrived))
+                    if name == "roomy":
+                        stream.get(index)  # its answer taken before the next set is fed
+            got[name] = [stream.get(frame) for frame in stream.wanted]
+            assert arrived == [0, 4, 8, 12]
+            assert answered == ([0, 0, 1, 2] if name == "crowded" else [0, 1, 2, 3])
+    for crowded, roomy in zip(got["crowded"], got["roomy"]):
+        np.testing.assert_array_equal(crowded[0], roomy[0])
+        np.testing.assert_array_equal(crowded[1], roomy[1])
+
+
+def test_a_fed_run_stopped_by_ctrl_c_releases_the_shared_frames_and_the_worker(tmp_path):
+    """Ctrl-C in the frame loop of a fed stream: the stream's close ends the worker, unlinks its shared memory and
+    keeps what it detected; no reader thread is left."""
+    import threading
+
+    from tracker.apps.keypoint_stream import tracked_frames
+
+    recording = open_recording(DEMO)
+    with pytest.raises(KeyboardInterrupt):
+        with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2)) as stream:
+            for index, _ in tracked_frames(stream, recording, start=0, stop=40):
+                stream.get(index)
+                if index == 9:
+                    name = stream.shared.spec[0]
+                    assert Path("/dev/shm", name.lstrip("/")).exists()
+                    raise KeyboardInterrupt
+    assert not Path("/dev/shm", name.lstrip("/")).exists() and stream.worker is None and stream.shared is None
+    assert not [thread for thread in threading.enumerate() if thread.name.startswith("reader ")]
+    assert list(load_keypoints(tmp_path / "keypoints.npz").frame)[:3] == [0, 4, 8]
+
+
 def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeypatch):
     """A cache of frames 0, 2 and 4 in which cam2 sees nobody and cam0 jumps 150 px (to someone else) from frame 2
     on: asked in frame order, the stream gives cam1's disputed landmarks of frames 2-4 back, never cam0's; asked for

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.metadata
 import signal
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -292,6 +293,16 @@ class _Scripted:
         return found if accept(found) else Detection.none()
 
 
+@pytest.fixture(params=["one view after the other", "views side by side"])
+def pool(request):
+    """detect_views' ``pool``: none, or threads that read the views side by side."""
+    if request.param == "one view after the other":
+        yield None
+        return
+    with ThreadPoolExecutor(3) as threads:
+        yield threads
+
+
 @pytest.mark.parametrize(
     ("sees", "images", "crops", "guided"),
     [
@@ -302,10 +313,15 @@ class _Scripted:
         (("body", "body", "chair"), (1, 1, 1), (0, 0, 0), (0, 0, 1)),  # a chair read where the others see him
     ],
 )
-def test_crops_run_where_fewer_than_two_views_agree_and_guided_reads_where_one_disagrees(sees, images, crops, guided):
+def test_crops_run_where_fewer_than_two_views_agree_and_guided_reads_where_one_disagrees(
+    sees, images, crops, guided, pool
+):
     detectors = [_Scripted(view, seen) for view, seen in enumerate(sees)]
     found = detect_views(
-        detectors, [None if image is None else np.zeros((4, 4, 3), np.uint8) for image in images], cameras=_RIG
+        detectors,
+        [None if image is None else np.zeros((4, 4, 3), np.uint8) for image in images],
+        cameras=_RIG,
+        pool=pool,
     )
     assert tuple(detector.crops for detector in detectors) == crops
     assert tuple(detector.guided_reads for detector in detectors) == guided
@@ -322,9 +338,11 @@ def test_crops_run_where_fewer_than_two_views_agree_and_guided_reads_where_one_d
         (("body", "nobody", "chair"), (False, False, True), (1, 1, 1), (0, 0, 1)),  # the others do not: read whole
     ],
 )
-def test_a_view_whose_last_guided_reading_was_taken_is_read_there_before_its_whole_image(sees, guiding, wholes, guided):
+def test_a_view_whose_last_guided_reading_was_taken_is_read_there_before_its_whole_image(
+    sees, guiding, wholes, guided, pool
+):
     detectors = [_Scripted(view, seen, follows) for view, (seen, follows) in enumerate(zip(sees, guiding))]
-    found = detect_views(detectors, [np.zeros((4, 4, 3), np.uint8)] * 3, cameras=_RIG)
+    found = detect_views(detectors, [np.zeros((4, 4, 3), np.uint8)] * 3, cameras=_RIG, pool=pool)
     assert tuple(detector.wholes for detector in detectors) == wholes
     assert tuple(detector.guided_reads for detector in detectors) == guided
     assert all(np.allclose(detection.pixels, _RIG[k].project(_BODY)) for k, detection in enumerate(found))
@@ -376,3 +394,36 @@ def test_landmarks_far_from_the_last_ones_are_read_again_afresh(monkeypatch):
     sure = (first.confidence > 0.8) & (moved.confidence > 0.8)
     assert sure.sum() > 15
     assert np.abs(moved.pixels[sure] - first.pixels[sure] - (80.0, 0.0)).max() < 10.0
+
+
+def test_views_read_side_by_side_and_landmarkers_warmed_up_find_the_same_landmarks():
+    """Frames 0, 4, ..., 16 of the demo (cam1's whole image shows the backdrop's player, so from frame 4 on it is read
+    where the others place the body first): detected one view after the other by fresh landmarkers, and side by side in
+    threads by landmarkers that first read an empty image (:meth:`Detector.warm_up`), as the tracker's worker does,
+    every landmark, confidence and mask is the same."""
+    recording = open_recording(DEMO)
+    sets = [images for _, images in frames(recording, 0, 20, colour=True, step=4)]
+    readings = []
+    for side_by_side in (False, True):
+        detectors = [Detector() for _ in recording.cameras]
+        guided = 0
+        try:
+            with ThreadPoolExecutor(3) as threads:
+                pool = threads if side_by_side else None
+                if side_by_side:
+                    list(pool.map(Detector.warm_up, detectors))
+                found = []
+                for images in sets:
+                    found.append(detect_views(detectors, images, cameras=recording.cameras, pool=pool))
+                    guided += sum(detector.guiding for detector in detectors)
+        finally:
+            for detector in detectors:
+                detector.close()
+        readings.append(found)
+        assert guided > 0  # the guided reads ran too
+    for one, other in zip(*readings):
+        for a, b in zip(one, other):
+            np.testing.assert_array_equal(a.pixels, b.pixels)
+            np.testing.assert_array_equal(a.confidence, b.confidence)
+            assert (a.mask is None) == (b.mask is None) and (a.mask is None or np.array_equal(a.mask, b.mask))
+            assert a.square == b.square

@@ -12,8 +12,7 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 * decode only: frames per second of the same reader threads with no tracking,
   the floor that tracking is compared with (``ratio_all_views``);
 * the keypoint cue: the detector's milliseconds per image (one camera's frames after the other,
-  in this process, reduced as the tracker feeds them to its worker) with each landmark model (the run's, and the
-  others beside it: ``tracker live`` runs :data:`tracker.landmarks.landmark_models.LIVE`), and frames per second end to
+  in this process, reduced as the tracker feeds them to its worker), and frames per second end to
   end with the detector beside the tracker at its default rate (a worker process started afresh in
   each pass, as ``tracker track`` does, so its start-up counts);
 * a long run (:func:`long_run`): thousands of frames, the recording read in a loop, and the resident
@@ -23,30 +22,39 @@ same process, after the numba kernels are compiled (or loaded from the cache):
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import statistics
 import tempfile
 import time
 import tomllib
 from collections.abc import Generator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from tracker.apps.keypoint_stream import KeypointStream, beside, default_step, schedule_words, tracked_frames
+from tracker.apps.keypoint_stream import (
+    KeypointStream,
+    beside,
+    default_step,
+    schedule,
+    schedule_words,
+    tracked_frames,
+)
 from tracker.apps.loop import Tracked, track_frames
 from tracker.camera import look_at_camera
 from tracker.errors import TrackerInputError
 from tracker.geometry import se3
 from tracker.io.posefile import load_pose_file, pose_frame
 from tracker.io.poses import load_poses
-from tracker.io.readers import grey_frames, reduced
+from tracker.io.readers import ColourCopies, grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
-from tracker.landmarks.detector import Detector
-from tracker.landmarks.landmark_models import LIVE, MODELS
+from tracker.landmarks.consistency import consistent
+from tracker.landmarks.detect_recording import frame_keypoints
+from tracker.landmarks.detector import Detector, detect_views, native_logs_muted, view_threads
+from tracker.landmarks.landmark_models import FILES, MODELS, RECORDED, model_folder
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
@@ -64,6 +72,42 @@ class TrackRun:
     stage_ms: dict  # stage -> milliseconds per frame
     iterations: int
     views: int
+    frames: int = 0
+    seconds: float = 0.0  # the loop's
+    first: float = 0.0  # seconds from the start of the loop until the first frame's landmarks came (0 without them)
+
+    @property
+    def fps_after_first(self) -> float:
+        """Frames a second from the first frame's landmarks on: the loop's pace once the detector's worker is up."""
+        return self.frames / (self.seconds - self.first)
+
+
+@dataclass
+class Stage:
+    """A stage of the loop timed alone: the frames it went through, and the wall and CPU seconds (this process's, all
+    its threads) that took."""
+
+    frames: int = 0
+    seconds: float = 0.0
+    cpu: float = 0.0
+
+    @contextlib.contextmanager
+    def timing(self, frames: int) -> Generator[None, None, None]:
+        """Count ``frames`` and the seconds the block takes."""
+        wall, cpu = time.perf_counter(), time.process_time()
+        yield
+        self.seconds += time.perf_counter() - wall
+        self.cpu += time.process_time() - cpu
+        self.frames += frames
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("nan")
+
+    @property
+    def cpu_ms(self) -> float:
+        """CPU milliseconds a frame."""
+        return 1e3 * self.cpu / self.frames if self.frames else float("nan")
 
 
 def _median(values) -> float:
@@ -79,23 +123,31 @@ def decode_cpu_ms(recording: Recording) -> float:
     return (time.perf_counter() - started) * 1e3 / recording.frame_count
 
 
+def decode_only(recording: Recording) -> Stage:
+    """The reader threads alone (all of the recording's cameras), decoding to grey."""
+    stage = Stage()
+    with stage.timing(recording.frame_count):
+        sum(1 for _ in frames(recording))
+    return stage
+
+
 def decode_only_fps(recording: Recording) -> float:
     """Frames per second of the reader threads alone (all of the recording's cameras)."""
-    started = time.perf_counter()
-    count = sum(1 for _ in frames(recording))
-    return count / (time.perf_counter() - started)
+    return decode_only(recording).fps
 
 
 def detector_ms(recording: Recording, settings: Settings, *, landmark_model: str, count: int = 40) -> float:
-    """Median milliseconds per image of the keypoint detector's pass on the whole image with ``landmark_model``, which
-    every view gets, over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the
-    tracker's
+    """Median milliseconds per image of the keypoint detector's pass (``landmark_model``) on the whole image, which
+    every view gets,
+    over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the tracker's
     worker runs them), each image reduced as the tracker's readers reduce what they feed the worker
     (:func:`tracker.tracking.frame_loop.reductions`: a 1080x1920 view at half size)."""
     seconds = []
     for source, factor in zip(recording.sources, reductions(settings, recording.cameras)):
-        detector = Detector(landmark_model=landmark_model)
-        images = grey_frames(source, range(min(count, recording.frame_count)), colour=True)
+        detector, images = (
+            Detector(landmark_model=landmark_model),
+            grey_frames(source, range(min(count, recording.frame_count)), colour=True),
+        )
         try:
             for image in images:
                 image = reduced(image, int(factor))
@@ -109,14 +161,20 @@ def detector_ms(recording: Recording, settings: Settings, *, landmark_model: str
 
 
 def _stream(
-    recording: Recording, stop: int, keypoint_step: int, settings: Settings, landmark_model: str
+    recording: Recording,
+    stop: int,
+    keypoint_step: int,
+    settings: Settings,
+    *,
+    cache: Path | None = None,
+    landmark_model: str,
 ) -> KeypointStream | None:
-    """The detector (``landmark_model``) beside the tracker on frames 0..stop-1, fed the tracker's images as
-    ``tracker track`` feeds it, or None for ``keypoint_step`` 0."""
+    """The detector (``landmark_model``) beside the tracker on frames 0..stop-1, fed the tracker's images
+    as ``tracker track`` feeds it, its detections kept in ``cache`` if given; None for ``keypoint_step`` 0."""
     if not keypoint_step:
         return None
     reduction = reductions(settings, recording.cameras)
-    return KeypointStream(recording, 0, stop, keypoint_step, reduction=reduction, landmark_model=landmark_model)
+    return KeypointStream(recording, 0, stop, keypoint_step, cache, reduction, landmark_model=landmark_model)
 
 
 def track_run(
@@ -127,16 +185,31 @@ def track_run(
     settings: Settings,
     out: Path,
     keypoint_step: int = 0,
-    landmark_model: str,
+    landmark_model: str = RECORDED,
+    cache: Path | None = None,
 ) -> TrackRun:
     """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
-    with ``keypoint_step`` the detector's worker (``landmark_model``) on every keypoint_step-th frame beside them,
-    started before the kernels load."""
-    stream = _stream(recording, recording.frame_count, keypoint_step, settings, landmark_model)
+    with ``keypoint_step`` the detector's worker (``landmark_model``) on every keypoint_step-th frame beside
+    them, started before the kernels load, its detections kept in ``cache`` if given (a cache that holds them is read
+    instead: no worker)."""
+    stream = _stream(
+        recording, recording.frame_count, keypoint_step, settings, cache=cache, landmark_model=landmark_model
+    )
+    first: list[float] = []
     try:
         tracker = Tracker(model, recording.cameras, start, settings)
         tracker.warm_up()
         tracker.work.times = StageTimes()
+        landmarks = None if stream is None else beside(stream, tracker)
+
+        def timed(index: int) -> tuple[np.ndarray, np.ndarray] | None:
+            """The frame's landmarks, the time the first came noted."""
+            assert landmarks is not None
+            found = landmarks(index)
+            if not first:
+                first.append(time.perf_counter() - started)
+            return found
+
         started = time.perf_counter()
         run = track_frames(
             tracker,
@@ -150,7 +223,7 @@ def track_run(
             ),
             out / "poses.npz",
             fps=recording.fps,
-            keypoints=None if stream is None else beside(stream, tracker),
+            keypoints=None if landmarks is None else timed,
         )
     finally:
         if stream is not None:
@@ -161,7 +234,105 @@ def track_run(
     count = recording.frame_count
     stage_ms = {stage: seconds * 1e3 / count for stage, seconds in tracker.work.times.seconds.items()}
     stage_ms["output"] = run.writing * 1e3 / count
-    return TrackRun(count / elapsed, stage_ms, settings.solve.iterations, len(recording.cameras))
+    views = len(recording.cameras)
+    return TrackRun(count / elapsed, stage_ms, settings.solve.iterations, views, count, elapsed, (first or [0.0])[0])
+
+
+CHUNK = 50
+"""Frames read into memory at a time when the tracker is timed alone (:func:`track_stage`)."""
+
+
+def track_stage(
+    recording: Recording,
+    model: Model,
+    start: np.ndarray,
+    *,
+    settings: Settings,
+    keypoint_step: int,
+    cache: Path,
+    landmark_model: str,
+) -> Stage:
+    """The tracker alone with the keypoint cue: the frames read beforehand, :data:`CHUNK` at a time (not timed), as
+    ``tracker track``'s readers give them, and the landmarks of every keypoint_step-th frame read from ``cache`` (a
+    keypoints.npz that holds them), so that neither decoding nor detection runs beside it."""
+    tracker = Tracker(model, recording.cameras, start, settings)
+    tracker.warm_up()
+    chroma = tracker.bin_colours if settings.region.on else False
+    stage = Stage()
+    with (
+        tempfile.TemporaryDirectory() as folder,
+        KeypointStream(
+            recording, 0, recording.frame_count, keypoint_step, cache, landmark_model=landmark_model
+        ) as stream,
+    ):
+        if stream.reused is None:
+            raise RuntimeError(f"{cache} does not hold the landmarks the tracker is timed with")
+        landmarks = beside(stream, tracker)
+        for first in range(0, recording.frame_count, CHUNK):
+            last = min(recording.frame_count, first + CHUNK)
+            chunk = list(frames(recording, first, last, prepare=tracker.smooth, chroma=chroma))
+            with stage.timing(len(chunk)):
+                run = track_frames(
+                    tracker, chunk, Path(folder) / f"{first}.npz", fps=recording.fps, keypoints=landmarks
+                )
+            if run.interrupted:
+                raise KeyboardInterrupt  # the benchmark stops at Ctrl-C
+    return stage
+
+
+def read_stage(
+    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int
+) -> Stage:
+    """``tracker track``'s reader threads alone: each frame decoded, smoothed and its colours binned, and every
+    keypoint_step-th frame's colour copy made for a fed detector (views the edge search reduces), nothing tracked."""
+    stage = Stage()
+    tracker = Tracker(model, recording.cameras, start, settings)
+    reduction = reductions(settings, recording.cameras)
+    copies = None
+    if keypoint_step and reduction.max() > 1:
+        wanted = frozenset(int(frame) for frame in schedule(0, recording.frame_count, keypoint_step))
+        copies = [ColourCopies(wanted, int(factor)) for factor in reduction]
+    chroma = tracker.bin_colours if settings.region.on else False
+    with stage.timing(recording.frame_count):
+        sum(1 for _ in frames(recording, prepare=tracker.smooth, chroma=chroma, copies=copies))
+    return stage
+
+
+SETS = 30
+"""Frame sets the detector is timed on alone (:func:`detect_stage`), after the first."""
+
+
+def installed_models() -> list[str]:
+    """The landmark models whose weights are installed: the detector never fetches one."""
+    folder = model_folder()
+    return [name for name in MODELS if (folder / FILES[name].file).is_file()]
+
+
+def detect_stage(recording: Recording, settings: Settings, keypoint_step: int, landmark_model: str) -> Stage:
+    """The detector alone (``landmark_model``) at ``keypoint_step``: every view of up to :data:`SETS` + 1 of
+    the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge search reduces them),
+    detected (the views side by side in threads) and checked across the views as the worker does, in this process,
+    each set counting for the ``keypoint_step`` frames it stands for; the first set (the landmarkers' start and a first
+    search for the body) is not timed."""
+    reduction = reductions(settings, recording.cameras)  # all 1 where the worker reads the videos itself
+    read = frames(recording, 0, min(recording.frame_count, (SETS + 1) * keypoint_step), colour=True, step=keypoint_step)
+    sets = [[reduced(image, int(factor)) for image, factor in zip(images, reduction)] for _, images in read]
+    names = tuple(camera.name for camera in recording.cameras)
+    detectors = [Detector(landmark_model=landmark_model) for _ in recording.cameras]
+    stage, untimed = Stage(), Stage()
+    try:
+        with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
+            for count, images in enumerate(sets):
+                with (stage if count else untimed).timing(keypoint_step):
+                    found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
+                    raw = frame_keypoints(
+                        0, found, names=names, identity="", landmark_model=landmark_model, reduction=reduction
+                    )
+                    consistent(raw, recording.cameras)
+    finally:
+        for detector in detectors:
+            detector.close()
+    return stage
 
 
 def _subject(path: Path, model_path: Path | None, init_path: Path | None) -> tuple[Recording, Model, np.ndarray]:
@@ -193,48 +364,68 @@ def run(
     *,
     repeats: int = 3,
     keypoint_step: int | None = None,
-    landmark_model: str,
     model_path: Path | None = None,
     init_path: Path | None = None,
+    landmark_model: str = RECORDED,
 ) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
-    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate) with
-    ``landmark_model``, the detector's time also with the other models.  The body model and the first pose
-    are ``model_path`` and ``init_path``, else the recording's own."""
+    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate), with
+    ``landmark_model`` beside the tracker (the detector alone is timed with every model installed).  The body
+    model and the first pose are ``model_path`` and ``init_path``, else the recording's own.  The passes of the
+    figures compared are taken in turn, one of each per repeat, so that a machine whose load drifts weighs on all
+    alike."""
     every, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
         keypoint_step = default_step(every.fps)
     first = open_recording(path, [every.cameras[0].name])
+    decode_ms, floors, floor_one, read = [], [], [], []
+    runs_all, runs_one, runs_cue, alone = [], [], [], []
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
-        decode_ms = [decode_cpu_ms(every) for _ in range(repeats)]
-        floor_all = [decode_only_fps(every) for _ in range(repeats)]
-        floor_one = [decode_only_fps(first) for _ in range(repeats)]
-        edges = functools.partial(track_run, settings=settings, out=out, landmark_model=landmark_model)  # no detector
-        runs_all = [edges(every, model, start) for _ in range(repeats)]
-        runs_one = [edges(first, model, start) for _ in range(repeats)]
-        runs_cue = [
-            track_run(
-                every,
-                model,
-                start,
-                settings=settings,
-                out=out,
-                keypoint_step=keypoint_step,
-                landmark_model=landmark_model,
-            )
-            for _ in range(repeats if keypoint_step else 0)
-        ]
-        timed = MODELS if keypoint_step else ()
-        by_model = {name: detector_ms(every, settings, landmark_model=name) for name in timed}
+        cache = out / "keypoints.npz"  # the last pass's detections: the landmarks the tracker is timed alone with
+        for repeat in range(repeats):
+            decode_ms.append(decode_cpu_ms(every))
+            floors.append(decode_only(every))
+            floor_one.append(decode_only_fps(first))
+            runs_all.append(track_run(every, model, start, settings=settings, out=out))
+            runs_one.append(track_run(first, model, start, settings=settings, out=out))
+            if keypoint_step:
+                kept = cache if repeat == repeats - 1 else None
+                runs_cue.append(
+                    track_run(
+                        every,
+                        model,
+                        start,
+                        settings=settings,
+                        out=out,
+                        keypoint_step=keypoint_step,
+                        landmark_model=landmark_model,
+                        cache=kept,
+                    )
+                )
+                read.append(read_stage(every, model, start, settings=settings, keypoint_step=keypoint_step))
+        if keypoint_step:
+            alone = [
+                track_stage(
+                    every,
+                    model,
+                    start,
+                    settings=settings,
+                    keypoint_step=keypoint_step,
+                    cache=cache,
+                    landmark_model=landmark_model,
+                )
+                for _ in range(repeats)
+            ]
+        detector = detector_ms(every, settings, landmark_model=landmark_model) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
     stage_cue = {stage: _median([r.stage_ms[stage] for r in runs_cue]) for stage in (*STAGES, "output") if runs_cue}
     core = sum(stage_ms[s] for s in ("outline", "ownership", "measure", "solve"))
     fps_all = _median([r.fps for r in runs_all])
-    decode_all = _median(floor_all)
-    return {
+    decode_all = _median([floor.fps for floor in floors])
+    result = {
         "recording": str(path),
         "views": len(every.cameras),
         "frames": every.frame_count,
@@ -251,10 +442,40 @@ def run(
         "ratio_one_view": _median([r.fps for r in runs_one]) / _median(floor_one),
         "ratio_all_views": fps_all / decode_all,
         "keypoint_step": keypoint_step,
-        "landmark_model": landmark_model,
-        "detector_ms_per_view": by_model.get(landmark_model, float("nan")),
-        "detector_ms_per_view_by_model": by_model,
+        "detector_ms_per_view": detector,
         "fps_all_views_with_keypoints": _median([r.fps for r in runs_cue]) if runs_cue else float("nan"),
+    }
+    if not keypoint_step:
+        return result
+    models = [name for name in MODELS if name in installed_models() or name == landmark_model]
+    detect = {name: detect_stage(every, settings, keypoint_step, name) for name in models}
+    stages = {"read": read, "detect": [detect[landmark_model]], "track": alone}
+    fps = {name: _median([stage.fps for stage in timed]) for name, timed in stages.items()}
+    cpu_ms = {name: _median([stage.cpu_ms for stage in timed]) for name, timed in stages.items()}
+    cores = os.cpu_count() or 1
+    overlapped = _median([r.fps for r in runs_cue])
+    return result | {
+        "landmark_model": landmark_model,
+        "stage_fps_with_keypoints": {
+            "decode_only": decode_all,
+            "read": fps["read"],
+            "detect": {name: stage.fps for name, stage in detect.items()},
+            "track": fps["track"],
+        },
+        "stage_cpu_ms_per_frame_with_keypoints": {
+            "decode_only": _median([floor.cpu_ms for floor in floors]),
+            "read": cpu_ms["read"],
+            "detect": {name: stage.cpu_ms for name, stage in detect.items()},
+            "track": cpu_ms["track"],
+        },
+        "cores": cores,
+        "bound_serial_fps": 1.0 / sum(1.0 / value for value in fps.values()),
+        "bound_cores_fps": 1e3 * cores / sum(cpu_ms.values()),
+        "bound_slowest_stage_fps": min(fps.values()),
+        "slowest_stage": min(fps, key=lambda name: fps[name]),
+        "first_landmarks_s": _median([r.first for r in runs_cue]),
+        "fps_all_views_with_keypoints_after_first": _median([r.fps_after_first for r in runs_cue]),
+        "ratio_with_keypoints": overlapped / decode_all,
     }
 
 
@@ -277,9 +498,9 @@ def long_run(
     settings: Settings = Settings(),
     *,
     keypoint_step: int | None = None,
-    landmark_model: str,
     model_path: Path | None = None,
     init_path: Path | None = None,
+    landmark_model: str = RECORDED,
     progress=lambda iterable, total=None: iterable,
 ) -> dict:
     """A long run for memory: ``total`` frames tracked and written to a poses.npz, the recording read again
@@ -316,7 +537,6 @@ def long_run(
         "frames_written": written,
         "fps": run.frames / run.seconds,
         "keypoint_step": keypoint_step,
-        "landmark_model": landmark_model,
         "resident_mb_start": memory["start"],
         "settled_frame": SETTLED,
         "resident_mb_settled": memory["settled"],
@@ -328,8 +548,8 @@ def long_run(
 @dataclass
 class _Passes:
     """The frames of a long run: ``total`` frames numbered 0, 1, ..., the recording read again and again from its
-    first frame (read as ``tracker`` reads them), each pass with a fresh keypoint worker (``landmark_model``) at
-    ``keypoint_step`` (0: none) beside it."""
+    first frame (read as ``tracker`` reads them), each pass with a fresh keypoint worker at ``keypoint_step`` (0:
+    none) beside it."""
 
     recording: Recording
     total: int
@@ -345,8 +565,10 @@ class _Passes:
         while done < self.total:
             stop = min(self.recording.frame_count, self.total - done)
             tracker = self.tracker
-            self.stream = _stream(self.recording, stop, self.keypoint_step, tracker.settings, self.landmark_model)
-            self.first = done
+            stream = _stream(
+                self.recording, stop, self.keypoint_step, tracker.settings, landmark_model=self.landmark_model
+            )
+            self.stream, self.first = stream, done
             try:
                 for _, images in tracked_frames(
                     self.stream,
@@ -369,7 +591,7 @@ class _Passes:
 
 def format_long(result: dict) -> str:
     """A Markdown table of :func:`long_run`'s figures."""
-    cue = f"{schedule_words(result['keypoint_step'])}, {result['landmark_model']}" if result["keypoint_step"] else "off"
+    cue = schedule_words(result["keypoint_step"]) if result["keypoint_step"] else "off"
     return "\n".join(
         [
             f"Recording `{result['recording']}` read in a loop: {result['views']} views, {result['frames']} frames "
@@ -424,16 +646,56 @@ def format_table(result: dict) -> str:
         "per IRLS iteration.",
     ]
     if result["keypoint_step"]:
-        model, by_model = result["landmark_model"], result["detector_ms_per_view_by_model"]
-        others = ", ".join(f"{name} {ms:.1f} ms" for name, ms in by_model.items() if name != model)
         lines += [
             "",
-            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view with the {model} "
-            f"landmark model ({others}; tracker live runs {LIVE}); with it on "
+            f"Keypoint cue: the detector takes {result['detector_ms_per_view']:.1f} ms per view; with it on "
             f"{schedule_words(result['keypoint_step'])} beside the tracker (a worker process, its start-up included), "
             f"{result['fps_all_views_with_keypoints']:.0f} frames per second with all views.",
+            "",
+            *format_stages(result),
         ]
     return "\n".join(lines)
+
+
+def format_stages(result: dict) -> list[str]:
+    """The lines of :func:`run`'s table of the stages with the keypoint cue: each alone, the bounds they set, and all
+    three overlapped."""
+    fps, cpu = result["stage_fps_with_keypoints"], result["stage_cpu_ms_per_frame_with_keypoints"]
+    every, model, floor = schedule_words(result["keypoint_step"]), result["landmark_model"], fps["decode_only"]
+    rows = [
+        ("decode only (the floor)", fps["decode_only"], cpu["decode_only"]),
+        (
+            "read: decode, smoothing, colours and the detector's copies, as the tracker's readers do",
+            fps["read"],
+            cpu["read"],
+        ),
+        *(
+            (
+                f"detect {every}, {name} model{' (beside the tracker)' if name == model else ''}",
+                rate,
+                cpu["detect"][name],
+            )
+            for name, rate in fps["detect"].items()
+        ),
+        ("track with the landmarks (frames and landmarks read beforehand)", fps["track"], cpu["track"]),
+        (f"bound: read, detect ({model}) and track one after the other", result["bound_serial_fps"], None),
+        (f"bound: the {result['cores']} cores over the three stages' CPU", result["bound_cores_fps"], None),
+        (f"bound: the slowest stage ({result['slowest_stage']})", result["bound_slowest_stage_fps"], None),
+        ("overlapped, the worker's start-up included", result["fps_all_views_with_keypoints"], None),
+        (
+            f"overlapped, from the first landmarks on ({result['first_landmarks_s']:.2f} s into the loop)",
+            result["fps_all_views_with_keypoints_after_first"],
+            None,
+        ),
+    ]
+    return [
+        "| with the keypoint cue, all views | frames per second | CPU ms a frame | / decode only |",
+        "| --- | --- | --- | --- |",
+        *(
+            f"| {name} | {rate:.1f} | {'' if ms is None else f'{ms:.1f}'} | {rate / floor:.2f} |"
+            for name, rate, ms in rows
+        ),
+    ]
 
 
 def _copies(data: dict, copies: int, keep=None) -> dict:

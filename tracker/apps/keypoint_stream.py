@@ -5,8 +5,10 @@ The worker either reads the recording itself or is fed by the tracker's reader t
 against each other (:mod:`tracker.landmarks.consistency`) and hands each frame's landmarks over a queue, in frame
 order.  Fed (large views only, :class:`KeypointStream`), it decodes nothing: the readers decode each video once and
 give the scheduled frames also in colour, reduced as the edge search reduces them
-(:func:`tracker.tracking.frame_loop.reductions`), and the landmarks are taken back to full-size pixels.  On 1080x1920
-H.264 that saves the second decoding of every frame of every view (docs/speed.md).  Colour it must be: in grey the
+(:func:`tracker.tracking.frame_loop.reductions`), written to shared memory that the worker reads in place
+(:mod:`tracker.io.shared_frames`), and the landmarks are taken back to full-size pixels.  On 1080x1920 H.264 that
+saves the second decoding of every frame of every view, and the pickling of each frame set through a pipe
+(docs/speed.md).  Colour it must be: in grey the
 detector takes the demo's backdrop photograph of a player for the body it should find (docs/keypoints.md).  The tracker
 reads its frames ``step + LAG`` frames ahead of the one it tracks (:func:`tracked_frames`), so the worker detects a
 frame while the tracker is still on earlier ones.  It is a process, not a thread, so the detector's Python glue never
@@ -29,6 +31,7 @@ import multiprocessing
 import queue
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
+from concurrent.futures import Executor, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -38,6 +41,7 @@ from tracker import stop_signals
 from tracker.errors import TrackerInputError
 from tracker.io.readers import ColourCopies, WithColour
 from tracker.io.recording import Recording, frames
+from tracker.io.shared_frames import SharedFrames
 from tracker.landmarks.consistency import CONFIDENT, consistent, sided_with
 from tracker.landmarks.detect_recording import (
     cached,
@@ -48,7 +52,13 @@ from tracker.landmarks.detect_recording import (
     merged,
     stacked,
 )
-from tracker.landmarks.detector import Detector, detect_views, native_logs_muted, require_detector
+from tracker.landmarks.detector import (
+    Detector,
+    detect_views,
+    native_logs_muted,
+    require_detector,
+    view_threads,
+)
 from tracker.landmarks.hips import lowered, proportions
 from tracker.landmarks.store import Keypoints, save_keypoints
 
@@ -86,48 +96,61 @@ def schedule(start: int, stop: int, step: int) -> np.ndarray:
 
 
 def _work(
-    recording: Recording, start: int, stop: int, step: int, results, fed=None, reduction=None, *, landmark_model: str
+    recording: Recording,
+    start: int,
+    stop: int,
+    step: int,
+    results,
+    fed=None,
+    reduction=None,
+    *,
+    landmark_model: str,
 ) -> None:
-    """The worker process: detect (with ``landmark_model``) and check each scheduled frame, put (raw, checked) on
-    ``results``, then
-    None; an error is put instead and ends it.  With ``fed``, a queue, the frames are (index, images) taken
-    from it (reduced by ``reduction``) until None; else the worker reads them.  The stop signals are the parent's to
-    handle (:mod:`tracker.stop_signals`)."""
+    """The worker process: detect and check each scheduled frame with ``landmark_model``, put (raw, checked) on
+    ``results``, then None; an error is put instead and ends it.  With ``fed``, a queue, the frames are those the
+    tracker's readers wrote to shared memory (:func:`_detect_fed`); else the worker reads them.  The stop signals are
+    the parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
-        with native_logs_muted():
+        with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
             if fed is not None:
-                _detect_fed(recording, fed, reduction, results, landmark_model)
+                _detect_fed(recording, fed, reduction, results, landmark_model, pool)
             else:
                 runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
                 for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-                    for _, raw in detections(recording, first, last, step=every, landmark_model=landmark_model):
+                    found = detections(recording, first, last, step=every, landmark_model=landmark_model, pool=pool)
+                    for _, raw in found:
                         results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
 
 
-def _detect_fed(recording: Recording, fed, reduction, results, landmark_model: str) -> None:
-    """Detect in the frames put on ``fed`` (one landmarker of ``landmark_model`` per camera, in video mode) until
-    None."""
+def _detect_fed(recording: Recording, fed, reduction, results, landmark_model: str, pool: Executor) -> None:
+    """Detect in the frame sets named on ``fed`` (index, slot, :attr:`SharedFrames.spec
+    <tracker.io.shared_frames.SharedFrames.spec>`), read in place in shared memory (one landmarker of
+    ``landmark_model`` per camera, in video mode), until None; a set's result is put only once its images are no
+    longer read, so that the tracker may write the slot again when it takes the result."""
     names, identity = tuple(camera.name for camera in recording.cameras), fingerprint(recording)
     detectors = [Detector(landmark_model=landmark_model) for _ in recording.cameras]
+    shared: SharedFrames | None = None
     try:
+        list(pool.map(Detector.warm_up, detectors))  # while the tracker's kernels load and its readers start
         while (item := fed.get()) is not None:
-            index, images = item
+            index, slot, spec = item
+            if shared is None:
+                shared = SharedFrames.attach(spec)
+            images = shared.images(slot)
+            found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
             raw = frame_keypoints(
-                index,
-                detect_views(detectors, images, cameras=recording.cameras, reduction=reduction),
-                names=names,
-                identity=identity,
-                landmark_model=landmark_model,
-                reduction=reduction,
+                index, found, names=names, identity=identity, landmark_model=landmark_model, reduction=reduction
             )
             results.put((raw, consistent(raw, recording.cameras)[0]))
     finally:
         for detector in detectors:
             detector.close()
+        if shared is not None:
+            shared.close()
 
 
 def tracked_frames(
@@ -178,7 +201,10 @@ class KeypointStream:
 
     Only reduced (large) views are fed: smaller ones decode cheaply (a 640x480 Motion-JPEG view costs a sixth of
     a 1080x1920 H.264 one), and a worker that reads them itself detects ahead while the tracker's kernels
-    load, unbounded by the frames the tracker holds (docs/speed.md has what either way is worth end to end)."""
+    load, unbounded by the frames the tracker holds (docs/speed.md has what either way is worth end to end).  A fed
+    worker reads the frame sets in shared memory (:mod:`tracker.io.shared_frames`), in a ring of as many slots as
+    it can have frames to detect ahead of the tracker.  ``landmark_model`` picks the landmark model
+    (:mod:`tracker.landmarks.landmark_models`)."""
 
     def __init__(
         self,
@@ -198,6 +224,10 @@ class KeypointStream:
         self.fed = None
         self.to_feed: frozenset[int] = frozenset()  # the frames the readers give a fed worker (:meth:`copies`)
         self.sent: set[int] = set()
+        self.shared: SharedFrames | None = None  # a fed worker's frame sets, made at the first one fed
+        self.slots = -(-self.lead // step) + 2  # frame sets fed and not yet answered for: at most lead / step + 1
+        self.free: list[int] = list(range(self.slots))
+        self.slot_of: dict[int, int] = {}  # the slot of each frame fed and not yet answered for
         self.old = cached(cache, recording, landmark_model) if cache is not None else None
         self.raw: list[Keypoints] = []
         self.detected: dict[int, Keypoints] = {}  # each scheduled frame's landmarks as detected, before the check
@@ -240,9 +270,19 @@ class KeypointStream:
 
     def feed(self, index: int, images: list[np.ndarray]) -> None:
         """Hand a fed worker frame ``index``'s colour images (BGR, one per camera, reduced by the stream's
-        ``reduction``)."""
+        ``reduction``), copied into a free slot of the shared frame sets; when none is free, the worker's answers
+        are taken (:meth:`_receive`) until one is."""
         assert self.fed is not None and index not in self.sent, f"frame {index} fed twice or to a reading stream"
-        self.fed.put((index, images))
+        if self.shared is None:
+            self.shared = SharedFrames([image.shape for image in images], self.slots)
+        while not self.free:
+            if self.finished:
+                raise RuntimeError(f"frame {index} fed after the worker ended")
+            self._receive()
+        slot = self.free.pop()
+        self.shared.write(slot, images)
+        self.fed.put((index, slot, self.shared.spec))
+        self.slot_of[index] = slot
         self.sent.add(index)
 
     def get(self, frame: int, *, settle: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
@@ -329,8 +369,11 @@ class KeypointStream:
             self._keep(item)
 
     def _keep(self, item: tuple[Keypoints, Keypoints]) -> None:
-        """Keep a frame's landmarks from the worker, (raw, checked), unless the cache held that frame."""
+        """Keep a frame's landmarks from the worker, (raw, checked), unless the cache held that frame; a fed frame's
+        slot is free again."""
         raw, checked = item
+        if (slot := self.slot_of.pop(int(raw.frame[0]), None)) is not None:
+            self.free.append(slot)
         if int(raw.frame[0]) not in self.checked:
             self.raw.append(raw)
             self.checked[int(raw.frame[0])] = checked
@@ -360,6 +403,9 @@ class KeypointStream:
         if self.fed is not None:  # frames it will not take must not hold this process up, nor their memory
             self.fed.cancel_join_thread()
             self.fed.close()
+        if self.shared is not None:
+            self.shared.close()
+            self.shared = None
         if self.cache is not None and self.raw:
             save_keypoints(self.cache, merged(self.old, stacked(self.raw)))
             self.raw = []

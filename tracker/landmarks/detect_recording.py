@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import os
 from collections.abc import Callable, Generator, Iterable
+from concurrent.futures import Executor
 from contextlib import ExitStack, closing
 from pathlib import Path
 
@@ -125,13 +126,19 @@ def merged(old: Keypoints | None, new: Keypoints) -> Keypoints:
 
 
 def detections(
-    recording: Recording, start: int, stop: int, *, step: int = 1, landmark_model: str
+    recording: Recording,
+    start: int,
+    stop: int,
+    *,
+    step: int = 1,
+    landmark_model: str,
+    pool: Executor | None = None,
 ) -> Generator[tuple[int, Keypoints], None, None]:
     """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker of
-    ``landmark_model`` per camera in video mode (so each follows its person from detected frame to detected frame).
-    MediaPipe's
-    native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a progress bar
-    over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
+    ``landmark_model`` per camera in video mode (so each follows its person from detected frame to detected frame),
+    the views side by side in ``pool``'s threads if given (:func:`tracker.landmarks.detector.detect_views`).
+    MediaPipe's native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a
+    progress bar over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
     names = tuple(camera.name for camera in recording.cameras)
     identity = fingerprint(recording)
     with ExitStack() as stack:
@@ -140,7 +147,7 @@ def detections(
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):
-            found = detect_views(detectors, images, cameras=recording.cameras)
+            found = detect_views(detectors, images, cameras=recording.cameras, pool=pool)
             yield index, frame_keypoints(index, found, names=names, identity=identity, landmark_model=landmark_model)
 
 

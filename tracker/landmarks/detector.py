@@ -59,7 +59,8 @@ import dataclasses
 import os
 import sys
 import types
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import cv2
@@ -275,6 +276,11 @@ class Detector:
         self._last = square
         return found
 
+    def warm_up(self) -> None:
+        """Load the landmarker's networks, which it otherwise does on its first image, by reading an image with nobody
+        in it: that leaves it as it was (its next image is read afresh, as a new landmarker's first)."""
+        _read(self._pose, _BLACK)
+
     def cropped(self, image: np.ndarray) -> Detection:
         """The landmarks the crops find in the image just given to :meth:`whole`: followed around the last
         landmarks, else searched for."""
@@ -328,12 +334,19 @@ class Detector:
                 self._crops.close()
 
 
+def view_threads(views: int) -> int:
+    """Threads that read ``views`` views side by side (:func:`detect_views`' ``pool``): one per view, no more than the
+    machine has cores."""
+    return max(1, min(views, os.cpu_count() or 1))
+
+
 def detect_views(
     detectors: list[Detector],
-    images: list[np.ndarray | None],
+    images: Sequence[np.ndarray | None],
     *,
     cameras: list[Camera],
     reduction: np.ndarray | None = None,
+    pool: Executor | None = None,
 ) -> list[Detection]:
     """One frame's landmarks in every view (``images`` in camera order, None for a view without one; with
     ``reduction``, one integer factor per camera, each image is its camera's reduced by it).
@@ -346,46 +359,60 @@ def detect_views(
     would find its background photo's player, whom the check across the views drops anyway).  Then each view that
     agrees with none of two or more agreeing ones is read again in the square where they place the body
     (:meth:`Detector.guided`), and that reading is kept when its landmarks lie where they place them
-    (:func:`tracker.landmarks.guided.fits`)."""
+    (:func:`tracker.landmarks.guided.fits`).
+
+    With ``pool``, the views of each of these passes are read side by side in its threads (MediaPipe's graphs run
+    outside Python's interpreter lock): each view's detector is given the same images in the same order as without
+    it, so the landmarks are the same."""
+    each = pool.map if pool is not None else map
     scale = np.ones(len(images)) if reduction is None else np.asarray(reduction, float)
     guiding = [image is not None and detector.guiding for detector, image in zip(detectors, images)]
-    found = [
-        Detection.none() if skip else _whole(detector, image)
-        for detector, image, skip in zip(detectors, images, guiding)
-    ]
+    found = list(each(lambda d, i, skip: Detection.none() if skip else _whole(d, i), detectors, images, guiding))
     agree = _agreeing(cameras, found, scale)
     if agree.sum() < 2 and any(guiding):
-        found = [
-            _whole(detector, image) if skip else detection
-            for detector, image, detection, skip in zip(detectors, images, found, guiding)
-        ]
+        found = list(each(lambda d, i, got, skip: _whole(d, i) if skip else got, detectors, images, found, guiding))
         agree = _agreeing(cameras, found, scale)
     if agree.sum() < 2:
-        found = [
-            detection if detection.found or image is None else detector.cropped(image)
-            for detector, image, detection in zip(detectors, images, found)
-        ]
+        found = list(
+            each(
+                lambda d, i, got: got if got.found or i is None else d.cropped(i),
+                detectors,
+                images,
+                found,
+            )
+        )
         agree = _agreeing(cameras, found, scale)
     if agree.sum() < 2:
         return found
     pixels, confidence = _landmarks(found, scale)
     points = placed_points(cameras, pixels, confidence, among=agree)
-    for view in np.flatnonzero(~agree):
+
+    def guided(view: int) -> Detection | None:
+        """View ``view``'s reading where the agreeing views place the body, if taken."""
         square, image = placed(cameras[view], points), images[view]
         if image is None or square is None:
-            continue
+            return None
         reduced = Region((square.centre[0] / scale[view], square.centre[1] / scale[view]), square.side / scale[view])
 
-        def agrees(reading: Detection, camera: Camera = cameras[view], factor: float = scale[view]) -> bool:
-            return fits(camera, points, reading.pixels * factor, confidence=reading.confidence)
+        def agrees(reading: Detection) -> bool:
+            return fits(cameras[view], points, reading.pixels * scale[view], confidence=reading.confidence)
 
         reading = detectors[view].guided(image, reduced, agrees)
-        if reading.found:
+        return reading if reading.found else None
+
+    strays = [int(view) for view in np.flatnonzero(~agree)]
+    for view, reading in zip(strays, each(guided, strays)):
+        if reading is not None:
             found[view] = reading
-    return [
-        _whole(detector, image) if skip and not detection.found else detection
-        for detector, image, detection, skip in zip(detectors, images, found, guiding)
-    ]
+    return list(
+        each(
+            lambda d, i, got, skip: _whole(d, i) if skip and not got.found else got,
+            detectors,
+            images,
+            found,
+            guiding,
+        )
+    )
 
 
 def _whole(detector: Detector, image: np.ndarray | None) -> Detection:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import multiprocessing
 import queue
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -22,7 +23,14 @@ from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_world
 from tracker.landmarks.consistency import consistent
-from tracker.landmarks.detector import Detector, detect_views, detector_name, native_logs_muted, require_detector
+from tracker.landmarks.detector import (
+    Detector,
+    detect_views,
+    detector_name,
+    native_logs_muted,
+    require_detector,
+    view_threads,
+)
 from tracker.landmarks.store import Keypoints
 
 _CLOSE_WAIT = 2.0
@@ -36,14 +44,15 @@ _START_WAIT = 120.0
 
 
 def _work(cameras: list[Camera], jobs, results, landmark_model: str) -> None:
-    """The worker process: detect (with ``landmark_model``) every frame set taken from ``jobs`` (None ends it) and put
-    (number, pixels,
-    confidence) of the checked landmarks on ``results``; an error is put instead and ends it.  The stop signals are
-    the parent's to handle (:mod:`tracker.stop_signals`)."""
+    """The worker process: detect every frame set taken from ``jobs`` (None ends it) with ``landmark_model``, the views
+    side by side in threads, and put (number, pixels, confidence) of the checked landmarks on ``results``; an error is
+    put instead and ends it.  Its landmarkers load their networks before it says it is ready.  The stop signals are the
+    parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
-        with native_logs_muted():
+        with native_logs_muted(), ThreadPoolExecutor(view_threads(len(cameras)), "view") as pool:
             detectors = [Detector(landmark_model=landmark_model) for _ in cameras]
+            list(pool.map(Detector.warm_up, detectors))
             names = tuple(camera.name for camera in cameras)
             results.put(READY)
             while (job := jobs.get()) is not None:
@@ -51,7 +60,7 @@ def _work(cameras: list[Camera], jobs, results, landmark_model: str) -> None:
                 pixels = np.full((len(cameras), len(LANDMARKS), 2), np.nan)
                 confidence = np.zeros((len(cameras), len(LANDMARKS)))
                 images = [None if jpeg is None else cv2.imdecode(jpeg, cv2.IMREAD_COLOR) for jpeg in jpegs]
-                for camera, found in enumerate(detect_views(detectors, images, cameras=cameras)):
+                for camera, found in enumerate(detect_views(detectors, images, cameras=cameras, pool=pool)):
                     pixels[camera], confidence[camera] = found.pixels, found.confidence
                 world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
                 raw = Keypoints(
