@@ -228,7 +228,9 @@ def test_a_fed_worker_given_more_frames_than_its_slots_answers_for_each_in_order
     read = [(index, [reduced(image, 2) for image in images]) for index, images in frames(recording, 0, 13, colour=True)]
     got = {}
     for name in ("crowded", "roomy"):
-        with KeypointStream(recording, 0, 13, 4, tmp_path / f"{name}.npz", np.full(3, 2)) as stream:
+        with KeypointStream(
+            recording, 0, 13, 4, tmp_path / f"{name}.npz", np.full(3, 2), landmark_model="full"
+        ) as stream:
             if name == "crowded":
                 stream.slots, stream.free = 2, [0, 1]
             arrived, answered = [], []
@@ -257,7 +259,9 @@ def test_a_fed_run_stopped_by_ctrl_c_releases_the_shared_frames_and_the_worker(t
 
     recording = open_recording(DEMO)
     with pytest.raises(KeyboardInterrupt):
-        with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2)) as stream:
+        with KeypointStream(
+            recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2), landmark_model="full"
+        ) as stream:
             for index, _ in tracked_frames(stream, recording, start=0, stop=40):
                 stream.get(index)
                 if index == 9:

@@ -405,7 +405,7 @@ def test_views_read_side_by_side_and_landmarkers_warmed_up_find_the_same_landmar
     sets = [images for _, images in frames(recording, 0, 20, colour=True, step=4)]
     readings = []
     for side_by_side in (False, True):
-        detectors = [Detector() for _ in recording.cameras]
+        detectors = [Detector(landmark_model="full") for _ in recording.cameras]
         guided = 0
         try:
             with ThreadPoolExecutor(3) as threads:
