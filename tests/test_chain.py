@@ -221,7 +221,7 @@ def test_marginal_information_is_the_inverse_of_the_constrained_covariance():
     neighbours' information through its joint."""
     rng = np.random.default_rng(7)
     worst = 0.0
-    for trial in range(50):
+    for _ in range(50):
         n = int(rng.integers(3, 12))
         model = random_model(rng, n, joints=(chain.BALL, chain.HINGE, chain.SLIDE, chain.FREE))
         poses = valid_poses(rng, model)

@@ -26,10 +26,12 @@ from typing import TypeVar
 
 import numpy as np
 
+from tracker.chain import marginal_information, motion_basis
 from tracker.io.readers import WithChroma, reduced
 from tracker.landmarks.body_landmarks import TRUNK_TURN, trunk
 from tracker.model import Model
 from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.tracking import motion_prior
 from tracker.tracking.colours import colour_bins, colour_grids, colour_reduction
 from tracker.tracking.cue import Cue, Frame, Iteration
 from tracker.tracking.cues import CUES
@@ -51,11 +53,16 @@ C = TypeVar("C")
 
 @dataclass(frozen=True)
 class FrameResult:
+    """A frame as tracked: its poses (N, 4, 4), status, the edges' robust mean offset (pixels), the share of the
+    outline samples that found an edge and their number; and, from a tracker that is ``measuring``, what its cues said
+    of each component's pose (:meth:`Tracker.measured`), which a smoother over the whole recording weighs it by."""
+
     poses: np.ndarray
     status: int
     residual: float
     share: float
     samples: int
+    information: np.ndarray | None = None
 
 
 class Tracker:
@@ -71,6 +78,9 @@ class Tracker:
         self.prior = np.ascontiguousarray(
             np.broadcast_to(np.diag(np.array([st.prior_translation] * 3 + [st.prior_rotation] * 3, float)), (n, 6, 6))
         )
+        self.floor = self.prior.copy()  # the solve's fixed prior, which the Kalman filter's replaces (motion_model)
+        self.basis = motion_basis(model.constraint_projector, model.constraint_rows)
+        self.measuring = False  # whether step gives each frame's information (measured): a smoother will read it
         self.reduction = reductions(settings, cameras)
         self.search_size = self.rig.size // self.reduction[:, None]  # each camera's image as the edge search reads it
         reach = max(settings.outline.search_range, settings.outline.final_search_range)
@@ -349,7 +359,23 @@ class Tracker:
             status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
         for cue in self.cues:
             cue.learn(self, status, kept=not dragged)
-        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
+        measured = self.measured() if self.measuring else None
+        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible, measured)
+
+    def measured(self) -> np.ndarray:
+        """What the last solve's cues said of each component's pose, as the information (N, 2, 3, 3) of a weighted
+        least-squares estimate, per block (:func:`tracker.tracking.motion_prior.block_information`: the world
+        translation, then the rotation in body coordinates): each component's C_i from its cues (the workspace's
+        information less the prior added about the prediction) over sigma0_i^2, the variance of unit weight of its
+        edge residuals (:func:`tracker.tracking.motion_prior.variance_factor`; 1 without any edge), plus the solve's
+        fixed prior, and what the others' say of it through the joints (:func:`tracker.chain.marginal_information`)."""
+        work, n, m = self.work, self.work.samples.count, self.model
+        scale = motion_prior.variance_factor(
+            work.samples.component[:n], work.offset[:n], work.weight[:n], n_components=m.size
+        )
+        data = (work.information - self.prior) / scale[:, None, None] + self.floor
+        joint = marginal_information(data, parent=m.parent, poses=self.poses, basis=self.basis)
+        return motion_prior.block_information(joint, self.poses)
 
     def judge(self, stats: Statistics) -> tuple[float, int]:
         """The share of the samples that found an edge in the measurement ``stats`` and the frame status it and
