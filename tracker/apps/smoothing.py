@@ -8,12 +8,13 @@ capture must.  A recording also holds the frames after it:
   (:func:`tracker.tracking.smoother.smoothed_track`), each frame weighed by what its cues said of each part's pose
   (:meth:`tracker.tracking.frame_loop.Tracker.measured`), its chains restarting at each re-seed (:func:`restarts`).
 * ``both-ways``: the recording is also tracked from its last frame back to its first (:func:`track_backwards`), from
-  the forward track's last pose, with its own recovery.  In each frame both tracks' poses are judged in that frame's
-  images alike (:func:`backing`): the share of their outline samples that found an edge, plus the share of their
-  body on the person's masks, less ``misfit_weight`` times their landmarks' misfit (the mean over the views of the
-  median landmark's image distance, a share of the body's size).  The frame keeps the pose that scores higher, and
-  the track so fused is smoothed as with ``rts``.  Where the forward track strayed (a limb lost on clutter, a trunk
-  tipped, then re-seeded) the backward one, come from later frames, has often not, and the other way round.
+  the forward track's last pose, with its own recovery.  In each frame where the two tracks disagree
+  (:data:`AGREE`), both poses are judged in that frame's images alike (:func:`backing`): the share of their outline
+  samples that found an edge, plus the share of their body on the person's masks, less ``misfit_weight`` times
+  their landmarks' misfit (the mean over the views of the median landmark's image distance, a share of the body's
+  size).  The frame keeps the pose that scores higher, and the track so fused is smoothed as with ``rts``.  Where the
+  forward track strayed (a limb lost on clutter, a trunk tipped, then re-seeded) the backward one, come from later
+  frames, has often not, and the other way round.
 
 ``tracker live`` has no frames after the one it tracks and keeps the forward track.
 """
@@ -61,6 +62,16 @@ def restarts(frame: np.ndarray, status: np.ndarray) -> np.ndarray:
     return out
 
 
+AGREE = 0.01
+"""Metres: two tracks whose joint centres all lie this near each other agree, and the frame keeps the forward pose
+unjudged."""
+
+
+def _apart(one: np.ndarray, other: np.ndarray) -> float:
+    """How far apart two poses (N, 4, 4) put the body: the largest distance between their joint centres, metres."""
+    return float(np.linalg.norm(one[:, :3, 3] - other[:, :3, 3], axis=1).max())
+
+
 @dataclasses.dataclass(frozen=True)
 class Backward:
     """What :func:`track_backwards` made of the frames it tracked back, in frame order: the fused ``track``, which of
@@ -102,7 +113,7 @@ def track_backwards(
     """Track ``frames`` (index, smoothed images, the last frame first) with ``tracker`` (started at the ``forward``
     track's pose of the first of them), each frame's landmarks ``keypoints(index)`` fused and ``check`` (the
     recovery) after it as in the forward run, and keep in each frame the pose of the track, forward or backward,
-    that the frame backs better (:func:`backing`; the backward one on a tie only if it scores higher).  Time runs
+    that the frame backs better (:func:`backing`; the forward one where they agree, :data:`AGREE`, or tie).  Time runs
     backwards here: the capture times ``times(index)`` (a live recording's) are negated, so that the steps go
     forward in that time, and so is each view's lateness ``late(index)`` (a camera late is early in that time).
     Ctrl-C, SIGTERM or SIGHUP (:mod:`tracker.stop_signals`) end it with the frames done (:attr:`Backward.
@@ -126,9 +137,10 @@ def track_backwards(
             if check is not None:
                 result = check(tracker, images, landmarks, result)
             row = row_of[int(index)]
-            back = tracker.judged(images, poses=result.poses, smoothed=True)
-            ahead = tracker.judged(images, poses=forward.poses[row], smoothed=True)
-            better = backing(tracker, check, landmarks, back) > backing(tracker, check, landmarks, ahead)
+            better = False
+            if _apart(forward.poses[row], result.poses) > AGREE:
+                back, ahead = (tracker.judged(poses=poses) for poses in (result.poses, forward.poses[row]))
+                better = backing(tracker, check, landmarks, back) > backing(tracker, check, landmarks, ahead)
             rows.append(row)
             taken.append(better)
             chosen.append(result)

@@ -287,6 +287,10 @@ def track(
             bar=bar,
         )
     interrupted = run.interrupted or back.interrupted or (smoothed is not None and smoothed.interrupted)
+    if smoothed is not None and not smoothed.interrupted:  # the frames as written: some from the backward track
+        written = load_poses(poses)
+        counts = {status: int((written["status"] == status).sum()) for status in counts}
+        residuals = list(written["residual"])
     results = load_poses(poses) if not interrupted and (truth is not None or live is not None) else None
     scored = None if truth is None else truth_within(truth, asked.start, asked.stop)
     report = evaluate(results, scored) if results is not None and scored is not None else None
@@ -343,8 +347,9 @@ def _files(
 
 
 BACK_CHUNK = 30
-"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`):
-they are held in memory, as smoothed images, until tracked."""
+"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`)
+or from the last frame (:func:`_tracked_from_the_end`, which reads the next chunk while one is tracked): they are held
+in memory, as smoothed images, until tracked."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -604,8 +609,17 @@ def _tracked_from_the_end(
             )
 
         def backwards():
-            for end in range(stop, begin, -BACK_CHUNK):
-                yield from reversed(read(max(begin, end - BACK_CHUNK), end))
+            """The frames last to first, :data:`BACK_CHUNK` at a time, the next chunk read while one is tracked."""
+            from concurrent.futures import ThreadPoolExecutor
+
+            ends = list(range(stop, begin, -BACK_CHUNK))
+            with ThreadPoolExecutor(1) as reader:
+                ahead = reader.submit(read, max(begin, ends[0] - BACK_CHUNK), ends[0])
+                for k in range(len(ends)):
+                    chunk = ahead.result()
+                    if k + 1 < len(ends):
+                        ahead = reader.submit(read, max(begin, ends[k + 1] - BACK_CHUNK), ends[k + 1])
+                    yield from reversed(chunk)
 
         print(f"smoothing: tracking back from frame {stop - 1} to frame {begin}", file=sys.stderr)
         return track_backwards(

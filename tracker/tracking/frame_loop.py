@@ -81,6 +81,7 @@ class Tracker:
         self.floor = self.prior.copy()  # the solve's fixed prior, which the Kalman filter's replaces (motion_model)
         self.basis = motion_basis(model.constraint_projector, model.constraint_rows)
         self.measuring = False  # whether step gives each frame's information (measured): a smoother will read it
+        self.judging: Workspace | None = None  # judged's buffers over the frame just tracked, made when first asked
         self.reduction = reductions(settings, cameras)
         self.search_size = self.rig.size // self.reduction[:, None]  # each camera's image as the edge search reads it
         reach = max(settings.outline.search_range, settings.outline.final_search_range)
@@ -286,20 +287,26 @@ class Tracker:
         found = {cue.name: cue.inspect(self, work) for cue in self.cues}
         return {name: self._inspection(work, *read) for name, read in found.items() if read is not None}
 
-    def judged(self, images, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
+    def judged(self, images=None, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
         """The frame's result at ``poses`` as they stand, without moving them: one measurement of their outlines in
-        ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
-        edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
-        _, stats = self._inspected(images, smoothed, poses, None)
+        ``images`` (else the frame just tracked, in buffers kept for these queries) as the last iteration would search
+        them (:meth:`inspect`), the share of their samples that found an edge, their robust mean offset and the status
+        those give.  A query, like :meth:`inspect`, from the thread that steps the tracker."""
+        if images is None and self.judging is None:
+            self.judging = self.work.spare(self.work.images)
+        _, stats = self._inspected(images, smoothed, poses, None, work=None if images is not None else self.judging)
         share, status = self.judge(stats)
         return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible)
 
-    def _inspected(self, images, smoothed: bool, poses, search_range) -> tuple[Workspace, Statistics]:
-        """A spare workspace in which the outlines at ``poses`` (else the current ones) are sampled and their edges
-        searched in ``images`` (else the frame just tracked) over ``search_range`` (else the last iteration's), and
-        that search's statistics."""
+    def _inspected(
+        self, images, smoothed: bool, poses, search_range, work: Workspace | None = None
+    ) -> tuple[Workspace, Statistics]:
+        """A spare workspace (``work``, else a new one) in which the outlines at ``poses`` (else the current ones) are
+        sampled and their edges searched in ``images`` (else the frame just tracked) over ``search_range`` (else the
+        last iteration's), and that search's statistics."""
         frame = self.work.images
-        work = self.work.spare(frame if images is None else np.zeros_like(frame))
+        if work is None:
+            work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
             self.load_images(images, smoothed, work)
         if search_range is None:
