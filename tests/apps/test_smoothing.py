@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import stopping_after
 
-from tracker.apps.smoothing import Track, _fused, smoothing_input
+from tracker.apps.smoothing import JUDGED_OVER, Track, _fused, smoothing_input, taken
 from tracker.cli import main
 from tracker.evaluate import evaluate
 from tracker.geometry import se3
@@ -123,3 +123,12 @@ def test_a_frame_not_measured_counts_as_its_nearest_measured_one_and_a_lost_one_
     weighed = smoothing_input(track)
     assert list(weighed[:, 0, 0, 0, 0]) == [1.0, 1.0, 1.0, 4.0, 4.0, 0.0]
     assert (weighed == weighed[:, :, :, :1, :1]).all()
+
+
+def test_the_tracks_are_judged_over_the_frames_about_each_one():
+    """Frames 1, 3 and 4 back the backward track by a hair (edges alone, no mask between detections) and frame 2, with
+    the person's mask, backs the forward one clearly: over five frames the forward track keeps 0-4; frames 5 and 6
+    agree (NaN) and keep it too; 7-9 back the backward track and take it."""
+    assert JUDGED_OVER == 5
+    difference = np.array([np.nan, 0.004, -0.06, 0.004, 0.004, np.nan, np.nan, 0.05, 0.05, 0.05])
+    assert list(taken(difference)) == [False] * 7 + [True] * 3

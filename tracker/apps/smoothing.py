@@ -100,6 +100,22 @@ def backing(tracker: Tracker, recovery: Recovery | None, landmarks: Landmarks | 
     return score
 
 
+JUDGED_OVER = 5
+"""Frames over which the two tracks' backing is compared: the detector's masks, whose share tells most, come with every
+few frames only (every 2nd at 30 fps, every 4th at 60), and a track that strayed stays off for a stretch."""
+
+
+def taken(difference: np.ndarray) -> np.ndarray:
+    """Which frames (F,) bool, in frame order, take the backward track's pose: those where the tracks disagree (a
+    finite ``difference``, the backward pose's :func:`backing` less the forward one's) and the mean of the difference
+    over the :data:`JUDGED_OVER` frames about the frame (0 where they agree, the first and last frames repeated) is
+    positive."""
+    counted = np.nan_to_num(difference, nan=0.0)
+    half = JUDGED_OVER // 2
+    mean = np.convolve(np.pad(counted, half, mode="edge"), np.full(JUDGED_OVER, 1.0 / JUDGED_OVER), mode="valid")
+    return np.isfinite(difference) & (mean > 0.0)
+
+
 def track_backwards(
     tracker: Tracker,
     frames: Iterable[tuple[int, Sequence[np.ndarray]]],
@@ -113,14 +129,15 @@ def track_backwards(
     """Track ``frames`` (index, smoothed images, the last frame first) with ``tracker`` (started at the ``forward``
     track's pose of the first of them), each frame's landmarks ``keypoints(index)`` fused and ``check`` (the
     recovery) after it as in the forward run, and keep in each frame the pose of the track, forward or backward,
-    that the frame backs better (:func:`backing`; the forward one where they agree, :data:`AGREE`, or tie).  Time runs
+    that the frames about it back better (:func:`backing`, :func:`taken`; the forward one where they agree,
+    :data:`AGREE`).  Time runs
     backwards here: the capture times ``times(index)`` (a live recording's) are negated, so that the steps go
     forward in that time, and so is each view's lateness ``late(index)`` (a camera late is early in that time).
     Ctrl-C, SIGTERM or SIGHUP (:mod:`tracker.stop_signals`) end it with the frames done (:attr:`Backward.
     interrupted`)."""
     row_of = {int(frame): row for row, frame in enumerate(forward.frame)}
     rows: list[int] = []
-    taken: list[bool] = []
+    differences: list[float] = []  # backing(backward) - backing(forward), NaN where the tracks agree
     chosen: list[FrameResult] = []
     reseeded: list[bool] = []  # the backward track re-seeded in the frame
     spent: list[float] = []
@@ -137,12 +154,12 @@ def track_backwards(
             if check is not None:
                 result = check(tracker, images, landmarks, result)
             row = row_of[int(index)]
-            better = False
+            difference = np.nan  # where the tracks agree
             if _apart(forward.poses[row], result.poses) > AGREE:
                 back, ahead = (tracker.judged(poses=poses) for poses in (result.poses, forward.poses[row]))
-                better = backing(tracker, check, landmarks, back) > backing(tracker, check, landmarks, ahead)
+                difference = backing(tracker, check, landmarks, back) - backing(tracker, check, landmarks, ahead)
             rows.append(row)
-            taken.append(better)
+            differences.append(difference)
             chosen.append(result)
             reseeded.append(result.status == RESEEDED)
             spent.append(time.perf_counter() - begun)
@@ -156,7 +173,7 @@ def track_backwards(
         forward,
         np.asarray(rows, np.int64)[order],
         [chosen[k] for k in order],
-        np.asarray(taken, bool)[order],
+        taken(np.asarray(differences)[order]),
         np.asarray(reseeded, bool)[order],
         np.asarray(spent)[order],
         interrupted,

@@ -16,11 +16,13 @@ coerced onto the joints and their limits.
 
 whose smoothed means are the minimiser of ``sum_k |z_k - x_k|^2_{W_k} + sum_k |s_{k+1} - A_k s_k - a_k|^2_{Q_k^-1}
 + |s_0 - m_0|^2_{P_0^-1}`` (:func:`rts_kernel`, a Kalman filter forward and the RTS recursion back; ``W_k`` may be
-singular, a part unseen in a frame has none).  Translation: ``x`` the world position of the component's origin,
-``A_k = Phi_k``, ``a_k = 0``.  Rotation, about a reference ``R'_k`` (first the tracked rotations, then the smoothed
-ones; Gauss-Newton, :data:`PASSES` passes): ``x = phi`` with ``R_k = R'_k Exp(phi_k)``, ``u = w`` the body angular
-velocity.  ``R_{k+1} = R_k Exp(c w_k)`` gives, to first order in ``phi`` and in ``w`` about the reference's own
-motion ``D_k = R'_k^T R'_{k+1}``,
+singular, a part unseen in a frame has none).  ``m_0`` is the first frame's measurement and the motion from it to the
+second, ``P_0`` broad (:data:`INITIAL_POSITION`, and the Kalman filter's first velocity's spread).
+
+Translation: ``x`` the world position of the component's origin, ``A_k = Phi_k``, ``a_k = 0``.  Rotation, about a
+reference ``R'_k`` (first the tracked rotations, then the smoothed ones; Gauss-Newton, :data:`PASSES` passes):
+``x = phi`` with ``R_k = R'_k Exp(phi_k)``, ``u = w`` the body angular velocity.  ``R_{k+1} = R_k Exp(c w_k)`` gives,
+to first order in ``phi`` and in ``w`` about the reference's own motion ``D_k = R'_k^T R'_{k+1}``,
 
     phi_{k+1} = D_k^T phi_k + c w_k - log(D_k),      w_{k+1} = b w_k,
 
@@ -107,23 +109,26 @@ def segments(starts: np.ndarray) -> list[slice]:
 
 def _block_model(dt: np.ndarray, motion: MotionSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per interval (F-1,) of ``dt``: c, b and the noise Bq (2, 2) of both blocks' per-axis motion
-    (:func:`motion_prior.transition`, :func:`motion_prior.noise_integral`)."""
-    phi = np.array([transition(float(step), motion.decay) for step in dt]).reshape(-1, 2, 2)
-    integral = np.array([noise_integral(float(step), motion.decay) for step in dt]).reshape(-1, 2, 2)
+    (:func:`motion_prior.transition`, :func:`motion_prior.noise_integral`), each interval's length computed once."""
+    steps, which = np.unique(dt, return_inverse=True)
+    phi = np.array([transition(float(step), motion.decay) for step in steps]).reshape(-1, 2, 2)[which]
+    integral = np.array([noise_integral(float(step), motion.decay) for step in steps]).reshape(-1, 2, 2)[which]
     return phi[:, 0, 1], phi[:, 1, 1], integral
 
 
-def _chains(c: np.ndarray, b: np.ndarray, integral: np.ndarray, q: float, turn: np.ndarray | None):
-    """Transitions (M, F-1, 6, 6) and noises of M chains with the per-interval c, b and Bq, the position block of
-    each transition ``turn`` (M, F-1, 3, 3; identity when None)."""
-    count = 1 if turn is None else turn.shape[0]
-    eye = np.eye(3)
-    a = np.zeros((count, len(c), 6, 6))
-    a[:, :, :3, :3] = eye if turn is None else turn
-    a[:, :, :3, 3:] = c[:, None, None] * eye
-    a[:, :, 3:, 3:] = b[:, None, None] * eye
-    noise = q * np.kron(integral, eye)  # (F-1, 6, 6)
-    return a, np.broadcast_to(noise, (count, *noise.shape))
+def _transitions(c: np.ndarray, b: np.ndarray, turn: np.ndarray | None = None) -> np.ndarray:
+    """The transitions A_k (1, F-1, 6, 6) of one chain with the per-interval c and b, the position block ``turn``
+    (F-1, 3, 3; identity when None)."""
+    a = np.zeros((1, len(c), 6, 6))
+    a[0, :, :3, :3] = np.eye(3) if turn is None else turn
+    a[0, :, :3, 3:] = c[:, None, None] * np.eye(3)
+    a[0, :, 3:, 3:] = b[:, None, None] * np.eye(3)
+    return a
+
+
+def _prior(position: float, velocity: float) -> np.ndarray:
+    """P_0 (1, 6, 6): the first position's and velocity's variances."""
+    return np.diag([position] * 3 + [velocity] * 3)[None].astype(np.float64)
 
 
 def smooth_segment(
@@ -131,55 +136,55 @@ def smooth_segment(
 ) -> np.ndarray:
     """The component poses (F, N, 4, 4) of one segment smoothed (module docstring), before any coercion:
     ``information`` (F, N, 2, 3, 3) of each frame's poses (:meth:`Tracker.measured`), divided by the noise scale
-    ``scale``; ``times`` (F,) seconds."""
+    ``scale``; ``times`` (F,) seconds.  One component at a time, so that a long recording's chains stay small."""
     f_count, n = poses.shape[:2]
     if f_count < 2:
         return poses.copy()
     c, b, integral = _block_model(np.diff(times), motion)
-    info = np.moveaxis(np.asarray(information, np.float64) / scale, 0, 2)  # (N, 2, F, 3, 3)
-    prior = np.zeros((n, 6, 6))
+    eye = np.eye(3)
+    noise = {
+        block: (q * np.kron(integral, eye))[None]
+        for block, q in ((TRANSLATION, motion.q_translation), (ROTATION, motion.q_rotation))
+    }
+    still = np.zeros((1, f_count - 1, 6))
+    translation = _transitions(c, b)
     out = poses.copy()
-    # translation: the world positions of the components' origins
-    a, noise = _chains(c, b, integral, motion.q_translation, None)
-    prior[:, :3, :3] = INITIAL_POSITION[TRANSLATION] * np.eye(3)
-    prior[:, 3:, 3:] = INITIAL_SPEED**2 * np.eye(3)
-    measured = np.ascontiguousarray(np.moveaxis(poses[:, :, :3, 3], 0, 1))  # (N, F, 3)
-    mean0 = np.concatenate([measured[:, 0], (measured[:, 1] - measured[:, 0]) / c[0]], axis=1)
-    means = rts_kernel(
-        np.ascontiguousarray(np.broadcast_to(a, (n, *a.shape[1:]))),
-        np.zeros((n, f_count - 1, 6)),
-        np.ascontiguousarray(np.broadcast_to(noise[0], (n, *noise.shape[1:]))),
-        measured,
-        np.ascontiguousarray(info[:, TRANSLATION]),
-        mean0,
-        prior.copy(),
-    )
-    out[:, :, :3, 3] = np.moveaxis(means[:, :, :3], 0, 1)
-    # rotation: increments about a reference trajectory, relinearised about the smoothed one
-    tracked = poses[:, :, :3, :3]
-    reference = tracked.copy()
-    prior[:, :3, :3] = INITIAL_POSITION[ROTATION] * np.eye(3)
-    prior[:, 3:, 3:] = INITIAL_SPIN**2 * np.eye(3)
-    _, noise = _chains(c, b, integral, motion.q_rotation, None)
-    noise = np.ascontiguousarray(np.broadcast_to(noise[0], (n, *noise.shape[1:])))
-    for _ in range(PASSES):
-        ref = np.moveaxis(reference, 0, 1)  # (N, F, 3, 3)
-        step = np.swapaxes(ref[:, :-1], -1, -2) @ ref[:, 1:]  # D_k (N, F-1, 3, 3)
-        motion_k = log_so3_many(np.ascontiguousarray(step.reshape(-1, 3, 3))).reshape(n, f_count - 1, 3)
-        a, _ = _chains(c, b, integral, motion.q_rotation, np.swapaxes(step, -1, -2))
-        offset = np.zeros((n, f_count - 1, 6))
-        offset[:, :, :3] = -motion_k
-        seen = np.swapaxes(ref, -1, -2) @ np.moveaxis(tracked, 0, 1)
-        measured = log_so3_many(np.ascontiguousarray(seen.reshape(-1, 3, 3))).reshape(n, f_count, 3)
-        spin = np.zeros((n, 3))
-        spin[:] = motion_k[:, 0] / c[0]
-        mean0 = np.concatenate([measured[:, 0], spin], axis=1)
+    for i in range(n):
+        weight = np.asarray(information[:, i], np.float64) / scale  # (F, 2, 3, 3)
+        # translation: the world position of the component's origin, its velocity from the first two frames
+        position = np.ascontiguousarray(poses[None, :, i, :3, 3])  # (1, F, 3)
+        mean0 = np.concatenate([position[:, 0], (position[:, 1] - position[:, 0]) / c[0]], axis=1)
         means = rts_kernel(
-            np.ascontiguousarray(a), offset, noise, measured, np.ascontiguousarray(info[:, ROTATION]), mean0, prior
+            translation,
+            still,
+            noise[TRANSLATION],
+            position,
+            np.ascontiguousarray(weight[None, :, TRANSLATION]),
+            mean0,
+            _prior(INITIAL_POSITION[TRANSLATION], INITIAL_SPEED**2),
         )
-        turn = exp_so3_many(np.ascontiguousarray(means[:, :, :3].reshape(-1, 3))).reshape(n, f_count, 3, 3)
-        reference = np.moveaxis(ref @ turn, 0, 1)
-    out[:, :, :3, :3] = reference
+        out[:, i, :3, 3] = means[0, :, :3]
+        # rotation: increments about a reference, the tracked rotations and then the smoothed ones
+        tracked = np.ascontiguousarray(poses[:, i, :3, :3])
+        reference = tracked.copy()
+        for _ in range(PASSES):
+            step = np.swapaxes(reference[:-1], -1, -2) @ reference[1:]  # D_k (F-1, 3, 3)
+            turned = log_so3_many(np.ascontiguousarray(step))  # log(D_k)
+            offset = np.zeros((1, f_count - 1, 6))
+            offset[0, :, :3] = -turned
+            measured = log_so3_many(np.ascontiguousarray(np.swapaxes(reference, -1, -2) @ tracked))[None]
+            mean0 = np.concatenate([measured[:, 0], turned[None, 0] / c[0]], axis=1)
+            means = rts_kernel(
+                _transitions(c, b, np.swapaxes(step, -1, -2)),
+                offset,
+                noise[ROTATION],
+                measured,
+                np.ascontiguousarray(weight[None, :, ROTATION]),
+                mean0,
+                _prior(INITIAL_POSITION[ROTATION], INITIAL_SPIN**2),
+            )
+            reference = reference @ exp_so3_many(np.ascontiguousarray(means[0, :, :3]))
+        out[:, i, :3, :3] = reference
     return out
 
 
