@@ -12,7 +12,8 @@ capture must.  A recording also holds the frames after it:
   (:data:`AGREE`), both poses are judged in that frame's images alike (:func:`backing`): the share of their outline
   samples that found an edge, plus the share of their body on the person's masks, less ``misfit_weight`` times
   their landmarks' misfit (the mean over the views of the median landmark's image distance, a share of the body's
-  size).  The frame keeps the pose that scores higher, and the track so fused is smoothed as with ``rts``.  Where the
+  size).  The frame keeps the pose that scores higher over the frames about it (:func:`taken`), and the track so
+  fused is smoothed as with ``rts``.  Where the
   forward track strayed (a limb lost on clutter, a trunk tipped, then re-seeded) the backward one, come from later
   frames, has often not, and the other way round.
 
