@@ -19,6 +19,7 @@ from tracker.errors import TrackerInputError
 if TYPE_CHECKING:
     import numpy as np
 
+    from tracker.apps.smoothing import Smoothed
     from tracker.evaluate import Report
     from tracker.io.recording import Recording
     from tracker.tracking.frame_loop import Tracker
@@ -73,12 +74,13 @@ class Outcome:
     report: Report | None  # the accuracy against the recording's truth.npz over ``span``, when it has one
     span: range  # the frames asked for (--start, --frames): the frames of the truth the report scores
     unscored: int  # the truth's frames outside ``span``, left out of the report
+    smoothed: Smoothed | None = None  # what smoothing the track with the frames after each one did (--smooth)
     review: Callable[[], Review] | None = dataclasses.field(default=None, compare=False)  # view: the review to serve
 
 
 def print_summary(outcome: Outcome) -> None:
-    """What a finished run prints: speed, residual, status counts, the accuracy over the frames asked for (and how
-    many frames of the truth that leaves out), and the files it wrote."""
+    """What a finished run prints: speed, residual, status counts, what smoothing the track did, the accuracy over the
+    frames asked for (and how many frames of the truth that leaves out), and the files it wrote."""
     from tracker.evaluate import format_report
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
@@ -92,6 +94,14 @@ def print_summary(outcome: Outcome) -> None:
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
     if outcome.frames:
         print(held_summary(outcome.parts, outcome.held, outcome.frames))
+    smoothed = outcome.smoothed
+    if smoothed is not None and smoothed.method == "both-ways":
+        print(
+            f"smoothed ({smoothed.method}, {smoothed.seconds:.1f} s): tracked back from the last frame, the backward "
+            f"track's pose kept in {smoothed.taken} of {smoothed.frames} frames, then the whole track smoothed"
+        )
+    elif smoothed is not None:
+        print(f"smoothed ({smoothed.method}, {smoothed.seconds:.1f} s) over the whole recording")
     if outcome.report is not None:
         scored = f"accuracy against the recording's truth.npz over frames {outcome.span.start}..{outcome.span.stop - 1}"
         if outcome.unscored:
@@ -172,6 +182,7 @@ def track(
     timed = None if times is None else lambda index: float(times[index])
     pairing = rec.pairing  # cameras not frame-locked: each view's frame and how late it was captured
     late = None if pairing is None else lambda index: pairing.late[index]
+    measured: dict[int, np.ndarray] = {}  # each frame's information about its poses (Tracker.measured), by frame
     back = TrackedBack(None, 0, False)
     if back_to < begin:
         from tracker.seeding.first_pose import FRAMES
@@ -187,6 +198,7 @@ def track(
             times=timed,
             late=late,
             bar=bar,
+            measured=measured,
         )
     before = back.rows
     if back.mended is not None:  # the forward pass starts from the first pose as the settling mended it
@@ -213,6 +225,7 @@ def track(
             recovery = Recovery(model, rec.cameras)
         print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
         tracker = Tracker(model, rec.cameras, init, settings)
+        tracker.measuring = settings.smoothing.method != "none"  # the smoother weighs each frame by it
         tracker.warm_up()
         truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
         live = _live_view(view, rec, tracker, truth) if view is not None else None
@@ -255,6 +268,8 @@ def track(
             counts[frame.result.status] += 1
             held[:] += frame.result.held == HELD
             residuals.append(frame.result.residual)
+            if frame.result.information is not None:
+                measured[frame.index] = frame.result.information.astype(np.float32)
 
         progress = bar(None, "frame", leave=True)
         read = tracked_frames(
@@ -280,7 +295,26 @@ def track(
         )
     done = run.frames + (0 if before is None else len(before["frame"]))
     poses = out / "poses.npz"
-    results = load_poses(poses) if not run.interrupted and (truth is not None or live is not None) else None
+    smoothed = None
+    if settings.smoothing.method != "none" and not run.interrupted and not back.interrupted and done > 1:
+        smoothed = _smoothed(
+            rec,
+            tracking,
+            model,
+            span=(begin, stop),
+            out=out,
+            background=background,
+            measured=measured,
+            times=timed,
+            late=late,
+            bar=bar,
+        )
+    interrupted = run.interrupted or back.interrupted or (smoothed is not None and smoothed.interrupted)
+    if smoothed is not None and not smoothed.interrupted:  # the frames as written: some from the backward track
+        written = load_poses(poses)
+        counts = {status: int((written["status"] == status).sum()) for status in counts}
+        residuals = list(written["residual"])
+    results = load_poses(poses) if not interrupted and (truth is not None or live is not None) else None
     scored = None if truth is None else truth_within(truth, asked.start, asked.stop)
     report = evaluate(results, scored) if results is not None and scored is not None else None
     review: Callable[[], Review] | None = None
@@ -305,11 +339,12 @@ def track(
         parts=model.names,
         held=held,
         declined=None if recovery is None else recovery.declined + back.declined,
-        interrupted=run.interrupted or back.interrupted,
+        interrupted=interrupted,
         files=_files(rec, tracking, out, frames=done, overlay=overlay, view=view),
         report=report,
         span=asked,
         unscored=0 if truth is None or scored is None else len(truth["joints"]) - len(scored["joints"]),
+        smoothed=smoothed,
         review=review,
     )
 
@@ -337,8 +372,9 @@ def _files(
 
 
 BACK_CHUNK = 30
-"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`):
-they are held in memory, as smoothed images, until tracked."""
+"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`)
+or from the last frame (:func:`_tracked_from_the_end`, which reads the next chunk while one is tracked): they are held
+in memory, as smoothed images, until tracked."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -367,7 +403,18 @@ def nearer_landmarks(
 
 
 def _tracked_back(
-    rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, late, bar
+    rec,
+    tracking: Tracking,
+    model,
+    init,
+    *,
+    span: tuple[int, int, int],
+    out: Path,
+    background,
+    times,
+    late,
+    bar,
+    measured: dict[int, np.ndarray],
 ) -> TrackedBack:
     """The frames ``span`` = (first, begin, settled) before the first pose ``init`` (at frame ``begin``) tracked
     backwards: the tracker settles on the first pose over the frames from ``begin`` to ``settled`` - 1 (the first
@@ -378,7 +425,8 @@ def _tracked_back(
     time, and the rows get them back; so is each view's lateness ``late(index)`` there (a camera late is early in
     that time).  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on
     keeps them; so does a stop (Ctrl-C, SIGTERM, SIGHUP) between the backward run and that write, while the
-    detector's landmarks of the first pose's frame are waited for or the detector is closed."""
+    detector's landmarks of the first pose's frame are waited for or the detector is closed.  With smoothing
+    (``Settings.smoothing``), each frame tracked back leaves its information in ``measured`` by frame."""
     import tempfile
 
     import numpy as np
@@ -415,7 +463,12 @@ def _tracked_back(
             check=recovery,
             times=None if times is None else lambda index: -times(index),
             late=None if late is None else lambda index: way * late(index),
+            each=measuring,
         )
+
+    def measuring(frame) -> None:
+        if frame.result.information is not None and frame.index < begin:
+            measured[frame.index] = frame.result.information.astype(np.float32)
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
     recovery, judged = None, None
@@ -430,6 +483,7 @@ def _tracked_back(
 
                     recovery = Recovery(model, rec.cameras)
                 tracker = Tracker(model, rec.cameras, init, settings)
+                tracker.measuring = settings.smoothing.method != "none"
                 tracker.warm_up()
                 prepare = _preparer(tracker, background, keep=False)
                 chroma = tracker.bin_colours if settings.region.on and background is None else False
@@ -459,6 +513,153 @@ def _tracked_back(
     rows["time"] = -rows["time"]
     track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=times, before=rows)
     return TrackedBack(rows, declined, interrupted, mended)
+
+
+def _smoothed(
+    rec, tracking: Tracking, model, *, span: tuple[int, int], out: Path, background, measured, times, late, bar
+) -> Smoothed:
+    """The track in OUT/poses.npz judged with the frames after each one, as ``Settings.smoothing.method`` says
+    (:mod:`tracker.apps.smoothing`), and the file replaced by the result; ``measured``: each frame's information
+    (:meth:`tracker.tracking.frame_loop.Tracker.measured`) by frame.  With ``both-ways`` the frames ``span`` =
+    (begin, stop), the forward run's, are tracked back from the last, reading :data:`BACK_CHUNK` frames at a time;
+    the frames before them, tracked back from the first pose already, stay as they are.  A stop (Ctrl-C, SIGTERM,
+    SIGHUP) leaves the file as the forward run wrote it."""
+    import os
+    import tempfile
+    import time
+
+    import numpy as np
+
+    from tracker import stop_signals
+    from tracker.apps.smoothing import Smoothed, Track, smoothing_input
+    from tracker.io.poses import PosesWriter, load_poses
+    from tracker.model import joint_centres
+    from tracker.tracking.smoother import smoothed_track
+
+    settings = tracking.settings
+    method = settings.smoothing.method
+    begin, stop = span
+    path = out / "poses.npz"
+    rows = load_poses(path)
+    empty = np.zeros((model.size, 2, 3, 3))
+    track = Track(
+        rows["frame"],
+        rows["poses"],
+        rows["status"],
+        rows["residual"],
+        rows["elapsed"],
+        np.stack([measured.get(int(frame), empty) for frame in rows["frame"]]),
+        rows.get("held"),
+    )
+    starts, taken, started = track.restarts(), 0, time.perf_counter()
+    try:
+        if method == "both-ways":
+            back = _tracked_from_the_end(
+                rec, tracking, model, track, span=span, out=out, background=background, times=times, late=late, bar=bar
+            )
+            if back.interrupted:
+                return Smoothed(method, time.perf_counter() - started, len(back.taken), int(back.taken.sum()), True)
+            within = slice(int(np.searchsorted(track.frame, begin)), int(np.searchsorted(track.frame, stop)))
+            keys = ("frame", "poses", "status", "residual", "elapsed", "information")
+            track = dataclasses.replace(
+                track,
+                **{
+                    key: np.concatenate([getattr(track, key)[: within.start], getattr(back.track, key)])
+                    for key in keys + (("held",) if track.held is not None and back.track.held is not None else ())
+                },
+            )
+            starts = np.concatenate([starts[: within.start], back.starts])
+            taken = int(back.taken.sum())
+        poses = smoothed_track(
+            model,
+            track.poses,
+            smoothing_input(track),
+            times=rows["time"],
+            starts=starts,
+            motion=settings.motion,
+            scale=settings.smoothing.noise_scale,
+        )
+        with tempfile.TemporaryDirectory(prefix="smoothed-", dir=path.parent) as folder:
+            smoothed = Path(folder) / "poses.npz"
+            with PosesWriter(smoothed, list(model.names), list(model.joint_names), rec.fps) as writer:
+                for row, frame in enumerate(track.frame):
+                    writer.append(
+                        int(frame),
+                        poses[row],
+                        joint_centres(poses[row]),
+                        status=int(track.status[row]),
+                        residual=float(track.residual[row]),
+                        elapsed=float(track.elapsed[row]),
+                        time=None if times is None else float(rows["time"][row]),
+                        held=None if track.held is None else track.held[row],
+                    )
+            os.replace(smoothed, path)
+    except (KeyboardInterrupt, SystemError) as error:  # a stop while smoothing or writing: the forward track stays
+        if not stop_signals.stopped_within(error):
+            raise
+        return Smoothed(method, time.perf_counter() - started, len(track.frame), taken, True)
+    return Smoothed(method, time.perf_counter() - started, len(track.frame), taken, False)
+
+
+def _tracked_from_the_end(
+    rec, tracking: Tracking, model, forward, *, span: tuple[int, int], out: Path, background, times, late, bar
+):
+    """The frames ``span`` = (begin, stop) of the ``forward`` track (:class:`tracker.apps.smoothing.Track`) tracked
+    back from its pose at the last, with the forward run's detections (cached in OUT) and a recovery of their own
+    (:func:`tracker.apps.smoothing.track_backwards`)."""
+    import numpy as np
+
+    from tracker.apps.keypoint_stream import beside, tracked_frames
+    from tracker.apps.smoothing import track_backwards
+    from tracker.tracking.frame_loop import Tracker
+
+    begin, stop = span
+    settings = tracking.settings
+    stream = _keypoints(rec, begin, stop, out, tracking.keypoints, None, tracking.landmark_model)
+    with contextlib.ExitStack() as closing:
+        recovery = None
+        if stream is not None:
+            closing.callback(stream.close)
+            from tracker.seeding.recovery import Recovery
+
+            recovery = Recovery(model, rec.cameras)
+        last = int(np.flatnonzero(forward.frame == stop - 1)[0])
+        tracker = Tracker(model, rec.cameras, forward.poses[last], settings)
+        tracker.measuring = True
+        tracker.warm_up()
+        prepare = _preparer(tracker, background, keep=False)
+        chroma = tracker.bin_colours if settings.region.on and background is None else False
+
+        def read(start: int, end: int) -> list:
+            return list(
+                tracked_frames(
+                    None, rec, start=start, stop=end, prepare=prepare, colour=background is not None, chroma=chroma
+                )
+            )
+
+        def backwards():
+            """The frames last to first, :data:`BACK_CHUNK` at a time, the next chunk read while one is tracked."""
+            from concurrent.futures import ThreadPoolExecutor
+
+            ends = list(range(stop, begin, -BACK_CHUNK))
+            with ThreadPoolExecutor(1) as reader:
+                ahead = reader.submit(read, max(begin, ends[0] - BACK_CHUNK), ends[0])
+                for k in range(len(ends)):
+                    chunk = ahead.result()
+                    if k + 1 < len(ends):
+                        ahead = reader.submit(read, max(begin, ends[k + 1] - BACK_CHUNK), ends[k + 1])
+                    yield from reversed(chunk)
+
+        print(f"smoothing: tracking back from frame {stop - 1} to frame {begin}", file=sys.stderr)
+        return track_backwards(
+            tracker,
+            bar("tracking back from the last frame", "frame")(backwards(), total=stop - begin),
+            forward=forward,
+            keypoints=None if stream is None else beside(stream, tracker),
+            check=recovery,
+            times=times,
+            late=late,
+        )
 
 
 def _preparer(tracker, background, *, keep: bool):

@@ -71,9 +71,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     outputs.add_argument(
         "--record",
         metavar="DIR",
-        help="also write the tracked frames as a recording folder that `tracker track DIR` replays to the same poses",
+        help="also write the tracked frames as a recording folder that `tracker track DIR --smooth none` replays to "
+        "the same poses",
     )
-    options.add_tuning_options(parser)
+    options.add_tuning_options(parser, recorded=False)
     options.add_keypoint_options(
         parser,
         "offer every N-th frame set to the 2-D keypoint detector, a worker process that takes one when it is free "
@@ -158,8 +159,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
     if recorder is not None:
         print(
-            f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record}` with the "
-            "same settings replays them)"
+            f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record} --smooth none` "
+            "with the same settings replays them)"
         )
     rate = summary.frames / summary.seconds if summary.seconds > 0 else 0.0
     captured = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.captured))

@@ -209,14 +209,17 @@ KINDS: dict[str | None, Callable[[str], Any]] = {
 }
 
 
-def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] | None = None) -> None:
-    """The tracker's tuning options that a command offers (their flags, ``which``; default all), one argument group
-    per settings group, each with the field's help, kind, choices and default (:mod:`tracker.tracking.settings`)."""
+def add_tuning_options(
+    parser: argparse.ArgumentParser, which: tuple[str, ...] | None = None, *, recorded: bool = True
+) -> None:
+    """The tracker's tuning options that a command offers (their flags, ``which``; default all, but those only for a
+    recorded folder when not ``recorded``), one argument group per settings group, each with the field's help, kind,
+    choices and default (:mod:`tracker.tracking.settings`)."""
     from tracker.tracking.settings import Settings
 
     defaults, groups = Settings(), {}
     for flag, (group, spec) in tuning_fields().items():
-        if which is not None and flag not in which:
+        if which is not None and flag not in which or spec.metadata["recorded"] and not recorded:
             continue
         if group not in groups:
             title = (type(getattr(defaults, group)).__doc__ or group).strip()

@@ -28,10 +28,12 @@ from typing import TypeVar
 
 import numpy as np
 
+from tracker.chain import marginal_information, motion_basis
 from tracker.io.readers import WithChroma, reduced
 from tracker.landmarks.body_landmarks import TRUNK_TURN, trunk
 from tracker.model import Model
 from tracker.status import HELD, LOST, TRACKED, UNCERTAIN
+from tracker.tracking import motion_prior
 from tracker.tracking.colours import colour_bins, colour_grids, colour_reduction
 from tracker.tracking.cue import Cue, Frame, Iteration
 from tracker.tracking.cues import CUES
@@ -54,9 +56,11 @@ C = TypeVar("C")
 
 @dataclass(frozen=True)
 class FrameResult:
-    """A frame's tracked ``poses`` (N, 4, 4), its ``status`` (:mod:`tracker.status`), the robust mean offset
-    ``residual`` (pixels) and the ``share`` of its ``samples`` that found an edge, all of them; and which parts the
-    images hold, ``held`` (N,) int8 (:data:`tracker.status.HELD`, ...; :mod:`tracker.tracking.held`)."""
+    """A frame as tracked: its ``poses`` (N, 4, 4), ``status`` (:mod:`tracker.status`), the edges' robust mean offset
+    ``residual`` (pixels), the ``share`` of its outline ``samples`` that found an edge and their number; which parts the
+    images hold, ``held`` (N,) int8 (:data:`tracker.status.HELD`, ...; :mod:`tracker.tracking.held`); and, from a
+    tracker that is ``measuring``, what its cues said of each component's pose (:meth:`Tracker.measured`), which a
+    smoother over the whole recording weighs it by."""
 
     poses: np.ndarray
     status: int
@@ -64,6 +68,7 @@ class FrameResult:
     share: float
     samples: int
     held: np.ndarray
+    information: np.ndarray | None = None
 
 
 class Tracker:
@@ -79,6 +84,10 @@ class Tracker:
         self.prior = np.ascontiguousarray(
             np.broadcast_to(np.diag(np.array([st.prior_translation] * 3 + [st.prior_rotation] * 3, float)), (n, 6, 6))
         )
+        self.floor = self.prior.copy()  # the solve's fixed prior, which the Kalman filter's replaces (motion_model)
+        self.basis = motion_basis(model.constraint_projector, model.constraint_rows)
+        self.measuring = False  # whether step gives each frame's information (measured): a smoother will read it
+        self.judging: Workspace | None = None  # judged's buffers over the frame just tracked, made when first asked
         self.reduction = reductions(settings, cameras)
         self.search_size = self.rig.size // self.reduction[:, None]  # each camera's image as the edge search reads it
         reach = max(settings.outline.search_range, settings.outline.final_search_range)
@@ -295,21 +304,27 @@ class Tracker:
         found = {cue.name: cue.inspect(self, work) for cue in self.cues}
         return {name: self._inspection(work, *read) for name, read in found.items() if read is not None}
 
-    def judged(self, images, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
+    def judged(self, images=None, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
         """The frame's result at ``poses`` as they stand, without moving them: one measurement of their outlines in
-        ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
-        edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
-        work, stats = self._inspected(images, smoothed, poses, None)
+        ``images`` (else the frame just tracked, in buffers kept for these queries) as the last iteration would search
+        them (:meth:`inspect`), the share of their samples that found an edge, their robust mean offset and the status
+        those give.  A query, like :meth:`inspect`, from the thread that steps the tracker."""
+        if images is None and self.judging is None:
+            self.judging = self.work.spare(self.work.images)
+        work, stats = self._inspected(images, smoothed, poses, None, work=None if images is not None else self.judging)
         held = self.held(work.information, work, seen=np.asarray(work.information.any(axis=(1, 2))))
         share, status = self.judge(stats, work, held)
         return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible, held)
 
-    def _inspected(self, images, smoothed: bool, poses, search_range) -> tuple[Workspace, Statistics]:
-        """A spare workspace in which the outlines at ``poses`` (else the current ones) are sampled and their edges
-        searched in ``images`` (else the frame just tracked) over ``search_range`` (else the last iteration's), and
-        that search's statistics."""
+    def _inspected(
+        self, images, smoothed: bool, poses, search_range, work: Workspace | None = None
+    ) -> tuple[Workspace, Statistics]:
+        """A spare workspace (``work``, else a new one) in which the outlines at ``poses`` (else the current ones) are
+        sampled and their edges searched in ``images`` (else the frame just tracked) over ``search_range`` (else the
+        last iteration's), and that search's statistics."""
         frame = self.work.images
-        work = self.work.spare(frame if images is None else np.zeros_like(frame))
+        if work is None:
+            work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
             self.load_images(images, smoothed, work)
         if search_range is None:
@@ -370,7 +385,23 @@ class Tracker:
             status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
         for cue in self.cues:
             cue.learn(self, status, kept=not dragged)
-        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible, held)
+        measured = self.measured() if self.measuring else None
+        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible, held, measured)
+
+    def measured(self) -> np.ndarray:
+        """What the last solve's cues said of each component's pose, as the information (N, 2, 3, 3) of a weighted
+        least-squares estimate, per block (:func:`tracker.tracking.motion_prior.block_information`: the world
+        translation, then the rotation in body coordinates): each component's C_i from its cues (the workspace's
+        information less the prior added about the prediction) over sigma0_i^2, the variance of unit weight of its
+        edge residuals (:func:`tracker.tracking.motion_prior.variance_factor`; 1 without any edge), plus the solve's
+        fixed prior, and what the others' say of it through the joints (:func:`tracker.chain.marginal_information`)."""
+        work, n, m = self.work, self.work.samples.count, self.model
+        scale = motion_prior.variance_factor(
+            work.samples.component[:n], work.offset[:n], work.weight[:n], n_components=m.size
+        )
+        data = (work.information - self.prior) / scale[:, None, None] + self.floor
+        joint = marginal_information(data, parent=m.parent, poses=self.poses, basis=self.basis)
+        return motion_prior.block_information(joint, self.poses)
 
     def held(self, evidence: np.ndarray, work: Workspace, *, seen: np.ndarray) -> np.ndarray:
         """Which parts the evidence (N, 6, 6) of the cues that place them holds, per the motion of their outline
