@@ -1,4 +1,5 @@
-"""Shared fixtures: small rendered recordings with ground truth (made once per test session), a small poses file,
+"""Shared fixtures: small rendered recordings with ground truth (made once per test session; one of a seated body
+behind a table, and the tracker run on it, :func:`tracked_behind`), a small poses file,
 the check that bad input gets a one-line error, the hashes that show a command left a user's files alone, perfect
 keypoint detections, a progress bar that stops the run with a signal (:func:`stopping_after`) and a terminal that
 closes (:func:`closing_terminal`); where the tests' real data is (:data:`TEST_DATA`, :data:`SHARED_DATA`)."""
@@ -20,7 +21,7 @@ import pytest
 from tracker.camera import look_at_camera, save_calibration
 from tracker.cli import main
 from tracker.errors import TrackerInputError
-from tracker.synthetic.synth import synthesize
+from tracker.synthetic.synth import Staging, synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 HUMAN = ROOT / "models" / "human.toml"
@@ -160,8 +161,9 @@ class Synced:
 @pytest.fixture(scope="session")
 def late_render(tmp_path_factory) -> Synced:
     """Three seconds whose cam1 runs 0.04 s late and cam2 0.025 s early (athletic motion, patterned clothes, the room,
-    calib/demo3.toml at 30 fps), and ``tracker sync`` on a copy of it: rendered and detected once for the tests of
-    the landmarks' offsets and of their refinement by the edges (which reuses the detections)."""
+    calib/demo3.toml at 30 fps), and ``tracker sync`` on a copy of it: rendered and detected once (by the full
+    landmark model, the lighter of the two that place this body well) for the tests of the landmarks' offsets and of
+    their refinement by the edges (which reuses the detections)."""
     folder = tmp_path_factory.mktemp("late")
     render, rec, out = folder / "render", folder / "rec", folder / "out"
     args = ["synth", "--model", str(HUMAN), "--calib", str(ROOT / "calib" / "demo3.toml"), "--out", str(render)]
@@ -170,7 +172,7 @@ def late_render(tmp_path_factory) -> Synced:
         assert main(args + staging + ["--backdrop", "room", "--time-offsets", "cam1=0.04,cam2=-0.025", "--quiet"]) == 0
     shutil.copytree(render, rec)
     with contextlib.redirect_stdout(io.StringIO()) as printed:
-        assert main(["sync", str(rec), "--out", str(out), "--quiet"]) == 0
+        assert main(["sync", str(rec), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     return Synced(render, rec, out, printed.getvalue().splitlines())
 
 
@@ -193,3 +195,45 @@ def person_masks():
         return masks, squares
 
     return draw
+
+
+@pytest.fixture(scope="session")
+def behind_a_table(tmp_path_factory) -> Path:
+    """Eight frames at 30 fps of the human model seated behind a table that hides its pelvis and legs from both
+    cameras, on plain backgrounds without noise (three 320x240 views, from 1.7 m up)."""
+    folder = tmp_path_factory.mktemp("table")
+    rig = [
+        look_at_camera("a", (0.4, -2.6, 1.7), (0.0, 0.0, 0.75), size=(320, 240), focal=280.0),
+        look_at_camera("b", (-2.4, -1.2, 1.7), (0.0, 0.0, 0.75), size=(320, 240), focal=280.0),
+        look_at_camera("c", (2.4, -1.2, 1.7), (0.0, 0.0, 0.75), size=(320, 240), focal=280.0),
+    ]
+    save_calibration(rig, folder / "rig.toml")
+    synthesize(
+        HUMAN,
+        folder / "rig.toml",
+        folder / "rec",
+        motion="seated",
+        frames=8,
+        fps=30.0,
+        seed=2,
+        codec="png",
+        noise=0.0,
+        backgrounds=[],
+        progress=False,
+        staging=Staging(tables=("all",)),
+    )
+    return folder / "rec"
+
+
+def tracked_behind(rec_path: Path):
+    """The tracker on the render :func:`behind_a_table`, from its first true pose, and each frame's images and
+    result, in order."""
+    from tracker.io.posefile import load_pose_file
+    from tracker.io.recording import frames, open_recording
+    from tracker.model import load_model
+    from tracker.tracking.frame_loop import Tracker
+
+    rec = open_recording(rec_path)
+    model = load_model(rec_path / "model.toml")
+    tracker = Tracker(model, rec.cameras, load_pose_file(rec.init_path, model))
+    return tracker, [(images, tracker.step(images)) for _, images in frames(rec)]

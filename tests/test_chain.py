@@ -214,6 +214,35 @@ def test_tree_solve_matches_dense_kkt():
     assert worst_residual < 1e-9
 
 
+def test_marginal_information_is_the_inverse_of_the_constrained_covariance():
+    """50 random trees: the inverse of the information of each alpha_i through the joints equals the i-th diagonal
+    block of the constrained solution's covariance, from the dense KKT matrix's inverse, to 1e-6 (relative: that
+    matrix's condition number reaches 1e10 with a component of next to no data); that component gets its
+    neighbours' information through its joint."""
+    rng = np.random.default_rng(7)
+    worst = 0.0
+    for _ in range(50):
+        n = int(rng.integers(3, 12))
+        model = random_model(rng, n, joints=(chain.BALL, chain.HINGE, chain.SLIDE, chain.FREE))
+        poses = valid_poses(rng, model)
+        information = random_information(rng, n)
+        information[-1] *= 1e-6  # a component its cues barely see
+        A = linear_constraints(model["parent"], model["D"], model["rows"], poses)
+        big_c = np.zeros((6 * n, 6 * n))
+        for i in range(n):
+            big_c[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = information[i]
+        m = A.shape[0]
+        covariance = np.linalg.inv(np.block([[big_c, A.T], [A, np.zeros((m, m))]]))[: 6 * n, : 6 * n]
+        expected = np.array([covariance[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] for i in range(n)])
+        basis = chain.motion_basis(chain.row_projectors(model["D"], model["rows"]), model["rows"])
+        found = chain.marginal_information(information, parent=model["parent"], poses=poses, basis=basis)
+        worst = max(worst, max(np.abs(np.linalg.inv(f) - e).max() / np.abs(e).max() for f, e in zip(found, expected)))
+        constrained = model["rows"][-1] > 0 and model["joint"][-1] != chain.FREE
+        if constrained:  # its joint's rows are known from its parent's data
+            assert np.linalg.eigvalsh(found[-1]).max() > 100 * np.linalg.eigvalsh(information[-1]).max()
+    assert worst < 1e-6
+
+
 def test_tree_solve_star_with_seven_children_and_free_child_independent():
     rng = np.random.default_rng(7)
     n = 9

@@ -64,7 +64,7 @@ from tracker.io.recording import open_recording
 
 recording = open_recording(sys.argv[1])
 with stop_signals.like_ctrl_c():
-    stream = KeypointStream(recording, 0, recording.frame_count, 1, Path(sys.argv[2]))
+    stream = KeypointStream(recording, 0, recording.frame_count, 1, Path(sys.argv[2]), landmark_model="full")
     try:
         stream.get(1)  # the worker has detected frames 0 and 1
         os.killpg(0, signal.SIGHUP)  # as a service manager or a closed terminal: every process of the run

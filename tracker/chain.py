@@ -451,6 +451,43 @@ def coerce(
     )
 
 
+def motion_basis(projector, rows) -> list[np.ndarray]:
+    """Per component a basis B_i (6 x (6 - k_i)) of the motions its joint allows relative to its parent, the null
+    space of its constraint rows (``projector``, :func:`row_projectors`): I6 for roots and free components."""
+    out = []
+    for pi_i, k in zip(projector, rows):
+        if k == 0:
+            out.append(np.eye(6))
+            continue
+        values, vectors = np.linalg.eigh(np.eye(6) - pi_i)
+        out.append(vectors[:, values > 0.5])
+    return out
+
+
+def marginal_information(information, *, parent, poses, basis) -> np.ndarray:
+    """Per component the information (N, 6, 6) the whole body's cues give its twist alpha_i, through the joints: with
+    the joints' coordinates theta (the roots' twists and each joint's allowed motion, ``basis``: :func:`motion_basis`),
+    alpha = J theta, J's rows for i being Ad(E_i^-1 E_p) J_p + B_i for its own coordinates (section 4), the cost
+    sum_i alpha_i^T C_i alpha_i gives theta the information H = J^T C J, and alpha_i the covariance
+    J_i H^-1 J_i^T, whose inverse this is.  ``information`` C_i (N, 6, 6) must leave H invertible (a prior added)."""
+    parent = _check_order(parent)
+    n = parent.shape[0]
+    widths = [b.shape[1] for b in basis]
+    columns = np.concatenate([[0], np.cumsum(widths)])
+    jac = np.zeros((n, 6, int(columns[-1])))
+    for i in range(n):
+        p = parent[i]
+        if p >= 0 and widths[i] < 6:
+            adj = np.empty((6, 6))
+            _relative_adjoint(np.ascontiguousarray(poses[i]), np.ascontiguousarray(poses[p]), adj)
+            jac[i] = adj @ jac[p]
+        jac[i, :, columns[i] : columns[i + 1]] += basis[i]
+    flat = jac.reshape(6 * n, -1)
+    hessian = flat.T @ (information @ jac).reshape(6 * n, -1)
+    blocks = jac @ np.linalg.inv(hessian) @ np.swapaxes(jac, 1, 2)
+    return np.linalg.inv(0.5 * (blocks + np.swapaxes(blocks, 1, 2)))
+
+
 def _check_order(parent) -> np.ndarray:
     """parent as int64, checked to satisfy parent[i] < i (both passes rely on it)."""
     parent = np.ascontiguousarray(parent, dtype=np.int64)

@@ -11,6 +11,7 @@ import tracker.apps.bench as bench
 from tracker.apps.bench import HUMAN, _copies, _side_by_side, detector_ms
 from tracker.cli import main
 from tracker.io.recording import open_recording
+from tracker.landmarks.landmark_models import MODELS, RECORDED
 from tracker.model import model_from_dict
 from tracker.tracking.settings import Settings
 
@@ -43,17 +44,18 @@ def test_bench_json_has_the_documented_keys(tiny_recording, capsys):
     assert abs(result["ratio_all_views"] - result["fps_all_views"] / result["decode_only_fps_all_views"]) < 1e-9
     assert set(result["stage_ms_per_frame_all_views"]) >= {"decode", "outline", "measure", "solve", "output"}
     assert result["keypoint_step"] == 4 and result["detector_ms_per_view"] > 0  # the default at the recording's 60 fps
+    assert result["landmark_model"] == RECORDED  # the default of the commands on recorded folders, and live's beside it
     assert result["fps_all_views_with_keypoints"] > 0
     assert set(result["stage_ms_per_frame_with_keypoints"]) >= {"outline", "measure", "region", "solve", "output"}
     stages = result["stage_fps_with_keypoints"]
-    assert stages["decode_only"] == result["decode_only_fps_all_views"] and result["landmark_model"] == "full"
-    assert set(stages["detect"]) >= {"full"} and all(fps > 0 for fps in stages["detect"].values())
-    alone = {"read": stages["read"], "detect": stages["detect"]["full"], "track": stages["track"]}
+    assert stages["decode_only"] == result["decode_only_fps_all_views"]
+    assert set(stages["detect"]) == set(MODELS) and all(fps > 0 for fps in stages["detect"].values())
+    alone = {"read": stages["read"], "detect": stages["detect"][RECORDED], "track": stages["track"]}
     assert all(fps > 0 for fps in alone.values())
     assert result["bound_slowest_stage_fps"] == min(alone.values()) == alone[result["slowest_stage"]]
     assert abs(1 / result["bound_serial_fps"] - sum(1 / fps for fps in alone.values())) < 1e-9
     cpu = result["stage_cpu_ms_per_frame_with_keypoints"]
-    spent = cpu["read"] + cpu["detect"]["full"] + cpu["track"]
+    spent = cpu["read"] + cpu["detect"][RECORDED] + cpu["track"]
     assert set(cpu["detect"]) == set(stages["detect"]) and all(ms > 0 for ms in cpu["detect"].values())
     assert cpu["decode_only"] > 0 and abs(result["bound_cores_fps"] - 1e3 * result["cores"] / spent) < 1e-9
     assert abs(result["ratio_bound_cores"] - cpu["decode_only"] / spent) < 1e-9
@@ -67,6 +69,9 @@ def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording
     shapes = []
 
     class Seen:
+        def __init__(self, *, landmark_model):
+            assert landmark_model == "full"
+
         def whole(self, image):
             shapes.append(image.shape)
 
@@ -75,10 +80,10 @@ def test_the_detector_is_timed_on_the_images_the_tracker_feeds_it(tiny_recording
 
     monkeypatch.setattr(bench, "Detector", Seen)
     recording = open_recording(tiny_recording)
-    assert detector_ms(recording, Settings().but(images=dict(work_side=120)), count=2) >= 0
+    assert detector_ms(recording, Settings().but(images=dict(work_side=120)), landmark_model="full", count=2) >= 0
     assert shapes == [(120, 160, 3)] * 4
     shapes.clear()
-    detector_ms(recording, Settings(), count=2)
+    detector_ms(recording, Settings(), landmark_model="full", count=2)
     assert shapes == [(240, 320, 3)] * 4
 
 
@@ -115,13 +120,22 @@ def test_bench_table_is_printed(tiny_recording, capsys):
         )
     }
     floor, decoding, shown = stages["decode only (the floor)"]
-    assert shown == 1.0 and decoding > 0 and any(name.startswith("detect one frame in 4, full") for name in stages)
+    assert (
+        shown == 1.0 and decoding > 0 and any(name.startswith(f"detect one frame in 4, {RECORDED}") for name in stages)
+    )
     found = {}
-    for name in ("read", "detect one frame in 4, full", "track", "bound: read", "bound: the slowest", "overlapped"):
+    for name in (
+        "read",
+        f"detect one frame in 4, {RECORDED}",
+        "track",
+        "bound: read",
+        "bound: the slowest",
+        "overlapped",
+    ):
         fps, ms, ratio = found[name] = next(value for row, value in stages.items() if row.startswith(name))
         assert fps > 0 and abs(ratio - fps / floor) <= 0.005 + 0.05 / floor  # printed to 0.1 frame and 0.01
     cores, spent, share = next(value for row, value in stages.items() if re.match(r"bound: the \d+ cores", row))
-    assert abs(spent - sum(found[name][1] for name in ("read", "detect one frame in 4, full", "track"))) <= 0.16
+    assert abs(spent - sum(found[name][1] for name in ("read", f"detect one frame in 4, {RECORDED}", "track"))) <= 0.16
     assert abs(share - decoding / spent) <= 0.005 + 0.05 * decoding / spent**2 + 0.05 / spent  # by CPU, not fps
 
 

@@ -20,6 +20,7 @@ from tracker.cli import main
 from tracker.io.pairing import by_offsets
 from tracker.io.recording import frames, open_recording
 from tracker.landmarks.detect_recording import cached, detect_recording, fingerprint
+from tracker.landmarks.detector import detector_name
 from tracker.landmarks.store import load_keypoints, save_keypoints
 from tracker.tracking.frame_loop import Tracker
 from tracker.tracking.settings import Settings
@@ -30,7 +31,7 @@ DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 def test_the_worker_detects_every_nth_frame_as_the_detector_does_and_the_cache_is_reused(tmp_path, monkeypatch):
     recording = open_recording(DEMO)
     cache = tmp_path / "keypoints.npz"
-    with KeypointStream(recording, 2, 11, 4, cache) as stream:
+    with KeypointStream(recording, 2, 11, 4, cache, landmark_model="full") as stream:
         assert stream.reused is None
         got = {frame: stream.get(frame) for frame in range(1, 12)}
     assert [frame for frame, found in got.items() if found is None] == [1, 11]  # before the first, after the last
@@ -39,7 +40,9 @@ def test_the_worker_detects_every_nth_frame_as_the_detector_does_and_the_cache_i
     np.testing.assert_array_equal(got[3][1], np.minimum(got[2][1], got[6][1]))
     saved = load_keypoints(cache)
     assert list(saved.frame) == [2, 6, 10] and saved.recording == fingerprint(recording)
-    alone = detect_recording(recording, 2, 3)[0]  # a landmarker's first frame is a fresh detection
+    alone = detect_recording(recording, 2, 3, landmark_model="full")[
+        0
+    ]  # a landmarker's first frame is a fresh detection
     np.testing.assert_array_equal(saved.pixels[0], alone.pixels[0])
     pixels, confidence = got[2]
     assert pixels.shape == (3, 33, 2) and confidence.shape == (3, 33)
@@ -50,7 +53,7 @@ def test_the_worker_detects_every_nth_frame_as_the_detector_does_and_the_cache_i
         raise AssertionError("a worker started although the cache holds the frames")
 
     monkeypatch.setattr(stream_module, "require_detector", refuse)
-    with KeypointStream(recording, 6, 11, 4, cache) as again:
+    with KeypointStream(recording, 6, 11, 4, cache, landmark_model="full") as again:
         assert again.reused is not None
         np.testing.assert_array_equal(again.get(6)[1], got[6][1])
         np.testing.assert_array_equal(again.get(7)[0], got[7][0])
@@ -59,14 +62,24 @@ def test_the_worker_detects_every_nth_frame_as_the_detector_does_and_the_cache_i
 def test_a_cache_of_another_recording_is_refused(tmp_path, one_line_error):
     recording = open_recording(DEMO)
     cache = tmp_path / "keypoints.npz"
-    keypoints = detect_recording(recording, 0, 1)[0]
+    keypoints = detect_recording(recording, 0, 1, landmark_model="full")[0]
     save_keypoints(cache, dataclasses.replace(keypoints, recording="cam0=1:0 cam1=1:0 cam2=1:0"))
-    message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache))
+    message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache, landmark_model="full"))
     assert str(cache) in message and "another recording" in message and "delete it" in message
-    other = dataclasses.replace(keypoints, detector="mediapipe 0.9 pose_landmark_lite")
-    save_keypoints(cache, other)
-    message = one_line_error(lambda: KeypointStream(recording, 0, 4, 2, cache))
-    assert "made by another detector (mediapipe 0.9 pose_landmark_lite" in message and "delete it" in message
+
+
+def test_a_cache_of_another_detector_is_detected_again_and_replaced(tmp_path):
+    """A file an older version of the detector wrote (another detector string) is not reused, nor an error: the
+    stream detects the frames and the file then holds this detector's."""
+    recording = open_recording(DEMO)
+    cache = tmp_path / "keypoints.npz"
+    keypoints = detect_recording(recording, 0, 1, landmark_model="full")[0]
+    save_keypoints(cache, dataclasses.replace(keypoints, detector="mediapipe 0.9 pose_landmark_full"))
+    with KeypointStream(recording, 0, 4, 2, cache, landmark_model="full") as stream:
+        assert stream.reused is None and stream.old is None
+        assert stream.get(3) is not None
+    again = load_keypoints(cache)
+    assert again.detector == detector_name("full") and list(again.frame) == [0, 2, 3]
 
 
 def test_a_cache_of_the_same_videos_paired_otherwise_is_detected_again(tmp_path):
@@ -75,11 +88,11 @@ def test_a_cache_of_the_same_videos_paired_otherwise_is_detected_again(tmp_path)
     paired = dataclasses.replace(recording, pairing=by_offsets(np.array([0.0, 2 / fps, 0.0]), count=count, fps=fps))
     repaired = dataclasses.replace(recording, pairing=by_offsets(np.array([0.0, 3 / fps, 0.0]), count=count, fps=fps))
     cache = tmp_path / "keypoints-paired.npz"
-    keypoints = detect_recording(paired, 0, 1)[0]
+    keypoints = detect_recording(paired, 0, 1, landmark_model="full")[0]
     save_keypoints(cache, dataclasses.replace(keypoints, recording=fingerprint(paired)))
-    assert cached(cache, paired) is not None
-    assert cached(cache, repaired) is None  # a new sync.toml: detected again
-    with KeypointStream(repaired, 0, 4, 2, cache) as stream:
+    assert cached(cache, paired, "full") is not None
+    assert cached(cache, repaired, "full") is None  # a new sync.toml: detected again
+    with KeypointStream(repaired, 0, 4, 2, cache, landmark_model="full") as stream:
         assert stream.reused is None
         assert all(stream.get(frame) is not None for frame in (0, 2))
     assert load_keypoints(cache).recording == fingerprint(repaired)
@@ -139,7 +152,7 @@ def test_a_missing_detector_says_how_to_install_it(tmp_path, monkeypatch, capsys
 def test_the_worker_keeps_mediapipes_native_logs_off_the_terminal(tmp_path, capfd):
     """MediaPipe's libraries write to file descriptor 2 behind Python's back (TensorFlow Lite's delegate, absl
     warnings); the worker mutes them for its whole life, so a run's terminal shows only the tracker's lines."""
-    with KeypointStream(open_recording(DEMO), 0, 5, 4, tmp_path / "keypoints.npz") as stream:
+    with KeypointStream(open_recording(DEMO), 0, 5, 4, tmp_path / "keypoints.npz", landmark_model="full") as stream:
         assert stream.get(4) is not None
     err = capfd.readouterr().err
     assert "XNNPACK" not in err and "W0000" not in err and "absl" not in err
@@ -157,7 +170,7 @@ def test_a_fed_worker_detects_in_the_readers_colour_copies(tmp_path):
 
     recording = open_recording(DEMO)
     for name, reduction in (("reading", np.ones(3, np.int64)), ("halved", np.full(3, 2))):
-        with KeypointStream(recording, 0, 9, 4, tmp_path / f"{name}.npz", reduction) as stream:
+        with KeypointStream(recording, 0, 9, 4, tmp_path / f"{name}.npz", reduction, landmark_model="full") as stream:
             assert (stream.fed is None) == (name == "reading")
             seen = []
             for index, images in tracked_frames(
@@ -168,14 +181,16 @@ def test_a_fed_worker_detects_in_the_readers_colour_copies(tmp_path):
                 stream.get(index)
             assert seen == list(range(9)) and stream.sent == ({0, 4, 8} if stream.fed else set())
     full, halved = load_keypoints(tmp_path / "reading.npz"), load_keypoints(tmp_path / "halved.npz")
-    detectors = [Detector() for _ in recording.cameras]
+    detectors = [Detector(landmark_model="full") for _ in recording.cameras]
     names = tuple(camera.name for camera in recording.cameras)
     try:
         for row, (index, images) in enumerate(frames(recording, 0, 9, colour=True, step=4)):
             alike = detect_views(
                 detectors, [reduced(image, 2) for image in images], cameras=recording.cameras, reduction=np.full(3, 2)
             )
-            expected = frame_keypoints(index, alike, names=names, identity="", reduction=np.full(3, 2))
+            expected = frame_keypoints(
+                index, alike, names=names, identity="", reduction=np.full(3, 2), landmark_model="full"
+            )
             np.testing.assert_array_equal(halved.pixels[row], expected.pixels[0])
     finally:
         for detector in detectors:
@@ -192,7 +207,9 @@ def test_a_fed_loop_given_up_early_stops_its_reader_threads(tmp_path):
     from tracker.apps.keypoint_stream import tracked_frames
 
     recording = open_recording(DEMO)
-    with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2)) as stream:
+    with KeypointStream(
+        recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2), landmark_model="full"
+    ) as stream:
         assert stream.fed is not None
         read = tracked_frames(stream, recording, start=0, stop=40)
         index, images = next(read)
@@ -211,7 +228,9 @@ def test_a_fed_worker_given_more_frames_than_its_slots_answers_for_each_in_order
     read = [(index, [reduced(image, 2) for image in images]) for index, images in frames(recording, 0, 13, colour=True)]
     got = {}
     for name in ("crowded", "roomy"):
-        with KeypointStream(recording, 0, 13, 4, tmp_path / f"{name}.npz", np.full(3, 2)) as stream:
+        with KeypointStream(
+            recording, 0, 13, 4, tmp_path / f"{name}.npz", np.full(3, 2), landmark_model="full"
+        ) as stream:
             if name == "crowded":
                 stream.slots, stream.free = 2, [0, 1]
             arrived, answered = [], []
@@ -240,7 +259,9 @@ def test_a_fed_run_stopped_by_ctrl_c_releases_the_shared_frames_and_the_worker(t
 
     recording = open_recording(DEMO)
     with pytest.raises(KeyboardInterrupt):
-        with KeypointStream(recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2)) as stream:
+        with KeypointStream(
+            recording, 0, 40, 4, tmp_path / "keypoints.npz", np.full(3, 2), landmark_model="full"
+        ) as stream:
             for index, _ in tracked_frames(stream, recording, start=0, stop=40):
                 stream.get(index)
                 if index == 9:
@@ -257,7 +278,6 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     on: asked in frame order, the stream gives cam1's disputed landmarks of frames 2-4 back, never cam0's; asked for
     frame 4 first, it has no last frame to go by and gives nothing back, and neither does it unless asked to settle."""
     from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
-    from tracker.landmarks.detector import DETECTOR
     from tracker.landmarks.store import Keypoints
     from tracker.model import load_model
 
@@ -274,15 +294,15 @@ def test_the_stream_settles_a_dispute_by_each_views_last_frame(tmp_path, monkeyp
     pixels[1:, 0] += [0.0, 150.0]
     confidence = np.where(np.isfinite(pixels[..., 0]), 1.0, 0.0)
     names = tuple(camera.name for camera in recording.cameras)
-    held = Keypoints(frames_held, names, pixels, confidence, np.zeros((3, 3, len(LANDMARKS), 3)), DETECTOR)
+    held = Keypoints(frames_held, names, pixels, confidence, np.zeros((3, 3, len(LANDMARKS), 3)), detector_name("full"))
     cache = tmp_path / "keypoints.npz"
     save_keypoints(cache, dataclasses.replace(held, recording=fingerprint(recording)))
-    monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
-    with KeypointStream(recording, 0, 5, 2, cache) as stream:
+    monkeypatch.setattr(stream_module, "require_detector", lambda model: pytest.fail("the cache holds every frame"))
+    with KeypointStream(recording, 0, 5, 2, cache, landmark_model="full") as stream:
         got = {frame: stream.get(frame, settle=True) for frame in range(5)}
     assert all((got[frame][1][1, seen] >= 0.5).all() for frame in range(5))
     assert not any((got[frame][1][0, seen] >= 0.5).any() for frame in (2, 3, 4))
-    with KeypointStream(recording, 0, 5, 2, cache) as fresh:
+    with KeypointStream(recording, 0, 5, 2, cache, landmark_model="full") as fresh:
         first = fresh.get(4, settle=True)
         plain = [fresh.get(frame) for frame in range(5)]
     assert not (first[1][:2, seen] >= 0.5).any()
@@ -294,7 +314,6 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
     none in frame 4, frames 1-3 none; a cache without masks gives none.  beside() hands them to the tracker."""
     from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
     from tracker.landmarks.crop import CROP
-    from tracker.landmarks.detector import DETECTOR
     from tracker.landmarks.store import Keypoints
     from tracker.model import load_model
 
@@ -315,12 +334,14 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
     square[..., :2] = np.nanmean(pixels[0], axis=1)  # about the body in each view, 400 pixels wide
     square[..., 2] = 400.0
     square[1, 2] = np.nan
-    held = Keypoints(np.array([0, 4]), names, pixels, confidence, np.zeros((2, 3, len(LANDMARKS), 3)), DETECTOR)
-    monkeypatch.setattr(stream_module, "require_detector", lambda: pytest.fail("the cache holds every frame"))
+    held = Keypoints(
+        np.array([0, 4]), names, pixels, confidence, np.zeros((2, 3, len(LANDMARKS), 3)), detector_name("full")
+    )
+    monkeypatch.setattr(stream_module, "require_detector", lambda model: pytest.fail("the cache holds every frame"))
     cache = tmp_path / "keypoints.npz"
     identity = fingerprint(recording)
     save_keypoints(cache, dataclasses.replace(held, recording=identity, mask=mask, square=square))
-    with KeypointStream(recording, 0, 5, 4, cache) as stream:
+    with KeypointStream(recording, 0, 5, 4, cache, landmark_model="full") as stream:
         for frame in range(5):
             stream.get(frame)
             person = stream.person(frame)
@@ -330,7 +351,7 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
         assert (stream.person(0)[0] == 200).all() and np.isfinite(stream.person(0)[1]).all()
     tracker = Tracker(model, recording.cameras, truth["poses"][0])
     trust = Settings().region.person
-    with KeypointStream(recording, 0, 5, 4, cache) as stream:
+    with KeypointStream(recording, 0, 5, 4, cache, landmark_model="full") as stream:
         landmarks = beside(stream, tracker)
         for frame, trusted in ((0, [trust] * 3), (1, [0.0] * 3), (4, [trust, trust, 0.0])):
             landmarks(frame)
@@ -338,7 +359,7 @@ def test_the_stream_gives_the_persons_masks_of_the_frames_detected_only(tmp_path
         u, v = (square[1, 0, :2] // 2).astype(int)  # the centre on the half-size grid, and 250 pixels off
         assert tracker.person.mask[0, v, u] == 255 and tracker.person.mask[0, v, max(0, u - 125)] == 0
     save_keypoints(cache, dataclasses.replace(held, recording=identity))
-    with KeypointStream(recording, 0, 5, 4, cache) as stream:
+    with KeypointStream(recording, 0, 5, 4, cache, landmark_model="full") as stream:
         stream.get(0)
         assert stream.person(0) is None
 
@@ -349,7 +370,7 @@ def _worker_ahead(monkeypatch) -> None:
     from tracker.apps.keypoint_stream import schedule
     from tracker.landmarks.store import Keypoints
 
-    def process(target, args, name, daemon):
+    def process(target, args, kwargs, name, daemon):
         recording, start, stop, step, results = args[:5]
         count = len(recording.cameras)
 
@@ -361,6 +382,7 @@ def _worker_ahead(monkeypatch) -> None:
                     np.full((1, count, 33, 2), np.nan),
                     np.zeros((1, count, 33)),
                     np.full((1, count, 33, 3), np.nan),
+                    detector_name(kwargs["landmark_model"]),
                     recording=fingerprint(recording),
                 )
                 results.put((nobody, nobody))
@@ -370,7 +392,7 @@ def _worker_ahead(monkeypatch) -> None:
 
     context = SimpleNamespace(Queue=queue.Queue, Process=process)
     monkeypatch.setattr(stream_module, "multiprocessing", SimpleNamespace(get_context=lambda method: context))
-    monkeypatch.setattr(stream_module, "require_detector", lambda: None)
+    monkeypatch.setattr(stream_module, "require_detector", lambda landmark_model: None)
 
 
 def test_closing_keeps_what_the_worker_detected_ahead_of_the_tracker(tmp_path, monkeypatch):
@@ -378,7 +400,7 @@ def test_closing_keeps_what_the_worker_detected_ahead_of_the_tracker(tmp_path, m
     and 8 as well: the stream's close adds all three to the cache."""
     _worker_ahead(monkeypatch)
     cache = tmp_path / "keypoints.npz"
-    with KeypointStream(open_recording(DEMO), 0, 9, 4, cache) as stream:
+    with KeypointStream(open_recording(DEMO), 0, 9, 4, cache, landmark_model="full") as stream:
         assert stream.get(0) is not None
     assert list(load_keypoints(cache).frame) == [0, 4, 8]
 

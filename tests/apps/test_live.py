@@ -53,8 +53,10 @@ def _args(rec: Path, cameras: list[str], *extra: str) -> argparse.Namespace:
 
 
 def _replayed(recording: Path, out: Path, *extra: str) -> dict:
-    """poses.npz of `tracker track` on a recording folder, with the live run's cues (edges only)."""
-    assert main(["track", str(recording), "--out", str(out), "--quiet", "--keypoints", "off", *extra]) == 0
+    """poses.npz of `tracker track` on a recording folder, with the live run's cues (edges only), frame by frame as
+    live tracks (``--smooth none``)."""
+    args = ["track", str(recording), "--out", str(out), "--quiet", "--keypoints", "off", "--smooth", "none", *extra]
+    assert main(args) == 0
     return load_poses(out / "poses.npz")
 
 

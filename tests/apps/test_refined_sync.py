@@ -32,9 +32,9 @@ def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(late_render, 
     rec, out = tmp_path / "rec", tmp_path / "out"
     shutil.copytree(late_render.render, rec)
     out.mkdir()
-    shutil.copy2(late_render.out / "keypoints.npz", out / "keypoints.npz")
-    detected = (out / "keypoints.npz").stat()
-    assert main(["sync", str(rec), "--refine", "--out", str(out), "--quiet"]) == 0
+    shutil.copy2(late_render.out / "keypoints-full.npz", out / "keypoints-full.npz")
+    detected = (out / "keypoints-full.npz").stat()
+    assert main(["sync", str(rec), "--refine", "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("cam0  +0.0000 s  reference") and lines[-1] == f"wrote {rec / 'sync.toml'}"
     written = load_offsets(rec / "sync.toml", ["cam0", "cam1", "cam2"], 3.0)
@@ -48,7 +48,7 @@ def test_tracker_sync_refines_the_offsets_of_a_render_by_the_edges(late_render, 
     for left_out in ("cam1", "cam2"):
         poses = load_poses(out / "sync" / f"without-{left_out}" / "poses.npz")
         assert len(poses["frame"]) == 90 and np.isfinite(poses["poses"]).all()
-    kept = (out / "keypoints.npz").stat()  # the detections reused, not made again
+    kept = (out / "keypoints-full.npz").stat()  # the detections reused, not made again
     assert (kept.st_ino, kept.st_mtime_ns) == (detected.st_ino, detected.st_mtime_ns)
 
 

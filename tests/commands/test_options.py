@@ -110,8 +110,8 @@ def test_the_cache_option_chooses_where_the_keypoints_are_kept(command, tmp_path
     chosen = []
     cache_file = detect_recording.cache_file
 
-    def stop(folder, recording):
-        chosen.append(cache_file(folder, recording))
+    def stop(folder, recording, landmark_model):
+        chosen.append(cache_file(folder, recording, landmark_model))
         raise TrackerInputError("stopped where the keypoints would be kept")
 
     monkeypatch.setattr(detect_recording, "cache_file", stop)
@@ -119,7 +119,8 @@ def test_the_cache_option_chooses_where_the_keypoints_are_kept(command, tmp_path
     given = file_hashes(DEMO)
     for extra in (["--cameras", "cam1,cam2"], [], ["--cache", str(tmp_path / "kp")]):
         assert main([command, str(rec), "--out", str(tmp_path / "out.toml"), *extra]) == 2
-        assert capsys.readouterr().err == "tracker: error: stopped where the keypoints would be kept\n"
+        said = capsys.readouterr().err.splitlines()
+        assert said[-1] == "tracker: error: stopped where the keypoints would be kept"
     kept = [Path("out/demo/keypoints-cam1,cam2.npz"), Path("out/demo/keypoints.npz"), tmp_path / "kp" / "keypoints.npz"]
     assert chosen == kept and (tmp_path / "kp").is_dir()
     assert file_hashes(DEMO) == given
@@ -131,3 +132,70 @@ def test_a_list_of_names_that_names_none_is_empty_not_absent():
     assert options.camera_names(None) is None
     assert options.camera_names("") == options.camera_names(",") == options.camera_names(" , ,") == []
     assert options.camera_names("cam0, cam2,") == ["cam0", "cam2"]
+
+
+def _subparser(command: str) -> argparse.ArgumentParser:
+    from tracker.cli import build_parser
+
+    parser = build_parser()
+    commands = next(action for action in parser._actions if isinstance(action, argparse._SubParsersAction))
+    return commands.choices[command]
+
+
+@pytest.mark.parametrize("command", ["track", "batch", "keypoints", "fit-model", "sync", "init", "bench", "live"])
+def test_every_command_that_detects_takes_the_landmark_model_with_its_default(command):
+    """One option, the same choices and help everywhere; the most accurate model for recorded folders, the live one
+    for cameras."""
+    from tracker.landmarks.landmark_models import LIVE, MODELS, RECORDED
+
+    action = next(a for a in _subparser(command)._actions if "--landmark-model" in a.option_strings)
+    assert tuple(action.choices) == MODELS
+    assert action.default == (LIVE if command == "live" else RECORDED)
+    assert action.help.endswith(f"(default {action.default})")
+
+
+def _named(folder: Path, source: Path) -> Path:
+    """A recording folder ``folder`` whose files are links to those of ``source``."""
+    folder.mkdir(parents=True)
+    for file in source.iterdir():
+        (folder / file.name).symlink_to(file)
+    return folder
+
+
+def test_two_recordings_of_the_same_name_get_their_own_default_output_folder(tmp_path, monkeypatch, capsys):
+    """a/rec, then b/rec: the first gets out/rec, which remembers it (out/rec/recording.txt), the second
+    out/rec-<the first 8 hex digits of the SHA-1 of its resolved path>; each again gets its own, and a command that
+    only reads finds the same folder without writing one."""
+    import hashlib
+    from types import SimpleNamespace
+
+    monkeypatch.chdir(tmp_path)
+    first, second = SimpleNamespace(path=tmp_path / "a" / "rec"), SimpleNamespace(path=Path("b/rec"))
+    assert options.output_folder("given", first) == Path("given")  # --out: taken as it is, nothing written
+    assert not Path("out").exists() and capsys.readouterr().err == ""
+    assert options.output_folder(None, first, claim=False) == Path("out/rec") and not Path("out").exists()
+    assert options.output_folder(None, first) == Path("out/rec")
+    assert Path("out/rec/recording.txt").read_text() == f"{tmp_path / 'a' / 'rec'}\n"
+    assert capsys.readouterr().err == "output folder: out/rec\n"
+    digest = hashlib.sha1(str(tmp_path / "b" / "rec").encode()).hexdigest()[:8]
+    assert options.output_folder(None, second, claim=False) == Path(f"out/rec-{digest}")
+    assert not Path(f"out/rec-{digest}").exists()
+    assert options.output_folder(None, second) == Path(f"out/rec-{digest}")
+    assert capsys.readouterr().err == f"output folder: out/rec-{digest} (out/rec holds {tmp_path / 'a' / 'rec'})\n"
+    assert Path(f"out/rec-{digest}/recording.txt").read_text() == f"{tmp_path / 'b' / 'rec'}\n"
+    for rec, folder in ((first, "out/rec"), (second, f"out/rec-{digest}"), (first, "out/rec")):
+        assert options.output_folder(None, rec) == Path(folder)
+    assert sorted(path.name for path in Path("out").iterdir()) == ["rec", f"rec-{digest}"]
+
+
+def test_keypoints_of_two_recordings_of_the_same_name_keep_apart(tiny_recording, tmp_path, monkeypatch):
+    """`tracker keypoints a/rec` then `tracker keypoints b/rec` (another recording in a folder of the same name): the
+    second detects into its own folder, where it stopped at the first's cache before."""
+    monkeypatch.chdir(tmp_path)
+    a, b = _named(tmp_path / "a" / "rec", DEMO), _named(tmp_path / "b" / "rec", tiny_recording)
+    for rec in (a, b, a):
+        assert main(["keypoints", str(rec), "--frames", "1", "--quiet", "--landmark-model", "full"]) == 0
+    folders = {path.name: path.joinpath("recording.txt").read_text().strip() for path in Path("out").iterdir()}
+    assert len(folders) == 2 and folders["rec"] == str(a) and str(b) in folders.values()
+    for folder in Path("out").iterdir():
+        assert [path.name for path in folder.glob("keypoints*.npz")] == ["keypoints-full.npz"]

@@ -247,3 +247,32 @@ def test_rows_that_cannot_be_kept_are_a_one_line_error(tmp_path: Path, monkeypat
     write_frames(writer, range(2))
     with pytest.raises(TrackerInputError, match="not-a-folder: cannot keep the tracked frames there.*TMPDIR"):
         write_frames(writer, range(2, 3))
+
+
+def test_which_parts_are_held_is_written_for_every_frame_or_none(tmp_path: Path) -> None:
+    """``held`` (F, N) int8 round-trips; a writer given it for some frames and not others refuses; a file without
+    it (written before it, or by tracker points) loads without it; one with a code other than 0-2 is refused."""
+    rng = np.random.default_rng(1)
+    path = tmp_path / "poses.npz"
+    codes = np.array([[0, 1, 2], [0, 0, 0], [2, 2, 1]], np.int8)
+    with PosesWriter(path, COMPONENTS, JOINTS, fps=30.0) as writer:
+        for frame, held in enumerate(codes):
+            writer.append(frame, *row(rng), status=0, residual=0.0, held=held)
+        with pytest.raises(ValueError, match="every frame or in none"):
+            writer.append(3, *row(rng), status=0, residual=0.0)
+        with pytest.raises(ValueError, match="held must hold 0, 1 or 2"):
+            writer.append(3, *row(rng), status=0, residual=0.0, held=np.array([0, 3, 0]))
+    arrays = load_poses(path)
+    np.testing.assert_array_equal(arrays["held"], codes)
+    assert arrays["held"].dtype == np.int8
+    old = tmp_path / "old.npz"
+    with PosesWriter(old, COMPONENTS, JOINTS, fps=30.0) as writer:
+        write_frames(writer, range(2))
+    assert "held" not in load_poses(old) and "held" not in np.load(old).files
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **dict(arrays, held=np.full((3, 3), 5, np.int8)))
+    with pytest.raises(TrackerInputError, match="'held' holds values other than 0, 1, 2"):
+        load_poses(bad)
+    np.savez(bad, **dict(arrays, held=np.zeros((3, 2), np.int8)))
+    with pytest.raises(TrackerInputError, match="'held' must be integer of shape"):
+        load_poses(bad)

@@ -100,7 +100,7 @@ def test_a_far_body_is_found_where_the_whole_image_shows_nobody(tmp_path):
     recording = open_recording(folder)
     plain = [_plain_finds(image) for _, images in frames(recording, colour=True) for image in images]
     assert not any(plain)
-    keypoints, _ = detect_recording(recording)
+    keypoints, _ = detect_recording(recording, landmark_model="full")
     truth = load_poses(folder / "truth.npz")["poses"]
     score = accuracy(keypoints, recording.cameras, truth, model=load_model(folder / "model.toml"))
     assert score.found == score.views == 18

@@ -51,7 +51,7 @@ def test_the_landmarker_imports_without_mediapipes_drawing_modules():
 
 @pytest.fixture(scope="module")
 def demo_keypoints() -> Keypoints:
-    return detect_recording(open_recording(DEMO), 0, 20)[0]
+    return detect_recording(open_recording(DEMO), 0, 20, landmark_model="full")[0]
 
 
 def test_landmarks_sit_on_the_demo_body(demo_keypoints):
@@ -106,7 +106,7 @@ def test_the_persons_mask_covers_the_demo_body(demo_keypoints):
 
 
 def test_an_empty_image_has_no_person():
-    detector = Detector()
+    detector = Detector(landmark_model="full")
     try:
         [found] = detect_views([detector], [np.full((240, 320), 128, np.uint8)], cameras=_RIG[:1])
     finally:
@@ -380,7 +380,7 @@ def test_landmarks_far_from_the_last_ones_are_read_again_afresh(monkeypatch):
     reads = []
     read = detector_module._read
     monkeypatch.setattr(detector_module, "_read", lambda pose, rgb: reads.append(rgb.shape) or read(pose, rgb))
-    detector = Detector()
+    detector = Detector(landmark_model="full")
     try:
         first = detector.whole(placed(100))
         reads.clear()
@@ -405,7 +405,7 @@ def test_views_read_side_by_side_and_landmarkers_warmed_up_find_the_same_landmar
     sets = [images for _, images in frames(recording, 0, 20, colour=True, step=4)]
     readings = []
     for side_by_side in (False, True):
-        detectors = [Detector() for _ in recording.cameras]
+        detectors = [Detector(landmark_model="full") for _ in recording.cameras]
         guided = 0
         try:
             with ThreadPoolExecutor(3) as threads:

@@ -32,7 +32,7 @@ def test_the_mask_covers_the_demo_body_and_little_else():
     """cam0 of the demo's first frames: the rendered body's pixels lie on the mask, and the rest of the square
     around it mostly not (the mask is widened by a few pixels, so a band around the outline is allowed)."""
     recording = open_recording(DEMO)
-    keypoints, _ = detect_recording(recording, 0, 3)
+    keypoints, _ = detect_recording(recording, 0, 3, landmark_model="full")
     model, truth = load_model(DEMO / "model.toml"), load_poses(DEMO / "truth.npz")
     segmenter = Segmenter()
     try:

@@ -132,7 +132,7 @@ def test_tracker_sync_finds_the_offsets_of_a_render(late_render):
     assert lines[0].startswith("cam0  +0.0000 s  reference") and lines[-1] == f"wrote {rec / 'sync.toml'}"
     written = load_offsets(rec / "sync.toml", ["cam0", "cam1", "cam2"], 3.0)
     assert abs(written["cam1"] - 0.04) < 0.008 and abs(written["cam2"] + 0.025) < 0.008
-    assert (late_render.out / "keypoints.npz").is_file()
+    assert (late_render.out / "keypoints-full.npz").is_file()
 
 
 def test_tracker_sync_says_when_the_motion_cannot_decide(tiny_recording, tmp_path, monkeypatch, capsys):

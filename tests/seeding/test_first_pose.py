@@ -292,14 +292,16 @@ def test_no_hips_is_a_one_line_error(demo, one_line_error):
 def test_tracker_init_starts_from_the_fit_to_the_detector(demo, tmp_path, monkeypatch, capsys):
     """``tracker init`` without an init file: the detector's landmarks in the demo's frames 0-4 (cam1 follows a
     basketball player in the background photo, cam0 reads the shoulders and wrists swapped in frame 0),
-    cached in out/demo/keypoints.npz; the snapped pose is within a centimetre of the true first pose
-    (measured: docs/keypoints.md, "Automatic first pose").  The cache serves any frames it holds."""
+    cached in out/demo/keypoints-full.npz (the full model's file); the snapped pose is within a centimetre of the true
+    first pose (measured: docs/keypoints.md, "Automatic first pose").  The cache serves any frames it holds."""
     recording, model, truth = demo
     monkeypatch.chdir(tmp_path)
-    poses = keypoint_pose(recording, model, 0)
+    poses = keypoint_pose(recording, model, 0, landmark_model="full")
     assert mean_error(poses, truth["poses"][0]) < 0.01
     assert "frames 0..4" in capsys.readouterr().out
-    some, detected = detect_recording(recording, 1, 3, cache=tmp_path / "out" / "demo" / "keypoints.npz")
+    some, detected = detect_recording(
+        recording, 1, 3, cache=tmp_path / "out" / "demo" / "keypoints-full.npz", landmark_model="full"
+    )
     assert detected == 0 and list(some.frame) == [1, 2]
 
 
@@ -308,7 +310,7 @@ def test_tracker_init_without_the_detector_starts_at_rest(demo, monkeypatch, cap
     says why."""
     recording, model, truth = demo
     monkeypatch.setattr(detector, "missing", lambda: "the keypoint detector is not installed (test)")
-    poses = keypoint_pose(recording, model, 0)
+    poses = keypoint_pose(recording, model, 0, landmark_model="full")
     np.testing.assert_allclose(poses, rest_poses(model, in_view(recording.cameras)))
     assert "not installed (test)" in capsys.readouterr().out
 

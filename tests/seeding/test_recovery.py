@@ -28,6 +28,11 @@ DEMO = Path(__file__).resolve().parents[2] / "recordings" / "demo"
 COUNT = 70
 
 
+def _held(poses: np.ndarray) -> np.ndarray:
+    """Every part of ``poses`` held by the images, as a hand-made result says."""
+    return np.zeros(len(poses), np.int8)
+
+
 def _errors(out: Path) -> np.ndarray:
     """Per frame, the mean distance (m) of the tracked joints from the truth."""
     poses, truth = load_poses(out / "poses.npz"), load_poses(DEMO / "truth.npz")
@@ -55,7 +60,7 @@ def demo_pngs(tmp_path_factory) -> Path:
 
 def test_track_without_a_first_pose_fits_one_to_the_keypoints(demo_pngs, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 0
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     assert "first pose: no init.toml, fitting the body to the keypoints of frames 0..4" in capsys.readouterr().err
     error = _errors(out)
     assert np.median(error) < 0.02 and error.max() < 0.06, error.round(3)
@@ -66,7 +71,7 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
     folder = _demo_copy(tmp_path / "rec", black=range(8))
     later = round(open_recording(folder).fps)  # an image folder's rate
     out = tmp_path / "out"
-    assert main(["track", str(folder), "--out", str(out), "--quiet"]) == 0
+    assert main(["track", str(folder), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     err = capsys.readouterr().err
     assert "no person found by the keypoint detector in two views in frames 0..4" in err and "trying again" in err
     assert f"fitting the body to the keypoints of frames {later}..{later + 4}" in err
@@ -75,13 +80,13 @@ def test_without_a_person_in_the_first_frames_the_detector_keeps_trying(tmp_path
 
 
 def _seen_in_cam0_alone(recording: Path, out: Path, frames_alone: range) -> None:
-    """OUT/keypoints.npz with the detector's landmarks of the recording's first 15 frames, those of cam1 and cam2 taken
-    out in ``frames_alone``: there cam0 alone sees him, and the images are as they were."""
-    found, _ = detect_recording(open_recording(recording), 0, 15)
+    """OUT/keypoints-full.npz with the full landmark model's landmarks of the recording's first 15 frames, those of cam1
+    and cam2 taken out in ``frames_alone``: there cam0 alone sees him, and the images are as they were."""
+    found, _ = detect_recording(open_recording(recording), 0, 15, landmark_model="full")
     alone = np.isin(found.frame, frames_alone)[:, None] & (np.arange(len(found.camera_names)) > 0)[None]
     out.mkdir()
     save_keypoints(
-        out / "keypoints.npz",
+        out / "keypoints-full.npz",
         dataclasses.replace(
             found,
             pixels=np.where(alone[..., None, None], np.nan, found.pixels),
@@ -103,7 +108,7 @@ def test_a_person_seen_in_one_view_only_is_tried_again_in_the_next_frames_and_tr
     recording = _demo_copy(tmp_path / "rec", black=range(nobody)) if nobody else demo_pngs
     out = tmp_path / "out"
     _seen_in_cam0_alone(recording, out, range(5))
-    assert main(["track", str(recording), "--out", str(out), "--quiet"]) == 0
+    assert main(["track", str(recording), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 0
     err = capsys.readouterr().err
     assert "in frames 0..4" in err and "trying again with the next frames, where someone was seen" in err
     assert "fitting the body to the keypoints of frames 5..9" in err
@@ -150,7 +155,7 @@ def test_ctrl_c_while_tracking_back_keeps_the_frames_tracked_back(at, kept, demo
 
     monkeypatch.setattr(app, "BACK_CHUNK", 2)
     monkeypatch.setattr(stream, "tracked_frames", stopped)
-    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet"]) == 130
+    assert main(["track", str(demo_pngs), "--out", str(out), "--quiet", "--landmark-model", "full"]) == 130
     assert "interrupted: the frames done so far are saved" in capsys.readouterr().err
     settled_then_back = [5, 12, 10, 8, 6, 4, 2, 0]  # settled on frames 5..14, then back from frame 13
     assert starts[: settled_then_back.index(at) + 1] == settled_then_back[: settled_then_back.index(at) + 1]
@@ -222,7 +227,7 @@ def test_a_body_lost_to_half_a_second_of_noise_is_found_again(tmp_path):
 
     def errors(*extra: str) -> np.ndarray:
         out = tmp_path / "out"
-        assert main(["track", str(folder), "--out", str(out), "--quiet", *extra]) == 0
+        assert main(["track", str(folder), "--out", str(out), "--quiet", *extra, "--landmark-model", "full"]) == 0
         poses = load_poses(out / "poses.npz")
         shutil.rmtree(out)
         return np.linalg.norm(poses["joints"] - truth["joints"][poses["frame"]], axis=2).mean(axis=1)
@@ -275,7 +280,7 @@ def _tried(monkeypatch, recovery: Recovery, keypoints, start: np.ndarray, snappe
 
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: snapped)
     tracker = Tracker(recovery.model, recovery.cameras, start)
-    tracked = FrameResult(start, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(start, 0, 1.0, 0.8, 1000, _held(start))
     for _ in range(WINDOW):
         result = recovery(tracker, None, keypoints, tracked)
     return result, tracked, tracker
@@ -316,10 +321,10 @@ def test_a_limb_off_for_persistence_frames_in_a_row_is_seeded_again(monkeypatch,
     keypoints = true_landmarks(recovery, truth)
     tries = []
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
-    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
+    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000, _held(truth))
     swung = _swung_arm(model, truth)
     tracker = Tracker(model, recovery.cameras, swung)
-    tracked = FrameResult(swung, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(swung, 0, 1.0, 0.8, 1000, _held(swung))
     counts = []
     for _ in range(PERSISTENCE + 1):
         recovery(tracker, None, keypoints, tracked)
@@ -339,7 +344,7 @@ def test_the_edges_decline_a_re_seed_that_finds_fewer_of_them(monkeypatch, snapp
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     result, tracked, tracker = _tried(
-        monkeypatch, recovery, keypoints, moved, FrameResult(truth, 0, 1.0, snapped_share, 1000)
+        monkeypatch, recovery, keypoints, moved, FrameResult(truth, 0, 1.0, snapped_share, 1000, _held(truth))
     )
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
@@ -359,7 +364,9 @@ def test_a_re_seed_no_nearer_the_landmarks_than_the_tracked_pose_is_declined(
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     seed = _moved(moved) if farther else truth
-    result, tracked, tracker = _tried(monkeypatch, recovery, keypoints, moved, FrameResult(seed, 0, 1.0, 0.95, 1000))
+    result, tracked, tracker = _tried(
+        monkeypatch, recovery, keypoints, moved, FrameResult(seed, 0, 1.0, 0.95, 1000, _held(seed))
+    )
     assert (result is tracked) == kept
     assert (recovery.declined, recovery.reseeded) == ((1, 0) if kept else (0, 1))
     assert np.allclose(tracker.poses, moved if kept else truth, atol=1e-6)
@@ -375,7 +382,9 @@ def test_a_pending_re_seed_is_judged_by_the_image_alone(monkeypatch, true_landma
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     recovery.pending = True
-    _, _, tracker = _tried(monkeypatch, recovery, keypoints, truth, FrameResult(moved, 0, 1.0, 0.95, 1000))
+    _, _, tracker = _tried(
+        monkeypatch, recovery, keypoints, truth, FrameResult(moved, 0, 1.0, 0.95, 1000, _held(moved))
+    )
     assert (recovery.declined, recovery.reseeded) == (0, 1)
     assert np.allclose(tracker.poses, moved, atol=1e-6)
 
@@ -386,7 +395,10 @@ def test_the_noise_of_two_shares_is_their_difference_s_spread():
     from tracker.seeding.recovery import _noise
     from tracker.tracking.frame_loop import FrameResult
 
-    one, other = FrameResult(np.eye(4)[None], 0, 1.0, 0.7, 400), FrameResult(np.eye(4)[None], 0, 1.0, 0.6, 900)
+    one, other = (
+        FrameResult(np.eye(4)[None], 0, 1.0, 0.7, 400, _held(np.eye(4)[None])),
+        FrameResult(np.eye(4)[None], 0, 1.0, 0.6, 900, _held(np.eye(4)[None])),
+    )
     rng = np.random.default_rng(7)
     drawn = rng.binomial(400, 0.7, 20000) / 400 - rng.binomial(900, 0.6, 20000) / 900
     assert _noise(one, other) == pytest.approx(drawn.std(), rel=0.02)
@@ -405,11 +417,13 @@ def test_a_re_seed_on_the_persons_mask_is_taken_though_it_finds_fewer_edges(
     model, truth, recovery = _at_truth()
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(truth, 0, 1.0, 0.7, 1000))
+    monkeypatch.setattr(
+        recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(truth, 0, 1.0, 0.7, 1000, _held(truth))
+    )
     tracker = Tracker(model, recovery.cameras, moved)
     if masked:
         tracker.see_person(person_masks(model, recovery.cameras, truth))
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000, _held(moved))
     for _ in range(WINDOW):
         recovery(tracker, None, keypoints, tracked)
     assert (recovery.declined, recovery.reseeded) == ((0, 1) if masked else (1, 0))
@@ -428,11 +442,14 @@ def test_a_snap_that_takes_the_re_seed_off_the_persons_mask_gives_way_to_the_see
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     monkeypatch.setattr(recovery, "fitted", lambda start: truth)
-    monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(moved, 0, 1.0, 0.9, 1000))
+    monkeypatch.setattr(
+        recovery_module, "snap_to_edges", lambda *args, **kwargs: FrameResult(moved, 0, 1.0, 0.9, 1000, _held(moved))
+    )
     tracker = Tracker(model, recovery.cameras, _swung_arm(model, truth))
     tracker.see_person(person_masks(model, recovery.cameras, truth))
     images = [tracker.smooth(image) for image in next(iter(frames(open_recording(DEMO), 0, 1)))[1]]
-    tracked = FrameResult(_swung_arm(model, truth), 0, 1.0, 0.8, 1000)
+    swung = _swung_arm(model, truth)
+    tracked = FrameResult(swung, 0, 1.0, 0.8, 1000, _held(swung))
     for _ in range(PERSISTENCE):
         result = recovery(tracker, images, keypoints, tracked)
     assert recovery.reseeded == 1 and result.status == RESEEDED and result.share > 0.8
@@ -449,11 +466,11 @@ def test_a_frame_without_the_persons_mask_waits_for_one_with_it(monkeypatch, tru
     keypoints = true_landmarks(recovery, truth)
     moved = _moved(truth)
     tries = []
-    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000)
+    snapped = FrameResult(truth, 0, 1.0, 0.9, 1000, _held(truth))
     monkeypatch.setattr(recovery_module, "snap_to_edges", lambda *args, **kwargs: tries.append(1) or snapped)
     tracker = Tracker(model, recovery.cameras, moved)
     masks = person_masks(model, recovery.cameras, truth)
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000, _held(moved))
     counts = []
     for masked in [True] + [False] * WINDOW + [True]:
         tracker.see_person(masks if masked else None)
@@ -475,7 +492,7 @@ def test_a_fit_that_cannot_place_the_body_backs_off_as_a_declined_re_seed(monkey
     fits = []
     monkeypatch.setattr(recovery, "fitted", lambda start: fits.append(1))
     tracker = Tracker(model, recovery.cameras, moved)
-    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000)
+    tracked = FrameResult(moved, 0, 1.0, 0.8, 1000, _held(moved))
     counts = []
     for _ in range(WINDOW + 2 * WINDOW + WINDOW + 2):
         assert recovery(tracker, None, keypoints, tracked) is tracked

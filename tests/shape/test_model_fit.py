@@ -72,7 +72,9 @@ def test_the_fit_finds_a_reshaped_body(reshaped_recording, tmp_path):
     millimetres, where the model was 2-3 cm off on average; the radii closer too."""
     generic = read_toml(HUMAN, "model", "")
     truth = read_toml(reshaped_recording / "body.toml", "model", "")
-    fit = fit_shape(open_recording(reshaped_recording), generic, frames=24, cache=tmp_path / "keypoints.npz")
+    fit = fit_shape(
+        open_recording(reshaped_recording), generic, frames=24, cache=tmp_path / "keypoints.npz", landmark_model="full"
+    )
     before, after = np.abs(length_errors(generic, truth)), np.abs(length_errors(fit.document, truth))
     assert before.mean() > 20 and after.mean() < 5 and after.max() < 10
     radii = [
@@ -96,7 +98,9 @@ def test_patterned_clothes_are_fitted_by_their_colours(tmp_path):
     recording = reshaped(tmp_path / "rec", 120, "mixed", seed=22)
     generic = read_toml(HUMAN, "model", "")
     truth = read_toml(recording / "body.toml", "model", "")
-    fit = fit_shape(open_recording(recording), generic, frames=40, cache=tmp_path / "keypoints.npz")
+    fit = fit_shape(
+        open_recording(recording), generic, frames=40, cache=tmp_path / "keypoints.npz", landmark_model="full"
+    )
     errors = np.abs(length_errors(fit.document, truth))
     radii = [
         abs(got.metres / want.metres - 1.0)
@@ -109,12 +113,13 @@ def test_patterned_clothes_are_fitted_by_their_colours(tmp_path):
 def test_fit_model_writes_a_model_and_says_what_changed(short_recording, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "fitted.toml"
-    assert main(["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet"]) == 0
+    argv = ["fit-model", str(short_recording), "--out", str(out), "--frames", "6", "--quiet"]
+    assert main([*argv, "--landmark-model", "full"]) == 0
     printed = capsys.readouterr()
     assert f"wrote {out}" in printed.out and "length to forearm_l" in printed.err
     document = read_toml(out, "model", "")
     assert document["name"] == "human-fitted" and out.read_text().startswith("# Fitted by `tracker fit-model`")
-    assert (tmp_path / "out" / "rec" / "keypoints.npz").is_file()  # the detections, for a re-run
+    assert (tmp_path / "out" / "rec" / "keypoints-full.npz").is_file()  # the detections, for a re-run
     model = read_toml(HUMAN, "model", "")
     limits = [c.get("limits") for c in document["component"]]
     assert limits == [c.get("limits") for c in model["component"]]  # joint limits kept
@@ -125,7 +130,8 @@ def test_track_without_a_model_fits_one_first(short_recording, tmp_path, capsys)
     shutil.copytree(short_recording, rec)
     for name in ("model.toml", "body.toml", "init.toml"):
         (rec / name).unlink()
-    code = main(["track", str(rec), "--out", str(tmp_path / "out"), "--frames", "6", "--quiet"])
+    argv = ["track", str(rec), "--out", str(tmp_path / "out"), "--frames", "6", "--quiet", "--landmark-model", "full"]
+    code = main(argv)
     assert code == 0
     err = capsys.readouterr().err
     assert "fitting human.toml to the person" in err and "wrote" in err
@@ -250,7 +256,7 @@ def test_legs_behind_tables_keep_the_given_proportions(tmp_path):
         staging=Staging(body="stretched", jitter=0.15, face=True, tables=("all",)),
     )
     generic, truth = read_toml(HUMAN, "model", ""), read_toml(folder / "body.toml", "model", "")
-    fit = fit_shape(open_recording(folder), generic, frames=20, cache=tmp_path / "keypoints.npz")
+    fit = fit_shape(open_recording(folder), generic, frames=20, cache=tmp_path / "keypoints.npz", landmark_model="full")
     measured = {name for name, seen in zip(fit.layout.names, fit.measured()) if seen}
     legs = {f"{part}_{side}" for part in ("thigh", "shin", "foot") for side in "lr"}
     assert not measured & legs and {"pelvis", "torso", "head", "upperarm_l", "forearm_l"} <= measured

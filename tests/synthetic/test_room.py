@@ -114,7 +114,7 @@ def test_the_detector_finds_no_person_in_the_rooms_but_finds_the_body_in_one(hum
     pose = synth.motion_poses(human, "procedural", 1)[0][0]
 
     def found(image: np.ndarray) -> bool:
-        detector = Detector()
+        detector = Detector(landmark_model="full")
         try:
             return bool(detect_views([detector], [image], cameras=cameras[:1])[0].confidence.max() > 0.0)
         finally:

@@ -17,6 +17,7 @@ from tracker.cli import main
 from tracker.commands import suite as suite_command
 from tracker.io.poses import PosesWriter, load_poses
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.landmark_models import RECORDED
 from tracker.landmarks.store import Keypoints, save_keypoints
 from tracker.model import load_model
 from tracker.synthetic import suite
@@ -104,6 +105,13 @@ def test_make_then_score_known_errors(tmp_path, capsys):
     row = json.loads(capsys.readouterr().out)[0]
     assert row["name"] == SMALL and row["median"] == 0.0 and row["wrong"] == 0.0 and row["swapped"] == 0.0
     assert row["views"] == row["found"] == row["on_body"] == 12 and 12 * 9 <= row["scored"] < 12 * 12  # cam0's table
+    assert row["triangulated_mm"] == pytest.approx(0.0, abs=1e-6) and row["coverage"] == 1.0  # every known joint, true
+    assert main(["suite", "landmarks", str(out), str(tmp_path / "kp"), "--landmark-model", "lite"]) == 2  # none made
+    lite = tmp_path / "kp" / SMALL / "keypoints-lite.npz"
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"tracker: error: {lite}: not found; detect it with tracker keypoints {out / SMALL} --out {lite.parent} "
+        "--landmark-model lite"
+    )
     # the same landmarks beside the results: triangulated frame by frame they are the true joints, so the
     # baseline is 0 mm while the tracker, 70 mm off (then 200 mm: every frame beyond 150 mm), keeps its number
     save_keypoints(results / SMALL / "keypoints.npz", found)
@@ -133,6 +141,7 @@ def test_run_tracks_with_the_options_given(tmp_path, capsys):
     row = json.loads(capsys.readouterr().out)["renders"][0]
     assert row["frames"] == 2 and row["lost_frames"] == 0 and row["mpjpe_mm"] < 50.0  # edges from the true start
     assert len(load_poses(results / SMALL / "poses.npz")["frame"]) == 2
+    assert (results / SMALL / "track.log").read_text().splitlines()[0].endswith(f"--landmark-model {RECORDED}")
 
 
 STOPPED_TRACK = """
@@ -185,6 +194,7 @@ def test_a_stopped_run_passes_the_stop_on_and_waits_for_the_render_tracked(numbe
         ["suite", "make", "{tmp}/x", "--only", ","],
         ["suite", "make", "{tmp}/x", "--only", "far-walk"],  # a CMU render without --clips
         ["suite", "run", "{out}", "{tmp}/r", "--json", "--", "--init", "x"],  # suite option after RESULTS
+        ["suite", "run", "{out}", "{tmp}/r", "--", "--landmark-model", "lite"],  # it names the detections scored too
         ["suite", "landmarks", "{out}", "{tmp}/no-keypoints"],
     ],
 )

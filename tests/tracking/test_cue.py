@@ -1,6 +1,6 @@
 """The cue interface (tracker.tracking.cue): a cue plugs in by its line in tracker.tracking.cues.CUES alone, and the
-tracker asks it as it asks the others: it prepares on each frame, adds its information in every iteration, learns
-after the frame, forgets on a restart and is shown in an inspection."""
+tracker asks it as it asks the others: it prepares on each frame, adds its information in every iteration, says what
+it read of each part in the last, learns after the frame, forgets on a restart and is shown in an inspection."""
 
 import itertools
 from pathlib import Path
@@ -24,6 +24,7 @@ class Beacon:
 
     name = "beacon"
     stage = "measure"
+    places = True
 
     def __init__(self, tracker):
         self.calls: list[str] = []
@@ -47,6 +48,10 @@ class Beacon:
         work.information[0, :3, :3] += weight * np.eye(3)
         work.eta[0, :3] += weight * rotation.T @ (self.target - position)  # body-frame translation
 
+    def evidence(self, tracker, work, added):
+        self.calls.append("evidence")
+        return added
+
     def learn(self, tracker, status: int, *, kept: bool) -> None:
         self.calls.append("learn")
 
@@ -66,7 +71,7 @@ def test_a_cue_listed_with_the_others_is_asked_in_every_step_and_moves_the_body(
     images = next(itertools.islice(frames(rec), 1))[1]
     tracker.step(images)
     iterations = Settings().solve.iterations
-    assert beacon.calls[1:] == ["prepare", *(f"add {k}" for k in range(iterations)), "learn"]
+    assert beacon.calls[1:] == ["prepare", *(f"add {k}" for k in range(iterations)), "evidence", "learn"]
     np.testing.assert_allclose(tracker.poses[0, :3, 3], start[0, :3, 3] + PULL, atol=2e-3)
     assert set(tracker.inspect_cues()) == {"edges", "region", "beacon"}  # the keypoint cue reads no sample
     tracker.restart(start)

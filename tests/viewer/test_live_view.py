@@ -29,3 +29,21 @@ def test_live_view_shows_the_newest_frame_and_records_the_session(server, tiny_r
     np.testing.assert_array_equal(frames_plotted, np.arange(6.0))
     np.testing.assert_allclose(fps, 100.0)
     assert (tmp_path / "live.viser").stat().st_size > 5000
+
+
+def test_the_scene_draws_the_parts_the_images_do_not_hold_grey_and_see_through(server, tiny_recording):
+    from tracker.status import HELD, LOOSE, UNSEEN
+    from tracker.viewer.scene import BODY, LOOSE_OPACITY, Frame
+
+    rec = open_recording(tiny_recording)
+    model = load_model(rec.model_path)
+    scene = Scene(server, model, rec.cameras)
+    poses = load_pose_file(rec.init_path, model)
+    held = np.full(model.size, HELD, np.int8)
+    held[[model.index("shin_l"), model.index("foot_l")]] = LOOSE, UNSEEN
+    scene.show(Frame(poses, held=held))
+    dim = [k for k, mesh in enumerate(scene.meshes) if mesh.opacity is not None]
+    assert dim == sorted([model.index("shin_l"), model.index("foot_l")])
+    assert scene.meshes[dim[0]].opacity == LOOSE_OPACITY and tuple(scene.meshes[dim[0]].color) != BODY
+    scene.show(Frame(poses))  # a frame that does not say: every part as held
+    assert all(mesh.opacity is None and tuple(mesh.color) == BODY for mesh in scene.meshes)

@@ -53,3 +53,33 @@ def test_overlay_video_of_unknown_type_is_a_one_line_error(tiny_recording, tmp_p
 
     assert main(["track", str(tiny_recording), "--out", str(tmp_path), "--overlay", str(tmp_path / "o.gif")]) == 2
     assert "unknown video type" in capsys.readouterr().err
+
+
+def test_parts_the_images_do_not_hold_are_drawn_dim_and_the_others_in_full(behind_a_table):
+    """Behind the table the legs are left to the prior (tracker.tracking.held): drawn with the frame's held codes,
+    their outline samples change the image by at most the dim opacity of what the full drawing changes it by (every
+    third sample drawn, at 40 %), with no search line, while the parts the images hold are drawn as in full."""
+    from conftest import tracked_behind
+
+    from tracker.status import HELD
+    from tracker.viewer.overlay import DIM_OPACITY
+
+    tracker, results = tracked_behind(behind_a_table)
+    images, result = results[-1]
+    inspection = tracker.inspect()
+    colours = component_colours(tracker.model.size)
+    loose = result.held[inspection.component] != HELD
+    assert loose.any() and (~loose).any()
+    for camera, image in enumerate(images):
+        plain = np.repeat(image[:, :, None], 3, axis=2).astype(int)
+        full = draw(image, inspection, camera, robust_c=2.0, colours=colours).astype(int)
+        dim = draw(image, inspection, camera, robust_c=2.0, colours=colours, held=result.held).astype(int)
+        mine = inspection.camera == camera
+        u, v = np.rint(inspection.pixel[mine]).astype(int).T
+        inside = (u >= 0) & (u < image.shape[1]) & (v >= 0) & (v < image.shape[0])
+        changed_full = np.abs(full[v, u] - plain[v, u]).sum(axis=1)
+        changed_dim = np.abs(dim[v, u] - plain[v, u]).sum(axis=1)
+        hidden, seen = inside & loose[mine], inside & ~loose[mine]
+        assert changed_dim[hidden].sum() <= (DIM_OPACITY + 0.02) * changed_full[hidden].sum()
+        assert changed_dim[seen].sum() >= 0.9 * changed_full[seen].sum()
+        assert changed_full[seen].mean() > 100  # drawn in full: the component's colours over the grey

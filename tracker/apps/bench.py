@@ -57,7 +57,8 @@ from tracker.io.readers import ColourCopies, grey_frames, reduced
 from tracker.io.recording import Recording, frames, open_recording
 from tracker.landmarks.consistency import consistent
 from tracker.landmarks.detect_recording import frame_keypoints
-from tracker.landmarks.detector import COMPLEXITY, Detector, detect_views, native_logs_muted, view_threads
+from tracker.landmarks.detector import Detector, detect_views, native_logs_muted, view_threads
+from tracker.landmarks.landmark_models import FILES, MODELS, RECORDED, model_folder
 from tracker.model import Model, load_model, model_from_dict, rest_poses
 from tracker.synthetic.render import Renderer
 from tracker.tracking.edge_cue import reductions
@@ -139,14 +140,18 @@ def decode_only_fps(recording: Recording) -> float:
     return decode_only(recording).fps
 
 
-def detector_ms(recording: Recording, settings: Settings, count: int = 40) -> float:
-    """Median milliseconds per image of the keypoint detector's pass on the whole image, which every view gets,
+def detector_ms(recording: Recording, settings: Settings, *, landmark_model: str, count: int = 40) -> float:
+    """Median milliseconds per image of the keypoint detector's pass (``landmark_model``) on the whole image, which
+    every view gets,
     over the first ``count`` frames of each camera (one landmarker per camera in video mode, as the tracker's
     worker runs them), each image reduced as the tracker's readers reduce what they feed the worker
     (:func:`tracker.tracking.frame_loop.reductions`: a 1080x1920 view at half size)."""
     seconds = []
     for source, factor in zip(recording.sources, reductions(settings, recording.cameras)):
-        detector, images = Detector(), grey_frames(source, range(min(count, recording.frame_count)), colour=True)
+        detector, images = (
+            Detector(landmark_model=landmark_model),
+            grey_frames(source, range(min(count, recording.frame_count)), colour=True),
+        )
         try:
             for image in images:
                 image = reduced(image, int(factor))
@@ -166,14 +171,14 @@ def _stream(
     settings: Settings,
     *,
     cache: Path | None = None,
-    complexity: int = COMPLEXITY,
+    landmark_model: str,
 ) -> KeypointStream | None:
-    """The detector (landmark model ``complexity``) beside the tracker on frames 0..stop-1, fed the tracker's images
+    """The detector (``landmark_model``) beside the tracker on frames 0..stop-1, fed the tracker's images
     as ``tracker track`` feeds it, its detections kept in ``cache`` if given; None for ``keypoint_step`` 0."""
     if not keypoint_step:
         return None
     reduction = reductions(settings, recording.cameras)
-    return KeypointStream(recording, 0, stop, keypoint_step, cache, reduction, complexity=complexity)
+    return KeypointStream(recording, 0, stop, keypoint_step, cache, reduction, landmark_model=landmark_model)
 
 
 def track_run(
@@ -184,14 +189,16 @@ def track_run(
     settings: Settings,
     out: Path,
     keypoint_step: int = 0,
-    complexity: int = COMPLEXITY,
+    landmark_model: str = RECORDED,
     cache: Path | None = None,
 ) -> TrackRun:
     """One end-to-end pass from the poses ``start`` (N, 4, 4): reader threads, tracking and the poses.npz writer;
-    with ``keypoint_step`` the detector's worker (landmark model ``complexity``) on every keypoint_step-th frame beside
+    with ``keypoint_step`` the detector's worker (``landmark_model``) on every keypoint_step-th frame beside
     them, started before the kernels load, its detections kept in ``cache`` if given (a cache that holds them is read
     instead: no worker)."""
-    stream = _stream(recording, recording.frame_count, keypoint_step, settings, cache=cache, complexity=complexity)
+    stream = _stream(
+        recording, recording.frame_count, keypoint_step, settings, cache=cache, landmark_model=landmark_model
+    )
     first: list[float] = []
     try:
         tracker = Tracker(model, recording.cameras, start, settings)
@@ -240,7 +247,14 @@ CHUNK = 50
 
 
 def track_stage(
-    recording: Recording, model: Model, start: np.ndarray, *, settings: Settings, keypoint_step: int, cache: Path
+    recording: Recording,
+    model: Model,
+    start: np.ndarray,
+    *,
+    settings: Settings,
+    keypoint_step: int,
+    cache: Path,
+    landmark_model: str,
 ) -> Stage:
     """The tracker alone with the keypoint cue: the frames read beforehand, :data:`CHUNK` at a time (not timed), as
     ``tracker track``'s readers give them, and the landmarks of every keypoint_step-th frame read from ``cache`` (a
@@ -251,7 +265,9 @@ def track_stage(
     stage = Stage()
     with (
         tempfile.TemporaryDirectory() as folder,
-        KeypointStream(recording, 0, recording.frame_count, keypoint_step, cache) as stream,
+        KeypointStream(
+            recording, 0, recording.frame_count, keypoint_step, cache, landmark_model=landmark_model
+        ) as stream,
     ):
         if stream.reused is None:
             raise RuntimeError(f"{cache} does not hold the landmarks the tracker is timed with")
@@ -286,23 +302,18 @@ def read_stage(
     return stage
 
 
-LANDMARK_MODELS = ("lite", "full", "heavy")
-"""MediaPipe's landmark models by ``model_complexity`` (0, 1, 2)."""
-
 SETS = 30
 """Frame sets the detector is timed on alone (:func:`detect_stage`), after the first."""
 
 
-def installed_models() -> list[int]:
-    """The landmark models (their complexity) whose weights are installed: the detector never fetches one."""
-    import mediapipe
-
-    folder = Path(mediapipe.__file__).parent / "modules" / "pose_landmark"
-    return [k for k, name in enumerate(LANDMARK_MODELS) if (folder / f"pose_landmark_{name}.tflite").is_file()]
+def installed_models() -> list[str]:
+    """The landmark models whose weights are installed: the detector never fetches one."""
+    folder = model_folder()
+    return [name for name in MODELS if (folder / FILES[name].file).is_file()]
 
 
-def detect_stage(recording: Recording, settings: Settings, keypoint_step: int, complexity: int) -> Stage:
-    """The detector alone (landmark model ``complexity``) at ``keypoint_step``: every view of up to :data:`SETS` + 1 of
+def detect_stage(recording: Recording, settings: Settings, keypoint_step: int, landmark_model: str) -> Stage:
+    """The detector alone (``landmark_model``) at ``keypoint_step``: every view of up to :data:`SETS` + 1 of
     the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge search reduces them),
     detected (the views side by side in threads) and checked across the views as the worker does, in this process,
     each set counting for the ``keypoint_step`` frames it stands for; the first set (the landmarkers' start and a first
@@ -311,14 +322,16 @@ def detect_stage(recording: Recording, settings: Settings, keypoint_step: int, c
     read = frames(recording, 0, min(recording.frame_count, (SETS + 1) * keypoint_step), colour=True, step=keypoint_step)
     sets = [[reduced(image, int(factor)) for image, factor in zip(images, reduction)] for _, images in read]
     names = tuple(camera.name for camera in recording.cameras)
-    detectors = [Detector(complexity=complexity) for _ in recording.cameras]
+    detectors = [Detector(landmark_model=landmark_model) for _ in recording.cameras]
     stage, untimed = Stage(), Stage()
     try:
         with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
             for count, images in enumerate(sets):
                 with (stage if count else untimed).timing(keypoint_step):
                     found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
-                    raw = frame_keypoints(0, found, names=names, identity="", reduction=reduction)
+                    raw = frame_keypoints(
+                        0, found, names=names, identity="", landmark_model=landmark_model, reduction=reduction
+                    )
                     consistent(raw, recording.cameras)
     finally:
         for detector in detectors:
@@ -357,11 +370,11 @@ def run(
     keypoint_step: int | None = None,
     model_path: Path | None = None,
     init_path: Path | None = None,
-    complexity: int = COMPLEXITY,
+    landmark_model: str = RECORDED,
 ) -> dict:
     """All figures of the benchmark as one dictionary (the keys of ``tracker bench --json``); the keypoint
-    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate), with the landmark
-    model ``complexity`` beside the tracker (the detector alone is timed with every model installed).  The body
+    cue's at ``keypoint_step`` (0: not timed; None: the default for the recording's frame rate), with
+    ``landmark_model`` beside the tracker (the detector alone is timed with every model installed).  The body
     model and the first pose are ``model_path`` and ``init_path``, else the recording's own.  The passes of the
     figures compared are taken in turn, one of each per repeat, so that a machine whose load drifts weighs on all
     alike."""
@@ -390,17 +403,25 @@ def run(
                         settings=settings,
                         out=out,
                         keypoint_step=keypoint_step,
-                        complexity=complexity,
+                        landmark_model=landmark_model,
                         cache=kept,
                     )
                 )
                 read.append(read_stage(every, model, start, settings=settings, keypoint_step=keypoint_step))
         if keypoint_step:
             alone = [
-                track_stage(every, model, start, settings=settings, keypoint_step=keypoint_step, cache=cache)
+                track_stage(
+                    every,
+                    model,
+                    start,
+                    settings=settings,
+                    keypoint_step=keypoint_step,
+                    cache=cache,
+                    landmark_model=landmark_model,
+                )
                 for _ in range(repeats)
             ]
-        detector = detector_ms(every, settings) if keypoint_step else float("nan")
+        detector = detector_ms(every, settings, landmark_model=landmark_model) if keypoint_step else float("nan")
     stage_ms = {"decode": _median(decode_ms)}
     for stage in (*STAGES, "output"):
         stage_ms[stage] = _median([r.stage_ms[stage] for r in runs_all])
@@ -430,15 +451,15 @@ def run(
     }
     if not keypoint_step:
         return result
-    models = sorted(set(installed_models()) | {complexity})
-    detect = {LANDMARK_MODELS[k]: detect_stage(every, settings, keypoint_step, k) for k in models}
-    stages = {"read": read, "detect": [detect[LANDMARK_MODELS[complexity]]], "track": alone}
+    models = [name for name in MODELS if name in installed_models() or name == landmark_model]
+    detect = {name: detect_stage(every, settings, keypoint_step, name) for name in models}
+    stages = {"read": read, "detect": [detect[landmark_model]], "track": alone}
     fps = {name: _median([stage.fps for stage in timed]) for name, timed in stages.items()}
     cpu_ms = {name: _median([stage.cpu_ms for stage in timed]) for name, timed in stages.items()}
     cores = os.cpu_count() or 1
     overlapped = _median([r.fps for r in runs_cue])
     return result | {
-        "landmark_model": LANDMARK_MODELS[complexity],
+        "landmark_model": landmark_model,
         "stage_fps_with_keypoints": {
             "decode_only": decode_all,
             "read": fps["read"],
@@ -484,20 +505,21 @@ def long_run(
     keypoint_step: int | None = None,
     model_path: Path | None = None,
     init_path: Path | None = None,
+    landmark_model: str = RECORDED,
     progress=lambda iterable, total=None: iterable,
 ) -> dict:
     """A long run for memory: ``total`` frames tracked and written to a poses.npz, the recording read again
-    and again from its first frame (each pass with a fresh keypoint worker, at ``keypoint_step``: 0 for none,
-    None for the default), and this process's resident memory before the first frame, after frame
-    :data:`SETTLED` and at the end.  The body jumps where a pass starts again, as a cut in a live session
-    would make it; the figures are about memory and the file, not accuracy."""
+    and again from its first frame (each pass with a fresh keypoint worker of ``landmark_model``, at
+    ``keypoint_step``: 0 for none, None for the default), and this process's resident memory before the first
+    frame, after frame :data:`SETTLED` and at the end.  The body jumps where a pass starts again, as a cut in a live
+    session would make it; the figures are about memory and the file, not accuracy."""
     recording, model, start = _subject(path, model_path, init_path)
     if keypoint_step is None:
         keypoint_step = default_step(recording.fps)
     tracker = Tracker(model, recording.cameras, start, settings)
     tracker.warm_up()
     memory = {"start": resident_mb(), "settled": float("nan")}
-    passes = _Passes(recording, total, keypoint_step, tracker)
+    passes = _Passes(recording, total, keypoint_step, tracker, landmark_model)
     bar = iter(progress(range(total), total=total))
 
     def counted(frame: Tracked) -> None:
@@ -538,6 +560,7 @@ class _Passes:
     total: int
     keypoint_step: int
     tracker: Tracker
+    landmark_model: str
     stream: KeypointStream | None = None  # the pass's worker
     first: int = 0  # the number of the pass's first frame
 
@@ -547,7 +570,10 @@ class _Passes:
         while done < self.total:
             stop = min(self.recording.frame_count, self.total - done)
             tracker = self.tracker
-            self.stream, self.first = _stream(self.recording, stop, self.keypoint_step, tracker.settings), done
+            stream = _stream(
+                self.recording, stop, self.keypoint_step, tracker.settings, landmark_model=self.landmark_model
+            )
+            self.stream, self.first = stream, done
             try:
                 for _, images in tracked_frames(
                     self.stream,

@@ -53,7 +53,6 @@ from tracker.landmarks.detect_recording import (
     stacked,
 )
 from tracker.landmarks.detector import (
-    COMPLEXITY,
     Detector,
     detect_views,
     native_logs_muted,
@@ -104,34 +103,36 @@ def _work(
     results,
     fed=None,
     reduction=None,
-    complexity: int = COMPLEXITY,
+    *,
+    landmark_model: str,
 ) -> None:
-    """The worker process: detect and check each scheduled frame with the landmark model ``complexity``, put (raw,
-    checked) on ``results``, then None; an error is put instead and ends it.  With ``fed``, a queue, the frames are
-    those the tracker's readers wrote to shared memory (:func:`_detect_fed`); else the worker reads them.  The stop
-    signals are the parent's to handle (:mod:`tracker.stop_signals`)."""
+    """The worker process: detect and check each scheduled frame with ``landmark_model``, put (raw, checked) on
+    ``results``, then None; an error is put instead and ends it.  With ``fed``, a queue, the frames are those the
+    tracker's readers wrote to shared memory (:func:`_detect_fed`); else the worker reads them.  The stop signals are
+    the parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
         with native_logs_muted(), ThreadPoolExecutor(view_threads(len(recording.cameras)), "view") as pool:
             if fed is not None:
-                _detect_fed(recording, fed, reduction, results, complexity, pool)
+                _detect_fed(recording, fed, reduction, results, landmark_model, pool)
             else:
                 runs = [(start, stop, step)] + ([(stop - 1, stop, 1)] if (stop - 1 - start) % step else [])
                 for first, last, every in runs:  # the grid, then the last frame if it lies off the grid
-                    for _, raw in detections(recording, first, last, step=every, complexity=complexity, pool=pool):
+                    found = detections(recording, first, last, step=every, landmark_model=landmark_model, pool=pool)
+                    for _, raw in found:
                         results.put((raw, consistent(raw, recording.cameras)[0]))
         results.put(None)
     except BaseException as error:  # handed to the tracker, raised there
         results.put(error)
 
 
-def _detect_fed(recording: Recording, fed, reduction, results, complexity: int, pool: Executor) -> None:
+def _detect_fed(recording: Recording, fed, reduction, results, landmark_model: str, pool: Executor) -> None:
     """Detect in the frame sets named on ``fed`` (index, slot, :attr:`SharedFrames.spec
-    <tracker.io.shared_frames.SharedFrames.spec>`), read in place in shared memory (one landmarker per camera, in
-    video mode), until None; a set's result is put only once its images are no longer read, so that the tracker may
-    write the slot again when it takes the result."""
+    <tracker.io.shared_frames.SharedFrames.spec>`), read in place in shared memory (one landmarker of
+    ``landmark_model`` per camera, in video mode), until None; a set's result is put only once its images are no
+    longer read, so that the tracker may write the slot again when it takes the result."""
     names, identity = tuple(camera.name for camera in recording.cameras), fingerprint(recording)
-    detectors = [Detector(complexity=complexity) for _ in recording.cameras]
+    detectors = [Detector(landmark_model=landmark_model) for _ in recording.cameras]
     shared: SharedFrames | None = None
     try:
         list(pool.map(Detector.warm_up, detectors))  # while the tracker's kernels load and its readers start
@@ -141,7 +142,9 @@ def _detect_fed(recording: Recording, fed, reduction, results, complexity: int, 
                 shared = SharedFrames.attach(spec)
             images = shared.images(slot)
             found = detect_views(detectors, images, cameras=recording.cameras, reduction=reduction, pool=pool)
-            raw = frame_keypoints(index, found, names=names, identity=identity, reduction=reduction)
+            raw = frame_keypoints(
+                index, found, names=names, identity=identity, landmark_model=landmark_model, reduction=reduction
+            )
             results.put((raw, consistent(raw, recording.cameras)[0]))
     finally:
         for detector in detectors:
@@ -191,7 +194,8 @@ def _fed_ahead(stream: KeypointStream, items: Iterable[tuple[int, list]]) -> Ite
 
 
 class KeypointStream:
-    """Checked landmarks of the scheduled frames, from the cache or from a worker process: one that reads the
+    """Checked landmarks by ``landmark_model`` of the scheduled frames, from the cache or from a worker process: one
+    that reads the
     recording, or, with ``reduction`` (the tracker's, one factor per camera) that reduces some camera's images,
     one fed by the tracker's readers (the frame loop reads through :func:`tracked_frames`).
 
@@ -199,8 +203,8 @@ class KeypointStream:
     a 1080x1920 H.264 one), and a worker that reads them itself detects ahead while the tracker's kernels
     load, unbounded by the frames the tracker holds (docs/speed.md has what either way is worth end to end).  A fed
     worker reads the frame sets in shared memory (:mod:`tracker.io.shared_frames`), in a ring of as many slots as
-    it can have frames to detect ahead of the tracker.  ``complexity`` picks the landmark model
-    (:data:`tracker.landmarks.detector.COMPLEXITY`)."""
+    it can have frames to detect ahead of the tracker.  ``landmark_model`` picks the landmark model
+    (:mod:`tracker.landmarks.landmark_models`)."""
 
     def __init__(
         self,
@@ -211,9 +215,9 @@ class KeypointStream:
         cache: Path | None = None,
         reduction: np.ndarray | None = None,
         *,
-        complexity: int = COMPLEXITY,
+        landmark_model: str,
     ):
-        self.recording, self.cache = recording, cache
+        self.recording, self.cache, self.landmark_model = recording, cache, landmark_model
         self.wanted = schedule(start, stop, step)
         self.lead = step + LAG
         self.reduction = reduction
@@ -224,7 +228,7 @@ class KeypointStream:
         self.slots = -(-self.lead // step) + 2  # frame sets fed and not yet answered for: at most lead / step + 1
         self.free: list[int] = list(range(self.slots))
         self.slot_of: dict[int, int] = {}  # the slot of each frame fed and not yet answered for
-        self.old = cached(cache, recording) if cache is not None else None
+        self.old = cached(cache, recording, landmark_model) if cache is not None else None
         self.raw: list[Keypoints] = []
         self.detected: dict[int, Keypoints] = {}  # each scheduled frame's landmarks as detected, before the check
         self.checked: dict[int, Keypoints] = {}
@@ -240,14 +244,15 @@ class KeypointStream:
             self.detected = {int(frame): detected.at_frames(np.array([frame])) for frame in held}
         if self.reused is not None:
             return
-        require_detector()
+        require_detector(landmark_model)
         context = multiprocessing.get_context("spawn")
         with stop_signals.held():
             self.results = context.Queue()
             self.fed = context.Queue() if reduction is not None and np.max(reduction) > 1 else None
             self.worker = context.Process(
                 target=_work,
-                args=(recording, start, stop, step, self.results, self.fed, reduction, complexity),
+                args=(recording, start, stop, step, self.results, self.fed, reduction),
+                kwargs=dict(landmark_model=landmark_model),
                 name="keypoint detector",
                 daemon=True,
             )

@@ -7,7 +7,8 @@ output path, and may wrap the keypoint source (a plain callable) to perturb the 
 a recording with the detector and the recovery::
 
     tracker = Tracker(model, recording.cameras, first_pose, settings)
-    stream = KeypointStream(recording, 0, recording.frame_count, step, cache, reductions(settings, recording.cameras))
+    stream = KeypointStream(recording, 0, recording.frame_count, step, cache, reductions(settings, recording.cameras),
+                            landmark_model="heavy")
     read = tracked_frames(stream, recording, 0, recording.frame_count, prepare=tracker.smooth)
     track_frames(tracker, read, out / "poses.npz", fps=recording.fps, keypoints=lambda index: moved(stream.get(index)),
                  check=Recovery(model, recording.cameras))
@@ -77,8 +78,9 @@ def track_frames(
     before: dict[str, np.ndarray] | None = None,
 ) -> Loop:
     """Track the ``frames`` with ``tracker`` and write each one's row to the poses.npz at ``path`` (frames at ``fps``)
-    as it is done: poses, joint centres, status, residual, seconds spent and capture time.  Ctrl-C, SIGTERM or SIGHUP
-    (:mod:`tracker.stop_signals`) ends the loop with the frames done written (:attr:`Loop.interrupted`).
+    as it is done: poses, joint centres, status, which parts the images hold, residual, seconds spent and capture
+    time.  Ctrl-C, SIGTERM or SIGHUP (:mod:`tracker.stop_signals`) ends the loop with the frames done written
+    (:attr:`Loop.interrupted`).
 
     ``frames`` yields (index, images), one image per camera of the tracker's rig, already :meth:`Tracker.smooth
     <tracker.tracking.frame_loop.Tracker.smooth>`-ed.  ``keypoints(index)``: the frame's landmarks, fused with the
@@ -88,8 +90,9 @@ def track_frames(
     frame-locked).
     ``retarget(tracker)``: before each frame, the tracker to track it with (``tracker live`` rebuilds it for the
     cameras still delivering).  ``each``: called with every frame once its row is written.  ``before``: rows of a
-    poses.npz (its arrays: frame, poses, joints, status, residual, elapsed, time) written first, in their order, as the
-    frames tracked back from the first pose of ``frames`` (:func:`tracker.apps.track.track`); not counted in the loop.
+    poses.npz (its arrays: frame, poses, joints, status, held, residual, elapsed, time) written first, in their
+    order, as the frames tracked back from the first pose of ``frames`` (:func:`tracker.apps.track.track`); not counted
+    in the loop.
     """
     done, writing, interrupted, last = 0, 0.0, False, None
     started = time.perf_counter()
@@ -104,6 +107,7 @@ def track_frames(
                     residual=float(before["residual"][row]),
                     elapsed=float(before["elapsed"][row]),
                     time=None if times is None else float(before["time"][row]),
+                    held=before["held"][row],
                 )
         try:
             for index, images in frames:
@@ -126,6 +130,7 @@ def track_frames(
                     residual=result.residual,
                     elapsed=spent,
                     time=at,
+                    held=result.held,
                 )
                 writing += time.perf_counter() - begun - spent
                 done, last = done + 1, at

@@ -19,6 +19,7 @@ from tracker.errors import TrackerInputError
 if TYPE_CHECKING:
     import numpy as np
 
+    from tracker.apps.smoothing import Smoothed
     from tracker.evaluate import Report
     from tracker.io.recording import Recording
     from tracker.tracking.frame_loop import Tracker
@@ -36,6 +37,7 @@ class Tracking:
 
     settings: Settings  # the tracker's settings, its frame rate the recording's
     keypoints: int  # the keypoint detector runs on every keypoints-th frame beside the tracker; 0: off
+    landmark_model: str  # the detector's landmark model: lite, full or heavy (tracker.landmarks.landmark_models)
     start: int = 0  # first frame
     frames: int | None = None  # frames to track (None: to the end)
     model: str | None = None  # body model TOML (None: the recording's model.toml, else models/human.toml fitted)
@@ -64,18 +66,21 @@ class Outcome:
     fps: float  # frames per second of the tracking loop (decoding included, start-up not)
     residual: float  # mean residual of the frames, pixels (NaN when no frame found an edge)
     counts: dict[int, int]  # frames per status (tracker.status)
+    parts: tuple[str, ...]  # the model's components
+    held: np.ndarray  # frames (N,) in which the images held each component (tracker.status.HELD)
     declined: int | None  # re-seeds the edges declined; None without the keypoint cue
     interrupted: bool  # stopped by Ctrl-C, SIGTERM or SIGHUP: the frames done are written
     files: tuple[tuple[Path, str], ...]  # the files the run wrote, each with what it holds
     report: Report | None  # the accuracy against the recording's truth.npz over ``span``, when it has one
     span: range  # the frames asked for (--start, --frames): the frames of the truth the report scores
     unscored: int  # the truth's frames outside ``span``, left out of the report
+    smoothed: Smoothed | None = None  # what smoothing the track with the frames after each one did (--smooth)
     review: Callable[[], Review] | None = dataclasses.field(default=None, compare=False)  # view: the review to serve
 
 
 def print_summary(outcome: Outcome) -> None:
-    """What a finished run prints: speed, residual, status counts, the accuracy over the frames asked for (and how
-    many frames of the truth that leaves out), and the files it wrote."""
+    """What a finished run prints: speed, residual, status counts, what smoothing the track did, the accuracy over the
+    frames asked for (and how many frames of the truth that leaves out), and the files it wrote."""
     from tracker.evaluate import format_report
     from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
 
@@ -87,6 +92,16 @@ def print_summary(outcome: Outcome) -> None:
         declined = f"{outcome.declined} declined by the image or the landmarks"
         reseeded = f", {counts[RESEEDED]} re-seeded from the keypoints ({declined})"
     print(f"status: {counts[TRACKED]} tracked, {counts[UNCERTAIN]} uncertain, {counts[LOST]} lost{reseeded}")
+    if outcome.frames:
+        print(held_summary(outcome.parts, outcome.held, outcome.frames))
+    smoothed = outcome.smoothed
+    if smoothed is not None and smoothed.method == "both-ways":
+        print(
+            f"smoothed ({smoothed.method}, {smoothed.seconds:.1f} s): tracked back from the last frame, the backward "
+            f"track's pose kept in {smoothed.taken} of {smoothed.frames} frames, then the whole track smoothed"
+        )
+    elif smoothed is not None:
+        print(f"smoothed ({smoothed.method}, {smoothed.seconds:.1f} s) over the whole recording")
     if outcome.report is not None:
         scored = f"accuracy against the recording's truth.npz over frames {outcome.span.start}..{outcome.span.stop - 1}"
         if outcome.unscored:
@@ -99,6 +114,20 @@ def print_summary(outcome: Outcome) -> None:
     print("files of this run:")
     for path, holds in outcome.files:
         print(f"  {str(path):<{width}}  {holds}")
+
+
+def held_summary(parts: Sequence[str], held: np.ndarray, frames: int) -> str:
+    """One line on the parts the images held over a run of ``frames`` frames, given the frames (N,) in which they
+    held each of ``parts``: their share of all the parts' frames, and the parts left to the prior and the joints
+    in half the frames or more, the most often first, each with its frames."""
+    share = float(held.sum()) / (len(parts) * frames) if parts else 0.0
+    line = f"parts held by the images: {100.0 * share:.0f} % of {len(parts)} parts x {frames} frames"
+    left = [(frames - int(count), name) for name, count in zip(parts, held) if 2 * (frames - count) >= frames]
+    if not left:
+        return line
+    left.sort(key=lambda item: -item[0])
+    named = ", ".join(f"{name} {count}" for count, name in left)
+    return f"{line}; by the prior only in half the frames or more: {named} (frames)"
 
 
 def track(
@@ -127,7 +156,7 @@ def track(
     from tracker.io.poses import load_poses
     from tracker.io.readers import split_kept
     from tracker.io.recording import capture_times
-    from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
+    from tracker.status import HELD, LOST, RESEEDED, TRACKED, UNCERTAIN
     from tracker.tracking.edge_cue import reductions
     from tracker.tracking.frame_loop import Tracker
 
@@ -140,9 +169,9 @@ def track(
     stop = rec.frame_count if tracking.frames is None else min(rec.frame_count, start + tracking.frames)
     asked = range(start, stop)
     pose_file = starting_pose_file(start, tracking.init, rec.init_path, by_itself=bool(step))
-    model = _model(tracking.model, rec, out, step, bar)
+    model = _model(tracking.model, rec, out, step, bar, tracking.landmark_model)
     background = _background(tracking.background, rec, out, bar)
-    init, begin, back_to = _first_pose(pose_file, start, rec, model, stop, out, settings, step)
+    init, begin, back_to = _first_pose(pose_file, start, rec, model, stop, out, settings, step, tracking.landmark_model)
     ensure_writable_folder(out)  # a folder that cannot be written fails now, not at the first save
     print(
         f"tracking {rec.path} frames {back_to}..{stop - 1} with {len(rec.cameras)} camera(s) "
@@ -153,6 +182,7 @@ def track(
     timed = None if times is None else lambda index: float(times[index])
     pairing = rec.pairing  # cameras not frame-locked: each view's frame and how late it was captured
     late = None if pairing is None else lambda index: pairing.late[index]
+    measured: dict[int, np.ndarray] = {}  # each frame's information about its poses (Tracker.measured), by frame
     back = TrackedBack(None, 0, False)
     if back_to < begin:
         from tracker.seeding.first_pose import FRAMES
@@ -168,6 +198,7 @@ def track(
             times=timed,
             late=late,
             bar=bar,
+            measured=measured,
         )
     before = back.rows
     if back.mended is not None:  # the forward pass starts from the first pose as the settling mended it
@@ -182,6 +213,7 @@ def track(
         out,
         step if stop > begin else 0,
         None if background is not None else reductions(settings, rec.cameras),
+        tracking.landmark_model,
     )
     video = None
     with contextlib.ExitStack() as closing:  # each closed however the run ends, the stream keeping what was detected
@@ -193,6 +225,7 @@ def track(
             recovery = Recovery(model, rec.cameras)
         print("preparing the numba kernels (compiled once, then cached)...", file=sys.stderr, flush=True)
         tracker = Tracker(model, rec.cameras, init, settings)
+        tracker.measuring = settings.smoothing.method != "none"  # the smoother weighs each frame by it
         tracker.warm_up()
         truth = load_poses(rec.truth_path) if rec.truth_path is not None else None
         live = _live_view(view, rec, tracker, truth) if view is not None else None
@@ -208,10 +241,12 @@ def track(
         shows = video is not None or live is not None
         prepare = _preparer(tracker, background, keep=shows)
         counts = {TRACKED: 0, UNCERTAIN: 0, LOST: 0, RESEEDED: 0}
+        held = np.zeros(model.size, np.int64)
         residuals = []
         if before is not None:
             for status in before["status"]:
                 counts[int(status)] += 1
+            held += (before["held"] == HELD).sum(axis=0)
             residuals.extend(before["residual"])
         grey: Sequence[np.ndarray] = ()  # the frame in hand as recorded, for the overlay and the viewer
 
@@ -229,9 +264,12 @@ def track(
             if live is not None:
                 live.offer(frame.index, images, frame.result, elapsed=frame.spent)
             if video is not None:
-                video.write(images, tracker.inspect())
+                video.write(images, tracker.inspect(), frame.result.held)
             counts[frame.result.status] += 1
+            held[:] += frame.result.held == HELD
             residuals.append(frame.result.residual)
+            if frame.result.information is not None:
+                measured[frame.index] = frame.result.information.astype(np.float32)
 
         progress = bar(None, "frame", leave=True)
         read = tracked_frames(
@@ -257,7 +295,26 @@ def track(
         )
     done = run.frames + (0 if before is None else len(before["frame"]))
     poses = out / "poses.npz"
-    results = load_poses(poses) if not run.interrupted and (truth is not None or live is not None) else None
+    smoothed = None
+    if settings.smoothing.method != "none" and not run.interrupted and not back.interrupted and done > 1:
+        smoothed = _smoothed(
+            rec,
+            tracking,
+            model,
+            span=(begin, stop),
+            out=out,
+            background=background,
+            measured=measured,
+            times=timed,
+            late=late,
+            bar=bar,
+        )
+    interrupted = run.interrupted or back.interrupted or (smoothed is not None and smoothed.interrupted)
+    if smoothed is not None and not smoothed.interrupted:  # the frames as written: some from the backward track
+        written = load_poses(poses)
+        counts = {status: int((written["status"] == status).sum()) for status in counts}
+        residuals = list(written["residual"])
+    results = load_poses(poses) if not interrupted and (truth is not None or live is not None) else None
     scored = None if truth is None else truth_within(truth, asked.start, asked.stop)
     report = evaluate(results, scored) if results is not None and scored is not None else None
     review: Callable[[], Review] | None = None
@@ -279,12 +336,15 @@ def track(
         fps=run.frames / run.seconds if run.seconds > 0 else float("inf"),
         residual=float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan"),
         counts=counts,
+        parts=model.names,
+        held=held,
         declined=None if recovery is None else recovery.declined + back.declined,
-        interrupted=run.interrupted or back.interrupted,
+        interrupted=interrupted,
         files=_files(rec, tracking, out, frames=done, overlay=overlay, view=view),
         report=report,
         span=asked,
         unscored=0 if truth is None or scored is None else len(truth["joints"]) - len(scored["joints"]),
+        smoothed=smoothed,
         review=review,
     )
 
@@ -299,7 +359,7 @@ def _files(
     files = [(out / "poses.npz", f"the pose of each of the {frames} frames: tracker view, eval and export read it")]
     if _fitted(tracking.model, rec):
         files.append((out / "model.toml", "the body model fitted to the person: pass it with --model to reuse it"))
-    keypoints = cache_file(out, rec)
+    keypoints = cache_file(out, rec, tracking.landmark_model)
     if tracking.keypoints and keypoints.is_file():
         files.append((keypoints, "the keypoint detector's landmarks, reused when this recording is tracked again"))
     if tracking.background == "median":
@@ -312,8 +372,9 @@ def _files(
 
 
 BACK_CHUNK = 30
-"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`):
-they are held in memory, as smoothed images, until tracked."""
+"""Frames read at a time, then tracked last to first, when tracking back from the first pose (:func:`_tracked_back`)
+or from the last frame (:func:`_tracked_from_the_end`, which reads the next chunk while one is tracked): they are held
+in memory, as smoothed images, until tracked."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -342,7 +403,18 @@ def nearer_landmarks(
 
 
 def _tracked_back(
-    rec, tracking: Tracking, model, init, *, span: tuple[int, int, int], out: Path, background, times, late, bar
+    rec,
+    tracking: Tracking,
+    model,
+    init,
+    *,
+    span: tuple[int, int, int],
+    out: Path,
+    background,
+    times,
+    late,
+    bar,
+    measured: dict[int, np.ndarray],
 ) -> TrackedBack:
     """The frames ``span`` = (first, begin, settled) before the first pose ``init`` (at frame ``begin``) tracked
     backwards: the tracker settles on the first pose over the frames from ``begin`` to ``settled`` - 1 (the first
@@ -353,7 +425,8 @@ def _tracked_back(
     time, and the rows get them back; so is each view's lateness ``late(index)`` there (a camera late is early in
     that time).  The rows are written to OUT/poses.npz at once, so that Ctrl-C from here on
     keeps them; so does a stop (Ctrl-C, SIGTERM, SIGHUP) between the backward run and that write, while the
-    detector's landmarks of the first pose's frame are waited for or the detector is closed."""
+    detector's landmarks of the first pose's frame are waited for or the detector is closed.  With smoothing
+    (``Settings.smoothing``), each frame tracked back leaves its information in ``measured`` by frame."""
     import tempfile
 
     import numpy as np
@@ -390,13 +463,18 @@ def _tracked_back(
             check=recovery,
             times=None if times is None else lambda index: -times(index),
             late=None if late is None else lambda index: way * late(index),
+            each=measuring,
         )
+
+    def measuring(frame) -> None:
+        if frame.result.information is not None and frame.index < begin:
+            measured[frame.index] = frame.result.information.astype(np.float32)
 
     print(f"tracking back from frame {begin} to frame {first}", file=sys.stderr)
     recovery, judged = None, None
     with tempfile.TemporaryDirectory(prefix="tracked-back-") as folder:
         path = Path(folder) / "poses.npz"
-        stream = _keypoints(rec, first, settled, out, tracking.keypoints, None)
+        stream = _keypoints(rec, first, settled, out, tracking.keypoints, None, tracking.landmark_model)
         try:
             with contextlib.ExitStack() as closing:
                 if stream is not None:
@@ -405,6 +483,7 @@ def _tracked_back(
 
                     recovery = Recovery(model, rec.cameras)
                 tracker = Tracker(model, rec.cameras, init, settings)
+                tracker.measuring = settings.smoothing.method != "none"
                 tracker.warm_up()
                 prepare = _preparer(tracker, background, keep=False)
                 chroma = tracker.bin_colours if settings.region.on and background is None else False
@@ -429,10 +508,158 @@ def _tracked_back(
         mended = nearer_landmarks(tracker, mended, fitted=init, keypoints=judged)
     kept = np.flatnonzero(found["frame"] < begin)
     kept = kept[np.argsort(found["frame"][kept])]
-    rows = {key: found[key][kept] for key in ("frame", "poses", "joints", "status", "residual", "elapsed", "time")}
+    keys = ("frame", "poses", "joints", "status", "held", "residual", "elapsed", "time")
+    rows = {key: found[key][kept] for key in keys}
     rows["time"] = -rows["time"]
     track_frames(tracker, (), out / "poses.npz", fps=rec.fps, times=times, before=rows)
     return TrackedBack(rows, declined, interrupted, mended)
+
+
+def _smoothed(
+    rec, tracking: Tracking, model, *, span: tuple[int, int], out: Path, background, measured, times, late, bar
+) -> Smoothed:
+    """The track in OUT/poses.npz judged with the frames after each one, as ``Settings.smoothing.method`` says
+    (:mod:`tracker.apps.smoothing`), and the file replaced by the result; ``measured``: each frame's information
+    (:meth:`tracker.tracking.frame_loop.Tracker.measured`) by frame.  With ``both-ways`` the frames ``span`` =
+    (begin, stop), the forward run's, are tracked back from the last, reading :data:`BACK_CHUNK` frames at a time;
+    the frames before them, tracked back from the first pose already, stay as they are.  A stop (Ctrl-C, SIGTERM,
+    SIGHUP) leaves the file as the forward run wrote it."""
+    import os
+    import tempfile
+    import time
+
+    import numpy as np
+
+    from tracker import stop_signals
+    from tracker.apps.smoothing import Smoothed, Track, smoothing_input
+    from tracker.io.poses import PosesWriter, load_poses
+    from tracker.model import joint_centres
+    from tracker.tracking.smoother import smoothed_track
+
+    settings = tracking.settings
+    method = settings.smoothing.method
+    begin, stop = span
+    path = out / "poses.npz"
+    rows = load_poses(path)
+    empty = np.zeros((model.size, 2, 3, 3))
+    track = Track(
+        rows["frame"],
+        rows["poses"],
+        rows["status"],
+        rows["residual"],
+        rows["elapsed"],
+        np.stack([measured.get(int(frame), empty) for frame in rows["frame"]]),
+        rows.get("held"),
+    )
+    starts, taken, started = track.restarts(), 0, time.perf_counter()
+    try:
+        if method == "both-ways":
+            back = _tracked_from_the_end(
+                rec, tracking, model, track, span=span, out=out, background=background, times=times, late=late, bar=bar
+            )
+            if back.interrupted:
+                return Smoothed(method, time.perf_counter() - started, len(back.taken), int(back.taken.sum()), True)
+            within = slice(int(np.searchsorted(track.frame, begin)), int(np.searchsorted(track.frame, stop)))
+            keys = ("frame", "poses", "status", "residual", "elapsed", "information")
+            track = dataclasses.replace(
+                track,
+                **{
+                    key: np.concatenate([getattr(track, key)[: within.start], getattr(back.track, key)])
+                    for key in keys + (("held",) if track.held is not None and back.track.held is not None else ())
+                },
+            )
+            starts = np.concatenate([starts[: within.start], back.starts])
+            taken = int(back.taken.sum())
+        poses = smoothed_track(
+            model,
+            track.poses,
+            smoothing_input(track),
+            times=rows["time"],
+            starts=starts,
+            motion=settings.motion,
+            scale=settings.smoothing.noise_scale,
+        )
+        with tempfile.TemporaryDirectory(prefix="smoothed-", dir=path.parent) as folder:
+            smoothed = Path(folder) / "poses.npz"
+            with PosesWriter(smoothed, list(model.names), list(model.joint_names), rec.fps) as writer:
+                for row, frame in enumerate(track.frame):
+                    writer.append(
+                        int(frame),
+                        poses[row],
+                        joint_centres(poses[row]),
+                        status=int(track.status[row]),
+                        residual=float(track.residual[row]),
+                        elapsed=float(track.elapsed[row]),
+                        time=None if times is None else float(rows["time"][row]),
+                        held=None if track.held is None else track.held[row],
+                    )
+            os.replace(smoothed, path)
+    except (KeyboardInterrupt, SystemError) as error:  # a stop while smoothing or writing: the forward track stays
+        if not stop_signals.stopped_within(error):
+            raise
+        return Smoothed(method, time.perf_counter() - started, len(track.frame), taken, True)
+    return Smoothed(method, time.perf_counter() - started, len(track.frame), taken, False)
+
+
+def _tracked_from_the_end(
+    rec, tracking: Tracking, model, forward, *, span: tuple[int, int], out: Path, background, times, late, bar
+):
+    """The frames ``span`` = (begin, stop) of the ``forward`` track (:class:`tracker.apps.smoothing.Track`) tracked
+    back from its pose at the last, with the forward run's detections (cached in OUT) and a recovery of their own
+    (:func:`tracker.apps.smoothing.track_backwards`)."""
+    import numpy as np
+
+    from tracker.apps.keypoint_stream import beside, tracked_frames
+    from tracker.apps.smoothing import track_backwards
+    from tracker.tracking.frame_loop import Tracker
+
+    begin, stop = span
+    settings = tracking.settings
+    stream = _keypoints(rec, begin, stop, out, tracking.keypoints, None, tracking.landmark_model)
+    with contextlib.ExitStack() as closing:
+        recovery = None
+        if stream is not None:
+            closing.callback(stream.close)
+            from tracker.seeding.recovery import Recovery
+
+            recovery = Recovery(model, rec.cameras)
+        last = int(np.flatnonzero(forward.frame == stop - 1)[0])
+        tracker = Tracker(model, rec.cameras, forward.poses[last], settings)
+        tracker.measuring = True
+        tracker.warm_up()
+        prepare = _preparer(tracker, background, keep=False)
+        chroma = tracker.bin_colours if settings.region.on and background is None else False
+
+        def read(start: int, end: int) -> list:
+            return list(
+                tracked_frames(
+                    None, rec, start=start, stop=end, prepare=prepare, colour=background is not None, chroma=chroma
+                )
+            )
+
+        def backwards():
+            """The frames last to first, :data:`BACK_CHUNK` at a time, the next chunk read while one is tracked."""
+            from concurrent.futures import ThreadPoolExecutor
+
+            ends = list(range(stop, begin, -BACK_CHUNK))
+            with ThreadPoolExecutor(1) as reader:
+                ahead = reader.submit(read, max(begin, ends[0] - BACK_CHUNK), ends[0])
+                for k in range(len(ends)):
+                    chunk = ahead.result()
+                    if k + 1 < len(ends):
+                        ahead = reader.submit(read, max(begin, ends[k + 1] - BACK_CHUNK), ends[k + 1])
+                    yield from reversed(chunk)
+
+        print(f"smoothing: tracking back from frame {stop - 1} to frame {begin}", file=sys.stderr)
+        return track_backwards(
+            tracker,
+            bar("tracking back from the last frame", "frame")(backwards(), total=stop - begin),
+            forward=forward,
+            keypoints=None if stream is None else beside(stream, tracker),
+            check=recovery,
+            times=times,
+            late=late,
+        )
 
 
 def _preparer(tracker, background, *, keep: bool):
@@ -454,9 +681,10 @@ def _fitted(given: str | None, rec) -> bool:
     return not given and rec.model_path is None
 
 
-def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
+def _model(given: str | None, rec, out: Path, step: int, bar: Bar, landmark_model: str):
     """The body model: ``given`` (``--model``), else the recording's model.toml, else models/human.toml fitted to the
-    person (:func:`tracker.shape.model_fit.fit_and_save`), written to OUT/model.toml."""
+    person (:func:`tracker.shape.model_fit.fit_and_save`, with the landmarks of ``landmark_model``), written to
+    OUT/model.toml."""
     from tracker.model import load_model
 
     if not _fitted(given, rec):
@@ -480,7 +708,8 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
         read_toml(GENERIC, "model", "reinstall the tracker: models/human.toml is part of it"),
         path,
         source=str(GENERIC),
-        cache=cache_file(path.parent, rec),
+        cache=cache_file(path.parent, rec, landmark_model),
+        landmark_model=landmark_model,
         progress=bar("fitting the model", "step"),
         say=lambda line: print(line, file=sys.stderr),
     )
@@ -488,15 +717,17 @@ def _model(given: str | None, rec, out: Path, step: int, bar: Bar):
     return load_model(path)
 
 
-def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: Path, settings, step: int):
+def _first_pose(
+    pose_file: Path | None, start: int, rec, model, stop: int, out: Path, settings, step: int, landmark_model: str
+):
     """The pose at the first frame, that frame (``start``, or later) and the first frame to track back to from it:
     the pose in ``pose_file`` (``--init`` or the recording's init.toml, the pose at frame ``start``:
     :func:`tracker.io.posefile.starting_pose_file`), else fitted to the keypoints of the first frames
-    (:func:`tracker.seeding.first_pose.first_pose`, detections cached in OUT/keypoints.npz).  When they cannot place
-    the body, the detector tries the next frames if it saw someone in them (a body cut by the borders, in one view
-    only, or in views that face each other), else a second of frames later, and tracking starts where the body is
-    first placed; the frames before it back to the first of those in which someone was seen, one try after another,
-    are tracked backwards from it (:func:`_tracked_back`)."""
+    (:func:`tracker.seeding.first_pose.first_pose`, detections by ``landmark_model`` cached in OUT/keypoints.npz).
+    When they cannot place the body, the detector tries the next frames if it saw someone in them (a body cut by the
+    borders, in one view only, or in views that face each other), else a second of frames later, and tracking starts
+    where the body is first placed; the frames before it back to the first of those in which someone was seen, one
+    try after another, are tracked backwards from it (:func:`_tracked_back`)."""
     from tracker.io.posefile import load_pose_file
 
     if pose_file is not None:
@@ -510,7 +741,7 @@ def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: 
     from tracker.landmarks.detect_recording import cache_file, detect_recording
     from tracker.seeding.first_pose import FRAMES, first_pose
 
-    cache = cache_file(ensure_writable_folder(out), rec)
+    cache = cache_file(ensure_writable_folder(out), rec, landmark_model)
     last_begin = max(start, stop - FRAMES)
     begin, back_to = start, None  # back_to: the first frame someone was seen in, try after try up to now
     lacking = "no init.toml" if rec.init_path is None else f"no init.toml of frame {start}"
@@ -519,7 +750,7 @@ def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: 
         print(
             f"first pose: {lacking}, fitting the body to the keypoints of frames {begin}..{last - 1}", file=sys.stderr
         )
-        keypoints, _ = detect_recording(rec, begin, last, cache=cache)
+        keypoints, _ = detect_recording(rec, begin, last, cache=cache, landmark_model=landmark_model)
         found = keypoints.frame[(keypoints.confidence > 0).any(axis=(1, 2))]
         seen = len(found) > 0
         if not seen:  # nobody here: nothing before to track back to
@@ -536,19 +767,21 @@ def _first_pose(pose_file: Path | None, start: int, rec, model, stop: int, out: 
             print(f"first pose: {error}; trying again {when}", file=sys.stderr)
 
 
-def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction):
-    """The detector's stream of every ``step``-th frame (``--keypoints``; cached in OUT/keypoints.npz), or None
-    (off); fed the tracker's images, reduced by ``reduction``, unless that is None."""
+def _keypoints(rec, begin: int, stop: int, out: Path, step: int, reduction, landmark_model: str):
+    """The detector's stream of every ``step``-th frame (``--keypoints``) by ``landmark_model``, cached in
+    OUT/keypoints.npz (:func:`tracker.landmarks.detect_recording.cache_file`), or None (off); fed the tracker's
+    images, reduced by ``reduction``, unless that is None."""
     if not step:
         return None
     from tracker.apps.keypoint_stream import KeypointStream, schedule_words
     from tracker.atomic import ensure_writable_folder
     from tracker.landmarks.detect_recording import cache_file
 
-    stream = KeypointStream(rec, begin, stop, step, cache_file(ensure_writable_folder(out), rec), reduction)
+    cache = cache_file(ensure_writable_folder(out), rec, landmark_model)
+    stream = KeypointStream(rec, begin, stop, step, cache, reduction, landmark_model=landmark_model)
     every = schedule_words(step)
     source = f"reused from {stream.cache}" if stream.reused is not None else "detected beside the tracker"
-    print(f"keypoints: {every}, {source}", file=sys.stderr)
+    print(f"keypoints: {every}, {source} (BlazePose {landmark_model})", file=sys.stderr)
     return stream
 
 

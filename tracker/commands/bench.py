@@ -42,6 +42,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     outputs.add_argument("--quiet", action="store_true", help="no progress bar (--long)")
     options.add_keypoint_options(parser, "time the keypoint cue at this rate")
+    options.add_landmark_model_option(parser)
     options.add_tuning_options(parser, ("--iterations", "--spacing", "--resample-every", "--work-side", "--region"))
 
 
@@ -67,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
             args.long,
             settings,
             keypoint_step=args.keypoints,
+            landmark_model=args.landmark_model,
             model_path=model,
             init_path=init,
             progress=bar,
@@ -74,7 +76,13 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(long, indent=2) if args.json else bench.format_long(long))
         return 0
     result = bench.run(
-        recording, settings, repeats=args.repeats, keypoint_step=args.keypoints, model_path=model, init_path=init
+        recording,
+        settings,
+        repeats=args.repeats,
+        keypoint_step=args.keypoints,
+        landmark_model=args.landmark_model,
+        model_path=model,
+        init_path=init,
     )
     print(json.dumps(result, indent=2) if args.json else bench.format_table(result))
     return 0

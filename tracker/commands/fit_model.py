@@ -41,6 +41,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     options.add_recording_options(inputs)
     options.add_cache_option(outputs)
+    options.add_landmark_model_option(parser)
     outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -64,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
         "write the fitted model to another file",
     )
     writable_file(args.out)  # before minutes of fitting, not after
-    require_detector()
-    cache = cache_file(ensure_writable_folder(options.output_folder(args.cache, rec)), rec)
+    require_detector(args.landmark_model)
+    cache = cache_file(ensure_writable_folder(options.output_folder(args.cache, rec)), rec, args.landmark_model)
     fit_and_save(
         rec,
         document,
@@ -74,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         frames=args.frames,
         tie_sides=not args.asymmetric,
         cache=cache,
+        landmark_model=args.landmark_model,
         progress=options.bar(args, "fitting", "step"),
         say=lambda line: print(line, file=sys.stderr),
     )

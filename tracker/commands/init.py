@@ -37,6 +37,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     inputs.add_argument("--start", type=int, default=0, help="the frame to place the pose in (default 0)")
     options.add_recording_options(inputs)
     options.add_cache_option(outputs)
+    options.add_landmark_model_option(parser)
     options.add_viewer_options(viewer, record=False)
 
 
@@ -63,16 +64,18 @@ def run(args: argparse.Namespace) -> int:
     )
     writable_file(out)  # before the placement, whose save button would fail in the viewer's thread
     poses = (
-        load_pose_file(start, model) if start is not None else keypoint_pose(rec, model, args.start, cache=args.cache)
+        load_pose_file(start, model)
+        if start is not None
+        else keypoint_pose(rec, model, args.start, cache=args.cache, landmark_model=args.landmark_model)
     )
     Placement(scene(args, rec, model, settings=Settings()), rec, model, poses, out, frame=args.start)
     return serve(f"placing the pose of frame {args.start} of {rec.path}; save writes {out}")
 
 
-def keypoint_pose(rec, model, start: int, *, cache: str | None = None) -> np.ndarray:
-    """The pose fitted to the keypoints of the frames from ``start`` (docs/keypoints.md, "Automatic first pose"),
-    their detections cached in the folder ``cache`` (``--cache``, default out/<recording name>); the rest pose where
-    the cameras look when the detector is not installed."""
+def keypoint_pose(rec, model, start: int, *, cache: str | None = None, landmark_model: str) -> np.ndarray:
+    """The pose fitted to the keypoints (by ``landmark_model``) of the frames from ``start`` (docs/keypoints.md,
+    "Automatic first pose"), their detections cached in the folder ``cache`` (``--cache``, default out/<recording
+    name>); the rest pose where the cameras look when the detector is not installed."""
     from tracker.atomic import ensure_writable_folder
     from tracker.landmarks.detect_recording import cache_file, detect_recording
     from tracker.landmarks.detector import missing
@@ -85,7 +88,7 @@ def keypoint_pose(rec, model, start: int, *, cache: str | None = None) -> np.nda
         print(f"starting from the rest pose: {reason}")
         return rest_poses(model, in_view(rec.cameras))
     stop = min(rec.frame_count, start + FRAMES)
-    path = cache_file(ensure_writable_folder(options.output_folder(cache, rec)), rec)
-    keypoints, _ = detect_recording(rec, start, stop, cache=path)
+    path = cache_file(ensure_writable_folder(options.output_folder(cache, rec)), rec, landmark_model)
+    keypoints, _ = detect_recording(rec, start, stop, cache=path, landmark_model=landmark_model)
     print(f"starting from the pose fitted to the keypoints of frames {start}..{stop - 1} ({path})")
     return first_pose(rec, model, keypoints)

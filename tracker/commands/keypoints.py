@@ -29,11 +29,13 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     options.add_recording_options(inputs)
     inputs.add_argument("--start", type=int, default=0, help="first frame (default 0)")
     inputs.add_argument("--frames", type=options.positive_int, help="number of frames (default: all)")
+    options.add_landmark_model_option(parser)
     outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Detect (or reuse OUT/keypoints.npz when it holds the same frames, cameras and detector, or go on from where it
+    """Detect (or reuse OUT/keypoints.npz, or the --landmark-model's own file, when it holds the same frames, cameras
+    and detector, or go on from where it
     stops when it holds the first of them) and print the time it took per view and how often a person was found per
     camera.  Interrupted (Ctrl-C, SIGTERM, SIGHUP), what was detected is kept in OUT/keypoints.npz and the
     run returns 130 (the CLI reports the signal's own code)."""
@@ -48,11 +50,16 @@ def run(args: argparse.Namespace) -> int:
         )
     stop = rec.frame_count if args.frames is None else min(rec.frame_count, args.start + args.frames)
     out = ensure_writable_folder(options.output_folder(args.out, rec))
-    path = cache_file(out, rec)
+    path = cache_file(out, rec, args.landmark_model)
     started = time.perf_counter()
     try:
         keypoints, detected = detect_recording(
-            rec, args.start, stop, cache=path, progress=options.bar(args, "detecting", "frame")
+            rec,
+            args.start,
+            stop,
+            cache=path,
+            progress=options.bar(args, "detecting", "frame"),
+            landmark_model=args.landmark_model,
         )
     except KeyboardInterrupt:
         print(

@@ -71,14 +71,18 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     outputs.add_argument(
         "--record",
         metavar="DIR",
-        help="also write the tracked frames as a recording folder that `tracker track DIR` replays to the same poses",
+        help="also write the tracked frames as a recording folder that `tracker track DIR --smooth none` replays to "
+        "the same poses",
     )
-    options.add_tuning_options(parser)
+    options.add_tuning_options(parser, recorded=False)
     options.add_keypoint_options(
         parser,
         "offer every N-th frame set to the 2-D keypoint detector, a worker process that takes one when it is free "
         "(the tracker never waits), and fuse its landmarks with the edges",
     )
+    from tracker.landmarks.landmark_models import LIVE
+
+    options.add_landmark_model_option(parser, LIVE)
     options.add_live_view_options(viewer, "while it tracks")
     options.add_viewer_options(viewer, record=False)
 
@@ -144,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         if step:
             from tracker.landmarks.live_detection import LiveDetector
 
-            detector = LiveDetector(cameras, step)
+            detector = LiveDetector(cameras, step, landmark_model=args.landmark_model)
             stack.callback(detector.close)
             print("starting the keypoint detector...", file=sys.stderr, flush=True)
             detector.wait_until_ready()
@@ -155,8 +159,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'poses.npz'} ({summary.frames} frames)")
     if recorder is not None:
         print(
-            f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record}` with the "
-            "same settings replays them)"
+            f"wrote recording {args.record} ({summary.recorded} frames; `tracker track {args.record} --smooth none` "
+            "with the same settings replays them)"
         )
     rate = summary.frames / summary.seconds if summary.seconds > 0 else 0.0
     captured = ", ".join(f"{name} {count}" for name, count in zip(counts.names, counts.captured))

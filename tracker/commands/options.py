@@ -125,6 +125,21 @@ def add_keypoint_options(parser: argparse.ArgumentParser, what: str | None = Non
     )
 
 
+def add_landmark_model_option(parser: Options, default: str | None = None) -> None:
+    """``--landmark-model lite|full|heavy``: the keypoint detector's landmark model, ``default`` (if not the one of
+    the commands that read recorded folders, :data:`tracker.landmarks.landmark_models.RECORDED`) when not given."""
+    from tracker.landmarks.landmark_models import MODELS, RECORDED
+
+    default = default or RECORDED
+    parser.add_argument(
+        "--landmark-model",
+        choices=MODELS,
+        default=default,
+        help=f"the keypoint detector's landmark model (BlazePose lite, full or heavy: lighter is faster, heavier more "
+        f"accurate; docs/keypoints.md); each model's detections are cached apart (default {default})",
+    )
+
+
 def camera_names(text: str | None) -> list[str] | None:
     """The names in a comma-separated list of cameras (``--cameras``, ``--fix``); None when not given, empty when
     it names none (``""`` or ``","``)."""
@@ -168,7 +183,7 @@ def add_cache_option(outputs: Options) -> None:
         "--cache",
         metavar="DIR",
         help="folder that keeps the keypoint detector's landmarks (keypoints.npz), which later runs reuse "
-        "(default: out/<recording name>)",
+        "(default: out/<recording name>, or out/<recording name>-<hash> when that holds another recording's)",
     )
 
 
@@ -194,14 +209,17 @@ KINDS: dict[str | None, Callable[[str], Any]] = {
 }
 
 
-def add_tuning_options(parser: argparse.ArgumentParser, which: tuple[str, ...] | None = None) -> None:
-    """The tracker's tuning options that a command offers (their flags, ``which``; default all), one argument group
-    per settings group, each with the field's help, kind, choices and default (:mod:`tracker.tracking.settings`)."""
+def add_tuning_options(
+    parser: argparse.ArgumentParser, which: tuple[str, ...] | None = None, *, recorded: bool = True
+) -> None:
+    """The tracker's tuning options that a command offers (their flags, ``which``; default all, but those only for a
+    recorded folder when not ``recorded``), one argument group per settings group, each with the field's help, kind,
+    choices and default (:mod:`tracker.tracking.settings`)."""
     from tracker.tracking.settings import Settings
 
     defaults, groups = Settings(), {}
     for flag, (group, spec) in tuning_fields().items():
-        if which is not None and flag not in which:
+        if which is not None and flag not in which or spec.metadata["recorded"] and not recorded:
             continue
         if group not in groups:
             title = (type(getattr(defaults, group)).__doc__ or group).strip()
@@ -280,6 +298,7 @@ def add_tracking_options(parser: argparse.ArgumentParser, *, inputs: Options) ->
     inputs.add_argument("--frames", type=positive_int, help="number of frames to track (default: all)")
     add_tuning_options(parser)
     add_keypoint_options(parser)
+    add_landmark_model_option(parser)
     parser.add_argument(
         "--background",
         default="none",
@@ -337,9 +356,42 @@ def recording(args: argparse.Namespace):
     return open_recording(args.recording, camera_names(args.cameras), args.calib)
 
 
-def output_folder(given: str | None, rec) -> Path:
-    """The folder a command writes a recording's results to: ``given`` (``--out``), else out/<recording name>."""
-    return Path(given) if given else Path("out") / rec.path.resolve().name
+HOLDS = "recording.txt"
+"""The file in a default output folder that names the recording whose results it holds (its resolved path)."""
+
+
+def output_folder(given: str | None, rec, *, claim: bool = True) -> Path:
+    """The folder a command writes a recording's results to: ``given`` (``--out``), else the default,
+    out/<recording name>, unless that folder holds another recording's (its :data:`HOLDS` names another folder):
+    then out/<recording name>-<8 hex digits of the SHA-1 of the recording's resolved path>, so that two recordings
+    whose folders share a name never mix their results (formats.md, "Output folders").  With ``claim`` (a command
+    that writes there) the default folder is made, :data:`HOLDS` written in it when it has none, and the folder said
+    on standard error."""
+    if given:
+        return Path(given)
+    import hashlib
+
+    from tracker.atomic import atomic_write
+
+    source = rec.path.resolve()
+    folder = Path("out") / source.name
+    held = _holder(folder)
+    if held is not None and held != str(source):
+        folder = folder.with_name(f"{source.name}-{hashlib.sha1(str(source).encode()).hexdigest()[:8]}")
+    if claim:
+        if _holder(folder) is None:
+            atomic_write(folder / HOLDS, lambda file: file.write(f"{source}\n".encode()))
+        other = "" if held is None or held == str(source) else f" (out/{source.name} holds {held})"
+        print(f"output folder: {folder}{other}", file=sys.stderr)
+    return folder
+
+
+def _holder(folder: Path) -> str | None:
+    """The recording (resolved path) whose results ``folder`` holds, as its :data:`HOLDS` says; None without one."""
+    try:
+        return (folder / HOLDS).read_text().strip() or None
+    except (OSError, UnicodeDecodeError):
+        return None
 
 
 def tracking(args: argparse.Namespace) -> tuple[Recording, Tracking]:
@@ -351,6 +403,7 @@ def tracking(args: argparse.Namespace) -> tuple[Recording, Tracking]:
     return rec, Tracking(
         settings_from(args, rec.fps),
         keypoint_step_at(args, rec.fps),
+        args.landmark_model,
         start=args.start,
         frames=args.frames,
         model=args.model,
@@ -399,7 +452,7 @@ def tracked(given: str | None, rec, model) -> tuple[Path, dict]:
     from tracker.io.poses import load_poses
     from tracker.status import LOST
 
-    path = Path(given) if given else output_folder(None, rec) / "poses.npz"
+    path = Path(given) if given else output_folder(None, rec, claim=False) / "poses.npz"
     if not given and not path.is_file():
         raise TrackerInputError(
             f"{path}: no poses to review or refine; run `tracker track {rec.path}` first or pass --poses"

@@ -40,13 +40,15 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     score.add_argument("out", help="folder of the renders")
     score.add_argument("results", help="folder of the tracked results, RESULTS/<name>/poses.npz")
     _only(score)
+    _landmark_model(score, "whose detections beside the results are scored too")
     score.add_argument("--json", action="store_true", help="print the scores as JSON")
     run = actions.add_parser(
         "run",
         help="track every render (tracker track OUT/<name> --out RESULTS/<name> TRACK OPTIONS), then score",
-        usage="tracker suite run [--only NAMES] [--json] [--quiet] OUT RESULTS [-- TRACK OPTIONS]",
+        usage="tracker suite run [--only NAMES] [--landmark-model M] [--json] [--quiet] OUT RESULTS [-- TRACK OPTIONS]",
     )
     _only(run)
+    _landmark_model(run, "that tracker track runs, and whose detections are scored")
     run.add_argument("--json", action="store_true", help="print the scores as JSON")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("out", help="folder of the renders")
@@ -63,11 +65,18 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     landmarks.add_argument("out", help="folder of the renders")
     landmarks.add_argument("keypoints", help="folder of the detections, KP/<name>/keypoints.npz (tracker keypoints)")
     _only(landmarks)
+    _landmark_model(landmarks, "whose detections are scored (KP/<name>/keypoints-<model>.npz but for the default)")
     landmarks.add_argument("--json", action="store_true", help="print the scores as JSON")
 
 
 def _only(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", metavar="NAMES", help="comma-separated renders of the suite (default: all)")
+
+
+def _landmark_model(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--landmark-model``, the detector's model ``what`` says."""
+    group = parser.add_argument_group(f"the landmark model {what}")
+    options.add_landmark_model_option(group)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -93,7 +102,8 @@ def _make(args: argparse.Namespace) -> int:
 def _score(args: argparse.Namespace) -> int:
     from tracker.synthetic.suite import format_summary, made, score, summary
 
-    data = summary(score(args.out, args.results, made(args.out, options.camera_names(args.only))))
+    renders = made(args.out, options.camera_names(args.only))
+    data = summary(score(args.out, args.results, renders, landmark_model=args.landmark_model))
     print(json.dumps(data, indent=2) if args.json else format_summary(data))
     return 0
 
@@ -105,10 +115,15 @@ def _run(args: argparse.Namespace) -> int:
     if "--" in extra:
         misplaced = " ".join(extra[: extra.index("--")])
         raise TrackerInputError(f"{misplaced}: give the suite's options before OUT, and tracker track's after --")
+    if any(word.split("=")[0] == "--landmark-model" for word in extra):
+        raise TrackerInputError(
+            "--landmark-model: give it before OUT, where it names the detections scored too, not after --"
+        )
+    extra += ["--landmark-model", args.landmark_model]
     renders = made(args.out, options.camera_names(args.only))
     for render in options.bar(args, "suite run", "render", leave=True)(renders):
         _track(Path(args.out) / render.name, Path(args.results) / render.name, extra)
-    data = summary(score(args.out, args.results, renders))
+    data = summary(score(args.out, args.results, renders, landmark_model=args.landmark_model))
     print(json.dumps(data, indent=2) if args.json else format_summary(data))
     return 0
 
@@ -117,7 +132,8 @@ def _landmarks(args: argparse.Namespace) -> int:
     from tracker.synthetic.keypoint_accuracy import accuracy_rows, format_accuracy, suite_accuracy
     from tracker.synthetic.suite import made
 
-    scores = suite_accuracy(args.out, args.keypoints, made(args.out, options.camera_names(args.only)))
+    renders = made(args.out, options.camera_names(args.only))
+    scores = suite_accuracy(args.out, args.keypoints, renders, landmark_model=args.landmark_model)
     print(json.dumps(accuracy_rows(scores), indent=2) if args.json else format_accuracy(scores))
     return 0
 

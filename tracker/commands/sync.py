@@ -53,6 +53,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         help="--refine: pose at the first frame (default: the recording's init.toml, else fitted to the keypoints)",
     )
     refining.add_argument("--frames", type=options.positive_int, help="--refine: frames to track (default: all)")
+    options.add_landmark_model_option(parser)
     outputs.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -100,7 +101,12 @@ def run(args: argparse.Namespace) -> int:
             )
     out = ensure_writable_folder(options.output_folder(args.out, rec))
     keypoints, _ = detect_recording(
-        rec, 0, rec.frame_count, cache=cache_file(out, rec), progress=options.bar(args, "detecting", "frame")
+        rec,
+        0,
+        rec.frame_count,
+        cache=cache_file(out, rec, args.landmark_model),
+        progress=options.bar(args, "detecting", "frame"),
+        landmark_model=args.landmark_model,
     )
     found = camera_offsets(
         keypoints.pixels, keypoints.confidence, rec.cameras, fps=rec.fps, reach=min(args.reach, duration / 2)
@@ -143,6 +149,7 @@ def _refined(args: argparse.Namespace, rec, found: Offsets, out):
     tracking = Tracking(
         Settings().but(motion=dict(frame_rate=rec.fps)),
         default_step(rec.fps),
+        args.landmark_model,
         frames=args.frames,
         model=args.model,
         init=args.init,

@@ -9,6 +9,8 @@ Arrays (formats.md), F frames, N components, J joints:
     joint_names (J,) str
     joints (F, J, 3) float64    joint centres in world, metres
     status (F,) int8            0 tracked, 1 uncertain, 2 lost, 3 re-seeded from the keypoints
+    held (F, N) int8            per part 0 held by the images, 1 loosely held, 2 unseen: carried by the
+                                prior and the joints alone (tracker.status; written by tracker track)
     residual (F,) float64       robust mean edge distance, pixels (tracker points: the RMS
                                 marker-to-node distance, mm)
 
@@ -38,12 +40,23 @@ import numpy as np
 from tracker.atomic import atomic_write, ensure_writable_folder
 from tracker.errors import TrackerInputError
 from tracker.npzfile import read_npz
-from tracker.status import LOST, RESEEDED, TRACKED, UNCERTAIN
+from tracker.status import HELD, LOOSE, LOST, RESEEDED, TRACKED, UNCERTAIN, UNSEEN
 
 _BUFFER = 256
 """Rows a writer holds in memory before appending them to its raw files."""
 
-_KEYS = ("frame", "time", "component_names", "poses", "joint_names", "joints", "status", "residual", "elapsed")
+_KEYS = (
+    "frame",
+    "time",
+    "component_names",
+    "poses",
+    "joint_names",
+    "joints",
+    "status",
+    "held",
+    "residual",
+    "elapsed",
+)
 """The archive's arrays, in its order."""
 
 _CHUNK = 1 << 22
@@ -86,6 +99,7 @@ class PosesWriter:
             "poses": np.empty((_BUFFER, n, 4, 4), np.float64),
             "joints": np.empty((_BUFFER, j, 3), np.float64),
             "status": np.empty(_BUFFER, np.int8),
+            "held": np.empty((_BUFFER, n), np.int8),
             "residual": np.empty(_BUFFER, np.float64),
             "elapsed": np.empty(_BUFFER, np.float64),
             "time": np.empty(_BUFFER, np.float64),
@@ -94,6 +108,7 @@ class PosesWriter:
         self._removal = weakref.finalize(self, shutil.rmtree, self._rows, True)
         self._first_frame = 0
         self._timed: bool | None = None  # whether rows come with their own times (all or none)
+        self._parted: bool | None = None  # whether rows say which parts the images hold (all or none)
         self._count = 0
         self._on_disk = 0
         self._buffered = 0
@@ -113,21 +128,28 @@ class PosesWriter:
         residual: float,
         elapsed: float = np.nan,
         time: float | None = None,
+        held: np.ndarray | None = None,
     ) -> None:
         """Add one frame: poses (N, 4, 4) world_from_component, joints (J, 3), status 0-3, residual px,
-        the seconds the tracker spent on it (NaN if unknown) and, for frames taken at measured times (live
-        capture), its time in seconds; without times, time = (frame - first frame) / fps."""
+        the seconds the tracker spent on it (NaN if unknown), for frames taken at measured times (live
+        capture) its time in seconds (without times, time = (frame - first frame) / fps), and which parts the
+        images hold, ``held`` (N,) codes 0-2 (:data:`tracker.status.HELD`, ...), given for every frame or none."""
         if self._closed:
             raise ValueError(f"{self.path}: writer is closed")
         if self._timed is None:
             self._timed = time is not None
         elif self._timed != (time is not None):
             raise ValueError(f"{self.path}: give every frame a time or none")
+        if self._parted is None:
+            self._parted = held is not None
+        elif self._parted != (held is not None):
+            raise ValueError(f"{self.path}: say which parts are held in every frame or in none")
         row: dict[str, Any] = {
             "frame": frame_index,
             "poses": poses,
             "joints": joints,
             "status": status,
+            "held": self._buffer["held"][0] if held is None else held,
             "residual": residual,
             "elapsed": elapsed,
             "time": np.nan if time is None else time,
@@ -137,6 +159,8 @@ class PosesWriter:
                 raise ValueError(f"{key} has shape {np.shape(value)}, expected {self._buffer[key].shape[1:]}")
         if status not in (TRACKED, UNCERTAIN, LOST, RESEEDED):
             raise ValueError(f"status must be 0, 1, 2 or 3, got {status}")
+        if held is not None and not np.isin(held, (HELD, LOOSE, UNSEEN)).all():
+            raise ValueError(f"held must hold 0, 1 or 2, got {np.unique(held)}")
         if self._count == 0:
             self._first_frame = int(frame_index)
         if self._buffered == len(self._buffer["frame"]):
@@ -194,7 +218,8 @@ class PosesWriter:
         """The archive np.savez would write (stored .npy members), streamed from the raw files."""
         with zipfile.ZipFile(file, "w", zipfile.ZIP_STORED, allowZip64=True) as archive:
             for key in _KEYS:
-                self._member(archive, key)
+                if key != "held" or self._parted:
+                    self._member(archive, key)
 
     def _member(self, archive: zipfile.ZipFile, key: str) -> None:
         with archive.open(f"{key}.npy", "w", force_zip64=True) as member:
@@ -232,9 +257,9 @@ def load_poses(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Arrays of a poses.npz or truth.npz, validated and in their canonical dtypes.
 
     ``joint_names`` and ``joints`` are required; ``frame``, ``time``, ``status``,
-    ``residual``, ``elapsed``, ``component_names`` and ``poses`` are optional (truth files
-    often hold only the joints; a missing ``frame`` is filled in as 0..F-1), and so is any extra
-    array, returned as is.
+    ``residual``, ``elapsed``, ``component_names``, ``poses`` and ``held`` are optional (truth files
+    often hold only the joints, files of older runs no ``held``; a missing ``frame`` is filled in as 0..F-1), and
+    so is any extra array, returned as is.
     Byte-string name arrays are decoded to unicode.
     """
     path = Path(path)
@@ -294,4 +319,10 @@ def _validated(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarra
         if "component_names" not in out:
             raise fail("'poses' needs 'component_names'")
         out["poses"] = numbers("poses", (frames, len(out["component_names"]), 4, 4), np.float64)
+    if "held" in arrays:
+        if "component_names" not in out:
+            raise fail("'held' needs 'component_names'")
+        out["held"] = numbers("held", (frames, len(out["component_names"])), np.int8, integer=True)
+        if not np.isin(out["held"], (HELD, LOOSE, UNSEEN)).all():
+            raise fail("'held' holds values other than 0, 1, 2")
     return out

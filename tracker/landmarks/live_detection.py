@@ -24,9 +24,9 @@ from tracker.errors import TrackerInputError
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_world
 from tracker.landmarks.consistency import consistent
 from tracker.landmarks.detector import (
-    COMPLEXITY,
     Detector,
     detect_views,
+    detector_name,
     native_logs_muted,
     require_detector,
     view_threads,
@@ -43,15 +43,15 @@ _START_WAIT = 120.0
 """Seconds the worker may take to load its landmarkers."""
 
 
-def _work(cameras: list[Camera], jobs, results, complexity: int = COMPLEXITY) -> None:
-    """The worker process: detect every frame set taken from ``jobs`` (None ends it) with the landmark model
-    ``complexity``, the views side by side in threads, and put (number, pixels, confidence) of the checked landmarks on
-    ``results``; an error is put instead and ends it.  Its landmarkers load their networks before it says it is ready.
-    The stop signals are the parent's to handle (:mod:`tracker.stop_signals`)."""
+def _work(cameras: list[Camera], jobs, results, landmark_model: str) -> None:
+    """The worker process: detect every frame set taken from ``jobs`` (None ends it) with ``landmark_model``, the views
+    side by side in threads, and put (number, pixels, confidence) of the checked landmarks on ``results``; an error is
+    put instead and ends it.  Its landmarkers load their networks before it says it is ready.  The stop signals are the
+    parent's to handle (:mod:`tracker.stop_signals`)."""
     stop_signals.ignore()
     try:
         with native_logs_muted(), ThreadPoolExecutor(view_threads(len(cameras)), "view") as pool:
-            detectors = [Detector(complexity=complexity) for _ in cameras]
+            detectors = [Detector(landmark_model=landmark_model) for _ in cameras]
             list(pool.map(Detector.warm_up, detectors))
             names = tuple(camera.name for camera in cameras)
             results.put(READY)
@@ -63,7 +63,9 @@ def _work(cameras: list[Camera], jobs, results, complexity: int = COMPLEXITY) ->
                 for camera, found in enumerate(detect_views(detectors, images, cameras=cameras, pool=pool)):
                     pixels[camera], confidence[camera] = found.pixels, found.confidence
                 world = np.full((1, len(cameras), len(LANDMARKS), 3), np.nan)
-                raw = Keypoints(np.array([number]), names, pixels[None], confidence[None], world)
+                raw = Keypoints(
+                    np.array([number]), names, pixels[None], confidence[None], world, detector_name(landmark_model)
+                )
                 checked = consistent(raw, cameras)[0]
                 results.put((number, checked.pixels[0], checked.confidence[0]))
     except BaseException as error:  # handed to the tracker, raised there
@@ -71,11 +73,11 @@ def _work(cameras: list[Camera], jobs, results, complexity: int = COMPLEXITY) ->
 
 
 class LiveDetector:
-    """A worker process detecting the frame sets offered to it when it is free (module docstring), with the landmark
-    model ``complexity`` (:data:`tracker.landmarks.detector.COMPLEXITY`)."""
+    """A worker process detecting the frame sets offered to it when it is free, with ``landmark_model`` (module
+    docstring)."""
 
-    def __init__(self, cameras: list[Camera], step: int, *, complexity: int = COMPLEXITY):
-        require_detector()
+    def __init__(self, cameras: list[Camera], step: int, *, landmark_model: str):
+        require_detector(landmark_model)
         self.step = step
         context = multiprocessing.get_context("spawn")
         with stop_signals.held():
@@ -83,7 +85,7 @@ class LiveDetector:
             self.results = context.Queue()
             self.worker = context.Process(
                 target=_work,
-                args=(cameras, self.jobs, self.results, complexity),
+                args=(cameras, self.jobs, self.results, landmark_model),
                 name="keypoint detector",
                 daemon=True,
             )

@@ -8,7 +8,8 @@ Arrays, F frames, C cameras, 33 landmarks (:data:`tracker.landmarks.body_landmar
     pixels (F, C, 33, 2) float64         image position, pixels (NaN: no person found)
     confidence (F, C, 33) float64        visibility, 0..1 (0: no person found)
     world (F, C, 33, 3) float64          metric world landmarks, metres, origin between the hips
-    detector () str                      what made them (a cache of another detector is not reused)
+    detector () str                      what made them, the landmark model named in it (a cache of another detector
+                                         is not reused: :func:`tracker.landmarks.detector.detector_name`)
     recording () str                     the recording's fingerprint (optional; "" when unknown)
     mask (F, C, 256, 256) uint8          the person's segmentation, probability x 255, over ``square`` (optional)
     square (F, C, 3) float64             centre x, y and side of the mask's square, image pixels (NaN: no mask)
@@ -29,22 +30,21 @@ from tracker.atomic import atomic_write
 from tracker.errors import TrackerInputError
 from tracker.landmarks.body_landmarks import LANDMARKS
 from tracker.landmarks.crop import CROP
-from tracker.landmarks.detector import DETECTOR
 from tracker.npzfile import read_npz
 
 
 @dataclass(frozen=True)
 class Keypoints:
     """The landmarks of frames ``frame`` (F,) in cameras ``camera_names``: pixels (F, C, 33, 2),
-    confidence (F, C, 33), world (F, C, 33, 3); and the person's masks (F, C, CROP, CROP) uint8 over their
-    squares (F, C, 3), None when not known (a file without them)."""
+    confidence (F, C, 33), world (F, C, 33, 3); what made them (``detector``, "" when not known); and the person's
+    masks (F, C, CROP, CROP) uint8 over their squares (F, C, 3), None when not known (a file without them)."""
 
     frame: np.ndarray
     camera_names: tuple[str, ...]
     pixels: np.ndarray
     confidence: np.ndarray
     world: np.ndarray
-    detector: str = DETECTOR
+    detector: str = ""
     recording: str = ""
     mask: np.ndarray | None = None
     square: np.ndarray | None = None

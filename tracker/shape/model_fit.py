@@ -133,17 +133,21 @@ def fit_shape(
     frames: int = FRAMES,
     tie_sides: bool = True,
     cache: str | Path | None = None,
+    landmark_model: str,
     progress: Callable[..., Iterable] = lambda iterable, total=None: iterable,
     say: Callable[[str], None] = lambda text: None,
 ) -> ShapeFit:
     """The model TOML ``document`` (parsed) fitted to the person in ``recording`` (module docstring), from
-    ``frames`` frames spread over it; detections cached in ``cache``.  ``progress(iterable, total=)`` wraps long
-    loops (e.g. a tqdm bar) and ``say`` reports each stage.  One-line errors when too few frames show the body."""
+    ``frames`` frames spread over it; detections by ``landmark_model`` cached in ``cache``.
+    ``progress(iterable, total=)`` wraps long loops (e.g. a tqdm bar) and ``say`` reports each stage.  One-line
+    errors when too few frames show the body."""
     model = model_from_dict(document)
     layout = Layout.of(model, tie_sides=tie_sides)
     step = max(1, recording.frame_count // max(frames, 1))
     say(f"keypoints: detecting the body in one frame of every {step}" if step > 1 else "keypoints: detecting the body")
-    keypoints, _ = detect_recording(recording, 0, recording.frame_count, step=step, cache=cache, progress=progress)
+    keypoints, _ = detect_recording(
+        recording, 0, recording.frame_count, step=step, cache=cache, progress=progress, landmark_model=landmark_model
+    )
     say("silhouettes: which landmarks lie on the person")
     keypoints, coloured, masks = _on_person(recording, keypoints, step, progress)
     found = frame_by_frame(keypoints, recording.cameras, model)

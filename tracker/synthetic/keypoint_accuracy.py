@@ -14,7 +14,10 @@ bounding box of every true joint centre's image. With d the detected pixel:
     swapped  the share of views on the body whose pairs fit better swapped (summed distances over the
              pairs with both landmarks scored), as the keypoint cue judges a swap
 
-:func:`suite_accuracy` scores every render of the hard suite (docs/suite.md) from KP/<name>/keypoints.npz.
+:func:`suite_accuracy` scores every render of the hard suite (docs/suite.md) from KP/<name>/keypoints.npz (or the file
+of another landmark model), and beside those scores the landmarks triangulated frame by frame
+(:mod:`tracker.synthetic.detector_baseline`): their mean distance from the true joint centres in millimetres, and the
+share of the joints the truth has that they give.
 """
 
 from __future__ import annotations
@@ -30,8 +33,11 @@ from tracker.camera import Camera, load_calibration
 from tracker.errors import TrackerInputError
 from tracker.io.poses import load_poses
 from tracker.landmarks.body_landmarks import LANDMARKS, landmark_points
+from tracker.landmarks.detect_recording import cache_name
+from tracker.landmarks.landmark_models import RECORDED
 from tracker.landmarks.store import Keypoints, load_keypoints
 from tracker.model import Model, load_model
+from tracker.synthetic.detector_baseline import Baseline, baseline
 from tracker.synthetic.props import Box
 from tracker.synthetic.suite import Render
 from tracker.synthetic.synth import seen_joints, table_before
@@ -114,49 +120,73 @@ def accuracy(
     )
 
 
+Scores = tuple[Render, Accuracy, Baseline]
+"""A render's scores: its landmarks' in the images, and triangulated frame by frame."""
+
+
 def suite_accuracy(
-    out: str | os.PathLike, keypoints: str | os.PathLike, renders: list[Render]
-) -> list[tuple[Render, Accuracy]]:
-    """Each render's scores: ``keypoints``/<name>/keypoints.npz against ``out``/<name>/ (its truth.npz,
+    out: str | os.PathLike, keypoints: str | os.PathLike, renders: list[Render], *, landmark_model: str = RECORDED
+) -> list[Scores]:
+    """Each render's scores: the detections of ``landmark_model`` in ``keypoints``/<name>/ (keypoints.npz, or its
+    own file: :func:`tracker.landmarks.detect_recording.cache_name`) against ``out``/<name>/ (its truth.npz,
     calibration.toml and model.toml, and the tables its staging stands before the cameras)."""
     scores = []
     for render in renders:
-        folder, path = Path(out) / render.name, Path(keypoints) / render.name / "keypoints.npz"
+        folder, path = Path(out) / render.name, Path(keypoints) / render.name / cache_name(landmark_model)
         if not path.is_file():
-            raise TrackerInputError(f"{path}: not found; detect it with tracker keypoints {folder} --out {path.parent}")
+            raise TrackerInputError(
+                f"{path}: not found; detect it with tracker keypoints {folder} --out {path.parent} --landmark-model "
+                f"{landmark_model}"
+            )
         cameras = load_calibration(folder / "calibration.toml")
         props = tuple(table_before(camera) for camera in render.staging.table_cameras(cameras))
         truth = load_poses(folder / "truth.npz")
-        found = load_keypoints(path)
-        scores.append(
-            (render, accuracy(found, cameras, truth["poses"], model=load_model(folder / "model.toml"), props=props))
-        )
+        found, model = load_keypoints(path), load_model(folder / "model.toml")
+        scored = accuracy(found, cameras, truth["poses"], model=model, props=props)
+        scores.append((render, scored, baseline(found, truth, cameras=cameras, model=model)))
     return scores
 
 
-def accuracy_rows(scores: list[tuple[Render, Accuracy]]) -> list[dict]:
-    """The scores as plain data, one dict per render (its name, then the fields of :class:`Accuracy`); NaN
-    becomes None."""
-    return [
-        {"name": render.name, **{key: None if _nan(value) else value for key, value in vars(score).items()}}
-        for render, score in scores
-    ]
+def accuracy_rows(scores: list[Scores]) -> list[dict]:
+    """The scores as plain data, one dict per render (its name, the fields of :class:`Accuracy`, then the
+    triangulated landmarks' ``triangulated_mm`` and ``coverage``); NaN becomes None."""
+    rows = []
+    for render, score, alone in scores:
+        values = {**vars(score), "triangulated_mm": alone.landmarks_mm, "coverage": alone.coverage}
+        rows.append({"name": render.name, **{key: None if _nan(value) else value for key, value in values.items()}})
+    return rows
 
 
 def _nan(value: float) -> bool:
     return isinstance(value, float) and math.isnan(value)
 
 
-def format_accuracy(scores: list[tuple[Render, Accuracy]]) -> str:
-    """The scores as a text table, one row per render."""
-    width = max(len("render"), *(len(render.name) for render, _ in scores))
-    lines = [f"{'render':<{width}}  {'found':>11}  {'median':>6}  {'> 10 %':>6}  {'on body':>7}  swapped"]
-    for render, score in scores:
+def format_accuracy(scores: list[Scores]) -> str:
+    """The scores as a text table, one row per render, then the mean of the triangulated error over the renders."""
+    width = max(len("render"), *(len(render.name) for render, _, _ in scores))
+    lines = [
+        f"{'render':<{width}}  {'found':>11}  {'median':>6}  {'> 10 %':>6}  {'on body':>7}  {'swapped':>7}  "
+        f"{'3-D mm':>6}  {'coverage':>8}"
+    ]
+    for render, score, alone in scores:
         lines.append(
             f"{render.name:<{width}}  {score.found:>5}/{score.views:<5}  {_percent(score.median):>6}  "
-            f"{_percent(score.wrong):>6}  {score.on_body:>7}  {_percent(score.swapped):>7}"
+            f"{_percent(score.wrong):>6}  {score.on_body:>7}  {_percent(score.swapped):>7}  "
+            f"{_millimetres(alone.landmarks_mm):>6}  {_percent(alone.coverage):>8}"
         )
+    numbers = [alone.landmarks_mm for _, _, alone in scores if not math.isnan(alone.landmarks_mm)]
+    mean = sum(numbers) / len(numbers) if numbers else math.nan
+    lines += [
+        "",
+        f"3-D: the landmarks triangulated frame by frame, mean error {_millimetres(mean)} mm over the renders "
+        "scored; coverage: the share of the truth's joints they give",
+    ]
     return "\n".join(lines)
+
+
+def _millimetres(value: float) -> str:
+    """Millimetres with one decimal, or - for NaN."""
+    return "-" if math.isnan(value) else f"{value:.1f}"
 
 
 def _percent(value: float) -> str:

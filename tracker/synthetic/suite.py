@@ -21,6 +21,8 @@ from tracker.camera import load_calibration
 from tracker.errors import TrackerInputError
 from tracker.evaluate import Report, evaluate
 from tracker.io.poses import load_poses
+from tracker.landmarks.detect_recording import cache_name
+from tracker.landmarks.landmark_models import RECORDED
 from tracker.landmarks.store import load_keypoints
 from tracker.model import load_model
 from tracker.synthetic.detector_baseline import Baseline, baseline
@@ -250,9 +252,12 @@ Scored = tuple[Render, Report, Baseline | None]
 """A render's report, and the detector's baseline where its results hold the landmarks (keypoints.npz)."""
 
 
-def score(out: str | os.PathLike, results: str | os.PathLike, renders: list[Render]) -> list[Scored]:
+def score(
+    out: str | os.PathLike, results: str | os.PathLike, renders: list[Render], *, landmark_model: str = RECORDED
+) -> list[Scored]:
     """Each render's report: ``results``/<name>/poses.npz against ``out``/<name>/truth.npz, and the detector's
-    baseline (:mod:`tracker.synthetic.detector_baseline`) from ``results``/<name>/keypoints.npz if there is one."""
+    baseline (:mod:`tracker.synthetic.detector_baseline`) from the detections of ``landmark_model`` beside it,
+    ``results``/<name>/keypoints.npz (:func:`tracker.landmarks.detect_recording.cache_name`), if there are any."""
     results = Path(results)
     if not results.is_dir():
         raise TrackerInputError(f"{results}: results folder not found; track the suite with tracker suite run")
@@ -265,7 +270,7 @@ def score(out: str | os.PathLike, results: str | os.PathLike, renders: list[Rend
             )
         recording = Path(out) / render.name
         tracked, truth = load_poses(poses), load_poses(recording / "truth.npz")
-        landmarks = results / render.name / "keypoints.npz"
+        landmarks = results / render.name / cache_name(landmark_model)
         alone = None
         if landmarks.is_file():
             cameras = load_calibration(recording / "calibration.toml")

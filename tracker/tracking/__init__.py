@@ -17,6 +17,7 @@ region_cue.py      the region cue: the outline's offset posterior along each lin
 region_lines.py    the region cue's lines in numba kernels: scored, added, counted
 colours.py         the colours the region cue learns per part and background, and the colour images it reads
 person.py          the person's masks from the detector, on the region cue's colour grid
+held.py            which parts the images hold in a frame, and which the prior and the joints alone carry
 lead.py            the limb lead: a limb beyond its edges' reach moved to its landmarks and tracked again
 motion_prior.py    the Kalman motion prior (``--dynamics kalman``) and the motion a tracker carries between frames
 motion_model.py    the motion models behind one interface (none, constant velocity, Kalman); poses moved along a motion

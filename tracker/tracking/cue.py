@@ -5,7 +5,8 @@ A cue is one source of information about the body's motion in a frame: the edges
 colours either side of the outline (:mod:`tracker.tracking.region_cue`).  In every iteration of a frame the tracker
 asks each cue in turn to add its information ``C_i`` and ``eta_i`` about each component's twist at the current poses
 (:meth:`Cue.add`), then solves the whole tree once for them all.  A cue is told of a new frame's inputs
-(:meth:`Cue.prepare`), learns from the frame once it is tracked (:meth:`Cue.learn`), forgets what it learnt when the
+(:meth:`Cue.prepare`), says what its readings of the frame tell of each part (:meth:`Cue.evidence`), learns from the
+frame once it is tracked (:meth:`Cue.learn`), forgets what it learnt when the
 tracker starts afresh (:meth:`Cue.restart`), and shows what it reads to a viewer (:meth:`Cue.inspect`).  What it
 learns lives in its own state; the buffers of one search, shared by all cues, in the
 :class:`~tracker.tracking.workspace.Workspace` it is handed, since a viewer's inspection or a lead's retry searches
@@ -60,6 +61,10 @@ class Cue(Protocol):
     """What a viewer's inspection calls it (:meth:`tracker.tracking.frame_loop.Tracker.inspect_cues`)."""
     stage: str
     """The stage of :class:`~tracker.tracking.workspace.StageTimes` its seconds count to."""
+    places: bool
+    """Whether its readings place a part where the images show it (the outline's edges and colours), or only say
+    that something sees it (a detector's landmarks, which it also guesses where nothing shows them): only the
+    first hold a part (:mod:`tracker.tracking.held`)."""
 
     def restart(self) -> None:
         """Forget what was learnt: the tracker goes on from a new first pose."""
@@ -82,6 +87,12 @@ class Cue(Protocol):
     def learn(self, tracker: Tracker, status: int, *, kept: bool) -> None:
         """Learn from the frame just tracked (in ``tracker.work``) with ``status``; ``kept``: False where the frame
         kept the poses it started from rather than those its cues moved it to."""
+        ...
+
+    def evidence(self, tracker: Tracker, work: Workspace, added: np.ndarray) -> np.ndarray:
+        """The information (N, 6, 6) this cue's readings of the frame give about each part, as the evidence that the
+        images hold it (:mod:`tracker.tracking.held`): ``added``, what it added to ``work.information`` in the frame's
+        last iteration, or a reading of its own at the same poses."""
         ...
 
     def inspect(self, tracker: Tracker, work: Workspace) -> tuple[np.ndarray, np.ndarray] | None:

@@ -57,6 +57,7 @@ class EdgeCue:
 
     name = "edges"
     stage = "measure"
+    places = True
 
     def __init__(self, tracker: Tracker):
         """The edges need nothing of the tracker beyond what each call hands them."""
@@ -75,6 +76,9 @@ class EdgeCue:
 
     def learn(self, tracker: Tracker, status: int, *, kept: bool) -> None:
         return None
+
+    def evidence(self, tracker: Tracker, work: Workspace, added: np.ndarray) -> np.ndarray:
+        return added
 
     def inspect(self, tracker: Tracker, work: Workspace) -> tuple[np.ndarray, np.ndarray]:
         return self.read(work)

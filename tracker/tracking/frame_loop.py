@@ -12,9 +12,11 @@ of its predicted covariance, at least P), solves the whole tree for one twist pe
 ``E_i <- E_i exp(alpha_i)`` and coerces the joints exact (section 5) (:mod:`tracker.tracking.solve`).  The search
 range shrinks from iteration to iteration (coarse to fine).  With landmarks, a limb they place far from where the
 edges left it is moved to them and the frame tracked again (:mod:`tracker.tracking.lead`), and a frame whose edges
-dragged the body off them keeps the poses it started from.  The frame's status comes from the share of samples
-that found an edge and their robust mean offset.  Where the cameras are not frame-locked, each view sees the poses
-moved on to its own capture time, to first order (:meth:`Tracker.seen`, docs/sync.md).
+dragged the body off them keeps the poses it started from.  Each part is then held by the images, or only by the
+prior and the joints (:mod:`tracker.tracking.held`), and the frame's status comes from the parts held: the share of
+their samples that found an edge, those edges' robust mean offset, and how many of the parts they are.  Where the
+cameras are not frame-locked, each view sees the poses moved on to its own capture time, to first order
+(:meth:`Tracker.seen`, docs/sync.md).
 """
 
 from __future__ import annotations
@@ -26,14 +28,17 @@ from typing import TypeVar
 
 import numpy as np
 
+from tracker.chain import marginal_information, motion_basis
 from tracker.io.readers import WithChroma, reduced
 from tracker.landmarks.body_landmarks import TRUNK_TURN, trunk
 from tracker.model import Model
-from tracker.status import LOST, TRACKED, UNCERTAIN
+from tracker.status import HELD, LOST, TRACKED, UNCERTAIN
+from tracker.tracking import motion_prior
 from tracker.tracking.colours import colour_bins, colour_grids, colour_reduction
 from tracker.tracking.cue import Cue, Frame, Iteration
 from tracker.tracking.cues import CUES
 from tracker.tracking.edge_cue import EdgeCue, reductions, smooth
+from tracker.tracking.held import held_codes, outline_motion
 from tracker.tracking.keypoint_cue import KeypointCue
 from tracker.tracking.lead import Lead
 from tracker.tracking.measure import Statistics
@@ -51,11 +56,19 @@ C = TypeVar("C")
 
 @dataclass(frozen=True)
 class FrameResult:
+    """A frame as tracked: its ``poses`` (N, 4, 4), ``status`` (:mod:`tracker.status`), the edges' robust mean offset
+    ``residual`` (pixels), the ``share`` of its outline ``samples`` that found an edge and their number; which parts the
+    images hold, ``held`` (N,) int8 (:data:`tracker.status.HELD`, ...; :mod:`tracker.tracking.held`); and, from a
+    tracker that is ``measuring``, what its cues said of each component's pose (:meth:`Tracker.measured`), which a
+    smoother over the whole recording weighs it by."""
+
     poses: np.ndarray
     status: int
     residual: float
     share: float
     samples: int
+    held: np.ndarray
+    information: np.ndarray | None = None
 
 
 class Tracker:
@@ -71,6 +84,10 @@ class Tracker:
         self.prior = np.ascontiguousarray(
             np.broadcast_to(np.diag(np.array([st.prior_translation] * 3 + [st.prior_rotation] * 3, float)), (n, 6, 6))
         )
+        self.floor = self.prior.copy()  # the solve's fixed prior, which the Kalman filter's replaces (motion_model)
+        self.basis = motion_basis(model.constraint_projector, model.constraint_rows)
+        self.measuring = False  # whether step gives each frame's information (measured): a smoother will read it
+        self.judging: Workspace | None = None  # judged's buffers over the frame just tracked, made when first asked
         self.reduction = reductions(settings, cameras)
         self.search_size = self.rig.size // self.reduction[:, None]  # each camera's image as the edge search reads it
         reach = max(settings.outline.search_range, settings.outline.final_search_range)
@@ -190,8 +207,19 @@ class Tracker:
         twist = self.still if resampled else motion_since(self.sampled_poses, self.poses)
         now = Iteration(iteration, count, search_range, resampled, twist)
         started = time.perf_counter()
+        work.information[:] = 0.0
+        work.eta[:] = 0.0
+        if now.last:
+            work.evidence[:] = 0.0
+            work.seen[:] = False
         for cue in self.cues:
+            before = work.information.copy() if now.last else None
             cue.add(self, work, now)
+            if before is not None:
+                evidence = cue.evidence(self, work, work.information - before)
+                work.seen |= evidence.any(axis=(1, 2))
+                if cue.places:
+                    work.evidence += evidence
             started = work.times.add(cue.stage, started)
         self.poses = self.solved(work.information, work.eta, prior=self.prior, poses=self.poses)
         work.times.add("solve", started)
@@ -276,20 +304,27 @@ class Tracker:
         found = {cue.name: cue.inspect(self, work) for cue in self.cues}
         return {name: self._inspection(work, *read) for name, read in found.items() if read is not None}
 
-    def judged(self, images, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
+    def judged(self, images=None, *, poses: np.ndarray, smoothed: bool = False) -> FrameResult:
         """The frame's result at ``poses`` as they stand, without moving them: one measurement of their outlines in
-        ``images`` as the last iteration would search them (:meth:`inspect`), the share of their samples that found an
-        edge, their robust mean offset and the status those give.  A query, like :meth:`inspect`."""
-        _, stats = self._inspected(images, smoothed, poses, None)
-        share, status = self.judge(stats)
-        return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible)
+        ``images`` (else the frame just tracked, in buffers kept for these queries) as the last iteration would search
+        them (:meth:`inspect`), the share of their samples that found an edge, their robust mean offset and the status
+        those give.  A query, like :meth:`inspect`, from the thread that steps the tracker."""
+        if images is None and self.judging is None:
+            self.judging = self.work.spare(self.work.images)
+        work, stats = self._inspected(images, smoothed, poses, None, work=None if images is not None else self.judging)
+        held = self.held(work.information, work, seen=np.asarray(work.information.any(axis=(1, 2))))
+        share, status = self.judge(stats, work, held)
+        return FrameResult(np.array(poses, copy=True), status, stats.residual, share, stats.visible, held)
 
-    def _inspected(self, images, smoothed: bool, poses, search_range) -> tuple[Workspace, Statistics]:
-        """A spare workspace in which the outlines at ``poses`` (else the current ones) are sampled and their edges
-        searched in ``images`` (else the frame just tracked) over ``search_range`` (else the last iteration's), and
-        that search's statistics."""
+    def _inspected(
+        self, images, smoothed: bool, poses, search_range, work: Workspace | None = None
+    ) -> tuple[Workspace, Statistics]:
+        """A spare workspace (``work``, else a new one) in which the outlines at ``poses`` (else the current ones) are
+        sampled and their edges searched in ``images`` (else the frame just tracked) over ``search_range`` (else the
+        last iteration's), and that search's statistics."""
         frame = self.work.images
-        work = self.work.spare(frame if images is None else np.zeros_like(frame))
+        if work is None:
+            work = self.work.spare(frame if images is None else np.zeros_like(frame))
         if images is not None:
             self.load_images(images, smoothed, work)
         if search_range is None:
@@ -344,23 +379,62 @@ class Tracker:
             self.poses = self.anchor.copy()
         self.dynamics.correct(self, predicted)
         self.motion = dataclasses.replace(self.motion, previous=current)
-        share, status = self.judge(stats)
+        held = self.held(self.work.evidence, self.work, seen=self.work.seen)
+        share, status = self.judge(stats, self.work, held)
         if dragged and status == TRACKED:
             status = UNCERTAIN  # and nothing learnt from an image the pose was not tracked in
         for cue in self.cues:
             cue.learn(self, status, kept=not dragged)
-        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible)
+        measured = self.measured() if self.measuring else None
+        return FrameResult(self.poses.copy(), status, stats.residual, share, stats.visible, held, measured)
 
-    def judge(self, stats: Statistics) -> tuple[float, int]:
-        """The share of the samples that found an edge in the measurement ``stats`` and the frame status it and
-        their residual give (:meth:`status`)."""
+    def measured(self) -> np.ndarray:
+        """What the last solve's cues said of each component's pose, as the information (N, 2, 3, 3) of a weighted
+        least-squares estimate, per block (:func:`tracker.tracking.motion_prior.block_information`: the world
+        translation, then the rotation in body coordinates): each component's C_i from its cues (the workspace's
+        information less the prior added about the prediction) over sigma0_i^2, the variance of unit weight of its
+        edge residuals (:func:`tracker.tracking.motion_prior.variance_factor`; 1 without any edge), plus the solve's
+        fixed prior, and what the others' say of it through the joints (:func:`tracker.chain.marginal_information`)."""
+        work, n, m = self.work, self.work.samples.count, self.model
+        scale = motion_prior.variance_factor(
+            work.samples.component[:n], work.offset[:n], work.weight[:n], n_components=m.size
+        )
+        data = (work.information - self.prior) / scale[:, None, None] + self.floor
+        joint = marginal_information(data, parent=m.parent, poses=self.poses, basis=self.basis)
+        return motion_prior.block_information(joint, self.poses)
+
+    def held(self, evidence: np.ndarray, work: Workspace, *, seen: np.ndarray) -> np.ndarray:
+        """Which parts the evidence (N, 6, 6) of the cues that place them holds, per the motion of their outline
+        samples in ``work``, the parts ``seen`` (N,) bool by any cue (N,) int8
+        (:func:`tracker.tracking.held.held_codes`)."""
+        s = work.samples
+        assert work.lo is not None and work.hi is not None  # set by sample()
+        motion = outline_motion(s.jacobian, s.component, work.lo, work.hi, s.count, self.model.size)
+        return held_codes(evidence, motion, within=self.settings.status.held_within, seen=seen)
+
+    def judge(self, stats: Statistics, work: Workspace, held: np.ndarray) -> tuple[float, int]:
+        """The share of all the samples that found an edge in the measurement ``stats`` (of ``work``), and the frame
+        status that the parts ``held`` (N,) by the images give: the share of their samples that found an edge, the
+        robust mean offset of those edges and how many of the parts they are (:meth:`status`).  The parts the images
+        do not hold (a leg behind a table) are left to the prior and do not judge the frame."""
         share = stats.found / stats.visible if stats.visible else 0.0
-        return share, self.status(share, stats.residual)
+        count = work.samples.count
+        chosen = held[work.samples.component[:count]] == HELD
+        offset, weight = work.offset[:count][chosen], work.weight[:count][chosen]
+        found = ~np.isnan(offset)
+        found_share = float(found.mean()) if len(found) else 0.0
+        sum_w = weight[found].sum()
+        residual = float((weight[found] * np.abs(offset[found])).sum() / sum_w) if sum_w > 0 else float("nan")
+        parts = float(np.mean(held == HELD)) if len(held) else 0.0
+        return share, self.status(found_share, residual, parts=parts)
 
-    def status(self, share: float, residual: float) -> int:
+    def status(self, share: float, residual: float, *, parts: float = 1.0) -> int:
+        """The frame's status from the ``share`` of the held parts' samples that found an edge, the robust mean offset
+        ``residual`` (pixels; NaN: none found) of those edges and the share of the ``parts`` the images hold
+        (:class:`~tracker.tracking.settings.StatusSettings`)."""
         st = self.settings.status
-        if share < st.lost_share or not residual <= st.lost_residual:
+        if share < st.lost_share or not residual <= st.lost_residual or parts < st.lost_held:
             return LOST
-        if share < st.uncertain_share or residual > st.uncertain_residual:
+        if share < st.uncertain_share or residual > st.uncertain_residual or parts < st.uncertain_held:
             return UNCERTAIN
         return TRACKED

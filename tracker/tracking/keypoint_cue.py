@@ -193,6 +193,7 @@ class KeypointCue:
 
     name = "keypoints"
     stage = "measure"
+    places = False
 
     def __init__(self, tracker: Tracker):
         model, settings, poses = tracker.model, tracker.settings, tracker.poses
@@ -272,6 +273,20 @@ class KeypointCue:
                 multiple=st.noise_multiple,
                 ceiling=st.tolerance_max,
             )
+
+    def evidence(self, tracker: Tracker, work: Workspace, added: np.ndarray) -> np.ndarray:
+        """The information of every landmark seen with confidence, as if each stood for its limb wherever it lies:
+        the pull of :meth:`pull` from no zone and with no fade, so that a landmark lying within its zone, which pulls
+        nothing, still says that the images see its part."""
+        information = np.zeros_like(added)
+        if self.frame is not None:
+            none = (np.zeros(len(LANDMARKS)), np.full(len(LANDMARKS), np.inf))
+            pixels, confidence = self.frame
+            scratch = np.zeros_like(work.eta), np.empty_like(work.misfit)
+            self.pull(
+                tracker, pixels, confidence, zone=none, information=information, eta=scratch[0], misfit=scratch[1]
+            )
+        return information
 
     def inspect(self, tracker: Tracker, work: Workspace) -> None:
         return None

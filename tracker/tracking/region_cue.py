@@ -68,6 +68,7 @@ class RegionCue:
 
     name = "region"
     stage = "region"
+    places = True
 
     def __init__(self, tracker: Tracker):
         model, settings = tracker.model, tracker.settings
@@ -125,6 +126,9 @@ class RegionCue:
         """Learn the colours along the lines of a frame that was not lost and kept the poses its cues found."""
         if self.settings.on and tracker.work.coloured and status != LOST and kept:
             self.learn_colours(tracker)
+
+    def evidence(self, tracker: Tracker, work: Workspace, added: np.ndarray) -> np.ndarray:
+        return added
 
     def inspect(self, tracker: Tracker, work: Workspace) -> tuple[np.ndarray, np.ndarray]:
         """Each sample's line as read in place of its edge: the posterior mean of the outline's offset and lambda /

@@ -1,5 +1,6 @@
 """The tracker's settings, one small frozen dataclass per group: the solve, the outline samples, the edge search,
-the image sizes, the motion model, the frame's status, the keypoints and the colour regions.
+the image sizes, the motion model, the frame's status, the keypoints, the colour regions and the smoothing of a
+recorded folder's track.
 
 Each field carries its help in its metadata, says whether it is in pixels (``pixels``: "grows" with the image,
 "shrinks" with it as a grey-level derivative per pixel does, or "fixed"), and, when a command offers it, its flag
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 DYNAMICS = ("none", "constant-velocity", "kalman")
+SMOOTHING = ("none", "rts", "both-ways")
 
 
 def setting(
@@ -27,14 +29,17 @@ def setting(
     kind: str | None = None,
     choices: tuple[str, ...] | None = None,
     renamed: str | None = None,
+    recorded: bool = False,
 ) -> Any:
     """A settings field: its ``default``, its ``help``, how it scales with the image (``pixels``: "grows", "shrinks"
     or "fixed"; an integer that grows is rounded and kept at ``least`` or more), and the ``flag``, ``kind`` (count,
     positive, whole, share or on-off) and ``choices`` of the command-line option that sets it, if any, with the
-    flag's old name, ``renamed``, still taken."""
+    flag's old name, ``renamed``, still taken; ``recorded``: only for a recorded folder (tracker live leaves it out)."""
     if pixels not in (None, "grows", "shrinks", "fixed"):
         raise ValueError(f"pixels must be grows, shrinks or fixed, got {pixels!r}")
-    metadata = dict(help=help, pixels=pixels, least=least, flag=flag, kind=kind, choices=choices, renamed=renamed)
+    metadata = dict(
+        help=help, pixels=pixels, least=least, flag=flag, kind=kind, choices=choices, renamed=renamed, recorded=recorded
+    )
     return field(default=default, metadata=metadata)
 
 
@@ -147,14 +152,24 @@ class MotionSettings:
 
 @dataclass(frozen=True)
 class StatusSettings:
-    """the frame's status: when it is tracked, uncertain or lost"""
+    """the frame's status: which parts the images hold, and when a frame is tracked, uncertain or lost"""
 
-    uncertain_share: float = setting(0.6, "share of the samples that found an edge below which a frame is uncertain")
+    held_within: float = setting(
+        1.0,
+        "a part is held by the images when the edges and colours along its outline place it within this many pixels "
+        "in its least-seen direction (tracking.held); the others are left to the prior and do not judge the frame",
+        pixels="grows",
+    )
+    uncertain_share: float = setting(
+        0.6, "share of the held parts' outline samples that found an edge below which a frame is uncertain"
+    )
     lost_share: float = setting(0.3, "... and lost")
     uncertain_residual: float = setting(
-        3.0, "robust mean offset above which a frame is uncertain, pixels", pixels="grows"
+        3.0, "robust mean offset of the held parts' edges above which a frame is uncertain, pixels", pixels="grows"
     )
     lost_residual: float = setting(6.0, "... and lost, pixels", pixels="grows")
+    uncertain_held: float = setting(0.5, "share of the parts held by the images below which a frame is uncertain")
+    lost_held: float = setting(0.2, "... and lost")
 
 
 @dataclass(frozen=True)
@@ -237,6 +252,30 @@ class RegionSettings:
 
 
 @dataclass(frozen=True)
+class SmoothingSettings:
+    """the track of a recorded folder judged with the frames after each one (docs/motion-models.md; tracker live tracks
+    frame by frame)"""
+
+    method: str = setting(
+        "both-ways",
+        "none: each frame from the frames before it alone, as live; rts: the track smoothed over the whole recording "
+        "on the motion model (a Rauch-Tung-Striebel smoother); both-ways: the recording also tracked back from its "
+        "last frame, each frame's pose taken from the track its edges, mask and landmarks back, then smoothed as rts",
+        flag="--smooth",
+        choices=SMOOTHING,
+        recorded=True,
+    )
+    noise_scale: float = setting(
+        10.0, "rts: each frame's information about a part's pose (Tracker.measured) is divided by this"
+    )
+    misfit_weight: float = setting(
+        5.0,
+        "both-ways: what a track's landmark misfit (a share of the body's size) costs against the shares of its "
+        "outline that found an edge and of its body on the person's masks",
+    )
+
+
+@dataclass(frozen=True)
 class Settings:
     """Tracking parameters by group; the defaults suit 640x480 views of a whole body."""
 
@@ -248,6 +287,7 @@ class Settings:
     status: StatusSettings = StatusSettings()
     keypoints: KeypointSettings = KeypointSettings()
     region: RegionSettings = RegionSettings()
+    smoothing: SmoothingSettings = SmoothingSettings()
 
     def but(self, **groups: dict[str, Any]) -> Settings:
         """These settings with some fields of some groups changed: ``but(motion=dict(dynamics="none"))``."""

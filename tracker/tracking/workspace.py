@@ -57,14 +57,16 @@ class StageTimes:
 class Workspace:
     """The buffers an edge search fills, and the seconds it spent in them: each camera's image as the search reads
     it, ``images`` (C, H, W) uint8; the outline ``samples`` and their camera-frame quadrics ``placed``; the search
-    limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each
-    sample's edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from
-    them (and from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); each camera's
-    half-size colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one in every camera and no
-    camera's is of a single colour, as a black frame a camera dropped is (``coloured``; the region cue would read it
-    as the background everywhere and shrink every outline there onto nothing, docs/region.md), and
-    the region cue's mean and variance per sample (:func:`tracker.tracking.region_lines.region_kernel`); the last edge
-    search's :class:`~tracker.tracking.measure.Statistics`.
+    limits (``ownership``'s buffers, and ``lo``/``hi`` of the samples, set by :meth:`Tracker.sample`); each sample's
+    edge offset and IRLS weight (capacity,); the information C_i (N, 6, 6) and eta_i (N, 6) summed from them (and
+    from the landmarks, whose misfits per camera the solve leaves in ``misfit`` (C, 33)); the evidence of each part
+    that the cues which place it read in the frame's last iteration, ``evidence`` (N, 6, 6), and the parts of which
+    any cue read something, ``seen`` (N,) bool (:meth:`tracker.tracking.cue.Cue.evidence`); each camera's half-size
+    colour image as colour bins, ``bins`` (C, H', W'), when the frame came with one in every camera and no camera's
+    is of a single colour, as a black frame a camera dropped is (``coloured``; the region cue would read it as the
+    background everywhere and shrink every outline there onto nothing, docs/region.md), and the region cue's mean
+    and variance per sample (:func:`tracker.tracking.region_lines.region_kernel`); the last edge search's
+    :class:`~tracker.tracking.measure.Statistics`.
 
     A tracker steps in its own (:attr:`Tracker.work`); an inspection searches in a spare one
     (:meth:`Tracker.inspect`), so that it leaves the tracker as it was."""
@@ -78,6 +80,8 @@ class Workspace:
     information: np.ndarray
     eta: np.ndarray
     misfit: np.ndarray
+    evidence: np.ndarray
+    seen: np.ndarray
     times: StageTimes
     bins: np.ndarray
     region_mean: np.ndarray
@@ -112,6 +116,8 @@ class Workspace:
             np.zeros((n, 6, 6)),
             np.zeros((n, 6)),
             np.full((len(ownership.rig.names), len(LANDMARKS)), np.nan),
+            np.zeros((n, 6, 6)),
+            np.zeros(n, bool),
             StageTimes(),
             np.zeros((len(half), int(half[:, 1].max()), int(half[:, 0].max())), np.int16),
             np.zeros(capacity),

@@ -110,7 +110,7 @@ class LiveView:
         if self.truth_joints is not None and 0 <= index < len(self.truth_joints):
             truth = self.truth_joints[index]
         label = f"frame {index}: residual {result.residual:.2f} px, {100 * result.share:.0f} % of samples found an edge"
-        self.scene.show(Frame(result.poses, images if with_images else None, inspection, truth, label))
+        self.scene.show(Frame(result.poses, images if with_images else None, inspection, truth, label, result.held))
         self.shown += 1
 
     def _plot(self) -> None:

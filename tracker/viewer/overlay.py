@@ -5,7 +5,9 @@ relative to a perfect fit, ``w c = c / (c + |m|)`` (green when the edge lies on
 the predicted outline, through yellow to red as it lies farther off, grey when
 no edge was found); the predicted outline as dots in its component's colour; and
 the edge each search found as a white dot.  A limb that drifts shows as a run of
-red or grey lines, and the white dots show which edge pulled it.
+red or grey lines, and the white dots show which edge pulled it.  A part the images
+do not hold (:mod:`tracker.tracking.held`: a leg behind a table, carried by the prior
+and its joints alone) is drawn dim, a sparse dotted outline with no search lines.
 """
 
 from __future__ import annotations
@@ -18,11 +20,14 @@ import cv2
 import numpy as np
 
 from tracker.io.mosaic import MosaicWriter
+from tracker.status import HELD
 from tracker.tracking.workspace import Inspection
 
 _SHIFT = 2  # sub-pixel drawing: coordinates in quarter pixels
 _BINS = 6  # weight colours
 _NO_EDGE = (110, 110, 110)
+DIM_EVERY = 3  # a part the images do not hold: one outline sample in this many drawn (draw_dim)
+DIM_OPACITY = 0.4  # ... at this opacity over the image
 
 
 def component_colours(count: int) -> np.ndarray:
@@ -41,10 +46,24 @@ def _fixed(points: np.ndarray) -> np.ndarray:
     return np.round(points * (1 << _SHIFT)).astype(np.int32)
 
 
-def draw(image: np.ndarray, inspection: Inspection, camera: int, *, robust_c: float, colours: np.ndarray) -> np.ndarray:
-    """RGB uint8 copy of a grey (or RGB) ``image`` with camera ``camera``'s search lines, outline and edges."""
+def draw(
+    image: np.ndarray,
+    inspection: Inspection,
+    camera: int,
+    *,
+    robust_c: float,
+    colours: np.ndarray,
+    held: np.ndarray | None = None,
+) -> np.ndarray:
+    """RGB uint8 copy of a grey (or RGB) ``image`` with camera ``camera``'s search lines, outline and edges; given
+    ``held`` (N,) codes (:data:`tracker.status.HELD`, ...), the parts the images do not hold are drawn dim
+    (:func:`draw_dim`) and the rest as always."""
     out = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) if image.ndim == 2 else image.copy()
     mine = inspection.camera == camera
+    if held is not None:
+        loose = mine & (held[inspection.component] != HELD)
+        draw_dim(out, inspection.pixel[loose], inspection.component[loose], colours=colours)
+        mine &= ~loose
     pixel, normal = inspection.pixel[mine], inspection.normal[mine]
     offset, weight = inspection.offset[mine], inspection.weight[mine]
     start = _fixed(pixel + inspection.lo[mine, None] * normal)
@@ -67,6 +86,22 @@ def draw(image: np.ndarray, inspection: Inspection, camera: int, *, robust_c: fl
     return out
 
 
+def draw_dim(out: np.ndarray, pixel: np.ndarray, component: np.ndarray, *, colours: np.ndarray) -> None:
+    """Draw on ``out`` (H, W, 3) RGB uint8, in place, the outline samples at ``pixel`` (M, 2) of parts the images do
+    not hold, dim: every :data:`DIM_EVERY`-th sample of each part as a small dot in its colour at :data:`DIM_OPACITY`,
+    with no search line or edge, so that a part the prior alone carries shows where it is assumed, not as a part
+    the images found."""
+    if not len(pixel):
+        return
+    layer = out.copy()
+    fixed = _fixed(pixel)
+    for i in np.unique(component):
+        colour = cast(tuple[int, int, int], tuple(int(c) for c in colours[i]))  # RGB
+        for x, y in fixed[component == i][::DIM_EVERY]:
+            cv2.circle(layer, (int(x), int(y)), 2 << _SHIFT, colour, -1, cv2.LINE_AA, _SHIFT)
+    cv2.addWeighted(layer, DIM_OPACITY, out, 1.0 - DIM_OPACITY, 0.0, dst=out)
+
+
 class OverlayVideo:
     """A video of every camera side by side with :func:`draw`'s annotations (``tracker track --overlay``)."""
 
@@ -75,9 +110,13 @@ class OverlayVideo:
         self.colours = component_colours(components)
         self.robust_c = robust_c
 
-    def write(self, images: Sequence[np.ndarray], inspection: Inspection) -> None:
+    def write(self, images: Sequence[np.ndarray], inspection: Inspection, held: np.ndarray | None = None) -> None:
+        """One frame: the ``images`` (rig order) drawn with ``inspection`` and, given, the parts ``held`` (N,)."""
         self.writer.write(
-            [draw(image, inspection, k, robust_c=self.robust_c, colours=self.colours) for k, image in enumerate(images)]
+            [
+                draw(image, inspection, k, robust_c=self.robust_c, colours=self.colours, held=held)
+                for k, image in enumerate(images)
+            ]
         )
 
     def close(self) -> None:

@@ -109,7 +109,8 @@ class Review(Timeline):
         if "residual" in self.results:
             label += f", residual {self.results['residual'][row]:.2f} px"
         truth = None if self.truth is None else self.truth[row]
-        self.scene.show(Frame(poses, images, inspection, truth, label))
+        held = self.results["held"][row] if "held" in self.results else None  # runs before it have none
+        self.scene.show(Frame(poses, images, inspection, truth, label, held))
 
     def _play(self) -> None:
         """While ``play`` is ticked, advance in real time times the speed, skipping frames drawing cannot keep up

@@ -1,11 +1,12 @@
 """The viewer's scene and camera panels (viser): what is drawn, not when.
 
 World frame as in the calibration (z up, metres).  Drawn: the model as shaded
-meshes of its clipped quadrics at the current poses, its joints and bones, the
+meshes of its clipped quadrics at the current poses (the parts the images do not
+hold grey and see-through, :mod:`tracker.tracking.held`), its joints and bones, the
 ground grid (z = 0), every camera as a frustum showing its current image, the
 truth skeleton when there is one (blue), and the root's trajectory.  Beside the
 3-D view, one image panel per camera with the search lines, outlines and found
-edges (:mod:`tracker.viewer.overlay`).
+edges (:mod:`tracker.viewer.overlay`; the parts the images do not hold dim).
 """
 
 from __future__ import annotations
@@ -23,11 +24,14 @@ import viser.transforms as vtf
 
 from tracker.atomic import atomic_write
 from tracker.model import Model, joint_centres
+from tracker.status import HELD
 from tracker.tracking.workspace import Inspection
 from tracker.viewer.mesh import component_meshes
 from tracker.viewer.overlay import component_colours, draw
 
 BODY = (235, 120, 40)  # shaded meshes and bones
+LOOSE = (150, 150, 150)  # the meshes of parts the images do not hold (tracker.tracking.held) ...
+LOOSE_OPACITY = 0.3  # ... see-through
 TRUTH = (40, 150, 255)  # the truth skeleton
 TRAJECTORY = (250, 220, 60)
 FRUSTUM_WIDTH = 200  # pixels of the images shown on the frustums (the panels get full size)
@@ -141,6 +145,7 @@ class Frame:
     inspection: Inspection | None = None
     truth: np.ndarray | None = None  # truth joint centres (J, 3), NaN where unknown
     label: str = ""
+    held: np.ndarray | None = None  # which parts the images hold (N,) codes (tracker.status), None: unknown
 
 
 class Scene:
@@ -162,6 +167,7 @@ class Scene:
             scene.add_mesh_simple(f"/body/{name}", vertices, faces, color=BODY, flat_shading=False)
             for name, (vertices, faces) in zip(model.names, component_meshes(model))
         ]
+        self.loose = np.zeros(model.size, bool)  # the parts drawn as not held by the images (show)
         self.joints = scene.add_point_cloud(
             "/joints", np.zeros((model.size, 3), np.float32), colors=(30, 30, 30), point_size=0.03, point_shape="circle"
         )
@@ -233,15 +239,20 @@ class Scene:
         images = None
         if frame.images is not None:
             images = [
-                draw(image, frame.inspection, k, robust_c=self.robust_c, colours=self.colours)
+                draw(image, frame.inspection, k, robust_c=self.robust_c, colours=self.colours, held=frame.held)
                 if frame.inspection is not None
                 else cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
                 for k, image in enumerate(frame.images)
             ]
+        loose = np.zeros(self.model.size, bool) if frame.held is None else np.asarray(frame.held) != HELD
         with self.server.atomic():
             for mesh, pose in zip(self.meshes, frame.poses):
                 mesh.wxyz = _wxyz(pose[0:3, 0:3])
                 mesh.position = pose[0:3, 3]
+            for i in np.flatnonzero(loose != self.loose):  # only the parts whose holding changed
+                self.meshes[i].color = LOOSE if loose[i] else BODY
+                self.meshes[i].opacity = LOOSE_OPACITY if loose[i] else None
+            self.loose = loose
             self.joints.points = joints.astype(np.float32)
             self.bones.points = bones(self.model, joints).astype(np.float32)
             if self.truth_index is not None and frame.truth is not None:
