@@ -312,7 +312,7 @@ def installed_models() -> list[str]:
     return [name for name in MODELS if (folder / FILES[name].file).is_file()]
 
 
-def detect_stage(recording: Recording, settings: Settings, keypoint_step: int, landmark_model: str) -> Stage:
+def detect_stage(recording: Recording, settings: Settings, *, keypoint_step: int, landmark_model: str) -> Stage:
     """The detector alone (``landmark_model``) at ``keypoint_step``: every view of up to :data:`SETS` + 1 of
     the frames it is scheduled on, read beforehand as its worker gets them (reduced as the edge search reduces them),
     detected (the views side by side in threads) and checked across the views as the worker does, in this process,
@@ -452,7 +452,7 @@ def run(
     if not keypoint_step:
         return result
     models = [name for name in MODELS if name in installed_models() or name == landmark_model]
-    detect = {name: detect_stage(every, settings, keypoint_step, name) for name in models}
+    detect = {name: detect_stage(every, settings, keypoint_step=keypoint_step, landmark_model=name) for name in models}
     stages = {"read": read, "detect": [detect[landmark_model]], "track": alone}
     fps = {name: _median([stage.fps for stage in timed]) for name, timed in stages.items()}
     cpu_ms = {name: _median([stage.cpu_ms for stage in timed]) for name, timed in stages.items()}

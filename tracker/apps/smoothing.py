@@ -89,7 +89,7 @@ class Backward:
     seconds: float
 
 
-def backing(tracker: Tracker, recovery: Recovery | None, landmarks: Landmarks | None, result: FrameResult) -> float:
+def backing(tracker: Tracker, result: FrameResult, *, recovery: Recovery | None, landmarks: Landmarks | None) -> float:
     """How well the frame ``tracker`` holds backs the poses of ``result`` (:meth:`Tracker.judged
     <tracker.tracking.frame_loop.Tracker.judged>` in its images): the share of their outline samples that found an
     edge, plus the share of their body on the person's masks (:meth:`tracker.tracking.person.PersonMasks.on_person`),
@@ -160,7 +160,9 @@ def track_backwards(
             difference = np.nan  # where the tracks agree
             if _apart(forward.poses[row], result.poses) > AGREE:
                 back, ahead = (tracker.judged(poses=poses) for poses in (result.poses, forward.poses[row]))
-                difference = backing(tracker, check, landmarks, back) - backing(tracker, check, landmarks, ahead)
+                difference = backing(tracker, back, recovery=check, landmarks=landmarks) - backing(
+                    tracker, ahead, recovery=check, landmarks=landmarks
+                )
             rows.append(row)
             differences.append(difference)
             chosen.append(result)
