@@ -664,47 +664,71 @@ def format_table(result: dict) -> str:
 
 def format_stages(result: dict) -> list[str]:
     """The lines of :func:`run`'s table of the stages with the keypoint cue: each alone, the bounds they set, and all
-    three overlapped."""
+    three overlapped; each row's ratio to decoding alone by frames a second, but the cores' bound's by CPU a frame."""
     fps, cpu = result["stage_fps_with_keypoints"], result["stage_cpu_ms_per_frame_with_keypoints"]
     every, model, floor = schedule_words(result["keypoint_step"]), result["landmark_model"], fps["decode_only"]
-    rows = [
-        ("decode only (the floor)", fps["decode_only"], cpu["decode_only"]),
+    spent = cpu["read"] + cpu["detect"][model] + cpu["track"]
+    rows: list[tuple[str, float, float | None, float]] = [  # name, frames a second, CPU ms a frame, ratio
+        ("decode only (the floor)", floor, cpu["decode_only"], 1.0),
         (
             "read: decode, smoothing, colours and the detector's copies, as the tracker's readers do",
             fps["read"],
             cpu["read"],
+            fps["read"] / floor,
         ),
         *(
             (
                 f"detect {every}, {name} model{' (beside the tracker)' if name == model else ''}",
                 rate,
                 cpu["detect"][name],
+                rate / floor,
             )
             for name, rate in fps["detect"].items()
         ),
-        ("track with the landmarks (frames and landmarks read beforehand)", fps["track"], cpu["track"]),
-        (f"bound: read, detect ({model}) and track one after the other", result["bound_serial_fps"], None),
-        (f"bound: the {result['cores']} cores over the three stages' CPU", result["bound_cores_fps"], "cores"),
-        (f"bound: the slowest stage ({result['slowest_stage']})", result["bound_slowest_stage_fps"], None),
-        ("overlapped, the worker's start-up included", result["fps_all_views_with_keypoints"], None),
+        (
+            "track with the landmarks (frames and landmarks read beforehand)",
+            fps["track"],
+            cpu["track"],
+            fps["track"] / floor,
+        ),
+        (
+            f"bound: read, detect ({model}) and track one after the other",
+            result["bound_serial_fps"],
+            None,
+            result["bound_serial_fps"] / floor,
+        ),
+        (
+            f"bound: the {result['cores']} cores over the three stages' CPU",
+            result["bound_cores_fps"],
+            spent,
+            result["ratio_bound_cores"],
+        ),
+        (
+            f"bound: the slowest stage ({result['slowest_stage']})",
+            result["bound_slowest_stage_fps"],
+            None,
+            result["bound_slowest_stage_fps"] / floor,
+        ),
+        (
+            "overlapped, the worker's start-up included",
+            result["fps_all_views_with_keypoints"],
+            None,
+            result["ratio_with_keypoints"],
+        ),
         (
             f"overlapped, from the first landmarks on ({result['first_landmarks_s']:.2f} s into the loop)",
             result["fps_all_views_with_keypoints_after_first"],
             None,
+            result["fps_all_views_with_keypoints_after_first"] / floor,
         ),
     ]
-    spent = cpu["read"] + cpu["detect"][model] + cpu["track"]
-
-    def row(name: str, rate: float, ms: float | str | None) -> str:
-        """A row; the cores' bound with the three stages' CPU and, as decoding alone's share of it, its ratio."""
-        if ms == "cores":
-            return f"| {name} | {rate:.1f} | {spent:.1f} | {result['ratio_bound_cores']:.2f} |"
-        return f"| {name} | {rate:.1f} | {'' if ms is None else f'{ms:.1f}'} | {rate / floor:.2f} |"
-
     return [
         "| with the keypoint cue, all views | frames per second | CPU ms a frame | / decode only |",
         "| --- | --- | --- | --- |",
-        *(row(*line) for line in rows),
+        *(
+            f"| {name} | {rate:.1f} | {'' if ms is None else f'{ms:.1f}'} | {ratio:.2f} |"
+            for name, rate, ms, ratio in rows
+        ),
         "",
         "The cores' bound is compared with decoding alone by their CPU a frame, which the machine's other load changes "
         "little; the other rows by their frames a second.",
